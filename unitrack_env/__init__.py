@@ -1,0 +1,14 @@
+"""unitrack-env: visual tracking benchmarks as Gymnasium environments.
+
+>>> import gymnasium as gym
+>>> import unitrack_env
+>>> "UniTrack/MOT17-v0" in gym.registry
+True
+"""
+
+from unitrack_env.registration import VARIANTS, env_ids, register_all, task_of
+
+__version__ = "0.1.0"
+__all__ = ["VARIANTS", "env_ids", "register_all", "task_of", "__version__"]
+
+register_all()

@@ -1,0 +1,408 @@
+"""Reader for the MOTChallenge layout (MOT15, MOT16, MOT17, MOT20 and custom data).
+
+Layout read, exactly as the benchmark ships it::
+
+    <root>/<split>/<sequence>/seqinfo.ini
+    <root>/<split>/<sequence>/img1/000001.jpg ...
+    <root>/<split>/<sequence>/det/det.txt      public detections
+    <root>/<split>/<sequence>/gt/gt.txt        ground truth (train splits only)
+
+Quirks accepted (all seen in real releases): ``det.txt`` with 10 columns
+(``frame,-1,x,y,w,h,score,-1,-1,-1``) or 7 (``frame,-1,x,y,w,h,score``), rows in any
+order, unbounded detector scores (MOT15's are 0-100 and more); ``gt.txt`` with 9 columns
+(``frame,id,x,y,w,h,flag,class,visibility``) for MOT16/17/20 or 10 columns with no class
+(``frame,id,x,y,w,h,flag,wx,wy,wz``) for MOT15; sorted by id or by frame.
+
+Columns are read by position. Every problem is reported as a
+:class:`~unitrack_env.errors.DataFormatError` naming the file, the line and the field.
+"""
+
+from __future__ import annotations
+
+import configparser
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from unitrack_env.errors import DataFormatError, UnknownSequenceError
+
+#: Benchmarks whose ground truth has the 9-column class/visibility layout.
+CLASS_COLUMN_BENCHMARKS = frozenset({"MOT16", "MOT17", "MOT20"})
+#: All benchmark rule sets understood by the reader and the official scorer.
+BENCHMARKS = frozenset({"MOT15"}) | CLASS_COLUMN_BENCHMARKS
+#: Class id of pedestrians in MOT16/17/20 ground truth (the evaluated class).
+PEDESTRIAN_CLASS = 1
+
+_SEQINFO_FIELDS = ("name", "imDir", "frameRate", "seqLength", "imWidth", "imHeight", "imExt")
+_DET_FIELDS = ("frame", "id", "x", "y", "w", "h", "score")
+_GT_FIELDS = ("frame", "id", "x", "y", "w", "h", "flag", "class", "visibility")
+
+
+@dataclass(frozen=True)
+class SequenceInfo:
+    """What ``seqinfo.ini`` says about a sequence, plus where its files are."""
+
+    name: str
+    path: Path
+    frame_rate: float
+    length: int
+    width: int
+    height: int
+    image_dir: str = "img1"
+    image_ext: str = ".jpg"
+
+    def frame_path(self, frame: int) -> Path:
+        """Return the image file of a 1-based frame index."""
+        return self.path / self.image_dir / f"{frame:06d}{self.image_ext}"
+
+
+@dataclass(frozen=True)
+class Annotations:
+    """Rows of a detection or ground-truth file, sorted by frame, with per-frame access.
+
+    Attributes:
+        frames: ``(n,)`` 1-based frame index of each row.
+        ids: ``(n,)`` object id (``-1`` for detections).
+        boxes: ``(n, 4)`` boxes ``(x, y, w, h)`` as written in the file (1-based pixels).
+        scores: ``(n,)`` detection score, or the ground truth's flag column (0 = ignore).
+        classes: ``(n,)`` class id (MOT16/17/20 gt); 1 (pedestrian) where the file has none.
+        visibility: ``(n,)`` visible fraction (gt of MOT16/17/20); 1 where the file has none.
+    """
+
+    frames: np.ndarray
+    ids: np.ndarray
+    boxes: np.ndarray
+    scores: np.ndarray
+    classes: np.ndarray
+    visibility: np.ndarray
+    _offsets: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        if self._offsets is None:
+            last = int(self.frames.max()) if len(self.frames) else 0
+            offsets = np.searchsorted(self.frames, np.arange(last + 2))
+            object.__setattr__(self, "_offsets", offsets)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def rows(self, frame: int) -> slice:
+        """Return the slice of rows that belong to ``frame``."""
+        if frame < 0 or frame + 1 >= len(self._offsets):
+            return slice(0, 0)
+        return slice(int(self._offsets[frame]), int(self._offsets[frame + 1]))
+
+    def count_per_frame(self, length: int) -> np.ndarray:
+        """Return the number of rows of each frame ``1..length`` (index 0 is frame 1)."""
+        counts = np.bincount(self.frames, minlength=length + 1)
+        return counts[1 : length + 1]
+
+    def filter(self, keep: np.ndarray) -> Annotations:
+        """Return the rows where ``keep`` is true."""
+        return Annotations(
+            self.frames[keep],
+            self.ids[keep],
+            self.boxes[keep],
+            self.scores[keep],
+            self.classes[keep],
+            self.visibility[keep],
+        )
+
+
+def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
+    """Read ``<seq_dir>/seqinfo.ini``.
+
+    Raises:
+        DataFormatError: the file is missing, has no ``[Sequence]`` section, or a field is
+            missing or not a number where one is needed.
+    """
+    seq_dir = Path(seq_dir)
+    path = seq_dir / "seqinfo.ini"
+    if not path.is_file():
+        raise DataFormatError(path, "missing; every MOTChallenge sequence needs a seqinfo.ini")
+    parser = configparser.ConfigParser(interpolation=None)
+    parser.optionxform = str  # keep the keys' case (imDir, frameRate, ...)
+    try:
+        parser.read_string(path.read_text(encoding="utf-8", errors="strict"))
+    except (configparser.Error, UnicodeDecodeError) as exc:
+        raise DataFormatError(path, f"not a valid INI file ({exc})") from None
+    if not parser.has_section("Sequence"):
+        raise DataFormatError(path, "has no [Sequence] section")
+    section = parser["Sequence"]
+    values: dict[str, str] = {}
+    for key in _SEQINFO_FIELDS:
+        if key not in section or not section[key].strip():
+            raise DataFormatError(path, "missing", field=key)
+        values[key] = section[key].strip()
+
+    def number(key: str, kind: type) -> float | int:
+        try:
+            value = kind(float(values[key])) if kind is int else kind(values[key])
+        except ValueError:
+            raise DataFormatError(path, f"'{values[key]}' is not a number", field=key) from None
+        if value <= 0:
+            raise DataFormatError(path, f"must be positive, got {values[key]}", field=key)
+        return value
+
+    ext = values["imExt"]
+    return SequenceInfo(
+        name=values["name"],
+        path=seq_dir,
+        frame_rate=float(number("frameRate", float)),
+        length=int(number("seqLength", int)),
+        width=int(number("imWidth", int)),
+        height=int(number("imHeight", int)),
+        image_dir=values["imDir"],
+        image_ext=ext if ext.startswith(".") else f".{ext}",
+    )
+
+
+def _parse_table(
+    path: Path, min_columns: int, field_names: tuple[str, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Parse a comma-separated numeric table; on any problem find the exact line and field.
+
+    Returns:
+        The table and the 1-based file line of each row (blank lines are skipped).
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DataFormatError(path, "missing") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFormatError(path, f"unreadable ({exc})") from None
+    lines = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip()]
+    if not lines:
+        return np.zeros((0, min_columns)), np.zeros(0, dtype=np.int64)
+    try:
+        table = np.array([ln.split(",") for _, ln in lines], dtype=np.float64)
+    except ValueError:
+        table = None  # ragged rows or a bad value: locate it below
+    if table is not None and table.ndim == 2 and table.shape[1] >= min_columns:
+        bad = ~np.isfinite(table[:, :min_columns])
+        if not bad.any():
+            return table, np.array([lineno for lineno, _ in lines])
+        row, col = np.argwhere(bad)[0]
+        raise DataFormatError(
+            path, "is not a finite number", line=lines[row][0], field=field_names[col]
+        )
+    width = None
+    for lineno, line in lines:
+        cells = line.split(",")
+        if len(cells) < min_columns:
+            raise DataFormatError(
+                path,
+                f"has {len(cells)} columns, expected at least {min_columns} "
+                f"({','.join(field_names[:min_columns])})",
+                line=lineno,
+            )
+        if width is not None and len(cells) != width:
+            raise DataFormatError(
+                path, f"has {len(cells)} columns where earlier lines have {width}", line=lineno
+            )
+        width = len(cells)
+        for col, cell in enumerate(cells[:min_columns]):
+            try:
+                float(cell)
+            except ValueError:
+                raise DataFormatError(
+                    path,
+                    f"'{cell.strip()}' is not a number",
+                    line=lineno,
+                    field=field_names[col] if col < len(field_names) else f"column {col + 1}",
+                ) from None
+    raise DataFormatError(path, "could not be parsed as a numeric table")  # pragma: no cover
+
+
+def _check_rows(
+    path: Path, table: np.ndarray, lines: np.ndarray, length: int | None, kind: str
+) -> None:
+    frames = table[:, 0]
+    bad = (frames != np.round(frames)) | (frames < 1)
+    if length is not None:
+        bad |= frames > length
+    if bad.any():
+        i = int(np.argmax(bad))
+        limit = f" (the sequence has {length} frames)" if length is not None else ""
+        raise DataFormatError(
+            path,
+            f"frame {table[i, 0]:g} is not a frame of the sequence{limit}",
+            line=int(lines[i]),
+            field="frame",
+        )
+    neg = (table[:, 4] < 0) | (table[:, 5] < 0)
+    if neg.any():
+        i = int(np.argmax(neg))
+        name = "w" if table[i, 4] < 0 else "h"
+        raise DataFormatError(
+            path, f"negative box size {table[i, 4 if name == 'w' else 5]:g}",
+            line=int(lines[i]), field=name,
+        )
+    if kind == "gt":
+        ids = table[:, 1]
+        bad_ids = ids != np.round(ids)
+        if bad_ids.any():
+            i = int(np.argmax(bad_ids))
+            raise DataFormatError(
+                path, f"id {ids[i]:g} is not an integer", line=int(lines[i]), field="id"
+            )
+
+
+def _annotations(table: np.ndarray, ids: np.ndarray, scores: np.ndarray,
+                 classes: np.ndarray, visibility: np.ndarray) -> Annotations:
+    order = np.argsort(table[:, 0], kind="stable")
+    return Annotations(
+        frames=table[order, 0].astype(np.int64),
+        ids=ids[order].astype(np.int64),
+        boxes=np.ascontiguousarray(table[order, 2:6]),
+        scores=scores[order].astype(np.float64),
+        classes=classes[order].astype(np.int64),
+        visibility=visibility[order].astype(np.float64),
+    )
+
+
+def read_detections(path: str | Path, length: int | None = None) -> Annotations:
+    """Read a detection file (``det.txt`` or a user file in the same format).
+
+    Args:
+        path: the file.
+        length: the sequence length; rows past it are reported as errors.
+    """
+    path = Path(path)
+    table, lines = _parse_table(path, 7, _DET_FIELDS)
+    _check_rows(path, table, lines, length, "det")
+    n = len(table)
+    return _annotations(table, np.full(n, -1), table[:, 6], np.ones(n), np.ones(n))
+
+
+def read_ground_truth(path: str | Path, benchmark: str, length: int | None = None) -> Annotations:
+    """Read a ``gt.txt`` file with the column rules of ``benchmark``.
+
+    MOT16/17/20 files have ``flag, class, visibility`` in columns 7-9; MOT15 files have only
+    the flag (column 7), every row being a pedestrian.
+    """
+    path = Path(path)
+    if benchmark not in BENCHMARKS:
+        raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
+    has_class = benchmark in CLASS_COLUMN_BENCHMARKS
+    table, lines = _parse_table(path, 9 if has_class else 7, _GT_FIELDS)
+    _check_rows(path, table, lines, length, "gt")
+    n = len(table)
+    classes = table[:, 7] if has_class else np.full(n, PEDESTRIAN_CLASS)
+    visibility = table[:, 8] if has_class else np.ones(n)
+    return _annotations(table, table[:, 1], table[:, 6], classes, visibility)
+
+
+@dataclass(frozen=True)
+class MOTSequence:
+    """One sequence: its info, detections, and ground truth when the split has it."""
+
+    info: SequenceInfo
+    detections: Annotations
+    ground_truth: Annotations | None
+
+    @property
+    def name(self) -> str:
+        """The sequence's folder name."""
+        return self.info.path.name
+
+
+class MOTChallengeDataset:
+    """The sequences of one split of a MOTChallenge-layout data set.
+
+    Args:
+        root: the benchmark folder (contains ``train/`` and/or ``test/``).
+        benchmark: the rule set (``MOT15``, ``MOT16``, ``MOT17`` or ``MOT20``).
+        split: ``"train"`` or ``"test"`` (any sub-folder name is accepted).
+        detections: ``"public"`` for each sequence's ``det/det.txt``, or a folder holding
+            ``<sequence>.txt`` files (or ``<sequence>/det/det.txt``) in the same format.
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        benchmark: str,
+        split: str = "train",
+        detections: str | Path = "public",
+    ) -> None:
+        self.root = Path(root)
+        self.benchmark = benchmark
+        self.split = split
+        self.detections = detections
+        if benchmark not in BENCHMARKS:
+            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
+        self.split_dir = self.root / split
+        if not self.split_dir.is_dir():
+            present = sorted(p.name for p in self.root.iterdir() if p.is_dir()) if (
+                self.root.is_dir()) else []
+            hint = f" (found: {', '.join(present)})" if present else ""
+            raise DataFormatError(
+                self.split_dir,
+                f"split folder missing; root= should be the benchmark folder that holds "
+                f"train/ and test/{hint}",
+            )
+        self.sequence_names = sorted(
+            p.name for p in self.split_dir.iterdir()
+            if p.is_dir() and ((p / "seqinfo.ini").exists() or (p / "img1").is_dir())
+        )
+        if not self.sequence_names:
+            raise DataFormatError(self.split_dir, "contains no sequence folders with seqinfo.ini")
+
+    def __len__(self) -> int:
+        return len(self.sequence_names)
+
+    def detection_path(self, name: str) -> Path:
+        """Return the detection file used for sequence ``name``."""
+        if self.detections == "public":
+            return self.split_dir / name / "det" / "det.txt"
+        folder = Path(self.detections)
+        for candidate in (folder / f"{name}.txt", folder / name / "det" / "det.txt"):
+            if candidate.is_file():
+                return candidate
+        raise DataFormatError(
+            folder / f"{name}.txt", f"no detection file for sequence '{name}' in {folder}"
+        )
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` ships a ``gt/gt.txt``."""
+        return (self.split_dir / name / "gt" / "gt.txt").is_file()
+
+    def load(self, name: str, *, check_frames: bool = True) -> MOTSequence:
+        """Read one sequence's files.
+
+        Args:
+            name: the sequence folder name.
+            check_frames: verify that every frame's image exists (a missing frame is an
+                error that names the first missing file).
+        """
+        if name not in self.sequence_names:
+            raise UnknownSequenceError(
+                f"no sequence '{name}' in {self.split_dir}; available: "
+                f"{', '.join(self.sequence_names)}"
+            )
+        seq_dir = self.split_dir / name
+        info = read_seqinfo(seq_dir)
+        if info.name != name:
+            warnings.warn(
+                f"{seq_dir / 'seqinfo.ini'}: name={info.name} differs from the folder name "
+                f"'{name}'; using the folder name", stacklevel=2,
+            )
+        if check_frames:
+            image_dir = seq_dir / info.image_dir
+            if not image_dir.is_dir():
+                raise DataFormatError(image_dir, "image folder missing (seqinfo.ini imDir)")
+            present = {p.name for p in image_dir.iterdir()}
+            for frame in range(1, info.length + 1):
+                if info.frame_path(frame).name not in present:
+                    raise DataFormatError(
+                        info.frame_path(frame),
+                        f"missing frame {frame} of {info.length} (seqinfo.ini seqLength)",
+                    )
+        detections = read_detections(self.detection_path(name), info.length)
+        gt_path = seq_dir / "gt" / "gt.txt"
+        ground_truth = (
+            read_ground_truth(gt_path, self.benchmark, info.length) if gt_path.is_file() else None
+        )
+        return MOTSequence(info, detections, ground_truth)

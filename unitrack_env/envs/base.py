@@ -1,0 +1,104 @@
+"""What every unitrack environment shares: episodes over the sequences of a data set.
+
+An episode is one video sequence. ``reset(options={"sequence": name})`` picks a sequence;
+without it the environment walks the split's sequences in order (or in a seeded shuffle with
+``shuffle=True``). Passing ``seed`` restarts that walk, so the same seed gives the same
+episode. Subclasses provide the data set, the observations and the scoring.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from unitrack_env.errors import DataFormatError, UnknownSequenceError
+
+#: Environment variable naming a folder that holds benchmark folders (``MOT17/``, ``DAVIS/``,
+#: ...); used when ``root`` is not given.
+DATA_ENV_VAR = "UNITRACK_DATA"
+
+
+def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path | None:
+    """Return the data root to read, or None for the embedded synthetic default.
+
+    ``root`` wins; otherwise ``$UNITRACK_DATA/<benchmark_folder>`` must exist when the
+    variable is set (no silent fallback to synthetic data).
+    """
+    if root is not None:
+        path = Path(root).expanduser()
+        if not path.is_dir():
+            raise DataFormatError(path, "root= is not a folder")
+        return path
+    base = os.environ.get(DATA_ENV_VAR)
+    if base:
+        path = Path(base).expanduser() / benchmark_folder
+        if not path.is_dir():
+            raise DataFormatError(
+                path,
+                f"{DATA_ENV_VAR}={base} is set but has no '{benchmark_folder}' folder; "
+                f"unset it to use the embedded synthetic data, or pass root=",
+            )
+        return path
+    return None
+
+
+class SequenceEnv(gym.Env):
+    """Base class: sequence selection, seeding and episode bookkeeping.
+
+    Subclasses set :attr:`sequence_names` in ``__init__`` and implement :meth:`_start_episode`.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    sequence_names: list[str]
+
+    def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported; use one of "
+                f"{self.metadata['render_modes']} or None"
+            )
+        self.render_mode = render_mode
+        self.shuffle = shuffle
+        self._order: list[str] | None = None
+        self._cursor = 0
+
+    def _choose_sequence(self, seed: int | None, options: dict[str, Any] | None) -> str:
+        options = options or {}
+        unknown = set(options) - {"sequence"}
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: ['sequence']")
+        if seed is not None or self._order is None:
+            self._order = list(self.sequence_names)
+            if self.shuffle:
+                self._order = [self._order[i] for i in self.np_random.permutation(len(self._order))]
+            self._cursor = 0
+        if options.get("sequence") is not None:
+            name = str(options["sequence"])
+            if name not in self.sequence_names:
+                raise UnknownSequenceError(
+                    f"no sequence '{name}'; this environment has: {', '.join(self.sequence_names)}"
+                )
+            return name
+        name = self._order[self._cursor % len(self._order)]
+        self._cursor += 1
+        return name
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Start an episode on one sequence (see the class docstring)."""
+        super().reset(seed=seed)
+        name = self._choose_sequence(seed, options)
+        return self._start_episode(name)
+
+    def _start_episode(self, name: str) -> tuple[Any, dict[str, Any]]:
+        raise NotImplementedError
+
+    @staticmethod
+    def _fresh(array: np.ndarray) -> np.ndarray:
+        return np.array(array, copy=True)

@@ -1,0 +1,353 @@
+"""Multi-object tracking on MOTChallenge data (MOT15, MOT16, MOT17, MOT20, custom)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from unitrack_env import spaces as ut_spaces
+from unitrack_env.datasets.motchallenge import (
+    BENCHMARKS,
+    Annotations,
+    MOTChallengeDataset,
+    MOTSequence,
+)
+from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.frames import FramePrefetcher
+from unitrack_env.metrics.clear_stream import StreamingClear
+from unitrack_env.metrics.mot_preprocess import preprocess_frame
+from unitrack_env.render import draw_boxes
+
+#: Default capacity of the padded detection arrays (MOT20 public detections reach ~250).
+DEFAULT_MAX_DETECTIONS = 512
+#: Default capacity of the padded track arrays.
+DEFAULT_MAX_TRACKS = 512
+#: Default bound of the frame space (height, width): 4K.
+DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
+
+
+class MOTChallengeEnv(SequenceEnv):
+    """Multi-object tracking by association on a MOTChallenge-layout data set.
+
+    ## Description
+    Each episode is one video sequence of a MOTChallenge benchmark (MOT15, MOT16, MOT17,
+    MOT20, or custom data in that layout). At every step the agent sees one frame and that
+    frame's detections (the benchmark's public detections, or a user-given detection
+    folder), and answers with its tracks for that frame: an id and a box per tracked
+    object. The environment scores the answer against the ground truth with the official
+    MOTChallenge rules and, at the end of the episode, reports the official TrackEval
+    metrics (HOTA, CLEAR, Identity) of the whole sequence.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
+    deterministic synthetic data set in the exact MOTChallenge layout, generated once into
+    the user cache, so it works offline.
+
+    ## Observation space
+    A ``Dict``:
+
+    | key | space | meaning |
+    |---|---|---|
+    | ``frame`` | :class:`~unitrack_env.spaces.Image` (uint8 RGB, native size) | the frame |
+    | ``boxes`` | ``Box(-inf, inf, (max_detections, 4), float32)`` | detections ``(x, y, w, h)``, 1-based pixels as in ``det.txt``; rows past ``num_detections`` are 0 |
+    | ``scores`` | ``Box(-inf, inf, (max_detections,), float32)`` | detection scores as in the file (MOT15's are unbounded) |
+    | ``num_detections`` | ``Discrete(max_detections + 1)`` | number of valid rows |
+
+    Ground truth never appears in observations. ``unitrack_env.spaces.unpack_detections``
+    returns the valid rows.
+
+    ## Action space
+    A ``Dict`` of padded arrays: ``ids`` ``(max_tracks,) int64`` (ids >= 1), ``boxes``
+    ``(max_tracks, 4) float32`` (same coordinates as the detections) and ``num_tracks``
+    ``Discrete(max_tracks + 1)``. Build it with ``unitrack_env.spaces.pack_tracks(ids,
+    boxes, max_tracks)``; the unpadded form ``{"ids": (k,), "boxes": (k, 4)}`` is accepted
+    too. Invalid actions (wrong shapes or dtypes, NaN or infinite boxes, negative sizes,
+    ids < 1, duplicate ids) raise ``InvalidActionError`` before anything is recorded.
+
+    ## Rewards
+    ``TP - FP - IDSW`` of the frame under TrackEval's CLEAR matching (IoU >= 0.5, with
+    MOTChallenge preprocessing: tracks matching distractor classes are dropped, only
+    pedestrians with a non-zero flag count). The episode return divided by the number of
+    evaluated ground-truth boxes is exactly TrackEval's MOTA. ``info["clear"]`` has the
+    frame's ``tp``, ``fp``, ``fn`` and ``idsw``. Splits without ground truth give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame of the chosen sequence and its detections.
+    ``info`` holds ``sequence``, ``frame_index`` (1-based), ``seq_length``, ``frame_rate``,
+    ``image_size`` ``(height, width)``, ``benchmark`` and ``has_ground_truth``.
+
+    ## Episode end
+    ``terminated=True`` after the agent has answered the last frame of the sequence (there
+    is no truncation). The final ``info["metrics"]`` holds the sequence's official
+    TrackEval metrics with TrackEval's names (``HOTA``, ``DetA``, ``AssA``, ``MOTA``,
+    ``MOTP``, ``IDF1``, ``IDSW``, ``CLR_FP``, ``CLR_FN``, ``MT``, ``ML``, ...), as fractions.
+    The recorded tracks are available in the official result format via
+    :meth:`episode_results`.
+
+    ## Arguments
+    - ``benchmark``: rule set, one of ``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``.
+    - ``root``: the benchmark folder holding ``train/`` and ``test/`` (default:
+      ``$UNITRACK_DATA/<benchmark>`` if that variable is set, else the synthetic default).
+    - ``split``: sub-folder to read (``"train"`` or ``"test"``).
+    - ``sequences``: restrict to these sequence names (default: all of the split).
+    - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
+    - ``min_score``: drop detections whose score is below this value.
+    - ``max_detections``, ``max_tracks``, ``max_frame_size``: space capacities.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; saves the decode time).
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws id-coloured track boxes on the frame.
+
+    ## Version history
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        benchmark: str = "MOT17",
+        root: str | os.PathLike | None = None,
+        split: str = "train",
+        sequences: list[str] | tuple[str, ...] | None = None,
+        detections: str | os.PathLike = "public",
+        min_score: float | None = None,
+        max_detections: int = DEFAULT_MAX_DETECTIONS,
+        max_tracks: int = DEFAULT_MAX_TRACKS,
+        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
+        decode_frames: bool = True,
+        prefetch: bool = True,
+        shuffle: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        if benchmark not in BENCHMARKS:
+            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
+        self.benchmark = benchmark
+        data_root = resolve_root(root, benchmark)
+        self.synthetic = data_root is None
+        if data_root is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            data_root = ensure_synthetic(benchmark)
+        self.dataset = MOTChallengeDataset(data_root, benchmark, split, detections)
+        if sequences is not None:
+            missing = [s for s in sequences if s not in self.dataset.sequence_names]
+            if missing:
+                raise ValueError(
+                    f"sequences {missing} are not in {self.dataset.split_dir}; available: "
+                    f"{', '.join(self.dataset.sequence_names)}"
+                )
+            self.sequence_names = list(sequences)
+        else:
+            self.sequence_names = list(self.dataset.sequence_names)
+        self.min_score = min_score
+        self.max_detections = int(max_detections)
+        self.max_tracks = int(max_tracks)
+        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        self.observation_space = ut_spaces.detection_observation_space(
+            self.max_detections, self.max_frame_size
+        )
+        self.action_space: spaces.Dict = ut_spaces.track_action_space(self.max_tracks)
+
+        self._sequence: MOTSequence | None = None
+        self._detections: Annotations | None = None
+        self._frames: FramePrefetcher | None = None
+        self._t = 0
+        self._done = True
+        self._clear = StreamingClear()
+        self._results: list[np.ndarray] = []
+        self._frame: np.ndarray | None = None
+        self._render_tracks: tuple[np.ndarray, np.ndarray] | None = None
+        self._render_frame: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ episode control
+    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self._frames is not None:
+            self._frames.close()
+        sequence = self.dataset.load(name, check_frames=self.decode_frames)
+        info = sequence.info
+        if info.height > self.max_frame_size[0] or info.width > self.max_frame_size[1]:
+            raise ValueError(
+                f"{name}: frames are {info.width}x{info.height}, larger than max_frame_size="
+                f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
+            )
+        detections = sequence.detections
+        if self.min_score is not None:
+            detections = detections.filter(detections.scores >= self.min_score)
+        most = int(detections.count_per_frame(info.length).max(initial=0))
+        if most > self.max_detections:
+            raise ValueError(
+                f"{self.dataset.detection_path(name)}: a frame has {most} detections, more than "
+                f"max_detections={self.max_detections}; pass a larger max_detections"
+            )
+        self._sequence = sequence
+        self._detections = detections
+        self._frames = FramePrefetcher(info.frame_path, prefetch=self.prefetch)
+        self._t = 1
+        self._done = False
+        self._clear.reset()
+        self._results = []
+        self._render_tracks = None
+        observation = self._observe(1)
+        return observation, self._info(reset=True)
+
+    def _observe(self, frame: int) -> dict[str, Any]:
+        assert self._sequence is not None and self._detections is not None
+        if self.decode_frames:
+            image = self._frames.get(frame)
+            if frame < self._sequence.info.length:
+                self._frames.schedule(frame + 1)
+            expected = (self._sequence.info.height, self._sequence.info.width)
+            if image.shape[:2] != expected:
+                raise ValueError(
+                    f"{self._sequence.info.frame_path(frame)}: image is {image.shape[1]}x"
+                    f"{image.shape[0]} but seqinfo.ini says {expected[1]}x{expected[0]}"
+                )
+        else:
+            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        self._frame = image
+        rows = self._detections.rows(frame)
+        n = rows.stop - rows.start
+        boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
+        scores = np.zeros(self.max_detections, dtype=np.float32)
+        boxes[:n] = self._detections.boxes[rows]
+        scores[:n] = self._detections.scores[rows]
+        return {"frame": image, "boxes": boxes, "scores": scores, "num_detections": n}
+
+    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+        info = self._sequence.info
+        out: dict[str, Any] = {"sequence": self._sequence.name, "frame_index": self._t}
+        if reset:
+            out.update(
+                seq_length=info.length,
+                frame_rate=info.frame_rate,
+                image_size=(info.height, info.width),
+                benchmark=self.benchmark,
+                has_ground_truth=self._sequence.ground_truth is not None,
+                synthetic=self.synthetic,
+            )
+        return out
+
+    def step(
+        self, action: dict[str, Any]
+    ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Record the tracks of the current frame, score them, and move to the next frame."""
+        if self._done or self._sequence is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        ids, boxes = ut_spaces.unpack_tracks(action, self.max_tracks)
+        t = self._t
+        self._results.append(_result_rows(t, ids, boxes))
+        reward, clear = self._score_frame(t, ids, boxes)
+        self._render_frame, self._render_tracks = self._frame, (ids, boxes)
+        info_extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
+        if t >= self._sequence.info.length:
+            self._done = True
+            observation = {k: self._fresh(v) if isinstance(v, np.ndarray) else v
+                           for k, v in self._last_observation().items()}
+            info = self._info() | info_extra
+            if self._sequence.ground_truth is not None:
+                info["metrics"] = self.episode_metrics()
+            if self._frames is not None:
+                self._frames.close()
+            return observation, reward, True, False, info
+        self._t = t + 1
+        observation = self._observe(self._t)
+        return observation, reward, False, False, self._info() | info_extra
+
+    def _last_observation(self) -> dict[str, Any]:
+        rows = self._detections.rows(self._t)
+        n = rows.stop - rows.start
+        boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
+        scores = np.zeros(self.max_detections, dtype=np.float32)
+        boxes[:n] = self._detections.boxes[rows]
+        scores[:n] = self._detections.scores[rows]
+        return {"frame": self._frame, "boxes": boxes, "scores": scores, "num_detections": n}
+
+    def _score_frame(
+        self, t: int, ids: np.ndarray, boxes: np.ndarray
+    ) -> tuple[float, dict[str, int] | None]:
+        gt = self._sequence.ground_truth
+        if gt is None:
+            return 0.0, None
+        rows = gt.rows(t)
+        frame = preprocess_frame(
+            gt.ids[rows], gt.boxes[rows], gt.classes[rows], gt.scores[rows].astype(np.int64),
+            ids, boxes, self.benchmark,
+        )
+        counts = self._clear.update(
+            frame.gt_ids, frame.gt_boxes, frame.tracker_ids, frame.tracker_boxes, iou=frame.iou
+        )
+        clear = {"tp": counts.tp, "fp": counts.fp, "fn": counts.fn, "idsw": counts.idsw}
+        return float(counts.tp - counts.fp - counts.idsw), clear
+
+    # ------------------------------------------------------------------ results
+    def episode_results(self) -> np.ndarray:
+        """Return the tracks recorded so far as MOTChallenge result rows.
+
+        Columns: ``frame, id, x, y, w, h, conf, -1, -1, -1`` (``conf`` = 1), the official
+        result format; write them with ``np.savetxt(..., delimiter=",")``.
+        """
+        if not self._results:
+            return np.zeros((0, 10))
+        return np.concatenate(self._results)
+
+    def episode_digest(self) -> str:
+        """Return a SHA-256 digest of the recorded tracks (ids and boxes rounded to 1e-3)."""
+        rows = np.round(self.episode_results(), 3)
+        return hashlib.sha256(np.ascontiguousarray(rows).tobytes()).hexdigest()
+
+    def episode_metrics(self) -> dict[str, float]:
+        """Score the recorded tracks of the current sequence with TrackEval.
+
+        Raises:
+            ValueError: the split has no ground truth.
+        """
+        from unitrack_env.metrics.motchallenge import score_sequence
+
+        if self._sequence is None or self._sequence.ground_truth is None:
+            raise ValueError("this sequence has no ground truth to score against")
+        score = score_sequence(
+            self._sequence.info.path,
+            self.episode_results(),
+            benchmark=self.benchmark,
+            seq_length=self._sequence.info.length,
+        )
+        return dict(score.summary)
+
+    @property
+    def sequence(self) -> MOTSequence | None:
+        """The sequence of the current episode."""
+        return self._sequence
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """Return the current frame with id-coloured tracks (``rgb_array``), else None."""
+        if self.render_mode is None:
+            return None
+        if self._sequence is None:
+            raise RuntimeError("call reset() before render()")
+        if self._render_tracks is None:
+            rows = self._detections.rows(self._t)
+            return draw_boxes(self._frame, self._detections.boxes[rows])
+        ids, boxes = self._render_tracks
+        return draw_boxes(self._render_frame, boxes, ids)
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()
+
+
+def _result_rows(frame: int, ids: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    rows = np.empty((len(ids), 10))
+    rows[:, 0] = frame
+    rows[:, 1] = ids
+    rows[:, 2:6] = boxes
+    rows[:, 6] = 1.0
+    rows[:, 7:] = -1.0
+    return rows
