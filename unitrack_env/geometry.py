@@ -31,8 +31,9 @@ def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
     iw = np.minimum(ax2[:, None], bx2[None, :]) - np.maximum(a[:, None, 0], b[None, :, 0])
     ih = np.minimum(ay2[:, None], by2[None, :]) - np.maximum(a[:, None, 1], b[None, :, 1])
     inter = np.clip(iw, 0, None) * np.clip(ih, 0, None)
-    area_a = np.clip(a[:, 2], 0, None) * np.clip(a[:, 3], 0, None)
-    area_b = np.clip(b[:, 2], 0, None) * np.clip(b[:, 3], 0, None)
+    # Areas as (x2 - x1) * (y2 - y1), TrackEval's arithmetic, so that ties round alike.
+    area_a = np.clip(ax2 - a[:, 0], 0, None) * np.clip(ay2 - a[:, 1], 0, None)
+    area_b = np.clip(bx2 - b[:, 0], 0, None) * np.clip(by2 - b[:, 1], 0, None)
     union = area_a[:, None] + area_b[None, :] - inter
     out = np.zeros_like(inter)
     np.divide(inter, union, out=out, where=union > 0)

@@ -1,0 +1,1 @@
+"""Evaluation: runners, official-format writers, scorers, reports and the CLI."""

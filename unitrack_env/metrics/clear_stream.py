@@ -1,0 +1,216 @@
+"""CLEAR MOT counts frame by frame, with TrackEval 1.3.0's matching (our own implementation).
+
+The rules restate ``trackeval/metrics/clear.py`` (``CLEAR.eval_sequence``); the CLEAR metrics
+are from Bernardin & Stiefelhagen, "Evaluating multiple object tracking performance: the CLEAR
+MOT metrics", EURASIP JIVP 2008.  For each frame with both ground truth and tracker boxes:
+
+* score = ``1000 * [tracker id == the id matched to this gt in the previous timestep] + IoU``,
+  zeroed where ``IoU < 0.5 - eps``; Hungarian assignment maximising the score; pairs with score
+  ``<= eps`` are not matches.  The bonus makes continuing a track win over any IoU gain.
+* TP = matches, FN = unmatched gt, FP = unmatched tracker boxes.
+* IDSW = matched gt whose tracker id differs from the tracker id it was *last* matched to, any
+  number of frames earlier.
+* The "previous timestep" record is replaced by this frame's matches.  Frames without ground
+  truth (all tracker boxes FP) or without tracker boxes (all gt FN) leave it untouched, exactly
+  as TrackEval's early ``continue`` does.
+
+Summed over a sequence, ``tp``, ``fp``, ``fn`` and ``idsw`` equal TrackEval's ``CLR_TP``,
+``CLR_FP``, ``CLR_FN`` and ``IDSW`` on the same preprocessed frames, and
+``(tp - fp - idsw) / (tp + fn)`` equals its MOTA.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from unitrack_env.geometry import box_iou
+from unitrack_env.metrics.mot_preprocess import (
+    EPS,
+    MATCH_IOU_THRESHOLD,
+    GtFrame,
+    TrackerFrame,
+    preprocess,
+)
+
+#: Score bonus for continuing the previous timestep's match (TrackEval's constant).
+CONTINUITY_BONUS: float = 1000.0
+
+
+@dataclass(frozen=True)
+class FrameClear:
+    """CLEAR counts of one frame.
+
+    Attributes:
+        tp: matched ground-truth boxes.
+        fp: tracker boxes without a match.
+        fn: ground-truth boxes without a match.
+        idsw: matches whose tracker id differs from the one last matched to that gt id.
+        iou_sum: summed IoU of the matches (numerator of MOTP).
+    """
+
+    tp: int
+    fp: int
+    fn: int
+    idsw: int
+    iou_sum: float = 0.0
+
+    @property
+    def mota_numerator(self) -> int:
+        """``tp - fp - idsw``: this frame's share of MOTA's numerator (the env's reward)."""
+        return self.tp - self.fp - self.idsw
+
+
+@dataclass
+class ClearTotals:
+    """Running sums of :class:`FrameClear` over a sequence."""
+
+    tp: int = 0
+    fp: int = 0
+    fn: int = 0
+    idsw: int = 0
+    iou_sum: float = 0.0
+    frames: int = 0
+
+    def add(self, frame: FrameClear) -> None:
+        """Add one frame's counts."""
+        self.tp += frame.tp
+        self.fp += frame.fp
+        self.fn += frame.fn
+        self.idsw += frame.idsw
+        self.iou_sum += frame.iou_sum
+        self.frames += 1
+
+    @property
+    def num_gt(self) -> int:
+        """Evaluated ground-truth boxes (``tp + fn``)."""
+        return self.tp + self.fn
+
+    @property
+    def mota(self) -> float:
+        """``(tp - fp - idsw) / max(1, tp + fn)``, as TrackEval computes MOTA."""
+        return (self.tp - self.fp - self.idsw) / max(1, self.num_gt)
+
+    @property
+    def motp(self) -> float:
+        """Mean IoU of the matches, ``iou_sum / max(1, tp)`` (TrackEval's MOTP)."""
+        return self.iou_sum / max(1, self.tp)
+
+
+@dataclass
+class StreamingClear:
+    """TrackEval CLEAR matching applied one frame at a time.
+
+    All state lives on the instance; :meth:`reset` starts a new sequence.  Feed frames that
+    are already preprocessed (see :func:`unitrack_env.metrics.mot_preprocess.preprocess_frame`).
+
+    Args:
+        threshold: minimum IoU of a match (TrackEval's ``THRESHOLD``, default 0.5).
+
+    >>> clear = StreamingClear()
+    >>> box = np.array([[0.0, 0.0, 10.0, 10.0]])
+    >>> clear.update(np.array([1]), box, np.array([7]), box)
+    FrameClear(tp=1, fp=0, fn=0, idsw=0, iou_sum=1.0)
+    >>> clear.update(np.array([1]), box, np.array([8]), box).idsw
+    1
+    """
+
+    threshold: float = MATCH_IOU_THRESHOLD
+    totals: ClearTotals = field(default_factory=ClearTotals, init=False)
+    _last_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
+    _prev_step_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
+
+    def reset(self) -> None:
+        """Forget all matches and totals (start of a sequence)."""
+        self.totals = ClearTotals()
+        self._last_match = {}
+        self._prev_step_match = {}
+
+    def update(
+        self,
+        gt_ids: np.ndarray,
+        gt_boxes: np.ndarray,
+        tracker_ids: np.ndarray,
+        tracker_boxes: np.ndarray,
+        *,
+        iou: np.ndarray | None = None,
+    ) -> FrameClear:
+        """Score one preprocessed frame and advance the state.
+
+        Args:
+            gt_ids: ``(n,)`` ids of the evaluated ground truth.
+            gt_boxes: ``(n, 4)`` their ``(x, y, w, h)`` boxes.
+            tracker_ids: ``(k,)`` tracker ids (unique).
+            tracker_boxes: ``(k, 4)`` tracker boxes.
+            iou: optional precomputed ``(n, k)`` IoU matrix (e.g. from preprocessing).
+
+        Returns:
+            This frame's counts (also added to :attr:`totals`).
+        """
+        g_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
+        t_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
+        n, k = len(g_ids), len(t_ids)
+        if n == 0 or k == 0:
+            result = FrameClear(tp=0, fp=k, fn=n, idsw=0)
+            self.totals.add(result)
+            return result
+
+        sim = box_iou(gt_boxes, tracker_boxes) if iou is None else np.asarray(iou, np.float64)
+        if sim.shape != (n, k):
+            raise ValueError(f"IoU matrix has shape {sim.shape}, expected {(n, k)}")
+        prev = np.array([self._prev_step_match.get(int(g), -1) for g in g_ids], dtype=np.int64)
+        has_prev = np.array([int(g) in self._prev_step_match for g in g_ids], dtype=bool)
+        continues = has_prev[:, None] & (t_ids[None, :] == prev[:, None])
+        score = CONTINUITY_BONUS * continues + sim
+        score[sim < self.threshold - EPS] = 0.0
+        rows, cols = linear_sum_assignment(-score)
+        matched = score[rows, cols] > EPS
+        rows, cols = rows[matched], cols[matched]
+
+        idsw = 0
+        for g, t in zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True):
+            last = self._last_match.get(g)
+            if last is not None and last != t:
+                idsw += 1
+            self._last_match[g] = t
+        self._prev_step_match = dict(zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
+
+        tp = len(rows)
+        result = FrameClear(
+            tp=tp,
+            fp=k - tp,
+            fn=n - tp,
+            idsw=idsw,
+            iou_sum=float(sim[rows, cols].sum()) if tp else 0.0,
+        )
+        self.totals.add(result)
+        return result
+
+
+def clear_from_frames(
+    gt_frames: Sequence[GtFrame],
+    tracker_frames: Sequence[TrackerFrame],
+    *,
+    benchmark: str,
+) -> ClearTotals:
+    """Preprocess and score a whole sequence frame by frame.
+
+    Args:
+        gt_frames: per-frame ground truth (frame ``t`` at index ``t - 1``).
+        tracker_frames: per-frame tracker output, same length.
+        benchmark: TrackEval benchmark name (``"MOT15"``, ``"MOT16"``, ``"MOT17"``, ``"MOT20"``).
+    """
+    if len(gt_frames) != len(tracker_frames):
+        raise ValueError(
+            f"{len(gt_frames)} ground-truth frames but {len(tracker_frames)} tracker frames"
+        )
+    clear = StreamingClear()
+    for gt, trk in zip(gt_frames, tracker_frames, strict=True):
+        frame = preprocess(gt, trk, benchmark)
+        clear.update(
+            frame.gt_ids, frame.gt_boxes, frame.tracker_ids, frame.tracker_boxes, iou=frame.iou
+        )
+    return clear.totals

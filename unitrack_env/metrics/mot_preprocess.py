@@ -1,0 +1,326 @@
+"""MOTChallenge per-frame preprocessing, exactly as the official evaluation does it.
+
+This is our own numpy implementation of the semantics of TrackEval 1.3.0's
+``MotChallenge2DBox.get_preprocessed_seq_data`` (J. Luiten et al., ``trackeval/datasets/
+mot_challenge_2d_box.py``), restated per frame so that an environment can score every step:
+
+1. The tracker's boxes are matched to *all* ground-truth boxes of the frame (any class) with the
+   Hungarian algorithm on IoU, pairs below ``0.5 - eps`` excluded.  Tracker boxes matched to a
+   ground-truth box of a distractor class (person on vehicle 2, static person 7, distractor 8,
+   reflection 12, and for MOT20 also non-MOT vehicle 6) are removed: they are neither true nor
+   false positives.
+2. Only pedestrian ground truth (class 1) whose "consider" flag (``zero_marked``, column 7 of
+   ``gt.txt``) is non-zero is kept.
+
+MOT15 (2D MOT 2015) files have no class column: step 1 is skipped and step 2 keeps every box
+whose flag is non-zero.
+
+Data contract: boxes are ``(n, 4)`` ``(x, y, w, h)`` arrays, ids are integer arrays, one frame
+at a time; the output keeps the input order of the surviving rows (the order matters only for
+Hungarian tie-breaking, and keeping it makes our sums equal TrackEval's to the last count).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from unitrack_env.geometry import box_iou
+
+#: MOTChallenge class ids of ``gt.txt`` column 8 (MOT16/17/20), as TrackEval names them.
+MOT_CLASS_IDS: dict[str, int] = {
+    "pedestrian": 1,
+    "person_on_vehicle": 2,
+    "car": 3,
+    "bicycle": 4,
+    "motorbike": 5,
+    "non_mot_vehicle": 6,
+    "static_person": 7,
+    "distractor": 8,
+    "occluder": 9,
+    "occluder_on_ground": 10,
+    "occluder_full": 11,
+    "reflection": 12,
+    "crowd": 13,
+}
+
+#: The only class that is evaluated.
+PEDESTRIAN_CLASS: int = MOT_CLASS_IDS["pedestrian"]
+
+#: Classes whose matched tracker boxes are removed (MOT16, MOT17).
+DISTRACTOR_CLASSES: tuple[int, ...] = tuple(
+    MOT_CLASS_IDS[name]
+    for name in ("person_on_vehicle", "static_person", "distractor", "reflection")
+)
+
+#: MOT20 also treats non-MOT vehicles as distractors.
+MOT20_DISTRACTOR_CLASSES: tuple[int, ...] = (*DISTRACTOR_CLASSES, MOT_CLASS_IDS["non_mot_vehicle"])
+
+#: Benchmarks understood by the preprocessing (TrackEval's ``BENCHMARK`` values).
+BENCHMARKS: tuple[str, ...] = ("MOT15", "MOT16", "MOT17", "MOT20")
+
+#: Benchmark without a class column and without distractor removal.
+CLASSLESS_BENCHMARK: str = "MOT15"
+
+#: IoU a tracker box needs with a ground-truth box to be matched (preprocessing and CLEAR).
+MATCH_IOU_THRESHOLD: float = 0.5
+
+#: Float tolerance TrackEval applies to every threshold comparison (``np.finfo(float).eps``).
+EPS: float = float(np.finfo(float).eps)
+
+
+def normalize_benchmark(benchmark: str) -> str:
+    """Return the canonical benchmark name (``"MOT17"``) or raise naming the valid ones.
+
+    >>> normalize_benchmark("mot17")
+    'MOT17'
+    """
+    name = str(benchmark).strip().upper()
+    if name not in BENCHMARKS:
+        raise ValueError(
+            f"unknown MOTChallenge benchmark {benchmark!r}; expected one of {', '.join(BENCHMARKS)}"
+        )
+    return name
+
+
+def distractor_classes(benchmark: str) -> tuple[int, ...]:
+    """Return the distractor class ids of ``benchmark`` (empty for MOT15)."""
+    name = normalize_benchmark(benchmark)
+    if name == CLASSLESS_BENCHMARK:
+        return ()
+    if name == "MOT20":
+        return MOT20_DISTRACTOR_CLASSES
+    return DISTRACTOR_CLASSES
+
+
+@dataclass(frozen=True)
+class GtFrame:
+    """All ground-truth rows of one frame, before preprocessing.
+
+    Attributes:
+        ids: ``(n,)`` int64 object ids.
+        boxes: ``(n, 4)`` float64 ``(x, y, w, h)``.
+        classes: ``(n,)`` int64 class ids (column 8; unused for MOT15).
+        zero_marked: ``(n,)`` int64 "consider" flags (column 7); 0 means ignore.
+    """
+
+    ids: np.ndarray
+    boxes: np.ndarray
+    classes: np.ndarray
+    zero_marked: np.ndarray
+
+
+@dataclass(frozen=True)
+class TrackerFrame:
+    """A tracker's boxes in one frame.
+
+    Attributes:
+        ids: ``(k,)`` int64 track ids.
+        boxes: ``(k, 4)`` float64 ``(x, y, w, h)``.
+    """
+
+    ids: np.ndarray
+    boxes: np.ndarray
+
+
+@dataclass(frozen=True)
+class PreprocessedFrame:
+    """One frame after MOTChallenge preprocessing.
+
+    Attributes:
+        gt_ids: ``(n',)`` ids of the evaluated ground truth.
+        gt_boxes: ``(n', 4)`` their boxes.
+        tracker_ids: ``(k',)`` ids of the tracker boxes that count.
+        tracker_boxes: ``(k', 4)`` their boxes.
+        iou: ``(n', k')`` IoU between the kept boxes (computed once, as TrackEval does).
+        gt_kept: ``(n,)`` bool mask over the input ground-truth rows.
+        tracker_kept: ``(k,)`` bool mask over the input tracker rows (False = removed because
+            it matched a distractor).
+    """
+
+    gt_ids: np.ndarray
+    gt_boxes: np.ndarray
+    tracker_ids: np.ndarray
+    tracker_boxes: np.ndarray
+    iou: np.ndarray
+    gt_kept: np.ndarray
+    tracker_kept: np.ndarray
+
+
+def _as_ids(values: np.ndarray | Sequence[int], what: str) -> np.ndarray:
+    arr = np.asarray(values)
+    if arr.ndim != 1:
+        raise ValueError(f"{what} must be a 1-D array, got shape {arr.shape}")
+    if arr.size and not np.issubdtype(arr.dtype, np.integer):
+        as_int = arr.astype(np.int64)
+        if not np.array_equal(as_int, arr):
+            raise ValueError(f"{what} must hold integers, got {arr[as_int != arr][:3].tolist()}")
+        arr = as_int
+    return arr.astype(np.int64, copy=False)
+
+
+def _as_boxes(values: np.ndarray, n: int, what: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.size == 0 and n == 0:
+        return arr.reshape(0, 4)
+    if arr.shape != (n, 4):
+        raise ValueError(f"{what} must have shape ({n}, 4), got {arr.shape}")
+    return arr
+
+
+def _check_unique(ids: np.ndarray, what: str) -> None:
+    if ids.size:
+        uniq, counts = np.unique(ids, return_counts=True)
+        if counts.max() > 1:
+            raise ValueError(
+                f"{what} must be unique within a frame; repeated: {uniq[counts > 1].tolist()}"
+            )
+
+
+def preprocess_frame(
+    gt_ids: np.ndarray,
+    gt_boxes: np.ndarray,
+    gt_classes: np.ndarray,
+    gt_zero_marked: np.ndarray,
+    trk_ids: np.ndarray,
+    trk_boxes: np.ndarray,
+    benchmark: str,
+) -> PreprocessedFrame:
+    """Apply MOTChallenge preprocessing to one frame (TrackEval 1.3.0 semantics).
+
+    Args:
+        gt_ids: ``(n,)`` ground-truth ids of every row of the frame (all classes).
+        gt_boxes: ``(n, 4)`` ground-truth boxes ``(x, y, w, h)``.
+        gt_classes: ``(n,)`` class ids (``gt.txt`` column 8); ignored for MOT15.
+        gt_zero_marked: ``(n,)`` "consider" flags (``gt.txt`` column 7).
+        trk_ids: ``(k,)`` tracker ids.
+        trk_boxes: ``(k, 4)`` tracker boxes.
+        benchmark: ``"MOT15"``, ``"MOT16"``, ``"MOT17"`` or ``"MOT20"``.
+
+    Returns:
+        The kept ground truth and tracker boxes (input order preserved) and their IoU matrix.
+
+    Raises:
+        ValueError: for shape mismatches, duplicate ids within the frame, or (not MOT15)
+            ground-truth class ids outside MOTChallenge's 1..13.  TrackEval checks the classes
+            only in frames where both sides have boxes; we check every frame with ground truth
+            so that an invalid file fails the same way whatever the tracker does.
+    """
+    name = normalize_benchmark(benchmark)
+    g_ids = _as_ids(gt_ids, "gt_ids")
+    g_boxes = _as_boxes(gt_boxes, len(g_ids), "gt_boxes")
+    g_zero = _as_ids(gt_zero_marked, "gt_zero_marked")
+    t_ids = _as_ids(trk_ids, "trk_ids")
+    t_boxes = _as_boxes(trk_boxes, len(t_ids), "trk_boxes")
+    if len(g_zero) != len(g_ids):
+        raise ValueError(f"gt_zero_marked has {len(g_zero)} entries for {len(g_ids)} gt boxes")
+    _check_unique(g_ids, "ground-truth ids")
+    _check_unique(t_ids, "tracker ids")
+
+    iou = box_iou(g_boxes, t_boxes)
+    tracker_kept = np.ones(len(t_ids), dtype=bool)
+    if name == CLASSLESS_BENCHMARK:
+        gt_kept = g_zero != 0
+    else:
+        g_classes = _as_ids(gt_classes, "gt_classes")
+        if len(g_classes) != len(g_ids):
+            raise ValueError(f"gt_classes has {len(g_classes)} entries for {len(g_ids)} gt boxes")
+        invalid = np.setdiff1d(g_classes, np.array(list(MOT_CLASS_IDS.values())))
+        if invalid.size:
+            raise ValueError(
+                f"ground-truth class ids {invalid.tolist()} are not MOTChallenge classes "
+                f"(valid: 1..{max(MOT_CLASS_IDS.values())}); if this is a 2D MOT 2015 file "
+                f"without a class column, use benchmark='MOT15'"
+            )
+        if len(g_ids) and len(t_ids):
+            scores = iou.copy()
+            scores[scores < MATCH_IOU_THRESHOLD - EPS] = 0.0
+            rows, cols = linear_sum_assignment(-scores)
+            matched = scores[rows, cols] > EPS
+            rows, cols = rows[matched], cols[matched]
+            on_distractor = np.isin(g_classes[rows], distractor_classes(name))
+            tracker_kept[cols[on_distractor]] = False
+        gt_kept = (g_zero != 0) & (g_classes == PEDESTRIAN_CLASS)
+
+    return PreprocessedFrame(
+        gt_ids=g_ids[gt_kept],
+        gt_boxes=g_boxes[gt_kept],
+        tracker_ids=t_ids[tracker_kept],
+        tracker_boxes=t_boxes[tracker_kept],
+        iou=iou[np.ix_(gt_kept, tracker_kept)],
+        gt_kept=gt_kept,
+        tracker_kept=tracker_kept,
+    )
+
+
+def preprocess(gt: GtFrame, tracker: TrackerFrame, benchmark: str) -> PreprocessedFrame:
+    """:func:`preprocess_frame` on records."""
+    return preprocess_frame(
+        gt.ids, gt.boxes, gt.classes, gt.zero_marked, tracker.ids, tracker.boxes, benchmark
+    )
+
+
+def _split_by_frame(rows: np.ndarray, num_frames: int, what: str) -> list[np.ndarray]:
+    frames = rows[:, 0]
+    frame_idx = frames.astype(np.int64)
+    if rows.size and (
+        not np.array_equal(frame_idx, frames) or frame_idx.min() < 1 or frame_idx.max() > num_frames
+    ):
+        bad = rows[(frame_idx != frames) | (frame_idx < 1) | (frame_idx > num_frames), 0]
+        raise ValueError(
+            f"{what} rows name frames {bad[:5].tolist()} outside 1..{num_frames} "
+            "(MOTChallenge frames are 1-based integers)"
+        )
+    return [rows[frame_idx == t] for t in range(1, num_frames + 1)]
+
+
+def gt_frames_from_rows(rows: np.ndarray, num_frames: int, *, benchmark: str) -> list[GtFrame]:
+    """Split ``gt.txt`` rows into per-frame records (index ``t - 1`` holds frame ``t``).
+
+    Columns are read by position as TrackEval reads them: frame, id, x, y, w, h, flag, class.
+    Row order within a frame is kept.
+
+    Args:
+        rows: ``(n, >=7)`` array (``>= 8`` columns unless ``benchmark`` is MOT15).
+        num_frames: the sequence length.
+        benchmark: TrackEval benchmark name.
+    """
+    name = normalize_benchmark(benchmark)
+    arr = np.asarray(rows, dtype=np.float64)
+    if arr.size == 0:
+        arr = arr.reshape(0, 8)
+    min_cols = 7 if name == CLASSLESS_BENCHMARK else 8
+    if arr.ndim != 2 or arr.shape[1] < min_cols:
+        raise ValueError(f"{name} ground truth needs at least {min_cols} columns, got {arr.shape}")
+    out = []
+    for part in _split_by_frame(arr, num_frames, "ground-truth"):
+        classes = (
+            part[:, 7].astype(np.int64)
+            if part.shape[1] >= 8
+            else np.full(len(part), PEDESTRIAN_CLASS, dtype=np.int64)
+        )
+        out.append(
+            GtFrame(
+                ids=part[:, 1].astype(np.int64),
+                boxes=part[:, 2:6].copy(),
+                classes=classes,
+                zero_marked=part[:, 6].astype(np.int64),
+            )
+        )
+    return out
+
+
+def tracker_frames_from_rows(rows: np.ndarray, num_frames: int) -> list[TrackerFrame]:
+    """Split MOTChallenge result rows ``(frame, id, x, y, w, h, ...)`` into per-frame records."""
+    arr = np.asarray(rows, dtype=np.float64)
+    if arr.size == 0:
+        arr = arr.reshape(0, 6)
+    if arr.ndim != 2 or arr.shape[1] < 6:
+        raise ValueError(f"tracker rows need at least 6 columns, got shape {arr.shape}")
+    return [
+        TrackerFrame(ids=part[:, 1].astype(np.int64), boxes=part[:, 2:6].copy())
+        for part in _split_by_frame(arr, num_frames, "tracker")
+    ]

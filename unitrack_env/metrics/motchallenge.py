@@ -1,0 +1,427 @@
+"""Official MOTChallenge scores through TrackEval 1.3.0 (HOTA, CLEAR, Identity, Count).
+
+TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
+licence) is the scorer behind the MOTChallenge leaderboards.  This adapter uses TrackEval's own
+``MotChallenge2DBox`` loading and preprocessing and its metric classes, but not its
+``Evaluator``: it calls ``get_raw_seq_data`` / ``get_preprocessed_seq_data`` and each metric's
+``eval_sequence`` / ``combine_sequences`` directly, so that nothing is printed, plotted or
+written (TrackEval's defaults would write into its own ``site-packages`` folder).
+
+Data contract:
+
+* ``gt_seq_dir`` is one MOTChallenge sequence folder holding ``gt/gt.txt`` and (unless
+  ``seq_length`` is given) ``seqinfo.ini``.
+* tracker output is a ``(k, >=6)`` array in MOTChallenge result format
+  ``frame, id, bb_left, bb_top, bb_width, bb_height[, conf, x, y, z]`` with 1-based frames, or
+  the path of such a file.  The rows are written to a private temporary folder for TrackEval;
+  track ids are relabelled to ``1..K`` on the way (TrackEval relabels too, but it indexes an
+  array by the raw id, so huge or negative ids would exhaust memory or alias).
+* Scores are TrackEval's numbers (fractions in ``[0, 1]``, not percent), keyed by TrackEval's
+  field names.  The HOTA family (HOTA, DetA, AssA, LocA, ...) is the mean over the 19 alpha
+  thresholds, which is what TrackEval's summary reports.
+"""
+
+from __future__ import annotations
+
+import configparser
+import contextlib
+import io
+import math
+import tempfile
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.errors import DataFormatError
+from unitrack_env.metrics.mot_preprocess import normalize_benchmark
+
+#: Column names of a MOTChallenge result file, used in error messages.
+RESULT_FIELDS: tuple[str, ...] = (
+    "frame",
+    "id",
+    "bb_left",
+    "bb_top",
+    "bb_width",
+    "bb_height",
+    "conf",
+    "x",
+    "y",
+    "z",
+)
+
+#: A result row needs at least frame, id and the box.
+MIN_RESULT_COLUMNS: int = 6
+
+#: Confidence written for rows given without one (TrackEval needs the column, never uses it).
+DEFAULT_CONFIDENCE: float = 1.0
+
+#: TrackEval reads result column 8 as a class id and rejects values above this (pedestrian).
+MAX_TRACKER_CLASS: int = 1
+
+#: Name of the tracker folder inside the temporary TrackEval layout.
+_TRACKER_NAME: str = "tracker"
+
+#: Sub-folder TrackEval expects under the tracker folder.
+_TRACKER_SUB_FOLDER: str = "data"
+
+#: The only MOTChallenge class that is evaluated.
+_CLASS: str = "pedestrian"
+
+#: Order in which metrics appear in summaries (TrackEval class names).
+METRIC_NAMES: tuple[str, ...] = ("HOTA", "CLEAR", "Identity", "Count")
+
+
+@dataclass(frozen=True, eq=False)
+class SequenceScore(Mapping[str, float]):
+    """TrackEval's results for one sequence (or a combination of sequences).
+
+    Behaves as a read-only mapping over :attr:`summary`, so ``score["MOTA"]`` works and
+    ``dict(score)`` is the flat summary; equality compares summaries.
+
+    Attributes:
+        sequence: sequence name (folder name) or ``"COMBINED"``.
+        benchmark: TrackEval benchmark used.
+        summary: flat ``{field: float}`` of every scalar TrackEval field; HOTA-family array
+            fields are averaged over the alpha thresholds.
+        raw: ``{metric class name: TrackEval result dict}`` exactly as ``eval_sequence`` (or
+            ``combine_sequences``) returned it, arrays included.
+    """
+
+    sequence: str
+    benchmark: str
+    summary: dict[str, float]
+    raw: dict[str, dict[str, Any]] = field(repr=False)
+
+    def __getitem__(self, key: str) -> float:
+        return self.summary[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.summary)
+
+    def __len__(self) -> int:
+        return len(self.summary)
+
+
+def _make_metrics() -> list[Any]:
+    from trackeval.metrics import CLEAR, HOTA, Count, Identity
+
+    quiet = {"PRINT_CONFIG": False}
+    return [HOTA(), CLEAR(dict(quiet)), Identity(dict(quiet)), Count()]
+
+
+def _flatten(raw: dict[str, dict[str, Any]]) -> dict[str, float]:
+    """One flat dict of floats from TrackEval's per-metric results."""
+    out: dict[str, float] = {}
+    for metric in _make_metrics():
+        res = raw[metric.get_name()]
+        for name in metric.fields:
+            if name not in res:
+                continue
+            if name in metric.integer_array_fields:
+                continue  # per-alpha counts (HOTA_TP, ...) stay in ``raw``
+            value = res[name]
+            out[name] = float(np.mean(value)) if np.ndim(value) else float(value)
+    return out
+
+
+def _split_fields(line: str) -> list[str]:
+    parts = line.split(",") if "," in line else line.split()
+    parts = [p.strip() for p in parts]
+    if len(parts) > 1 and parts[-1] == "":  # a trailing comma, which TrackEval tolerates
+        parts = parts[:-1]
+    return parts
+
+
+def _field_name(col: int) -> str:
+    return RESULT_FIELDS[col] if col < len(RESULT_FIELDS) else f"column {col + 1}"
+
+
+def _parse_result_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Parse a result file into ``(rows, line_numbers)``; blank lines are skipped."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise DataFormatError(path, "result file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFormatError(path, f"cannot read result file ({exc})") from None
+    rows: list[list[float]] = []
+    lines: list[int] = []
+    width: int | None = None
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        parts = _split_fields(line)
+        if len(parts) < MIN_RESULT_COLUMNS:
+            raise DataFormatError(
+                path,
+                f"expected at least {MIN_RESULT_COLUMNS} comma-separated fields "
+                f"(frame, id, bb_left, bb_top, bb_width, bb_height), got {len(parts)}",
+                line=lineno,
+            )
+        if width is None:
+            width = len(parts)
+        elif len(parts) != width:
+            raise DataFormatError(
+                path, f"has {len(parts)} fields but earlier lines have {width}", line=lineno
+            )
+        values = []
+        for col, part in enumerate(parts):
+            try:
+                value = float(part)
+            except ValueError:
+                raise DataFormatError(
+                    path, f"{part!r} is not a number", line=lineno, field=_field_name(col)
+                ) from None
+            if not math.isfinite(value):
+                raise DataFormatError(
+                    path, f"{part!r} is not a finite number", line=lineno, field=_field_name(col)
+                )
+            values.append(value)
+        for col, what in ((0, "frame"), (1, "id")):
+            if values[col] != int(values[col]):
+                raise DataFormatError(
+                    path,
+                    f"{what} must be an integer, got {parts[col]!r}",
+                    line=lineno,
+                    field=what,
+                )
+        if values[0] < 1:
+            raise DataFormatError(
+                path, f"frames are 1-based, got {parts[0]!r}", line=lineno, field="frame"
+            )
+        rows.append(values)
+        lines.append(lineno)
+    arr = np.array(rows, dtype=np.float64).reshape(len(rows), width or MIN_RESULT_COLUMNS)
+    return arr, np.array(lines, dtype=np.int64)
+
+
+def read_result_file(path: str | Path) -> np.ndarray:
+    """Read a MOTChallenge result file into a ``(k, c)`` float64 array (``c >= 6``).
+
+    Raises:
+        DataFormatError: naming the file, the 1-based line and the field of the first
+            malformed value (too few fields, a ragged line, a non-number, a non-integer or
+            non-positive frame, a non-integer id).
+    """
+    return _parse_result_file(Path(path))[0]
+
+
+def _fail(source: Path | None, message: str, line: int | None, fld: str | None) -> Exception:
+    if source is None:
+        row = "" if line is None else f"row {line}: "
+        col = "" if fld is None else f"column '{fld}': "
+        return ValueError(f"tracker rows: {row}{col}{message}")
+    return DataFormatError(source, message, line=line, field=fld)
+
+
+def _validate_tracker_rows(
+    rows: np.ndarray, seq_length: int, source: Path | None, line_numbers: np.ndarray | None
+) -> None:
+    """Reject what TrackEval would reject (or mis-handle), with a precise location."""
+
+    def where(i: int) -> int:
+        return int(line_numbers[i]) if line_numbers is not None else i
+
+    if rows.ndim != 2 or (rows.size and rows.shape[1] < MIN_RESULT_COLUMNS):
+        raise _fail(source, f"expected a (k, >=6) array, got shape {rows.shape}", None, None)
+    if not len(rows):
+        return
+    bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
+    if bad.size:
+        raise _fail(source, "contains NaN or infinity", where(bad[0]), None)
+    for col, what in ((0, "frame"), (1, "id")):
+        bad = np.flatnonzero(rows[:, col] != np.floor(rows[:, col]))
+        if bad.size:
+            raise _fail(source, f"{what} must be an integer", where(bad[0]), what)
+    bad = np.flatnonzero((rows[:, 0] < 1) | (rows[:, 0] > seq_length))
+    if bad.size:
+        raise _fail(
+            source,
+            f"frame {int(rows[bad[0], 0])} is outside the sequence (1..{seq_length})",
+            where(bad[0]),
+            "frame",
+        )
+    if rows.shape[1] > 7:
+        bad = np.flatnonzero(rows[:, 7].astype(np.int64) > MAX_TRACKER_CLASS)
+        if bad.size:
+            raise _fail(
+                source,
+                f"TrackEval reads this column as a class id and accepts only <= "
+                f"{MAX_TRACKER_CLASS} (pedestrian); write -1 in the x, y, z columns of 2D results",
+                where(bad[0]),
+                "x",
+            )
+    keys = rows[:, 0].astype(np.int64) * (1 << 32) + np.unique(rows[:, 1], return_inverse=True)[
+        1
+    ].astype(np.int64)
+    order = np.argsort(keys, kind="stable")
+    dup = np.flatnonzero(keys[order][1:] == keys[order][:-1])
+    if dup.size:
+        i = int(order[dup[0] + 1])
+        raise _fail(
+            source,
+            f"id {int(rows[i, 1])} appears more than once in frame {int(rows[i, 0])}",
+            where(i),
+            "id",
+        )
+
+
+def _write_for_trackeval(rows: np.ndarray, path: Path) -> None:
+    """Write rows as a result file TrackEval reads back to the same doubles."""
+    out = rows.copy()
+    if len(out):
+        out[:, 1] = np.unique(out[:, 1], return_inverse=True)[1] + 1
+    if out.shape[1] < MIN_RESULT_COLUMNS + 1:
+        out = np.column_stack([out, np.full(len(out), DEFAULT_CONFIDENCE)])
+    fmt = ["%d", "%d"] + ["%.17g"] * (out.shape[1] - 2)
+    with path.open("w", encoding="ascii") as fh:
+        if len(out):
+            np.savetxt(fh, out, fmt=fmt, delimiter=",")
+
+
+def _read_seq_length(gt_seq_dir: Path) -> int:
+    ini = gt_seq_dir / "seqinfo.ini"
+    if not ini.is_file():
+        raise DataFormatError(ini, "missing; pass seq_length= when a sequence has no seqinfo.ini")
+    parser = configparser.ConfigParser()
+    try:
+        parser.read(ini, encoding="utf-8")
+        value = parser["Sequence"]["seqLength"]
+    except (configparser.Error, KeyError, UnicodeDecodeError):
+        raise DataFormatError(
+            ini, "needs a [Sequence] section with seqLength", field="seqLength"
+        ) from None
+    try:
+        length = int(value)
+    except ValueError:
+        raise DataFormatError(ini, f"{value!r} is not an integer", field="seqLength") from None
+    if length < 1:
+        raise DataFormatError(ini, f"must be positive, got {length}", field="seqLength")
+    return length
+
+
+def score_sequence(
+    gt_seq_dir: str | Path,
+    tracker_rows: np.ndarray | str | Path,
+    *,
+    benchmark: str,
+    seq_length: int | None = None,
+) -> SequenceScore:
+    """Score one sequence with TrackEval's HOTA, CLEAR, Identity and Count metrics.
+
+    Args:
+        gt_seq_dir: MOTChallenge sequence folder with ``gt/gt.txt`` (its folder name is the
+            sequence name).
+        tracker_rows: ``(k, >=6)`` result rows, or the path of a result file.
+        benchmark: ``"MOT15"``, ``"MOT16"``, ``"MOT17"`` or ``"MOT20"`` (TrackEval's
+            ``BENCHMARK``; MOT15 means no class column and no distractor removal).
+        seq_length: number of frames; read from ``seqinfo.ini`` when omitted.
+
+    Returns:
+        A :class:`SequenceScore` (a mapping of TrackEval field names to floats).
+
+    Raises:
+        DataFormatError: missing or malformed ground truth / seqinfo / result file.
+        ValueError: malformed ``tracker_rows`` array, unknown benchmark.
+
+    Example:
+        >>> score = score_sequence(seq_dir, rows, benchmark="MOT17")  # doctest: +SKIP
+        >>> score["MOTA"], score["IDF1"], score["HOTA"]  # doctest: +SKIP
+    """
+    name = normalize_benchmark(benchmark)
+    seq_dir = Path(gt_seq_dir).resolve()
+    gt_file = seq_dir / "gt" / "gt.txt"
+    if not gt_file.is_file():
+        raise DataFormatError(gt_file, "ground truth not found (expected <sequence>/gt/gt.txt)")
+    if seq_length is None:
+        seq_length = _read_seq_length(seq_dir)
+    elif int(seq_length) < 1:
+        raise ValueError(f"seq_length must be positive, got {seq_length}")
+    seq_length = int(seq_length)
+
+    source: Path | None = None
+    line_numbers: np.ndarray | None = None
+    if isinstance(tracker_rows, (str, Path)):
+        source = Path(tracker_rows)
+        rows, line_numbers = _parse_result_file(source)
+    else:
+        rows = np.asarray(tracker_rows, dtype=np.float64)
+        if rows.size == 0:
+            rows = rows.reshape(0, MIN_RESULT_COLUMNS)
+    _validate_tracker_rows(rows, seq_length, source, line_numbers)
+
+    raw = _run_trackeval(seq_dir, rows, name, seq_length, gt_file)
+    return SequenceScore(sequence=seq_dir.name, benchmark=name, summary=_flatten(raw), raw=raw)
+
+
+def _run_trackeval(
+    seq_dir: Path, rows: np.ndarray, benchmark: str, seq_length: int, gt_file: Path
+) -> dict[str, dict[str, Any]]:
+    from trackeval.datasets import MotChallenge2DBox
+    from trackeval.utils import TrackEvalException
+
+    seq = seq_dir.name
+    with tempfile.TemporaryDirectory(prefix="unitrack-trackeval-") as tmp:
+        data_dir = Path(tmp) / _TRACKER_NAME / _TRACKER_SUB_FOLDER
+        data_dir.mkdir(parents=True)
+        _write_for_trackeval(rows, data_dir / f"{seq}.txt")
+        config = {
+            "GT_FOLDER": str(seq_dir.parent),
+            "TRACKERS_FOLDER": tmp,
+            "OUTPUT_FOLDER": tmp,
+            "TRACKERS_TO_EVAL": [_TRACKER_NAME],
+            "CLASSES_TO_EVAL": [_CLASS],
+            "BENCHMARK": benchmark,
+            "SPLIT_TO_EVAL": "train",
+            "INPUT_AS_ZIP": False,
+            "PRINT_CONFIG": False,
+            "DO_PREPROC": True,
+            "TRACKER_SUB_FOLDER": _TRACKER_SUB_FOLDER,
+            "OUTPUT_SUB_FOLDER": "",
+            "SEQ_INFO": {seq: seq_length},
+            "SKIP_SPLIT_FOL": True,
+        }
+        captured = io.StringIO()
+        try:
+            # TrackEval prints (and dumps tracebacks) on bad input; keep that out of the
+            # caller's streams and put it in our error instead.  The redirection is
+            # process-wide while it lasts: score in worker processes, not threads.
+            with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
+                dataset = MotChallenge2DBox(config)
+                raw_data = dataset.get_raw_seq_data(_TRACKER_NAME, seq)
+                data = dataset.get_preprocessed_seq_data(raw_data, _CLASS)
+        except TrackEvalException as exc:
+            detail = captured.getvalue().strip().splitlines()
+            hint = f" ({detail[-1]})" if detail else ""
+            raise DataFormatError(gt_file, f"TrackEval rejected the data: {exc}{hint}") from exc
+        return {metric.get_name(): metric.eval_sequence(data) for metric in _make_metrics()}
+
+
+def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScore:
+    """Combine per-sequence results as TrackEval's ``combine_sequences`` of each metric does.
+
+    Returns:
+        A :class:`SequenceScore` named ``"COMBINED"`` with summary and raw results.
+    """
+    if not scores:
+        raise ValueError("no sequence scores to combine")
+    benchmarks = {s.benchmark for s in scores.values()}
+    if len(benchmarks) != 1:
+        raise ValueError(f"cannot combine scores of different benchmarks: {sorted(benchmarks)}")
+    raw = {
+        metric.get_name(): metric.combine_sequences(
+            {seq: s.raw[metric.get_name()] for seq, s in scores.items()}
+        )
+        for metric in _make_metrics()
+    }
+    return SequenceScore(
+        sequence="COMBINED", benchmark=benchmarks.pop(), summary=_flatten(raw), raw=raw
+    )
+
+
+def combine_sequences(scores: Mapping[str, SequenceScore]) -> dict[str, float]:
+    """Flat combined metrics over sequences (TrackEval's ``COMBINED_SEQ`` row)."""
+    return dict(combine_sequence_scores(scores).summary)

@@ -1,0 +1,239 @@
+"""PCK (percentage of correct keypoints) for pose propagation on JHMDB.
+
+Data contract: keypoints are ``(..., J, 2)`` arrays of ``(x, y)`` pixel coordinates; the
+prediction and the ground truth must use the same origin (the JHMDB reader returns 0-based
+coordinates). A joint is correct when ``||pred - gt|| <= alpha * s`` where ``s`` is the
+frame's normaliser. Scores are fractions in ``[0, 1]`` (papers print percentages).
+
+Normalisers (both computed from the *ground-truth* joints of the frame):
+
+* ``"box_diagonal"`` (default): ``0.6 x`` the diagonal of the box enclosing the GT joints.
+  This is what the UniTrack JHMDB evaluation script uses (a copy of the CRW / TimeCycle
+  ``eval_pck`` script: ``now_boxes[k] = 0.6 * norm([maxx, maxy] - [minx, miny])``), and the
+  UniTrack paper's JHMDB table (TimeCycle 57.3/78.1, UVC 58.6/79.6, CRW 59.0/83.2,
+  I18 58.3/80.5 at PCK@0.1/0.2) compares numbers produced by that script family, so the
+  environment reports it by default.
+* ``"box_max_side"``: ``max(w, h)`` of the same GT joint box, the alternative left commented
+  out in that script and the usual "normalised by person size" JHMDB convention
+  (Jhuang et al. 2013 use the person box; we only have joints, so this is the joint box).
+
+The authors' script also skips the first frame of every video (it is given), pools the
+distances of each joint over all frames of all videos, computes a PCK per joint and reports
+the **mean over the 15 joints**; :class:`PCKCounts` does the same and can be merged across
+videos. (Their script also drops joints whose *predicted* x is negative from both the box
+and the score; we do not copy that: it rewards predicting off-image coordinates.)
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+PAPER_PCK_THRESHOLDS: tuple[float, ...] = (0.1, 0.2)
+"""The ``alpha`` values of the paper's JHMDB table (PCK@0.1 and PCK@0.2)."""
+
+SCRIPT_PCK_THRESHOLDS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
+"""The ``alpha`` values the authors' evaluation script prints."""
+
+BOX_DIAGONAL_FACTOR: float = 0.6
+"""Factor on the GT joint-box diagonal in the default normaliser (UniTrack/CRW script)."""
+
+Normaliser = Literal["box_diagonal", "box_max_side"]
+NORMALISERS: tuple[str, ...] = ("box_diagonal", "box_max_side")
+
+
+@contextmanager
+def _quiet_nan_warnings() -> Iterator[None]:
+    """Silence numpy's "All-NaN slice" / "Mean of empty slice" warnings in a block."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", category=RuntimeWarning)
+        yield
+
+
+def _as_keypoints(kp: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(kp, dtype=np.float64)
+    if arr.ndim < 2 or arr.shape[-1] != 2:
+        raise ValueError(f"{name} must have shape (..., J, 2) as (x, y); got {arr.shape}")
+    return arr
+
+
+def pck_normaliser(
+    gt: np.ndarray,
+    method: Normaliser = "box_diagonal",
+    visible: np.ndarray | None = None,
+) -> np.ndarray:
+    """Return the PCK normaliser of each frame from its ground-truth joints.
+
+    Args:
+        gt: ``(..., J, 2)`` ground-truth keypoints.
+        method: ``"box_diagonal"`` (0.6 x joint-box diagonal, default) or ``"box_max_side"``.
+        visible: optional ``(..., J)`` bool; only visible joints span the box.
+
+    Returns:
+        ``(...)`` normalisers in pixels (NaN for a frame without visible joints).
+
+    >>> float(pck_normaliser(np.array([[0.0, 0.0], [30.0, 40.0]])))
+    30.0
+    """
+    g = _as_keypoints(gt, "gt")
+    vis = np.ones(g.shape[:-1], dtype=bool) if visible is None else np.asarray(visible, bool)
+    if vis.shape != g.shape[:-1]:
+        raise ValueError(f"visible must have shape {g.shape[:-1]}; got {vis.shape}")
+    xs = np.where(vis, g[..., 0], np.nan)
+    ys = np.where(vis, g[..., 1], np.nan)
+    with np.errstate(invalid="ignore"), _quiet_nan_warnings():
+        w = np.nanmax(xs, axis=-1) - np.nanmin(xs, axis=-1)
+        h = np.nanmax(ys, axis=-1) - np.nanmin(ys, axis=-1)
+    if method == "box_diagonal":
+        return BOX_DIAGONAL_FACTOR * np.hypot(w, h)
+    if method == "box_max_side":
+        return np.maximum(w, h)
+    raise ValueError(f"unknown PCK normaliser {method!r}; choose one of {NORMALISERS}")
+
+
+def keypoint_distances(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Return the Euclidean distance of every predicted joint to its ground truth.
+
+    Args:
+        pred: ``(..., J, 2)`` predicted keypoints.
+        gt: ground truth of the same shape.
+
+    Returns:
+        ``(..., J)`` distances in pixels.
+    """
+    p = _as_keypoints(pred, "pred")
+    g = _as_keypoints(gt, "gt")
+    if p.shape != g.shape:
+        raise ValueError(f"pred {p.shape} and gt {g.shape} differ in shape")
+    d = p - g
+    return np.hypot(d[..., 0], d[..., 1])
+
+
+def frame_pck(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    alpha: float = 0.1,
+    method: Normaliser = "box_diagonal",
+    visible: np.ndarray | None = None,
+) -> float:
+    """Return the fraction of a frame's (visible) joints within ``alpha x normaliser``.
+
+    This is the pose-propagation per-step reward (PCK@0.1 of the frame by default).
+
+    Args:
+        pred: ``(J, 2)`` predicted keypoints.
+        gt: ``(J, 2)`` ground-truth keypoints.
+        alpha: PCK threshold as a fraction of the normaliser.
+        method: normaliser, see :func:`pck_normaliser`.
+        visible: optional ``(J,)`` bool; invisible joints are not scored.
+
+    Returns:
+        PCK in ``[0, 1]``; 0.0 when no joint is visible.
+
+    >>> gt = np.array([[0.0, 0.0], [30.0, 40.0]])  # normaliser 0.6 * 50 = 30 px
+    >>> frame_pck(gt + [[2.0, 0.0], [4.0, 0.0]], gt, alpha=0.1)  # 2 <= 3 < 4
+    0.5
+    """
+    p = _as_keypoints(pred, "pred")
+    g = _as_keypoints(gt, "gt")
+    if p.ndim != 2 or g.shape != p.shape:
+        raise ValueError(f"pred and gt must both be (J, 2); got {p.shape} and {g.shape}")
+    vis = np.ones(len(g), dtype=bool) if visible is None else np.asarray(visible, bool)
+    if not vis.any():
+        return 0.0
+    norm = pck_normaliser(g, method, vis)
+    correct = keypoint_distances(p, g) <= alpha * norm
+    return float(np.count_nonzero(correct & vis) / np.count_nonzero(vis))
+
+
+@dataclass(frozen=True)
+class PCKCounts:
+    """Correct-joint counts per threshold and joint, mergeable across videos.
+
+    Attributes:
+        thresholds: the ``alpha`` values.
+        correct: ``(len(thresholds), J)`` number of correct joint instances.
+        total: ``(J,)`` number of scored joint instances.
+    """
+
+    thresholds: tuple[float, ...]
+    correct: np.ndarray
+    total: np.ndarray
+
+    def merge(self, other: PCKCounts) -> PCKCounts:
+        """Return the pooled counts of two sets of videos (same thresholds and joints)."""
+        if self.thresholds != other.thresholds or self.total.shape != other.total.shape:
+            raise ValueError("cannot merge PCK counts with different thresholds or joints")
+        return PCKCounts(self.thresholds, self.correct + other.correct, self.total + other.total)
+
+    def per_joint(self) -> np.ndarray:
+        """Return ``(len(thresholds), J)`` PCK per joint (NaN for a joint never scored)."""
+        out = np.full(self.correct.shape, np.nan)
+        np.divide(self.correct, self.total[None, :], out=out, where=self.total[None, :] > 0)
+        return out
+
+    def mean_over_joints(self) -> np.ndarray:
+        """Return ``(len(thresholds),)`` PCK averaged over joints (the reported number)."""
+        with _quiet_nan_warnings():
+            return np.nanmean(self.per_joint(), axis=1)
+
+    def as_dict(self) -> dict[str, float]:
+        """Return ``{"PCK@0.1": ..., "PCK@0.2": ...}`` for every threshold."""
+        values = self.mean_over_joints()
+        return {f"PCK@{t:g}": float(v) for t, v in zip(self.thresholds, values, strict=True)}
+
+
+def pck_counts(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    thresholds: Sequence[float] = PAPER_PCK_THRESHOLDS,
+    *,
+    method: Normaliser = "box_diagonal",
+    skip_first_frame: bool = True,
+    visible: np.ndarray | None = None,
+) -> PCKCounts:
+    """Count correct joints of one video at several thresholds.
+
+    Args:
+        pred: ``(T, J, 2)`` predicted keypoints, frame 0 included.
+        gt: ``(T, J, 2)`` ground truth.
+        thresholds: ``alpha`` values.
+        method: normaliser, see :func:`pck_normaliser`.
+        skip_first_frame: do not score frame 0 (it is given), as the authors' script does.
+        visible: optional ``(T, J)`` bool of scored joints.
+
+    Returns:
+        :class:`PCKCounts`; merge across videos with :meth:`PCKCounts.merge`.
+    """
+    p = _as_keypoints(pred, "pred")
+    g = _as_keypoints(gt, "gt")
+    if p.ndim != 3 or p.shape != g.shape:
+        raise ValueError(f"pred and gt must both be (T, J, 2); got {p.shape} and {g.shape}")
+    vis = np.ones(g.shape[:2], dtype=bool) if visible is None else np.asarray(visible, bool)
+    if vis.shape != g.shape[:2]:
+        raise ValueError(f"visible must have shape {g.shape[:2]}; got {vis.shape}")
+    start = 1 if skip_first_frame else 0
+    p, g, vis = p[start:], g[start:], vis[start:]
+    norm = pck_normaliser(g, method, vis)  # (T,)
+    dist = keypoint_distances(p, g)  # (T, J)
+    alphas = np.asarray(tuple(thresholds), dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        ok = dist[None, :, :] <= alphas[:, None, None] * norm[None, :, None]
+    correct = np.count_nonzero(ok & vis[None], axis=1)
+    return PCKCounts(tuple(float(t) for t in alphas), correct, np.count_nonzero(vis, axis=0))
+
+
+def evaluate_pose_sequence(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    thresholds: Sequence[float] = PAPER_PCK_THRESHOLDS,
+    *,
+    method: Normaliser = "box_diagonal",
+) -> dict[str, float]:
+    """Return ``{"PCK@0.1": ..., "PCK@0.2": ...}`` of one video (frame 0 not scored)."""
+    return pck_counts(pred, gt, thresholds, method=method).as_dict()

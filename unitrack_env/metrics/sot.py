@@ -1,0 +1,320 @@
+"""Single object tracking (SOT) metrics in the OTB toolkit's way: success AUC and precision.
+
+Data contract: every function takes the whole sequence, ``pred`` and ``gt`` as ``(n, 4)``
+arrays of ``(x, y, w, h)`` boxes in the benchmark file's own pixel frame (OTB is 1-based;
+both arrays must use the same origin, which then cancels out), row ``i`` = frame ``i`` of
+the sequence, row 0 = the initialisation frame.
+
+What the OTB-2015 toolkit does (``tracker_benchmark_v1.0``, ``util/calcSeqErrRobust.m`` and
+``perfPlot.m``/``OPE_perfmat.m``; the Python port in visionml/pytracking
+``pytracking/analysis/extract_results.py`` agrees on the points marked *):
+
+* The prediction of frame 1 is replaced by the ground truth (``rectMat(1,:) = rect_anno(1,:)``)*.
+* A prediction that is NaN or has ``w <= 0`` or ``h <= 0`` is replaced by the previous frame's
+  prediction (when that frame's ground truth is not NaN)*.
+* Overlap = intersection over union with ``x2 = x + w - 1`` and ``+1`` on the intersection
+  side (``calcRectInt.m``), which equals the continuous IoU with ``x2 = x + w`` used by
+  :func:`unitrack_env.geometry.box_iou` and TrackEval.
+* Centre = ``x + (w - 1) / 2``; the ``-1`` cancels in a difference of centres, so the centre
+  error is the Euclidean distance between ``x + w / 2`` centres.
+* A ground-truth row is valid only when all four numbers are ``> 0`` (``rect_anno > 0``,
+  ``sum(index, 2) == 4``; NaN compares false, so NaN rows are invalid too). Invalid frames get
+  overlap ``-1`` and centre error ``-1`` and stay in the denominator: they *fail* every success
+  threshold but *pass* every precision threshold. :data:`INVALID_GT_TOOLKIT` reproduces this.
+  pytracking instead drops invalid frames (valid = ``w > 0 and h > 0``) from the denominator*;
+  that is :data:`INVALID_GT_EXCLUDE`.
+* Success at threshold ``t`` counts overlaps ``> t`` (strictly greater)*, thresholds
+  ``0:0.05:1`` (21 values)*; precision at threshold ``d`` counts centre errors ``<= d``,
+  thresholds ``0:50`` px (51 values)*. AUC = mean of the 21 success rates, so a perfect
+  tracker scores 20/21 = 0.952 (no overlap is ``> 1``); precision@20px is the precision curve
+  at 20 px. The toolkit divides by ``len + eps``; we divide by ``len`` exactly.
+* Over a data set the per-sequence curves are averaged with equal weight per sequence
+  (:func:`aggregate_sot`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+OTB_OVERLAP_THRESHOLDS: np.ndarray = np.linspace(0.0, 1.0, 21)
+"""IoU thresholds of the OTB success plot, MATLAB ``0:0.05:1`` (21 values)."""
+OTB_OVERLAP_THRESHOLDS.setflags(write=False)
+
+OTB_CENTER_THRESHOLDS: np.ndarray = np.arange(0, 51, dtype=np.float64)
+"""Centre-error thresholds of the OTB precision plot in pixels, MATLAB ``0:50``."""
+OTB_CENTER_THRESHOLDS.setflags(write=False)
+
+PRECISION_THRESHOLD_PX: float = 20.0
+"""The precision plot's reported point: fraction of frames with centre error <= 20 px."""
+
+INVALID_GT_TOOLKIT = "toolkit"
+"""Invalid ground truth as the OTB MATLAB toolkit treats it (see the module docstring)."""
+INVALID_GT_EXCLUDE = "exclude"
+"""Invalid ground truth (NaN, ``w <= 0`` or ``h <= 0``) removed from the evaluation."""
+
+InvalidGTRule = Literal["toolkit", "exclude"]
+
+_INVALID_SCORE = -1.0  # the toolkit's marker for frames without valid ground truth
+
+
+def _as_boxes(boxes: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(boxes, dtype=np.float64)
+    if arr.ndim == 1 and arr.shape == (4,):
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != 4:
+        raise ValueError(f"{name} must have shape (n, 4) as (x, y, w, h); got {arr.shape}")
+    return arr
+
+
+def _check_pair(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    p = _as_boxes(pred, "pred")
+    g = _as_boxes(gt, "gt")
+    if p.shape != g.shape:
+        raise ValueError(
+            f"pred has {len(p)} boxes but gt has {len(g)}: give one prediction per frame"
+        )
+    return p, g
+
+
+def overlap_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Return the IoU of ``pred[i]`` with ``gt[i]`` for every row ``i``.
+
+    Rows where either box is non-finite or has no area get 0.
+
+    Args:
+        pred: ``(n, 4)`` predicted boxes ``(x, y, w, h)``.
+        gt: ``(n, 4)`` ground-truth boxes in the same pixel frame.
+
+    Returns:
+        ``(n,)`` float64 overlaps in ``[0, 1]``.
+
+    >>> overlap_per_frame(np.array([[0, 0, 10, 10]]), np.array([[5, 0, 10, 10]]))
+    array([0.33333333])
+    """
+    p, g = _check_pair(pred, gt)
+    finite = np.isfinite(p).all(axis=1) & np.isfinite(g).all(axis=1)
+    p = np.where(finite[:, None], p, 0.0)
+    g = np.where(finite[:, None], g, 0.0)
+    iw = np.minimum(p[:, 0] + p[:, 2], g[:, 0] + g[:, 2]) - np.maximum(p[:, 0], g[:, 0])
+    ih = np.minimum(p[:, 1] + p[:, 3], g[:, 1] + g[:, 3]) - np.maximum(p[:, 1], g[:, 1])
+    inter = np.clip(iw, 0.0, None) * np.clip(ih, 0.0, None)
+    area_p = np.clip(p[:, 2], 0.0, None) * np.clip(p[:, 3], 0.0, None)
+    area_g = np.clip(g[:, 2], 0.0, None) * np.clip(g[:, 3], 0.0, None)
+    union = area_p + area_g - inter
+    out = np.zeros(len(p))
+    np.divide(inter, union, out=out, where=finite & (union > 0))
+    return out
+
+
+def center_error_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Return the Euclidean distance in pixels between box centres, row by row.
+
+    Rows with a non-finite number get ``inf``.
+
+    >>> center_error_per_frame(np.array([[3, 4, 10, 10]]), np.array([[0, 0, 10, 10]]))
+    array([5.])
+    """
+    p, g = _check_pair(pred, gt)
+    dc = (p[:, :2] + p[:, 2:] / 2.0) - (g[:, :2] + g[:, 2:] / 2.0)
+    err = np.hypot(dc[:, 0], dc[:, 1])
+    err[~np.isfinite(err)] = np.inf
+    return err
+
+
+def valid_ground_truth(gt: np.ndarray, rule: InvalidGTRule = INVALID_GT_TOOLKIT) -> np.ndarray:
+    """Return which ground-truth rows count as annotated.
+
+    Args:
+        gt: ``(n, 4)`` ground-truth boxes.
+        rule: ``"toolkit"``: all four numbers ``> 0`` (OTB MATLAB toolkit, so a box touching
+            or crossing the left/top border at ``x <= 0`` counts as invalid there too);
+            ``"exclude"``: finite with ``w > 0`` and ``h > 0`` (pytracking).
+
+    Returns:
+        ``(n,)`` bool.
+    """
+    g = _as_boxes(gt, "gt")
+    with np.errstate(invalid="ignore"):
+        if rule == INVALID_GT_TOOLKIT:
+            return np.all(g > 0, axis=1)
+        if rule == INVALID_GT_EXCLUDE:
+            return np.isfinite(g).all(axis=1) & (g[:, 2] > 0) & (g[:, 3] > 0)
+    raise ValueError(f"unknown invalid_gt rule {rule!r}; use 'toolkit' or 'exclude'")
+
+
+def frame_iou(pred_box: np.ndarray, gt_box: np.ndarray) -> float:
+    """Return the IoU of one predicted box with one ground-truth box (a per-step reward).
+
+    Returns 0.0 when the ground truth is missing or empty (NaN, ``w <= 0`` or ``h <= 0``),
+    so that the value is always a finite float.
+    """
+    g = _as_boxes(gt_box, "gt_box")
+    if not valid_ground_truth(g, INVALID_GT_EXCLUDE)[0]:
+        return 0.0
+    return float(overlap_per_frame(pred_box, g)[0])
+
+
+def repair_predictions(
+    pred: np.ndarray, gt: np.ndarray, *, init_from_gt: bool = True
+) -> np.ndarray:
+    """Apply the toolkit's clean-up of a result file before scoring.
+
+    Frame 0 becomes the ground truth when ``init_from_gt``; afterwards a row that is
+    non-finite or has ``w <= 0`` or ``h <= 0`` is replaced by the previous (repaired) row,
+    unless that frame's ground truth contains NaN.
+
+    Returns:
+        A new ``(n, 4)`` float64 array.
+    """
+    p, g = _check_pair(pred, gt)
+    p = p.copy()
+    if len(p) == 0:
+        return p
+    if init_from_gt:
+        p[0] = g[0]
+    gt_has_nan = np.isnan(g).any(axis=1)
+    for i in range(1, len(p)):
+        bad = not np.isfinite(p[i]).all() or p[i, 2] <= 0 or p[i, 3] <= 0
+        if bad and not gt_has_nan[i]:
+            p[i] = p[i - 1]
+    return p
+
+
+def success_curve(
+    overlaps: np.ndarray, thresholds: np.ndarray = OTB_OVERLAP_THRESHOLDS
+) -> np.ndarray:
+    """Return the fraction of frames whose overlap is strictly greater than each threshold.
+
+    Args:
+        overlaps: ``(n,)`` per-frame overlaps; the toolkit's ``-1`` marks invalid frames,
+            which then fail every threshold.
+        thresholds: IoU thresholds.
+
+    Returns:
+        ``(len(thresholds),)`` rates; NaN when ``n == 0``.
+    """
+    o = np.asarray(overlaps, dtype=np.float64).reshape(-1)
+    if len(o) == 0:
+        return np.full(len(thresholds), np.nan)
+    return (o[:, None] > np.asarray(thresholds)[None, :]).mean(axis=0)
+
+
+def precision_curve(
+    center_errors: np.ndarray, thresholds: np.ndarray = OTB_CENTER_THRESHOLDS
+) -> np.ndarray:
+    """Return the fraction of frames whose centre error is ``<=`` each pixel threshold.
+
+    The toolkit's ``-1`` for invalid frames passes every threshold.
+    """
+    e = np.asarray(center_errors, dtype=np.float64).reshape(-1)
+    if len(e) == 0:
+        return np.full(len(thresholds), np.nan)
+    return (e[:, None] <= np.asarray(thresholds)[None, :]).mean(axis=0)
+
+
+@dataclass(frozen=True)
+class SOTScores:
+    """Success and precision of one sequence (or the average over sequences).
+
+    Attributes:
+        success_curve: success rate at each of :data:`OTB_OVERLAP_THRESHOLDS`.
+        precision_curve: precision at each of :data:`OTB_CENTER_THRESHOLDS`.
+        auc: mean of ``success_curve`` (the OTB "AUC"/success score), in ``[0, 1]``.
+        precision_20px: ``precision_curve`` at 20 px.
+        average_overlap: mean IoU over the frames with valid ground truth.
+        num_frames: frames in the denominator (all frames, or valid ones under "exclude").
+        num_sequences: 1 for a sequence; the count for an aggregate.
+    """
+
+    success_curve: np.ndarray
+    precision_curve: np.ndarray
+    auc: float
+    precision_20px: float
+    average_overlap: float
+    num_frames: int
+    num_sequences: int = 1
+
+    def as_dict(self) -> dict[str, float]:
+        """Return the scalar metrics keyed by their report names."""
+        return {
+            "AUC": self.auc,
+            "Precision@20px": self.precision_20px,
+            "AverageOverlap": self.average_overlap,
+        }
+
+
+def _precision_at(curve: np.ndarray, thresholds: np.ndarray, px: float) -> float:
+    hit = np.flatnonzero(np.isclose(thresholds, px))
+    if len(hit) == 0:
+        raise ValueError(f"{px} px is not one of the precision thresholds")
+    return float(curve[hit[0]])
+
+
+def evaluate_sot_sequence(
+    pred: np.ndarray,
+    gt: np.ndarray,
+    *,
+    init_from_gt: bool = True,
+    invalid_gt: InvalidGTRule = INVALID_GT_TOOLKIT,
+) -> SOTScores:
+    """Score one sequence the way the OTB toolkit does (one-pass evaluation, OPE).
+
+    Args:
+        pred: ``(n, 4)`` predicted boxes, one per frame including the first.
+        gt: ``(n, 4)`` ground-truth boxes.
+        init_from_gt: replace frame 0's prediction by the ground truth (toolkit default).
+        invalid_gt: ``"toolkit"`` or ``"exclude"`` (see :func:`valid_ground_truth`).
+
+    Returns:
+        :class:`SOTScores` for the sequence.
+
+    Raises:
+        ValueError: shapes differ, the sequence is empty, or the rule is unknown.
+    """
+    p, g = _check_pair(pred, gt)
+    if len(p) == 0:
+        raise ValueError("cannot score an empty sequence")
+    p = repair_predictions(p, g, init_from_gt=init_from_gt)
+    valid = valid_ground_truth(g, invalid_gt)
+    overlaps = overlap_per_frame(p, g)
+    errors = center_error_per_frame(p, g)
+    if invalid_gt == INVALID_GT_TOOLKIT:
+        overlaps[~valid] = _INVALID_SCORE
+        errors[~valid] = _INVALID_SCORE
+    else:
+        overlaps, errors = overlaps[valid], errors[valid]
+    s_curve = success_curve(overlaps)
+    p_curve = precision_curve(errors)
+    valid_overlaps = overlaps[overlaps >= 0]
+    return SOTScores(
+        success_curve=s_curve,
+        precision_curve=p_curve,
+        auc=float(np.mean(s_curve)),
+        precision_20px=_precision_at(p_curve, OTB_CENTER_THRESHOLDS, PRECISION_THRESHOLD_PX),
+        average_overlap=float(valid_overlaps.mean()) if len(valid_overlaps) else float("nan"),
+        num_frames=len(overlaps),
+    )
+
+
+def aggregate_sot(scores: Sequence[SOTScores]) -> SOTScores:
+    """Average per-sequence scores with equal weight per sequence (OTB's overall plot).
+
+    The AUC of the averaged curve equals the mean of the per-sequence AUCs.
+    """
+    if len(scores) == 0:
+        raise ValueError("no sequences to aggregate")
+    s_curve = np.mean([s.success_curve for s in scores], axis=0)
+    p_curve = np.mean([s.precision_curve for s in scores], axis=0)
+    return SOTScores(
+        success_curve=s_curve,
+        precision_curve=p_curve,
+        auc=float(np.mean(s_curve)),
+        precision_20px=_precision_at(p_curve, OTB_CENTER_THRESHOLDS, PRECISION_THRESHOLD_PX),
+        average_overlap=float(np.nanmean([s.average_overlap for s in scores])),
+        num_frames=int(sum(s.num_frames for s in scores)),
+        num_sequences=int(sum(s.num_sequences for s in scores)),
+    )
