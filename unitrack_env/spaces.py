@@ -86,9 +86,17 @@ class Image(spaces.Space[np.ndarray]):
         return [np.asarray(image, dtype=np.uint8) for image in sample_n]
 
 
+#: Largest finite float32: "any finite number" bounds (infinite bounds would accept NaN-free
+#: infinities and make ``check_env`` warn).
+FLOAT_MAX = float(np.finfo(np.float32).max)
+#: Bound of box coordinates in pixels (generous: boxes may extend past the frame).
+COORD_MAX = 1e5
+
+
 def box_array_space(capacity: int) -> spaces.Box:
-    """``(capacity, 4)`` float32 boxes ``(x, y, w, h)``; rows past the count are zero."""
-    return spaces.Box(-np.inf, np.inf, (capacity, 4), np.float32)
+    """``(capacity, 4)`` float32 boxes ``(x, y, w, h)``: finite, ``w, h >= 0``; padding is 0."""
+    low = np.tile(np.array([-COORD_MAX, -COORD_MAX, 0.0, 0.0], np.float32), (capacity, 1))
+    return spaces.Box(low, np.float32(COORD_MAX), (capacity, 4), np.float32)
 
 
 def detection_observation_space(
@@ -99,7 +107,7 @@ def detection_observation_space(
         {
             "frame": Image(*max_frame_size),
             "boxes": box_array_space(max_detections),
-            "scores": spaces.Box(-np.inf, np.inf, (max_detections,), np.float32),
+            "scores": spaces.Box(-FLOAT_MAX, FLOAT_MAX, (max_detections,), np.float32),
             "num_detections": spaces.Discrete(max_detections + 1),
         }
     )
@@ -110,7 +118,7 @@ def track_action_space(max_tracks: int) -> spaces.Dict:
     return spaces.Dict(
         {
             "ids": spaces.Box(1, np.iinfo(np.int32).max, (max_tracks,), np.int64),
-            "boxes": spaces.Box(0.0, 1e4, (max_tracks, 4), np.float32),
+            "boxes": box_array_space(max_tracks),
             "num_tracks": spaces.Discrete(max_tracks + 1),
         }
     )

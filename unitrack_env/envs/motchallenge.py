@@ -15,6 +15,7 @@ from unitrack_env.datasets.motchallenge import (
     Annotations,
     MOTChallengeDataset,
     MOTSequence,
+    read_seqinfo,
 )
 from unitrack_env.envs.base import SequenceEnv, resolve_root
 from unitrack_env.frames import FramePrefetcher
@@ -52,8 +53,8 @@ class MOTChallengeEnv(SequenceEnv):
     | key | space | meaning |
     |---|---|---|
     | ``frame`` | :class:`~unitrack_env.spaces.Image` (uint8 RGB, native size) | the frame |
-    | ``boxes`` | ``Box(-inf, inf, (max_detections, 4), float32)`` | detections ``(x, y, w, h)``, 1-based pixels as in ``det.txt``; rows past ``num_detections`` are 0 |
-    | ``scores`` | ``Box(-inf, inf, (max_detections,), float32)`` | detection scores as in the file (MOT15's are unbounded) |
+    | ``boxes`` | ``Box((max_detections, 4), float32)``, finite, ``w, h >= 0`` | detections ``(x, y, w, h)``, 1-based pixels as in ``det.txt``; rows past ``num_detections`` are 0 |
+    | ``scores`` | ``Box((max_detections,), float32)``, finite | detection scores as in the file (MOT15's are unbounded) |
     | ``num_detections`` | ``Discrete(max_detections + 1)`` | number of valid rows |
 
     Ground truth never appears in observations. ``unitrack_env.spaces.unpack_detections``
@@ -317,6 +318,10 @@ class MOTChallengeEnv(SequenceEnv):
             seq_length=self._sequence.info.length,
         )
         return dict(score.summary)
+
+    def sequence_length(self, name: str) -> int:
+        """Return the number of frames of sequence ``name`` (reads only its seqinfo.ini)."""
+        return read_seqinfo(self.dataset.split_dir / name).length
 
     @property
     def sequence(self) -> MOTSequence | None:

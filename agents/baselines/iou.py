@@ -1,0 +1,120 @@
+"""The IoU baseline: box overlap + Hungarian matching with a track life cycle, no appearance."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from agents.base import Agent
+from unitrack_env.geometry import box_iou
+from unitrack_env.spaces import pack_tracks, unpack_detections
+
+
+@dataclass(frozen=True)
+class IoUConfig:
+    """Parameters of the IoU baseline.
+
+    Attributes:
+        iou_threshold: least IoU between a track's predicted box and a detection to match.
+        min_score: detections scored below this are ignored (scores are benchmark-specific:
+            MOT17 FRCNN scores lie in [0, 1], MOT15's are unbounded).
+        min_hits: a track is reported once it has been matched this many times (during the
+            first ``min_hits`` frames of an episode every matched track is reported, so the
+            opening frames are not lost).
+        max_lost_seconds: a track that found no detection is kept this long (converted to
+            frames with the sequence's frame rate) before it is dropped.
+        velocity_smoothing: weight of the newest displacement in the exponentially smoothed
+            velocity that predicts where a track is in the next frame (0 = no motion model).
+        duplicate_iou: an unmatched detection that overlaps a matched one by at least this
+            IoU is treated as a duplicate detection and starts no track (1 = off).
+    """
+
+    iou_threshold: float = 0.3
+    min_score: float = -np.inf
+    min_hits: int = 2
+    max_lost_seconds: float = 1.0
+    velocity_smoothing: float = 0.5
+    duplicate_iou: float = 0.3
+
+
+class IoUAgent(Agent, name="iou", tasks=("mot",)):
+    """Associates detections to tracks by IoU with a constant-velocity guess.
+
+    Per frame: predict each track's box (last box + smoothed velocity, times the frames it
+    has been lost), match predictions to detections with the Hungarian algorithm on IoU,
+    start a track for every unmatched detection, and drop tracks lost longer than
+    ``max_lost_seconds``. Only tracks matched in this frame are reported.
+
+    Args:
+        max_tracks: action capacity (must match the environment's ``max_tracks``).
+        **config: fields of :class:`IoUConfig`.
+    """
+
+    def __init__(self, max_tracks: int = 512, **config: Any) -> None:
+        self.config = IoUConfig(**config)
+        self.max_tracks = max_tracks
+        self._reset_state(30.0)
+
+    def _reset_state(self, frame_rate: float) -> None:
+        self._max_lost = max(1, round(self.config.max_lost_seconds * frame_rate))
+        self._next_id = 1
+        self._frame = 0
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._boxes = np.zeros((0, 4))
+        self._velocity = np.zeros((0, 4))
+        self._hits = np.zeros(0, dtype=np.int64)
+        self._lost = np.zeros(0, dtype=np.int64)
+
+    def reset(self, observation: Any, info: dict[str, Any]) -> None:
+        """Forget all tracks; read the frame rate for the lost-track age."""
+        self._reset_state(float(info.get("frame_rate", 30.0)))
+
+    def act(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """Match this frame's detections to the tracks and report the matched tracks."""
+        cfg = self.config
+        self._frame += 1
+        boxes, scores = unpack_detections(observation)
+        boxes = boxes[scores >= cfg.min_score].astype(np.float64)
+
+        predicted = self._boxes + self._velocity * (self._lost + 1)[:, None]
+        matched_tracks = np.zeros(len(self._ids), dtype=bool)
+        matched_dets = np.zeros(len(boxes), dtype=bool)
+        if len(predicted) and len(boxes):
+            iou = box_iou(predicted, boxes)
+            rows, cols = linear_sum_assignment(-iou)
+            ok = iou[rows, cols] >= cfg.iou_threshold
+            rows, cols = rows[ok], cols[ok]
+            displacement = (boxes[cols] - self._boxes[rows]) / (self._lost[rows] + 1)[:, None]
+            a = cfg.velocity_smoothing
+            first = self._hits[rows] == 1
+            self._velocity[rows] = np.where(
+                first[:, None], displacement, a * displacement + (1 - a) * self._velocity[rows]
+            )
+            self._boxes[rows] = boxes[cols]
+            self._hits[rows] += 1
+            self._lost[rows] = 0
+            matched_tracks[rows] = True
+            matched_dets[cols] = True
+        self._lost[~matched_tracks] += 1
+
+        new = boxes[~matched_dets]
+        if len(new) and matched_dets.any() and cfg.duplicate_iou < 1.0:
+            # A detection overlapping an already matched one is a duplicate, not a new object.
+            overlap = box_iou(new, boxes[matched_dets]).max(axis=1)
+            new = new[overlap < cfg.duplicate_iou]
+        new_ids = np.arange(self._next_id, self._next_id + len(new))
+        self._next_id += len(new)
+        keep = self._lost <= self._max_lost
+        self._ids = np.concatenate([self._ids[keep], new_ids])
+        self._boxes = np.concatenate([self._boxes[keep], new])
+        self._velocity = np.concatenate([self._velocity[keep], np.zeros((len(new), 4))])
+        self._hits = np.concatenate([self._hits[keep], np.ones(len(new), dtype=np.int64)])
+        self._lost = np.concatenate([self._lost[keep], np.zeros(len(new), dtype=np.int64)])
+
+        active = self._lost == 0
+        if self._frame > cfg.min_hits:
+            active &= self._hits >= cfg.min_hits
+        return pack_tracks(self._ids[active], self._boxes[active], self.max_tracks)

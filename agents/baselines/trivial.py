@@ -1,0 +1,40 @@
+"""A deliberately weak agent that gives the metrics a floor."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agents.base import Agent
+from unitrack_env.spaces import pack_tracks, unpack_detections
+
+
+class FreshIdsAgent(Agent, name="fresh-ids", tasks=("mot",)):
+    """Reports every detection as a new track with a never-seen id.
+
+    Detection quality is kept (so MOTA's FP/FN terms are the detector's), but nothing is
+    associated across frames, so every continuing object is an identity switch: the floor
+    for IDF1, AssA and HOTA.
+
+    Args:
+        min_score: ignore detections scored below this.
+        max_tracks: action capacity (must match the environment's ``max_tracks``).
+    """
+
+    def __init__(self, min_score: float = -np.inf, max_tracks: int = 512) -> None:
+        self.min_score = min_score
+        self.max_tracks = max_tracks
+        self._next_id = 1
+
+    def reset(self, observation: Any, info: dict[str, Any]) -> None:
+        """Restart ids at 1."""
+        self._next_id = 1
+
+    def act(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """Give each detection above the score threshold a fresh id."""
+        boxes, scores = unpack_detections(observation)
+        boxes = boxes[scores >= self.min_score]
+        ids = np.arange(self._next_id, self._next_id + len(boxes))
+        self._next_id += len(boxes)
+        return pack_tracks(ids, boxes, self.max_tracks)

@@ -1,0 +1,46 @@
+"""Shared test fixtures: hermetic synthetic-data cache and the real fixtures in ../shared."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+#: Real benchmark fixtures beside the repository (absent in a user's clone).
+SHARED_DATA = (REPO / ".." / "shared" / "data").resolve()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _hermetic_environment(tmp_path_factory: pytest.TempPathFactory):
+    """Generate synthetic data into a per-session cache; ignore a user's UNITRACK_DATA."""
+    saved = {k: os.environ.get(k) for k in ("UNITRACK_CACHE", "UNITRACK_DATA")}
+    os.environ["UNITRACK_CACHE"] = str(tmp_path_factory.mktemp("unitrack-cache"))
+    os.environ.pop("UNITRACK_DATA", None)
+    yield
+    for key, value in saved.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The ``../shared/data`` folder, or skip when it is not beside the repository."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip("../shared/data is not available (only in the project's own checkout)")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def mot17_root(shared_data: Path) -> Path:
+    """Real MOT17 clips (4 short FRCNN sequences)."""
+    return shared_data / "MOT17"
+
+
+@pytest.fixture(scope="session")
+def mot15_root(shared_data: Path) -> Path:
+    """Real MOT15 PETS09-S2L1 (400 frames)."""
+    return shared_data / "MOT15"
