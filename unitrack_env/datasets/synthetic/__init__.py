@@ -1,1 +1,66 @@
+"""Embedded synthetic data sets: small, deterministic, in each benchmark's exact layout.
 
+Without ``root=``, an environment calls :func:`ensure_synthetic` (e.g.
+``ensure_synthetic("MOT17")``) and reads the returned folder with the same reader as real
+data. The scene engine (:func:`render_scene`) draws textured people that walk, cross and
+occlude each other in front of a static background; writers put the scenes on disk in a
+benchmark's layout (:func:`write_motchallenge` for MOT15/16/17/20).
+"""
+
+from unitrack_env.datasets.synthetic.cache import (
+    CACHE_ENV_VAR,
+    GENERATOR_VERSION,
+    cache_root,
+    ensure_synthetic,
+    is_complete,
+    synthetic_path,
+)
+from unitrack_env.datasets.synthetic.motchallenge import (
+    DEFAULT_SPEC,
+    DetectionNoise,
+    Detections,
+    MotChallengeSpec,
+    SequenceSpec,
+    simulate_detections,
+    write_motchallenge,
+)
+from unitrack_env.datasets.synthetic.scene import (
+    ObjectAnnotation,
+    ObjectRole,
+    Pattern,
+    SceneConfig,
+    SceneObject,
+    Silhouette,
+    SyntheticFrame,
+    SyntheticVideo,
+    Texture,
+    Trajectory,
+    render_scene,
+)
+
+__all__ = [
+    "CACHE_ENV_VAR",
+    "DEFAULT_SPEC",
+    "GENERATOR_VERSION",
+    "DetectionNoise",
+    "Detections",
+    "MotChallengeSpec",
+    "ObjectAnnotation",
+    "ObjectRole",
+    "Pattern",
+    "SceneConfig",
+    "SceneObject",
+    "SequenceSpec",
+    "Silhouette",
+    "SyntheticFrame",
+    "SyntheticVideo",
+    "Texture",
+    "Trajectory",
+    "cache_root",
+    "ensure_synthetic",
+    "is_complete",
+    "render_scene",
+    "simulate_detections",
+    "synthetic_path",
+    "write_motchallenge",
+]

@@ -1,0 +1,148 @@
+"""The on-disk cache of embedded synthetic data sets.
+
+:func:`ensure_synthetic` returns the root of a synthetic data set (the folder holding
+``train/`` and ``test/``), generating it on first use into::
+
+    $UNITRACK_CACHE/synthetic/<kind>-<benchmark>-v<GENERATOR_VERSION>/
+
+(``platformdirs.user_cache_dir("unitrack-env")`` when ``UNITRACK_CACHE`` is unset).
+
+Creation is atomic: the data set is written into a temporary sibling folder, a marker file
+is written last, and the folder is renamed into place. A process that loses the race to
+another one drops its copy. A final folder without the marker (half-written by an older
+version, or damaged by hand) is moved aside and regenerated; leftover temporary folders of
+interrupted runs are ignored and removed once stale.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from types import MappingProxyType
+
+from unitrack_env.datasets.synthetic import motchallenge
+
+#: Version of the generated data; bump it whenever any writer's output changes, so that
+#: caches of an older generator are not reused.
+GENERATOR_VERSION = 1
+#: Environment variable that overrides the cache folder.
+CACHE_ENV_VAR = "UNITRACK_CACHE"
+#: Application name given to platformdirs for the default cache folder.
+APP_NAME = "unitrack-env"
+#: Sub-folder of the cache holding synthetic data sets.
+SYNTHETIC_SUBDIR = "synthetic"
+#: File written last into a complete data set.
+MARKER_NAME = ".unitrack-synthetic-complete"
+#: Temporary folders older than this (seconds) are leftovers of interrupted runs.
+STALE_TEMP_SECONDS = 3600.0
+
+#: Writer of each kind: ``writer(root, benchmark)`` fills ``root``.
+WRITERS: Mapping[str, Callable[[Path, str], None]] = MappingProxyType({
+    "motchallenge": motchallenge.write_motchallenge,
+})
+#: Benchmarks each kind can generate.
+KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    "motchallenge": motchallenge.BENCHMARKS,
+})
+
+
+def cache_root() -> Path:
+    """Return the cache folder: ``$UNITRACK_CACHE`` or the user cache dir."""
+    override = os.environ.get(CACHE_ENV_VAR)
+    if override:
+        return Path(override).expanduser()
+    import platformdirs  # lazily: only needed without the override
+
+    return Path(platformdirs.user_cache_dir(APP_NAME))
+
+
+def synthetic_path(benchmark: str, kind: str = "motchallenge") -> Path:
+    """Return where the synthetic ``benchmark`` data set of ``kind`` is (or will be) cached.
+
+    Raises:
+        ValueError: unknown ``kind`` or ``benchmark`` (the message lists the valid ones).
+    """
+    if kind not in WRITERS:
+        raise ValueError(f"unknown synthetic data kind {kind!r}; valid: {', '.join(WRITERS)}")
+    if benchmark not in KIND_BENCHMARKS[kind]:
+        raise ValueError(
+            f"no synthetic {kind} data for benchmark {benchmark!r}; valid: "
+            f"{', '.join(KIND_BENCHMARKS[kind])}"
+        )
+    return cache_root() / SYNTHETIC_SUBDIR / f"{kind}-{benchmark}-v{GENERATOR_VERSION}"
+
+
+def is_complete(path: Path) -> bool:
+    """Whether ``path`` holds a completely written synthetic data set (its marker exists)."""
+    return (path / MARKER_NAME).is_file()
+
+
+def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
+    """Return the root of the synthetic ``benchmark`` data set, generating it once.
+
+    Args:
+        benchmark: e.g. ``"MOT17"``; see :data:`KIND_BENCHMARKS`.
+        kind: the data layout family, e.g. ``"motchallenge"``; see :data:`WRITERS`.
+
+    Returns:
+        The folder that holds ``train/`` and ``test/``.
+
+    Raises:
+        ValueError: unknown ``kind`` or ``benchmark``.
+        OSError: the cache folder is not writable (set ``UNITRACK_CACHE`` elsewhere).
+    """
+    final = synthetic_path(benchmark, kind)
+    if is_complete(final):
+        return final
+    parent = final.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise OSError(
+            f"cannot create the synthetic data cache {parent} ({error}); set "
+            f"{CACHE_ENV_VAR} to a writable folder"
+        ) from error
+    _remove_stale_temps(parent, final.name)
+    temp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=parent))
+    try:
+        WRITERS[kind](temp, benchmark)
+        marker = {"kind": kind, "benchmark": benchmark, "generator_version": GENERATOR_VERSION}
+        (temp / MARKER_NAME).write_text(json.dumps(marker, sort_keys=True) + "\n")
+        if final.exists() and not is_complete(final):
+            _discard(final, parent)
+        try:
+            os.rename(temp, final)
+        except OSError:
+            if not is_complete(final):  # not a lost race: a real failure
+                raise
+    finally:
+        if temp.exists():
+            shutil.rmtree(temp, ignore_errors=True)
+    return final
+
+
+def _discard(path: Path, parent: Path) -> None:
+    """Move an incomplete data set aside (atomically) and delete it."""
+    trash = Path(tempfile.mkdtemp(prefix=f".{path.name}.trash-", dir=parent))
+    try:
+        os.rename(path, trash / path.name)
+    except FileNotFoundError:  # someone else already moved it
+        pass
+    shutil.rmtree(trash, ignore_errors=True)
+
+
+def _remove_stale_temps(parent: Path, name: str) -> None:
+    """Delete temporary folders of interrupted runs older than :data:`STALE_TEMP_SECONDS`."""
+    now = time.time()
+    for prefix in (f".{name}.tmp-", f".{name}.trash-"):
+        for path in parent.glob(f"{prefix}*"):
+            try:
+                if now - path.stat().st_mtime > STALE_TEMP_SECONDS:
+                    shutil.rmtree(path, ignore_errors=True)
+            except FileNotFoundError:
+                pass

@@ -1,0 +1,396 @@
+"""Synthetic MOTChallenge data sets (MOT15, MOT16, MOT17, MOT20 layouts).
+
+:func:`write_motchallenge` renders the scenes of a :class:`MotChallengeSpec` and writes them
+in the exact MOTChallenge layout::
+
+    <root>/train/<SEQ>/img1/000001.jpg ...   JPEG (quality 90), BGR on disk as cv2 writes it
+    <root>/train/<SEQ>/gt/gt.txt              ground truth (train split only)
+    <root>/train/<SEQ>/det/det.txt            noisy public detections
+    <root>/train/<SEQ>/seqinfo.ini
+    <root>/test/<SEQ>/{img1/, det/det.txt, seqinfo.ini}
+
+Sequence names are plain (``SYN-01``, ``SYN-02``, ``SYN-03``) for every benchmark: MOT17's
+detector suffix (``-FRCNN``) names one of three public detection sets, and the synthetic
+data set has one, so a suffix would only suggest variants that do not exist.
+
+Ground truth, in MOTChallenge's 1-based pixel coordinates (``x = x0 + 1``):
+
+* MOT16/17/20, 9 columns ``frame,id,x,y,w,h,flag,class,visibility``, sorted by id then
+  frame as the official files are. Walking persons are class 1 (pedestrian) with flag 1; a
+  standing person is class 7 (static_person, a distractor class) and an occluder is class 9
+  (occluder), both with flag 0 as in the official MOT17 files; so that the official
+  preprocessing (distractor removal, zero-marked filtering) has work to do. Visibility is the
+  visible fraction of the object's silhouette after occlusion and truncation, from the
+  rendered instance map.
+* MOT15, 10 columns ``frame,id,x,y,w,h,1,-1,-1,-1`` (no classes), sorted by frame. Persons
+  (walking or standing) are written; occluders are not.
+
+Detections, 10 columns ``frame,-1,x,y,w,h,score,-1,-1,-1`` sorted by frame, come from
+:func:`simulate_detections`: jittered copies of the persons' boxes, missed more often the
+less visible a person is, plus false positives (random boxes and clutter near persons).
+Scores lie in [0, 1] and grow with box quality; MOT15's are scaled to 0-100 like the PETS
+detector's unbounded scores.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+import cv2
+import numpy as np
+
+from unitrack_env.datasets.synthetic.scene import (
+    ObjectAnnotation,
+    ObjectRole,
+    SceneConfig,
+    render_scene,
+)
+from unitrack_env.geometry import box_iou
+
+#: Benchmarks whose layout :func:`write_motchallenge` writes.
+BENCHMARKS = ("MOT15", "MOT16", "MOT17", "MOT20")
+#: Benchmarks whose gt.txt has the 9-column class/visibility layout.
+CLASS_COLUMN_BENCHMARKS = frozenset({"MOT16", "MOT17", "MOT20"})
+#: ``(flag, class)`` written for each role in MOT16/17/20 ground truth; roles not listed
+#: are not written. Class ids: 1 pedestrian, 7 static_person, 9 occluder.
+MOT_CLASSES = MappingProxyType({
+    ObjectRole.PEDESTRIAN: (1, 1),
+    ObjectRole.STATIC_PERSON: (0, 7),
+    ObjectRole.OCCLUDER: (0, 9),
+})
+#: Roles written to MOT15 ground truth (which has no classes; flag 1).
+MOT15_ROLES = frozenset({ObjectRole.PEDESTRIAN, ObjectRole.STATIC_PERSON})
+#: Roles a simulated person detector fires on.
+DETECTABLE_ROLES = frozenset({ObjectRole.PEDESTRIAN, ObjectRole.STATIC_PERSON})
+#: MOT15 detection scores are the [0, 1] score times this (PETS-like unbounded range).
+MOT15_SCORE_SCALE = 100.0
+#: Splits that ship ground truth.
+SPLITS_WITH_GROUND_TRUTH = frozenset({"train"})
+#: Seed-stream index of the detection noise (the scene uses 0 and 1).
+_STREAM_DETECTIONS = 2
+
+
+@dataclass(frozen=True)
+class DetectionNoise:
+    """How simulated public detections deviate from the ground truth.
+
+    A person with visibility ``v`` is missed with probability
+    ``min(1, miss_rate + occlusion_miss_weight * (1 - v) ** occlusion_miss_power)``.
+    A detected box keeps the person's centre and size up to Gaussian noise whose standard
+    deviation is ``position_jitter`` (fraction of the box size) and ``size_jitter`` (of the
+    log size), both multiplied by ``2 - v``; it is then clipped to the image. Its score is
+    ``score_base + score_iou * IoU + score_visibility * v`` plus ``score_noise`` noise,
+    clipped to [``min_score``, ``max_score``].
+
+    Attributes:
+        miss_rate: miss probability of a fully visible person.
+        occlusion_miss_weight: extra miss probability of a fully hidden person.
+        occlusion_miss_power: shape of the miss probability's growth with occlusion.
+        position_jitter: centre noise as a fraction of the box width / height.
+        size_jitter: standard deviation of the log width / height ratio.
+        score_base: score offset of a true detection.
+        score_iou: score weight of the detection's IoU with its person.
+        score_visibility: score weight of the person's visibility.
+        score_noise: standard deviation of the score noise.
+        false_positives_per_frame: Poisson mean of random boxes per frame.
+        false_positive_height_range: height of random boxes in pixels, ``(min, max)``.
+        false_positive_aspect_range: width / height of random boxes, ``(min, max)``.
+        false_positive_score: Beta distribution ``(a, b)`` of false-positive scores.
+        clutter_rate: per-person probability of an extra, poorly fitting box nearby (a
+            shifted or partial box: a typical near-duplicate false positive).
+        clutter_min_visibility: persons less visible than this get no clutter.
+        min_size: detections narrower or lower than this many pixels (after clipping) are
+            dropped.
+        min_score: lowest score.
+        max_score: highest score.
+    """
+
+    miss_rate: float = 0.04
+    occlusion_miss_weight: float = 0.96
+    occlusion_miss_power: float = 2.0
+    position_jitter: float = 0.04
+    size_jitter: float = 0.06
+    score_base: float = 0.25
+    score_iou: float = 0.45
+    score_visibility: float = 0.3
+    score_noise: float = 0.06
+    false_positives_per_frame: float = 0.4
+    false_positive_height_range: tuple[float, float] = (40.0, 140.0)
+    false_positive_aspect_range: tuple[float, float] = (0.3, 0.6)
+    false_positive_score: tuple[float, float] = (2.0, 5.0)
+    clutter_rate: float = 0.04
+    clutter_min_visibility: float = 0.3
+    min_size: float = 6.0
+    min_score: float = 0.01
+    max_score: float = 0.999
+
+
+@dataclass(frozen=True)
+class SequenceSpec:
+    """One synthetic sequence.
+
+    Attributes:
+        name: folder name (also ``seqinfo.ini``'s ``name``).
+        split: ``"train"`` (with gt) or ``"test"`` (without).
+        scene: the scene to render.
+        frame_rate: ``seqinfo.ini``'s ``frameRate``.
+    """
+
+    name: str
+    split: str
+    scene: SceneConfig
+    frame_rate: int = 30
+
+    def __post_init__(self) -> None:
+        if self.split not in ("train", "test"):
+            raise ValueError(f"SequenceSpec.split={self.split!r}: use 'train' or 'test'")
+        if not self.name or "/" in self.name or "\\" in self.name:
+            raise ValueError(f"SequenceSpec.name={self.name!r}: must be a plain folder name")
+        if self.frame_rate <= 0:
+            raise ValueError(f"SequenceSpec.frame_rate={self.frame_rate}: must be positive")
+
+
+@dataclass(frozen=True)
+class MotChallengeSpec:
+    """A synthetic MOTChallenge data set.
+
+    Attributes:
+        sequences: the sequences, in writing order.
+        detection_noise: the simulated detector.
+        jpeg_quality: JPEG quality of the frames (cv2's 0-100 scale).
+    """
+
+    sequences: tuple[SequenceSpec, ...]
+    detection_noise: DetectionNoise = field(default_factory=DetectionNoise)
+    jpeg_quality: int = 90
+
+    def __post_init__(self) -> None:
+        names = [(s.split, s.name) for s in self.sequences]
+        if len(set(names)) != len(names):
+            raise ValueError(f"MotChallengeSpec.sequences: duplicate split/name in {names}")
+        if not 0 <= self.jpeg_quality <= 100:
+            raise ValueError(f"MotChallengeSpec.jpeg_quality={self.jpeg_quality}: use 0..100")
+
+
+#: The embedded default: two train sequences (one of another frame size and frame rate) and
+#: one test sequence, each with two forced crossings, a standing person and an occluder.
+DEFAULT_SPEC = MotChallengeSpec(sequences=(
+    SequenceSpec("SYN-01", "train", SceneConfig(
+        width=640, height=360, num_frames=72, num_objects=7, seed=1), frame_rate=30),
+    SequenceSpec("SYN-02", "train", SceneConfig(
+        width=576, height=324, num_frames=64, num_objects=6, seed=2), frame_rate=25),
+    SequenceSpec("SYN-03", "test", SceneConfig(
+        width=640, height=360, num_frames=80, num_objects=8, seed=3), frame_rate=30),
+))
+
+
+@dataclass(frozen=True)
+class Detections:
+    """Simulated detections of a whole sequence.
+
+    Attributes:
+        frames: ``(n,)`` 0-based frame index.
+        boxes: ``(n, 4)`` ``(x, y, w, h)`` in 0-based pixels, inside the image.
+        scores: ``(n,)`` in [0, 1].
+        sources: ``(n,)`` id of the object a detection was made from, ``-1`` for false
+            positives (random boxes and clutter); for measuring the noise, never written.
+    """
+
+    frames: np.ndarray
+    boxes: np.ndarray
+    scores: np.ndarray
+    sources: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+
+def _clip_box(box: np.ndarray, width: int, height: int) -> np.ndarray:
+    x0, y0 = max(box[0], 0.0), max(box[1], 0.0)
+    x1, y1 = min(box[0] + box[2], float(width)), min(box[1] + box[3], float(height))
+    return np.array([x0, y0, x1 - x0, y1 - y0])
+
+
+def simulate_detections(
+    annotations: Sequence[Sequence[ObjectAnnotation]],
+    image_size: tuple[int, int],
+    noise: DetectionNoise,
+    rng: np.random.Generator,
+) -> Detections:
+    """Make noisy detections from per-frame ground truth.
+
+    Args:
+        annotations: for each frame (0-based), the objects present (as rendered).
+        image_size: ``(width, height)``; boxes are clipped to it.
+        noise: the detector model.
+        rng: the only randomness.
+
+    Returns:
+        Detections sorted by frame.
+    """
+    width, height = image_size
+    frames: list[int] = []
+    boxes: list[np.ndarray] = []
+    scores: list[float] = []
+    sources: list[int] = []
+
+    def add(t: int, box: np.ndarray, score: float, source: int) -> None:
+        box = _clip_box(box, width, height)
+        if box[2] < noise.min_size or box[3] < noise.min_size:
+            return
+        frames.append(t)
+        boxes.append(box)
+        scores.append(float(np.clip(score, noise.min_score, noise.max_score)))
+        sources.append(source)
+
+    for t, objects in enumerate(annotations):
+        for obj in objects:
+            if obj.role not in DETECTABLE_ROLES:
+                continue
+            v = obj.visibility
+            p_miss = noise.miss_rate + noise.occlusion_miss_weight * (
+                1.0 - v) ** noise.occlusion_miss_power
+            draws = rng.standard_normal(5)  # always drawn: keeps the stream aligned
+            if rng.uniform() < p_miss:
+                continue
+            x, y, w, h = obj.box
+            spread = 2.0 - v
+            cx = x + w / 2 + draws[0] * noise.position_jitter * w * spread
+            cy = y + h / 2 + draws[1] * noise.position_jitter * h * spread
+            dw = w * np.exp(draws[2] * noise.size_jitter * spread)
+            dh = h * np.exp(draws[3] * noise.size_jitter * spread)
+            box = np.array([cx - dw / 2, cy - dh / 2, dw, dh])
+            iou = float(box_iou(_clip_box(box, width, height)[None], np.array([obj.box]))[0, 0])
+            score = (noise.score_base + noise.score_iou * iou + noise.score_visibility * v
+                     + noise.score_noise * draws[4])
+            add(t, box, score, obj.id)
+        for obj in objects:  # clutter: a shifted or partial box next to a visible person
+            if obj.role not in DETECTABLE_ROLES or obj.visibility < noise.clutter_min_visibility:
+                continue
+            if rng.uniform() >= noise.clutter_rate:
+                continue
+            x, y, w, h = obj.box
+            if rng.uniform() < 0.5:  # shifted sideways by about a width
+                shift = rng.choice([-1.0, 1.0]) * rng.uniform(0.6, 1.0) * w
+                box = np.array([x + shift, y + rng.uniform(-0.1, 0.1) * h, w, h])
+            else:  # the upper or lower part only
+                part = rng.uniform(0.3, 0.45)
+                top = y if rng.uniform() < 0.5 else y + (1 - part) * h
+                box = np.array([x, top, w, part * h])
+            add(t, box, float(rng.beta(*noise.false_positive_score)), -1)
+        for _ in range(rng.poisson(noise.false_positives_per_frame)):
+            h = rng.uniform(*noise.false_positive_height_range)
+            w = h * rng.uniform(*noise.false_positive_aspect_range)
+            box = np.array([rng.uniform(-0.2 * w, width - 0.8 * w),
+                            rng.uniform(-0.2 * h, height - 0.8 * h), w, h])
+            add(t, box, float(rng.beta(*noise.false_positive_score)), -1)
+    return Detections(
+        frames=np.asarray(frames, dtype=np.int64),
+        boxes=np.asarray(boxes, dtype=np.float64).reshape(-1, 4),
+        scores=np.asarray(scores, dtype=np.float64),
+        sources=np.asarray(sources, dtype=np.int64),
+    )
+
+
+def _seqinfo_text(spec: SequenceSpec) -> str:
+    scene = spec.scene
+    return (
+        "[Sequence]\n"
+        f"name={spec.name}\n"
+        "imDir=img1\n"
+        f"frameRate={spec.frame_rate}\n"
+        f"seqLength={scene.num_frames}\n"
+        f"imWidth={scene.width}\n"
+        f"imHeight={scene.height}\n"
+        "imExt=.jpg\n"
+    )
+
+
+def _gt_lines(
+    benchmark: str, annotations: Sequence[Sequence[ObjectAnnotation]]
+) -> list[str]:
+    """Ground-truth rows (1-based coordinates) in the benchmark's column layout and order."""
+    rows: list[tuple[int, int, str]] = []
+    for t, objects in enumerate(annotations):
+        for obj in objects:
+            x, y, w, h = (int(v) for v in obj.box)
+            prefix = f"{t + 1},{obj.id},{x + 1},{y + 1},{w},{h}"
+            if benchmark in CLASS_COLUMN_BENCHMARKS:
+                flag_class = MOT_CLASSES.get(obj.role)
+                if flag_class is None:
+                    continue
+                visibility = float(round(obj.visibility, 5))
+                rows.append((obj.id, t, f"{prefix},{flag_class[0]},{flag_class[1]},{visibility}"))
+            elif obj.role in MOT15_ROLES:
+                rows.append((obj.id, t, f"{prefix},1,-1,-1,-1"))
+    if benchmark in CLASS_COLUMN_BENCHMARKS:
+        rows.sort(key=lambda r: (r[0], r[1]))  # by id, then frame (official order)
+    else:
+        rows.sort(key=lambda r: (r[1], r[0]))  # by frame (as 2DMOT2015 files are)
+    return [line for _, _, line in rows]
+
+
+def _det_lines(benchmark: str, detections: Detections) -> list[str]:
+    scale = MOT15_SCORE_SCALE if benchmark == "MOT15" else 1.0
+    digits = 3 if benchmark == "MOT15" else 5
+    lines = []
+    for t, (x, y, w, h), score in zip(
+        detections.frames, detections.boxes, detections.scores, strict=True
+    ):
+        box = f"{x + 1:.2f},{y + 1:.2f},{w:.2f},{h:.2f}"
+        lines.append(f"{t + 1},-1,{box},{score * scale:.{digits}f},-1,-1,-1")
+    return lines
+
+
+def _write_lines(path: Path, lines: list[str]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("".join(line + "\n" for line in lines), encoding="ascii")
+
+
+def write_motchallenge(
+    root: str | Path, benchmark: str, *, spec: MotChallengeSpec = DEFAULT_SPEC
+) -> None:
+    """Render ``spec`` and write it under ``root`` in ``benchmark``'s MOTChallenge layout.
+
+    Args:
+        root: the data set folder to fill (created if missing); it will hold ``train/`` and
+            ``test/``. Existing files of the same names are overwritten.
+        benchmark: ``MOT15``, ``MOT16``, ``MOT17`` or ``MOT20`` (decides the gt.txt columns
+            and the detection score range).
+        spec: what to render; equal specs give byte-identical text files and identical
+            frames.
+
+    Raises:
+        ValueError: ``benchmark`` is not one of :data:`BENCHMARKS`.
+        OSError: a file could not be written.
+    """
+    if benchmark not in BENCHMARKS:
+        raise ValueError(
+            f"unknown MOTChallenge benchmark {benchmark!r}; valid: {', '.join(BENCHMARKS)}"
+        )
+    root = Path(root)
+    jpeg_params = [cv2.IMWRITE_JPEG_QUALITY, int(spec.jpeg_quality)]
+    for seq in spec.sequences:
+        seq_dir = root / seq.split / seq.name
+        image_dir = seq_dir / "img1"
+        image_dir.mkdir(parents=True, exist_ok=True)
+        video = render_scene(seq.scene)
+        annotations: list[tuple[ObjectAnnotation, ...]] = []
+        for frame in video:
+            path = image_dir / f"{frame.index + 1:06d}.jpg"
+            if not cv2.imwrite(str(path), frame.image[:, :, ::-1], jpeg_params):
+                raise OSError(f"{path}: cv2.imwrite failed to write the JPEG frame")
+            annotations.append(frame.objects)
+        (seq_dir / "seqinfo.ini").write_text(_seqinfo_text(seq), encoding="ascii")
+        if seq.split in SPLITS_WITH_GROUND_TRUTH:
+            _write_lines(seq_dir / "gt" / "gt.txt", _gt_lines(benchmark, annotations))
+        detections = simulate_detections(
+            annotations,
+            (seq.scene.width, seq.scene.height),
+            spec.detection_noise,
+            np.random.default_rng([seq.scene.seed, _STREAM_DETECTIONS]),
+        )
+        _write_lines(seq_dir / "det" / "det.txt", _det_lines(benchmark, detections))
