@@ -1,0 +1,63 @@
+"""The generated environment pages are up to date, and the README's promises hold."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_env_pages_match_docstrings():
+    spec = importlib.util.spec_from_file_location("make_env_docs",
+                                                  REPO / "scripts" / "make_env_docs.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    for name, text in module.pages().items():
+        page = REPO / "docs" / "envs" / name
+        assert page.is_file(), f"{page} missing: run python scripts/make_env_docs.py"
+        assert page.read_text() == text, f"{page} is stale: run python scripts/make_env_docs.py"
+
+
+def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
+    readme = (REPO / "README.md").read_text()
+    setup = readme.split("## Set up", 1)[1].split("\n## ", 1)[0]
+    commands = [line for line in re.findall(r"```bash\n(.*?)```", setup, re.S)[0].splitlines()
+                if line.strip() and not line.startswith("#")]
+    assert len(commands) == 2
+    ci = (REPO / ".ci" / "run").read_text()
+    assert commands[1] in ci
+
+
+def test_readme_links_exist():
+    readme = (REPO / "README.md").read_text()
+    for link in re.findall(r"\]\(((?:docs|benchmarks)/[^)]+)\)", readme):
+        assert (REPO / link).exists(), link
+
+
+def _python_blocks(path: Path) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", path.read_text(), re.S)
+
+
+def test_readme_quickstart_runs(capsys):
+    code = _python_blocks(REPO / "README.md")[0]
+    exec(compile(code, "README.md", "exec"), {})
+    printed = capsys.readouterr().out.split()
+    assert len(printed) == 3 and all(0.0 <= float(x) <= 1.0 for x in printed)
+
+
+def test_writing_an_agent_example_runs():
+    from agents.base import AGENTS
+    from evaluation.runner import run
+
+    code = _python_blocks(REPO / "docs" / "writing-an-agent.md")[0]
+    try:
+        exec(compile(code, "writing-an-agent.md", "exec"), {})
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as out:
+            report = run("UniTrack/MOT16-v0", "nearest-centre", out=out, progress=False)
+        assert 0 < report.combined["IDF1"] <= 1
+    finally:
+        AGENTS.pop("nearest-centre", None)
