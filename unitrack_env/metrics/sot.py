@@ -11,7 +11,8 @@ What the OTB-2015 toolkit does (``tracker_benchmark_v1.0``, ``util/calcSeqErrRob
 
 * The prediction of frame 1 is replaced by the ground truth (``rectMat(1,:) = rect_anno(1,:)``)*.
 * A prediction that is NaN or has ``w <= 0`` or ``h <= 0`` is replaced by the previous frame's
-  prediction (when that frame's ground truth is not NaN)*.
+  prediction (when that frame's ground truth is not NaN). pytracking does this for zero sizes
+  only and rejects NaN or negative sizes.
 * Overlap = intersection over union with ``x2 = x + w - 1`` and ``+1`` on the intersection
   side (``calcRectInt.m``), which equals the continuous IoU with ``x2 = x + w`` used by
   :func:`unitrack_env.geometry.box_iou` and TrackEval.
@@ -21,7 +22,7 @@ What the OTB-2015 toolkit does (``tracker_benchmark_v1.0``, ``util/calcSeqErrRob
   ``sum(index, 2) == 4``; NaN compares false, so NaN rows are invalid too). Invalid frames get
   overlap ``-1`` and centre error ``-1`` and stay in the denominator: they *fail* every success
   threshold but *pass* every precision threshold. :data:`INVALID_GT_TOOLKIT` reproduces this.
-  pytracking instead drops invalid frames (valid = ``w > 0 and h > 0``) from the denominator*;
+  pytracking instead drops invalid frames (valid = ``w > 0 and h > 0``) from the denominator;
   that is :data:`INVALID_GT_EXCLUDE`.
 * Success at threshold ``t`` counts overlaps ``> t`` (strictly greater)*, thresholds
   ``0:0.05:1`` (21 values)*; precision at threshold ``d`` counts centre errors ``<= d``,

@@ -1,0 +1,307 @@
+"""Reader and result writer for DAVIS-2017 semi-supervised video object segmentation.
+
+Layout read, exactly as the benchmark ships it::
+
+    <root>/JPEGImages/480p/<seq>/00000.jpg ...
+    <root>/Annotations/480p/<seq>/00000.png ...     palette PNGs (test-dev: first frame only)
+    <root>/ImageSets/2017/{train,val,test-dev}.txt   one sequence name per line
+
+Annotation PNGs are 8-bit palette ("P") images whose *indices* are labels: 0 = background,
+``k`` = object ``k``, 255 = void (ambiguous border pixels, not scored). OpenCV cannot return
+palette indices (``cv2.IMREAD_UNCHANGED`` expands a palette PNG to BGR, checked on the
+fixture), so PNGs are read and written with Pillow (imported lazily; ``pip install pillow``).
+
+The objects of a sequence are the labels present in its first annotation other than 0 and
+255 (DAVIS-2017 labels are consecutive, ``1..n``, so this equals the official evaluation's
+``1..max``). Results are palette PNGs with the DAVIS palette, one per frame, named like the
+frames (``<out>/<seq>/00000.png``), which is what the official evaluation reads.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.datasets.otb import read_image_size
+from unitrack_env.errors import DataFormatError, UnknownSequenceError
+
+DAVIS_VOID_LABEL: int = 255
+"""Annotation label of void pixels."""
+
+DAVIS_RESOLUTIONS: tuple[str, ...] = ("480p", "Full-Resolution")
+"""Resolution folders of the DAVIS release."""
+
+PALETTE_SIZE: int = 256
+"""Entries in a PNG palette."""
+
+
+def voc_palette(size: int = PALETTE_SIZE) -> np.ndarray:
+    """Return the PASCAL VOC colour map, which DAVIS uses as its annotation palette.
+
+    Colour of index ``i``: the bits of ``i`` are dealt out three at a time, bit 0 to red,
+    bit 1 to green, bit 2 to blue, filling each channel from its most significant bit down
+    (so index 1 is dark red ``(128, 0, 0)``, index 2 dark green, 3 olive, 4 navy, ...).
+
+    Returns:
+        ``(size, 3)`` uint8.
+
+    >>> voc_palette(5).tolist()
+    [[0, 0, 0], [128, 0, 0], [0, 128, 0], [128, 128, 0], [0, 0, 128]]
+    """
+    index = np.arange(size)
+    colours = np.zeros((size, 3), dtype=np.int64)
+    for bit in range(8):
+        for channel in range(3):
+            colours[:, channel] |= ((index >> (3 * bit + channel)) & 1) << (7 - bit)
+    return colours.astype(np.uint8)
+
+
+DAVIS_PALETTE: np.ndarray = voc_palette()
+"""The 256-entry DAVIS annotation palette, ``(256, 3)`` uint8 (read-only)."""
+DAVIS_PALETTE.setflags(write=False)
+
+
+def _pil_image() -> Any:
+    try:
+        from PIL import Image
+    except ImportError as err:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "reading and writing DAVIS palette PNGs needs Pillow: pip install pillow"
+        ) from err
+    return Image
+
+
+def read_label_png(path: str | Path) -> np.ndarray:
+    """Read a label map from a palette ("P") or 8-bit grayscale ("L") PNG.
+
+    Returns:
+        ``(H, W)`` uint8 of palette indices (labels), not colours.
+
+    Raises:
+        DataFormatError: the file is missing, unreadable, or an RGB/16-bit image whose
+            pixel values are not labels.
+    """
+    image_mod = _pil_image()
+    try:
+        with image_mod.open(path) as image:
+            mode = image.mode
+            if mode not in ("P", "L"):
+                raise DataFormatError(
+                    path,
+                    f"PNG mode {mode!r} is not a label map; DAVIS annotations and results must "
+                    "be palette ('P') PNGs whose indices are object ids",
+                )
+            return np.array(image, dtype=np.uint8)
+    except OSError as err:
+        raise DataFormatError(path, f"missing or unreadable PNG ({err})") from err
+
+
+def read_png_palette(path: str | Path) -> np.ndarray:
+    """Return the palette of a palette PNG as ``(n, 3)`` uint8 (n = entries stored)."""
+    image_mod = _pil_image()
+    with image_mod.open(path) as image:
+        palette = image.getpalette()
+    if palette is None:
+        raise DataFormatError(path, "PNG has no palette")
+    return np.asarray(palette, dtype=np.uint8).reshape(-1, 3)
+
+
+def write_label_png(
+    path: str | Path, labels: np.ndarray, palette: np.ndarray = DAVIS_PALETTE
+) -> Path:
+    """Write a label map as a palette PNG (the DAVIS result format), atomically.
+
+    Args:
+        path: output file; parent folders are created.
+        labels: ``(H, W)`` integer labels in ``0..255``.
+        palette: ``(256, 3)`` uint8 colours; the DAVIS palette by default.
+
+    Returns:
+        The written path.
+    """
+    arr = np.asarray(labels)
+    if arr.ndim != 2:
+        raise ValueError(f"labels must be a 2-D (H, W) array; got shape {arr.shape}")
+    if arr.size and (arr.min() < 0 or arr.max() > 255):
+        raise ValueError("labels must lie in 0..255 to fit a palette PNG")
+    pal = np.asarray(palette, dtype=np.uint8).reshape(-1, 3)
+    height, width = arr.shape
+    pixels = np.ascontiguousarray(arr, dtype=np.uint8).tobytes()
+    image = _pil_image().frombytes("P", (width, height), pixels)
+    image.putpalette(pal.reshape(-1).tolist())
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            image.save(handle, format="PNG")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+@dataclass(frozen=True)
+class VOSSequence:
+    """One DAVIS sequence.
+
+    Attributes:
+        name: sequence name.
+        frame_paths: JPEG of every frame, in order.
+        annotation_paths: PNG of every frame, or None where the release has none (test-dev
+            annotates only the first frame).
+        image_size: ``(width, height)``.
+        object_ids: labels of the objects to segment (from the first annotation).
+    """
+
+    name: str
+    frame_paths: tuple[Path, ...]
+    annotation_paths: tuple[Path | None, ...]
+    image_size: tuple[int, int]
+    object_ids: tuple[int, ...]
+
+    @property
+    def num_frames(self) -> int:
+        """Number of frames."""
+        return len(self.frame_paths)
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        """File stems of the frames (``00000``), the names result PNGs must carry."""
+        return tuple(p.stem for p in self.frame_paths)
+
+    @property
+    def has_ground_truth(self) -> bool:
+        """Whether every frame has an annotation (train/val)."""
+        return all(p is not None for p in self.annotation_paths)
+
+    def read_annotation(self, index: int) -> np.ndarray:
+        """Return frame ``index``'s label map ``(H, W)`` uint8 (255 = void)."""
+        path = self.annotation_paths[index]
+        if path is None:
+            raise DataFormatError(
+                self.frame_paths[index], f"frame {index} of {self.name} has no annotation"
+            )
+        labels = read_label_png(path)
+        if labels.shape != (self.image_size[1], self.image_size[0]):
+            raise DataFormatError(
+                path, f"size {labels.shape[::-1]} differs from the frames' {self.image_size}"
+            )
+        return labels
+
+    def read_annotations(self) -> np.ndarray:
+        """Return all label maps as ``(T, H, W)`` uint8."""
+        return np.stack([self.read_annotation(i) for i in range(self.num_frames)])
+
+
+class DAVISDataset:
+    """The sequences of one DAVIS-2017 split.
+
+    Args:
+        root: the DAVIS folder holding ``JPEGImages``, ``Annotations`` and ``ImageSets``.
+        split: ``"train"``, ``"val"``, ``"test-dev"``...: reads ``ImageSets/<year>/<split>.txt``;
+            None lists every sequence folder in ``JPEGImages/<resolution>``.
+        resolution: ``"480p"`` (the benchmark's) or ``"Full-Resolution"``.
+        year: ``ImageSets`` sub-folder.
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        split: str | None = "val",
+        resolution: str = "480p",
+        year: str = "2017",
+    ) -> None:
+        self.root = Path(root)
+        self.split = split
+        self.image_dir = self.root / "JPEGImages" / resolution
+        self.annotation_dir = self.root / "Annotations" / resolution
+        if not self.image_dir.is_dir():
+            raise DataFormatError(
+                self.image_dir,
+                f"frame folder missing; root= must be the DAVIS folder holding "
+                f"JPEGImages/{resolution} (resolutions: {', '.join(DAVIS_RESOLUTIONS)})",
+            )
+        if split is None:
+            names = sorted(p.name for p in self.image_dir.iterdir() if p.is_dir())
+        else:
+            split_file = self.root / "ImageSets" / year / f"{split}.txt"
+            if not split_file.is_file():
+                folder = split_file.parent
+                present = sorted(p.stem for p in folder.glob("*.txt")) if folder.is_dir() else []
+                raise DataFormatError(
+                    split_file,
+                    f"split list missing (splits found: {', '.join(present) or 'none'}; "
+                    "split=None reads every sequence)",
+                )
+            names = [s.strip() for s in split_file.read_text().splitlines() if s.strip()]
+        if not names:
+            raise DataFormatError(self.image_dir, "no sequences")
+        self.sequence_names: list[str] = names
+
+    def __len__(self) -> int:
+        return len(self.sequence_names)
+
+    def __iter__(self) -> Iterator[VOSSequence]:
+        for name in self.sequence_names:
+            yield self.load(name)
+
+    def load(self, name: str) -> VOSSequence:
+        """Read one sequence's file lists, size and object ids (masks load on demand)."""
+        if name not in self.sequence_names:
+            raise UnknownSequenceError(
+                f"no DAVIS sequence '{name}' in split {self.split!r} of {self.root}; "
+                f"available: {', '.join(self.sequence_names)}"
+            )
+        seq_dir = self.image_dir / name
+        if not seq_dir.is_dir():
+            raise DataFormatError(seq_dir, f"frames of sequence '{name}' missing")
+        frames = tuple(sorted(p for p in seq_dir.iterdir() if p.suffix.lower() == ".jpg"))
+        if not frames:
+            raise DataFormatError(seq_dir, "contains no .jpg frames")
+        ann_dir = self.annotation_dir / name
+        pngs = {p.stem: p for p in ann_dir.glob("*.png")} if ann_dir.is_dir() else {}
+        unmatched = sorted(set(pngs) - {f.stem for f in frames})
+        if unmatched:
+            raise DataFormatError(
+                pngs[unmatched[0]], "annotation without a frame of the same name in JPEGImages"
+            )
+        annotations = tuple(pngs.get(f.stem) for f in frames)
+        if annotations[0] is None:
+            raise DataFormatError(
+                ann_dir / f"{frames[0].stem}.png",
+                "first-frame annotation missing; semi-supervised VOS needs it",
+            )
+        size = read_image_size(frames[0])
+        first = read_label_png(annotations[0])
+        if first.shape != (size[1], size[0]):
+            raise DataFormatError(
+                annotations[0], f"size {first.shape[::-1]} differs from the frames' {size}"
+            )
+        ids = tuple(int(v) for v in np.unique(first) if v not in (0, DAVIS_VOID_LABEL))
+        if not ids:
+            raise DataFormatError(
+                annotations[0],
+                "no object in the first annotation (labels other than 0 and 255); a DAVIS-2016 "
+                "0/255 mask must be converted to labels 0/1",
+            )
+        return VOSSequence(name, frames, annotations, size, ids)
+
+
+def write_davis_result(
+    out_dir: str | Path, sequence: VOSSequence, index: int, labels: np.ndarray
+) -> Path:
+    """Write frame ``index`` of ``sequence`` as ``<out_dir>/<seq>/<frame>.png`` (DAVIS layout)."""
+    expected = (sequence.image_size[1], sequence.image_size[0])
+    if np.shape(labels) != expected:
+        raise ValueError(f"labels have shape {np.shape(labels)}; the frame is {expected}")
+    return write_label_png(
+        Path(out_dir) / sequence.name / f"{sequence.frame_names[index]}.png", labels
+    )

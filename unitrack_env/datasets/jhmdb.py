@@ -1,0 +1,239 @@
+"""Reader for JHMDB pose propagation (frames + ``joint_positions.mat``).
+
+Layout read, exactly as the benchmark ships it::
+
+    <root>/Rename_Images/<action>/<video>/00001.png ...
+    <root>/joint_positions/<action>/<video>/joint_positions.mat
+    <root>/splits/<action>_test_split<k>.txt          optional; "<video>.avi <1|2>" per line
+                                                      (1 = train, 2 = test, HMDB51 format)
+
+``joint_positions.mat`` (MATLAB 5) holds ``pos_img`` of shape ``(2, 15, T)``: x/y image
+coordinates of 15 puppet joints in every frame, in MATLAB's 1-based pixel convention (the
+centre of the top-left pixel is ``(1, 1)``), sub-pixel values such as ``286.5``.
+
+Origin decision: the reader returns **0-based** coordinates (``pos_img - 1``; the centre of
+the top-left pixel is ``(0, 0)``, the same as numpy indexing), because that is what the
+UniTrack/CRW/TimeCycle loaders and evaluation script use (``lbls_coord = pos_img - 1``) and
+what an agent needs to sample feature maps. PCK only depends on differences, so the choice
+does not change scores as long as predictions use the same frame.
+
+Sequences are named ``"<action>/<video>"``. Every annotated joint is treated as visible
+(JHMDB annotates occluded joints too). When a video folder holds more images than ``T``
+annotated frames, the sequence is the first ``T`` frames; fewer images is an error.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from unitrack_env.datasets.otb import read_image_size
+from unitrack_env.errors import DataFormatError, UnknownSequenceError
+
+JHMDB_JOINT_NAMES: tuple[str, ...] = (
+    "neck",
+    "belly",
+    "face",
+    "right_shoulder",
+    "left_shoulder",
+    "right_hip",
+    "left_hip",
+    "right_elbow",
+    "left_elbow",
+    "right_knee",
+    "left_knee",
+    "right_wrist",
+    "left_wrist",
+    "right_ankle",
+    "left_ankle",
+)
+"""The 15 JHMDB puppet joints in ``pos_img`` order (JHMDB README; mmpose's ``jhmdb`` dataset
+info lists the same order, calling the third joint "head")."""
+
+NUM_JOINTS: int = len(JHMDB_JOINT_NAMES)
+
+JHMDB_SKELETON: tuple[tuple[int, int], ...] = (
+    (13, 9), (9, 5), (5, 1), (1, 6), (6, 10), (10, 14),  # legs through the belly
+    (1, 0), (0, 2),  # belly - neck - face
+    (0, 3), (3, 7), (7, 11),  # right arm
+    (0, 4), (4, 8), (8, 12),  # left arm
+)
+"""Limbs as joint-index pairs, for drawing."""
+
+MATLAB_ORIGIN: float = 1.0
+"""Subtracted from ``pos_img`` to get 0-based pixel coordinates."""
+
+SPLIT_TRAIN: int = 1
+SPLIT_TEST: int = 2
+_SPLIT_LABELS = {"train": SPLIT_TRAIN, "test": SPLIT_TEST}
+_SPLIT_FILE = re.compile(r"^(?P<action>.+)_test_split(?P<k>\d+)\.txt$")
+
+
+def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.ndarray:
+    """Read ``pos_img`` from a JHMDB ``joint_positions.mat``.
+
+    Args:
+        path: the ``.mat`` file.
+        zero_based: subtract 1 (see the module docstring); False keeps MATLAB's values.
+
+    Returns:
+        ``(T, 15, 2)`` float64 ``(x, y)`` per frame and joint.
+
+    Raises:
+        DataFormatError: unreadable file, no ``pos_img``, or a shape other than ``(2, 15, T)``.
+    """
+    from scipy.io import loadmat  # scipy is a core dependency; imported here to keep
+    # ``import unitrack_env`` fast.
+
+    try:
+        mat = loadmat(str(path))
+    except (OSError, ValueError, NotImplementedError) as err:
+        raise DataFormatError(path, f"cannot read MATLAB file ({err})") from err
+    if "pos_img" not in mat:
+        raise DataFormatError(path, "has no 'pos_img' variable", field="pos_img")
+    pos = np.asarray(mat["pos_img"], dtype=np.float64)
+    if pos.ndim == 2 and pos.shape == (2, NUM_JOINTS):  # a one-frame video loses its last axis
+        pos = pos[:, :, None]
+    if pos.ndim != 3 or pos.shape[:2] != (2, NUM_JOINTS):
+        raise DataFormatError(
+            path, f"pos_img has shape {pos.shape}, expected (2, {NUM_JOINTS}, T)", field="pos_img"
+        )
+    keypoints = pos.transpose(2, 1, 0).copy()
+    if zero_based:
+        keypoints -= MATLAB_ORIGIN
+    return keypoints
+
+
+@dataclass(frozen=True)
+class PoseSequence:
+    """One JHMDB video with its joints.
+
+    Attributes:
+        name: ``"<action>/<video>"``.
+        frame_paths: PNG of every annotated frame, in order.
+        keypoints: ``(num_frames, 15, 2)`` float64 ``(x, y)``, 0-based pixels.
+        image_size: ``(width, height)``.
+    """
+
+    name: str
+    frame_paths: tuple[Path, ...]
+    keypoints: np.ndarray
+    image_size: tuple[int, int]
+
+    def __post_init__(self) -> None:
+        if self.keypoints.shape != (len(self.frame_paths), NUM_JOINTS, 2):
+            raise ValueError(f"{self.name}: keypoints and frames disagree")
+        self.keypoints.setflags(write=False)
+
+    @property
+    def action(self) -> str:
+        """The action class folder."""
+        return self.name.split("/", 1)[0]
+
+    @property
+    def video(self) -> str:
+        """The video folder."""
+        return self.name.split("/", 1)[1]
+
+    @property
+    def num_frames(self) -> int:
+        """Number of frames."""
+        return len(self.frame_paths)
+
+    @property
+    def init_keypoints(self) -> np.ndarray:
+        """The first frame's joints (what a propagation agent is given)."""
+        return self.keypoints[0]
+
+
+def read_split_files(split_dir: str | Path, split_index: int = 1) -> dict[str, int]:
+    """Read ``<action>_test_split<k>.txt`` files into ``{"<action>/<video>": 1 or 2}``."""
+    split_dir = Path(split_dir)
+    membership: dict[str, int] = {}
+    files = sorted(split_dir.glob(f"*_test_split{split_index}.txt"))
+    if not files:
+        raise DataFormatError(split_dir, f"no *_test_split{split_index}.txt files")
+    for path in files:
+        action = _SPLIT_FILE.match(path.name).group("action")  # type: ignore[union-attr]
+        for number, line in enumerate(path.read_text().splitlines(), start=1):
+            if not line.strip():
+                continue
+            parts = line.split()
+            if len(parts) != 2 or parts[1] not in ("0", "1", "2"):
+                raise DataFormatError(path, f"expected '<video>.avi <1|2>', got {line!r}",
+                                      line=number)
+            membership[f"{action}/{Path(parts[0]).stem}"] = int(parts[1])
+    return membership
+
+
+class JHMDBDataset:
+    """The annotated videos of a JHMDB folder.
+
+    Args:
+        root: the folder holding ``Rename_Images`` and ``joint_positions``.
+        split: None for every annotated video, or ``"train"``/``"test"`` of split file set
+            ``split_index`` (requires the split files).
+        split_index: 1, 2 or 3 (JHMDB's three splits).
+        split_dir: where the split files are; default ``<root>/splits``.
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        split: str | None = None,
+        split_index: int = 1,
+        split_dir: str | Path | None = None,
+    ) -> None:
+        self.root = Path(root)
+        self.frame_dir = self.root / "Rename_Images"
+        self.joint_dir = self.root / "joint_positions"
+        for folder in (self.frame_dir, self.joint_dir):
+            if not folder.is_dir():
+                raise DataFormatError(
+                    folder, "missing; root= must hold Rename_Images/ and joint_positions/"
+                )
+        names = sorted(
+            f"{mat.parent.parent.name}/{mat.parent.name}"
+            for mat in self.joint_dir.glob("*/*/joint_positions.mat")
+        )
+        if split is not None:
+            if split not in _SPLIT_LABELS:
+                raise ValueError(f"split must be None, 'train' or 'test'; got {split!r}")
+            membership = read_split_files(
+                Path(split_dir) if split_dir is not None else self.root / "splits", split_index
+            )
+            names = [n for n in names if membership.get(n) == _SPLIT_LABELS[split]]
+        if not names:
+            raise DataFormatError(self.joint_dir, "no <action>/<video>/joint_positions.mat")
+        self.sequence_names: list[str] = names
+
+    def __len__(self) -> int:
+        return len(self.sequence_names)
+
+    def __iter__(self) -> Iterator[PoseSequence]:
+        for name in self.sequence_names:
+            yield self.load(name)
+
+    def load(self, name: str) -> PoseSequence:
+        """Read one video's frame list and joints."""
+        if name not in self.sequence_names:
+            raise UnknownSequenceError(
+                f"no JHMDB video '{name}' in {self.root} (names are '<action>/<video>'); "
+                f"{len(self.sequence_names)} available, e.g. {self.sequence_names[0]}"
+            )
+        mat = self.joint_dir / name / "joint_positions.mat"
+        keypoints = read_joint_positions(mat)
+        frame_folder = self.frame_dir / name
+        if not frame_folder.is_dir():
+            raise DataFormatError(frame_folder, f"frames of '{name}' missing")
+        frames = tuple(sorted(p for p in frame_folder.iterdir() if p.suffix.lower() == ".png"))
+        if len(frames) < len(keypoints):
+            raise DataFormatError(
+                mat, f"annotates {len(keypoints)} frames but {frame_folder} has {len(frames)}"
+            )
+        frames = frames[: len(keypoints)]
+        return PoseSequence(name, frames, keypoints, read_image_size(frames[0]))
