@@ -16,6 +16,10 @@ import numpy as np
 from unitrack_env.errors import DataFormatError
 
 
+#: OpenCV >= 4.11 decodes straight to RGB, which saves a full-frame colour conversion.
+_IMREAD_RGB = getattr(cv2, "IMREAD_COLOR_RGB", None)
+
+
 def read_rgb(path: str | Path) -> np.ndarray:
     """Decode an image file to a ``uint8`` RGB array.
 
@@ -23,11 +27,13 @@ def read_rgb(path: str | Path) -> np.ndarray:
         DataFormatError: the file is missing or not a decodable image.
     """
     path = Path(path)
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    image = cv2.imread(str(path), _IMREAD_RGB if _IMREAD_RGB is not None else cv2.IMREAD_COLOR)
     if image is None:
         reason = "missing" if not path.exists() else "not a decodable image (corrupt or truncated?)"
         raise DataFormatError(path, reason)
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    if _IMREAD_RGB is None:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return image
 
 
 class FramePrefetcher:
