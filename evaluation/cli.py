@@ -195,7 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
     env_options(rd)
     rd.add_argument("--sequence", required=True)
     rd.add_argument("--out", required=True, help="video file (.mp4 or .avi)")
-    rd.add_argument("--fps", type=float, default=None, help="video frame rate (default: sequence's)")
+    rd.add_argument("--fps", type=float, default=None,
+                    help="video frame rate (default: the sequence's)")
     rd.set_defaults(func=_cmd_render)
 
     ls = sub.add_parser("list", help="list environments and agents")

@@ -102,7 +102,7 @@ def format_results(rows: np.ndarray) -> str:
     """Format MOTChallenge result rows (``frame, id, x, y, w, h, conf, -1, -1, -1``)."""
     lines = []
     for row in np.asarray(rows).reshape(-1, 10):
-        lines.append(",".join(fmt % value for fmt, value in zip(RESULT_FORMAT, row)))
+        lines.append(",".join(fmt % value for fmt, value in zip(RESULT_FORMAT, row, strict=True)))
     return "\n".join(lines) + ("\n" if lines else "")
 
 

@@ -36,6 +36,7 @@ def pages() -> dict[str, str]:
 
 
 def main() -> int:
+    """Write every page."""
     DOCS.mkdir(parents=True, exist_ok=True)
     for name, text in pages().items():
         (DOCS / name).write_text(text)

@@ -15,7 +15,6 @@ import numpy as np
 
 from unitrack_env.errors import DataFormatError
 
-
 #: OpenCV >= 4.11 decodes straight to RGB, which saves a full-frame colour conversion.
 _IMREAD_RGB = getattr(cv2, "IMREAD_COLOR_RGB", None)
 

@@ -67,7 +67,8 @@ class Image(spaces.Space[np.ndarray]):
         )
 
     def __repr__(self) -> str:
-        return f"Image(max_height={self.max_height}, max_width={self.max_width}, channels={self.channels})"
+        return (f"Image(max_height={self.max_height}, max_width={self.max_width}, "
+                f"channels={self.channels})")
 
     def __eq__(self, other: object) -> bool:
         return (

@@ -20,7 +20,7 @@ def observation(boxes, scores=None, capacity=16):
 
 def tracks(action):
     ids, boxes = unpack_tracks(action)
-    return dict(zip(ids.tolist(), boxes.tolist()))
+    return dict(zip(ids.tolist(), boxes.tolist(), strict=True))
 
 
 def test_registry_lists_builtins_and_explains_unknown_names():

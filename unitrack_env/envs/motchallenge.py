@@ -50,12 +50,14 @@ class MOTChallengeEnv(SequenceEnv):
     ## Observation space
     A ``Dict``:
 
-    | key | space | meaning |
-    |---|---|---|
-    | ``frame`` | :class:`~unitrack_env.spaces.Image` (uint8 RGB, native size) | the frame |
-    | ``boxes`` | ``Box((max_detections, 4), float32)``, finite, ``w, h >= 0`` | detections ``(x, y, w, h)``, 1-based pixels as in ``det.txt``; rows past ``num_detections`` are 0 |
-    | ``scores`` | ``Box((max_detections,), float32)``, finite | detection scores as in the file (MOT15's are unbounded) |
-    | ``num_detections`` | ``Discrete(max_detections + 1)`` | number of valid rows |
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size.
+    - ``boxes``: ``Box((max_detections, 4), float32)``, finite, ``w, h >= 0``: detections
+      ``(x, y, w, h)`` in 1-based pixels as in ``det.txt``; rows past ``num_detections``
+      are 0.
+    - ``scores``: ``Box((max_detections,), float32)``, finite: detection scores as in the
+      file (MOT15's are unbounded).
+    - ``num_detections``: ``Discrete(max_detections + 1)``, the number of valid rows.
 
     Ground truth never appears in observations. ``unitrack_env.spaces.unpack_detections``
     returns the valid rows.
