@@ -159,3 +159,15 @@ def test_user_detection_folder(tmp_path: Path):
     dets.mkdir()
     with pytest.raises(DataFormatError, match="no detection file for sequence 'S1'"):
         MOTChallengeDataset(tmp_path, "MOT17", detections=dets).load("S1")
+
+
+def test_corrupt_frame_is_reported_by_the_env(tmp_path: Path):
+    import gymnasium as gym
+
+    seq = make_sequence(tmp_path, det="1,-1,1,1,10,20,0.9\n2,-1,1,1,10,20,0.9\n")
+    (seq / "img1" / "000002.jpg").write_bytes(b"\xff\xd8 not really a jpeg")
+    env = gym.make("UniTrack/MOTChallenge-v0", root=tmp_path)
+    observation, _ = env.reset()
+    assert observation["frame"].shape == (48, 64, 3)
+    with pytest.raises(DataFormatError, match="000002.jpg: not a decodable image"):
+        env.step({"ids": np.zeros(0, int), "boxes": np.zeros((0, 4))})
