@@ -120,10 +120,10 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
 
 
 def _cmd_score(args: argparse.Namespace, console: Console) -> int:
-    from evaluation.scoring import score_results
+    from unitrack_env.metrics.motchallenge import score_folder
 
     sequences = args.sequences.split(",") if args.sequences else None
-    report = score_results(args.gt, args.results, benchmark=args.benchmark, sequences=sequences)
+    report = score_folder(args.gt, args.results, benchmark=args.benchmark, sequences=sequences)
     console.print(metrics_table(report.per_sequence, report.combined, f"{args.results}"))
     if args.out:
         Path(args.out).write_text(report.to_json())

@@ -4,11 +4,15 @@ Output folder layout (TrackEval's tracker layout, so the folder can be scored ag
 ``unitrack score`` or TrackEval itself)::
 
     <out>/run.json                 what was run (env id, env and agent arguments)
-    <out>/data/<sequence>.txt      results in the official format, written atomically
+    <out>/data/...                 results in the task's official format (MOT:
+                                   ``<sequence>.txt``), written atomically by the env
     <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, digest
-    <out>/metrics.json             per-sequence and combined metrics (TrackEval names)
+    <out>/metrics.json             per-sequence and combined official metrics
 
-A sequence counts as finished once both its result file and its record exist; both are
+The runner knows no task: it relies on the environment's results contract
+(:class:`unitrack_env.envs.base.SequenceEnv`: ``write_episode``, ``score_folder``,
+``sequence_length``, ``has_ground_truth``, ``episode_digest``). A sequence counts as
+finished once its record exists; the record is written after the results, and every file is
 written with write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and
 never loses a finished sequence. Running again with the same ``out`` resumes: finished
 sequences are skipped.
@@ -18,7 +22,7 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+import shutil
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -28,14 +32,11 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 import unitrack_env
 from evaluation._agents import agents_module
-from evaluation.scoring import ScoreReport, score_results
-
-#: Format of the floats in result files (MOTChallenge files use 2 decimals; keep 3).
-RESULT_FORMAT = ("%d", "%d", "%.3f", "%.3f", "%.3f", "%.3f", "%g", "%d", "%d", "%d")
+from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.report import ScoreReport
 
 
 @dataclass(frozen=True)
@@ -83,37 +84,14 @@ class RunReport:
         return self.scores.combined if self.scores is not None else {}
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` so that readers see the old file or the whole new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def format_results(rows: np.ndarray) -> str:
-    """Format MOTChallenge result rows (``frame, id, x, y, w, h, conf, -1, -1, -1``)."""
-    lines = []
-    for row in np.asarray(rows).reshape(-1, 10):
-        lines.append(",".join(fmt % value for fmt, value in zip(RESULT_FORMAT, row, strict=True)))
-    return "\n".join(lines) + ("\n" if lines else "")
-
-
 def play_episode(
     env: gym.Env,
     agent: Any,
     sequence: str,
     *,
     on_frame: Callable[[], None] | None = None,
-) -> tuple[np.ndarray, SequenceRecord, dict[str, Any]]:
-    """Play one sequence; return its result rows, its record and the final info."""
+) -> tuple[SequenceRecord, dict[str, Any]]:
+    """Play one sequence; return its record and the final info (results stay in the env)."""
     start = time.perf_counter()
     observation, info = env.reset(options={"sequence": sequence})
     agent.reset(observation, info)
@@ -133,19 +111,16 @@ def play_episode(
         if on_frame is not None:
             on_frame()
     seconds = time.perf_counter() - start
-    base = env.unwrapped
-    record = SequenceRecord(sequence, frames, seconds, base.episode_digest(), total)
-    return base.episode_results(), record, info
+    record = SequenceRecord(sequence, frames, seconds, env.unwrapped.episode_digest(), total)
+    return record, info
 
 
 def _finished(out: Path, sequence: str) -> bool:
-    return (out / "data" / f"{sequence}.txt").is_file() and (
-        out / "sequences" / f"{sequence}.json"
-    ).is_file()
+    return (out / "sequences" / f"{sequence}.json").is_file()
 
 
-def _save(out: Path, rows: np.ndarray, record: SequenceRecord) -> None:
-    atomic_write_text(out / "data" / f"{record.sequence}.txt", format_results(rows))
+def _save(out: Path, env: gym.Env, record: SequenceRecord) -> None:
+    env.unwrapped.write_episode(out / "data")
     payload = asdict(record) | {"fps": record.fps}
     atomic_write_text(out / "sequences" / f"{record.sequence}.json", json.dumps(payload, indent=2))
 
@@ -164,8 +139,8 @@ def _worker(spec: RunSpec, out: str, sequence: str, threads: int | None) -> dict
         torch.set_num_threads(threads)
     env, agent = _make(spec)
     try:
-        rows, record, _ = play_episode(env, agent, sequence)
-        _save(Path(out), rows, record)
+        record, _ = play_episode(env, agent, sequence)
+        _save(Path(out), env, record)
         return asdict(record)
     finally:
         agent.close()
@@ -184,8 +159,8 @@ def _check_run_file(out: Path, spec: RunSpec, overwrite: bool) -> None:
             )
     if overwrite:
         for sub in ("data", "sequences"):
-            for path in (out / sub).glob("*"):
-                path.unlink()
+            if (out / sub).is_dir():
+                shutil.rmtree(out / sub)
     atomic_write_text(run_file, json.dumps(spec.to_json(), indent=2))
 
 
@@ -240,8 +215,8 @@ def run(
             try:
                 for name in todo:
                     bar.start_sequence(name)
-                    rows, record, _ = play_episode(env, agent_obj, name, on_frame=bar.advance)
-                    _save(out, rows, record)
+                    record, _ = play_episode(env, agent_obj, name, on_frame=bar.advance)
+                    _save(out, env, record)
                     records[name] = record
             finally:
                 agent_obj.close()
@@ -262,7 +237,8 @@ def run(
         data = json.loads((out / "sequences" / f"{name}.json").read_text())
         data.pop("fps", None)
         records[name] = SequenceRecord(**data)
-    scores = _score(spec, base, out, names)
+    with_gt = [n for n in names if base.has_ground_truth(n)]
+    scores = base.score_folder(out / "data", with_gt) if with_gt else None
     payload: dict[str, Any] = {
         "env_id": env_id,
         "agent": agent,
@@ -275,11 +251,3 @@ def run(
         payload["note"] = "this split has no ground truth; results were written, not scored"
     atomic_write_text(out / "metrics.json", json.dumps(payload, indent=2))
     return RunReport(out, {n: records[n] for n in names}, scores, skipped)
-
-
-def _score(spec: RunSpec, base: Any, out: Path, names: list[str]) -> ScoreReport | None:
-    with_gt = [n for n in names if base.dataset.has_ground_truth(n)]
-    if not with_gt:
-        return None
-    return score_results(base.dataset.split_dir, out / "data", benchmark=base.benchmark,
-                         sequences=with_gt)

@@ -13,7 +13,8 @@ import gymnasium as gym
 
 import unitrack_env
 from evaluation._agents import agents_module
-from evaluation.runner import atomic_write_text, play_episode
+from evaluation.runner import play_episode
+from unitrack_env.io import atomic_write_text
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
 DEFAULT_TOLERANCE = 1e-6
@@ -68,7 +69,7 @@ def record_episode(
     env = gym.make(env_id, **env_kwargs)
     tracker = agents_module().make_agent(agent, **agent_kwargs)
     try:
-        _, record, info = play_episode(env, tracker, sequence)
+        record, info = play_episode(env, tracker, sequence)
     finally:
         tracker.close()
         env.close()

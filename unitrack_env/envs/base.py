@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.metrics.report import ScoreReport
 
 #: Environment variable naming a folder that holds benchmark folders (``MOT17/``, ``DAVIS/``,
 #: ...); used when ``root`` is not given.
@@ -49,7 +50,11 @@ def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path 
 class SequenceEnv(gym.Env):
     """Base class: sequence selection, seeding and episode bookkeeping.
 
-    Subclasses set :attr:`sequence_names` in ``__init__`` and implement :meth:`_start_episode`.
+    Subclasses set :attr:`sequence_names` in ``__init__`` and implement
+    :meth:`_start_episode`, plus the results contract that ``evaluation`` relies on for every
+    task: :meth:`sequence_length`, :meth:`has_ground_truth`, :meth:`episode_digest`,
+    :meth:`write_episode` (official result format) and :meth:`score_folder` (official
+    metrics of a folder of such results).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
@@ -97,6 +102,31 @@ class SequenceEnv(gym.Env):
         return self._start_episode(name)
 
     def _start_episode(self, name: str) -> tuple[Any, dict[str, Any]]:
+        raise NotImplementedError
+
+    # ----------------------------------------------------------- results contract
+    def sequence_length(self, name: str) -> int:
+        """Number of frames (steps) of sequence ``name``, without loading it."""
+        raise NotImplementedError
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` can be scored."""
+        raise NotImplementedError
+
+    def episode_digest(self) -> str:
+        """A stable digest of the actions recorded in the current episode."""
+        raise NotImplementedError
+
+    def write_episode(self, folder: Path) -> None:
+        """Write the current (finished) episode's results in the official format.
+
+        Writes must be atomic (``unitrack_env.io``) so an interrupted run never leaves half a
+        result behind.
+        """
+        raise NotImplementedError
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score results written by :meth:`write_episode` with the official metrics."""
         raise NotImplementedError
 
     @staticmethod

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,8 +20,10 @@ from unitrack_env.datasets.motchallenge import (
 )
 from unitrack_env.envs.base import SequenceEnv, resolve_root
 from unitrack_env.frames import FramePrefetcher
+from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.clear_stream import StreamingClear
 from unitrack_env.metrics.mot_preprocess import preprocess_frame
+from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.render import draw_boxes
 
 #: Default capacity of the padded detection arrays (MOT20 public detections reach ~250).
@@ -325,6 +328,24 @@ class MOTChallengeEnv(SequenceEnv):
         """Return the number of frames of sequence ``name`` (reads only its seqinfo.ini)."""
         return read_seqinfo(self.dataset.split_dir / name).length
 
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` has a ``gt/gt.txt``."""
+        return self.dataset.has_ground_truth(name)
+
+    def write_episode(self, folder: Path) -> None:
+        """Write ``<folder>/<sequence>.txt`` in the official MOTChallenge result format."""
+        if self._sequence is None:
+            raise RuntimeError("no episode to write; call reset() and play it first")
+        atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
+                          format_mot_results(self.episode_results()))
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
+        from unitrack_env.metrics.motchallenge import score_folder
+
+        return score_folder(self.dataset.split_dir, folder, benchmark=self.benchmark,
+                            sequences=sequences)
+
     @property
     def sequence(self) -> MOTSequence | None:
         """The sequence of the current episode."""
@@ -348,6 +369,17 @@ class MOTChallengeEnv(SequenceEnv):
         if self._frames is not None:
             self._frames.close()
         super().close()
+
+
+#: printf formats of the result columns (MOTChallenge files use 2 decimals; keep 3).
+RESULT_FORMAT = ("%d", "%d", "%.3f", "%.3f", "%.3f", "%.3f", "%g", "%d", "%d", "%d")
+
+
+def format_mot_results(rows: np.ndarray) -> str:
+    """Format result rows ``frame, id, x, y, w, h, conf, -1, -1, -1`` as MOTChallenge text."""
+    lines = [",".join(fmt % value for fmt, value in zip(RESULT_FORMAT, row, strict=True))
+             for row in np.asarray(rows).reshape(-1, 10)]
+    return "\n".join(lines) + ("\n" if lines else "")
 
 
 def _result_rows(frame: int, ids: np.ndarray, boxes: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ import contextlib
 import io
 import math
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,7 @@ import numpy as np
 
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.mot_preprocess import normalize_benchmark
+from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: Column names of a MOTChallenge result file, used in error messages.
 RESULT_FIELDS: tuple[str, ...] = (
@@ -425,3 +426,79 @@ def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScor
 def combine_sequences(scores: Mapping[str, SequenceScore]) -> dict[str, float]:
     """Flat combined metrics over sequences (TrackEval's ``COMBINED_SEQ`` row)."""
     return dict(combine_sequence_scores(scores).summary)
+
+
+#: File suffix of MOTChallenge result files.
+RESULT_SUFFIX: str = ".txt"
+
+
+def _sequences_from_results(results_dir: Path) -> list[str]:
+    return sorted(
+        p.stem for p in results_dir.iterdir() if p.is_file() and p.suffix == RESULT_SUFFIX
+    )
+
+
+def score_folder(
+    gt_root: str | Path,
+    results_dir: str | Path,
+    *,
+    benchmark: str,
+    sequences: Sequence[str] | None = None,
+) -> ScoreReport:
+    """Score ``results_dir/<seq>.txt`` against ``gt_root/<seq>/gt/gt.txt`` for each sequence.
+
+    Args:
+        gt_root: folder holding one MOTChallenge sequence folder per sequence.
+        results_dir: folder of result files named ``<seq>.txt``.
+        benchmark: ``"MOT15"``, ``"MOT16"``, ``"MOT17"`` or ``"MOT20"``.
+        sequences: the sequences to score; each must have a result file.  By default every
+            ``*.txt`` file in ``results_dir`` is scored (and each must have ground truth).
+
+    Returns:
+        A :class:`ScoreReport`.
+
+    Raises:
+        DataFormatError: a missing folder, a result file whose sequence has no ground truth, a
+            missing result file for a listed sequence, or a malformed line (naming the file,
+            line and field).
+    """
+    name = normalize_benchmark(benchmark)
+    gt_root = Path(gt_root)
+    results_dir = Path(results_dir)
+    if not gt_root.is_dir():
+        raise DataFormatError(gt_root, "ground-truth folder not found")
+    if not results_dir.is_dir():
+        raise DataFormatError(results_dir, "results folder not found")
+
+    if sequences is None:
+        seqs = _sequences_from_results(results_dir)
+        if not seqs:
+            raise DataFormatError(results_dir, f"contains no result files (*{RESULT_SUFFIX})")
+    else:
+        seqs = list(dict.fromkeys(sequences))
+        if not seqs:
+            raise ValueError("sequences is empty; pass None to score every result file")
+        for seq in seqs:
+            result = results_dir / f"{seq}{RESULT_SUFFIX}"
+            if not result.is_file():
+                raise DataFormatError(result, f"result file for sequence '{seq}' is missing")
+
+    for seq in seqs:
+        gt_file = gt_root / seq / "gt" / "gt.txt"
+        if not gt_file.is_file():
+            raise DataFormatError(
+                results_dir / f"{seq}{RESULT_SUFFIX}",
+                f"sequence '{seq}' has no ground truth (expected {gt_file})",
+            )
+
+    scores = {
+        seq: score_sequence(gt_root / seq, results_dir / f"{seq}{RESULT_SUFFIX}", benchmark=name)
+        for seq in seqs
+    }
+    combined = combine_sequence_scores(scores)
+    return ScoreReport(
+        benchmark=name,
+        per_sequence={seq: dict(score.summary) for seq, score in scores.items()},
+        combined=dict(combined.summary),
+        scores={**scores, COMBINED: combined},
+    )

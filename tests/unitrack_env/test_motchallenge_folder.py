@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evaluation.scoring import COMBINED, ScoreReport, score_results
 from unitrack_env.errors import DataFormatError
+from unitrack_env.metrics.motchallenge import score_folder as score_results
+from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 motmetrics = pytest.importorskip("motmetrics")
 TUD_DATA = Path(motmetrics.__file__).parent / "data"
