@@ -25,6 +25,8 @@ _BUILTIN_MODULES: dict[str, str] = {
     "iou": "agents.baselines.iou",
     "fresh-ids": "agents.baselines.trivial",
     "unitrack": "agents.heads.mot",
+    "repeat-box": "agents.baselines.repeat",
+    "repeat-mask": "agents.baselines.repeat",
 }
 
 

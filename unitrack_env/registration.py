@@ -41,6 +41,8 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("MOT20", _MOT, {"benchmark": "MOT20"}, "mot"),
     # Custom data in the MOTChallenge layout; pass root= and the benchmark= rule set.
     Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, "mot"),
+    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot"),
+    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos"),
 )
 
 

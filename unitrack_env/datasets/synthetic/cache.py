@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import MappingProxyType
 
-from unitrack_env.datasets.synthetic import motchallenge
+from unitrack_env.datasets.synthetic import davis, motchallenge, otb
 
 #: Version of the generated data; bump it whenever any writer's output changes, so that
 #: caches of an older generator are not reused.
@@ -44,10 +44,14 @@ STALE_TEMP_SECONDS = 3600.0
 #: Writer of each kind: ``writer(root, benchmark)`` fills ``root``.
 WRITERS: Mapping[str, Callable[[Path, str], None]] = MappingProxyType({
     "motchallenge": motchallenge.write_motchallenge,
+    "otb": otb.write_otb,
+    "davis": davis.write_davis,
 })
 #: Benchmarks each kind can generate.
 KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "motchallenge": motchallenge.BENCHMARKS,
+    "otb": otb.BENCHMARKS,
+    "davis": davis.BENCHMARKS,
 })
 
 

@@ -1,0 +1,171 @@
+"""Synthetic OTB-2015 data set: single targets that walk, cross and get occluded.
+
+:func:`write_otb` renders the scenes of an :class:`OTBSpec` and writes them in the exact
+OTB-2015 layout, which :class:`unitrack_env.datasets.otb.OTBDataset` reads::
+
+    <root>/<Seq>/img/0001.jpg ...            JPEG (quality 90); a sequence may start later
+    <root>/<Seq>/groundtruth_rect.txt        x,y,w,h per frame, 1-based integer pixels
+
+The default set exercises the OTB quirks the reader handles: one ground-truth file is
+tab-separated (like Crossing), one has no newline after its last line (like Human3), one
+sequence is grayscale (like Car4) and one has image files numbered from a later frame
+(like BlurCar1, whose first image is ``0247.jpg``). Sequence names are not OTB-100 names,
+so the reader treats them as plain folders (frames start at the first numbered image).
+
+The target of a sequence is the walking person that stays fully inside the image in every
+frame and is the most occluded at some frame (lowest visible fraction; ties by id): it
+moves, changes scale slightly, and is hidden partly or wholly when it crosses another
+person or passes behind the occluder. Its ground truth is its amodal box (the full
+silhouette, also while hidden, as OTB annotates occluded targets), shifted to OTB's 1-based
+pixel coordinates (``x = x0 + 1``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from unitrack_env.datasets.synthetic.scene import (
+    ObjectRole,
+    SceneConfig,
+    SyntheticVideo,
+    render_scene,
+)
+
+#: Benchmarks whose layout :func:`write_otb` writes.
+BENCHMARKS = ("OTB",)
+#: JPEG quality of the frames.
+JPEG_QUALITY = 90
+#: Digits of OTB image file names (``0001.jpg``).
+IMAGE_DIGITS = 4
+#: Scene parameters shared by the default sequences: few people on a small frame, slow
+#: enough that the target stays in view for the whole (short) sequence.
+_SCENE = {
+    "num_objects": 3,
+    "num_crossings": 1,
+    "num_static_persons": 0,
+    "num_occluders": 1,
+    "object_height_range": (60.0, 100.0),
+    "speed_range": (1.0, 2.5),
+}
+
+
+@dataclass(frozen=True)
+class SyntheticOTBSequence:
+    """One synthetic OTB sequence.
+
+    Attributes:
+        name: folder name (must not be an OTB-100 name, whose frame range is fixed).
+        scene: the scene to render.
+        first_frame: number of the first image file (later than 1 like BlurCar1's 247).
+        separator: separator of the ground-truth columns (a comma, or a tab as in Crossing).
+        grayscale: write single-channel JPEGs (some OTB sequences are grayscale).
+        trailing_newline: end the ground-truth file with a newline.
+    """
+
+    name: str
+    scene: SceneConfig
+    first_frame: int = 1
+    separator: str = ","
+    grayscale: bool = False
+    trailing_newline: bool = True
+
+
+@dataclass(frozen=True)
+class OTBSpec:
+    """A synthetic OTB data set: its sequences."""
+
+    sequences: tuple[SyntheticOTBSequence, ...]
+
+
+DEFAULT_SPEC = OTBSpec(sequences=(
+    SyntheticOTBSequence(
+        "SynWalker", SceneConfig(width=320, height=240, num_frames=40, seed=0, **_SCENE)),
+    SyntheticOTBSequence(
+        "SynCrossing", SceneConfig(width=360, height=240, num_frames=36, seed=4, **_SCENE),
+        separator="\t"),
+    SyntheticOTBSequence(
+        "SynLateStart", SceneConfig(width=320, height=240, num_frames=30, seed=10, **_SCENE),
+        first_frame=11, grayscale=True, trailing_newline=False),
+))
+"""The embedded default: three short sequences (see the module docstring)."""
+
+
+def choose_target(video: SyntheticVideo) -> int:
+    """Return the id of the target: the fully visible-in-frame walker most occluded at some point.
+
+    Raises:
+        ValueError: no walking person stays inside the image in every frame.
+    """
+    width, height = video.width, video.height
+    inside: dict[int, bool] = {o.id: True for o in video.objects
+                               if o.role is ObjectRole.PEDESTRIAN}
+    least_visible = dict.fromkeys(inside, 1.0)
+    for frame in video:
+        present = {a.id: a for a in frame.objects}
+        for object_id in inside:
+            annotation = present.get(object_id)
+            if annotation is None:
+                inside[object_id] = False
+                continue
+            x, y, w, h = annotation.box
+            if x < 0 or y < 0 or x + w > width or y + h > height:
+                inside[object_id] = False
+            least_visible[object_id] = min(least_visible[object_id], annotation.visibility)
+    candidates = [i for i, ok in inside.items() if ok]
+    if not candidates:
+        raise ValueError(
+            f"no walking person stays inside the {width}x{height} image for all "
+            f"{video.num_frames} frames (seed {video.config.seed}); use a slower or shorter scene"
+        )
+    return min(candidates, key=lambda i: (least_visible[i], i))
+
+
+def target_boxes(video: SyntheticVideo, target: int) -> np.ndarray:
+    """Return the target's ``(T, 4)`` boxes in OTB's 1-based pixels (as written to the file)."""
+    rows = []
+    for frame in video:
+        box = next(a.box for a in frame.objects if a.id == target)
+        rows.append([box[0] + 1.0, box[1] + 1.0, box[2], box[3]])
+    return np.asarray(rows, dtype=np.float64)
+
+
+def write_sequence(root: Path, sequence: SyntheticOTBSequence) -> Path:
+    """Render one sequence into ``root/<name>/`` (``img/`` and ``groundtruth_rect.txt``)."""
+    video = render_scene(sequence.scene)
+    target = choose_target(video)
+    folder = Path(root) / sequence.name
+    images = folder / "img"
+    images.mkdir(parents=True, exist_ok=True)
+    params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY]
+    for frame in video:
+        number = sequence.first_frame + frame.index
+        code = cv2.COLOR_RGB2GRAY if sequence.grayscale else cv2.COLOR_RGB2BGR
+        path = images / f"{number:0{IMAGE_DIGITS}d}.jpg"
+        if not cv2.imwrite(str(path), cv2.cvtColor(frame.image, code), params):
+            raise OSError(f"could not write {path}")
+    lines = [sequence.separator.join(f"{v:.0f}" for v in row)
+             for row in target_boxes(video, target)]
+    text = "\n".join(lines) + ("\n" if sequence.trailing_newline else "")
+    (folder / "groundtruth_rect.txt").write_text(text)
+    return folder
+
+
+def write_otb(root: Path, benchmark: str = "OTB", spec: OTBSpec = DEFAULT_SPEC) -> None:
+    """Write the synthetic OTB data set of ``spec`` into ``root`` (the OTB folder).
+
+    Args:
+        root: output folder; sequence folders are created inside it.
+        benchmark: must be ``"OTB"`` (the signature every synthetic writer shares).
+        spec: the sequences to write.
+    """
+    if benchmark not in BENCHMARKS:
+        raise ValueError(f"write_otb writes {BENCHMARKS}, not {benchmark!r}")
+    names = [s.name.lower() for s in spec.sequences]
+    if len(set(names)) != len(names):
+        raise ValueError(f"sequence names must be unique (case-insensitively): {names}")
+    for sequence in spec.sequences:
+        write_sequence(Path(root), sequence)

@@ -1,0 +1,527 @@
+"""Semi-supervised video object segmentation (mask propagation) on DAVIS-2017 data."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from gymnasium import spaces
+
+from unitrack_env import spaces as ut_spaces
+from unitrack_env.datasets.davis import (
+    DAVIS_VOID_LABEL,
+    DAVISDataset,
+    VOSSequence,
+    read_label_png,
+    write_davis_result,
+)
+from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.errors import DataFormatError, InvalidActionError
+from unitrack_env.frames import FramePrefetcher
+from unitrack_env.metrics.report import COMBINED, ScoreReport
+from unitrack_env.metrics.vos import (
+    VOSScores,
+    aggregate_vos,
+    davis_statistics,
+    evaluate_vos_sequence,
+    frame_scores,
+)
+from unitrack_env.render import id_colour
+
+#: Folder of the DAVIS data under ``$UNITRACK_DATA``.
+BENCHMARK_FOLDER = "DAVIS"
+#: Name of the rule set in score reports.
+BENCHMARK = "DAVIS-2017"
+#: Largest object label: labels are uint8 and 255 is void.
+MAX_OBJECTS = 254
+#: Default bound of the frame space (height, width): DAVIS Full-Resolution reaches 4096 wide.
+DEFAULT_MAX_FRAME_SIZE = (2160, 4096)
+#: DAVIS videos run at 24 frames per second.
+DAVIS_FRAME_RATE = 24.0
+#: Opacity of the mask overlay in renderings.
+OVERLAY_ALPHA = 0.5
+
+
+def _frame_path(paths: tuple[Path, ...], index: int) -> Path:
+    return paths[index]
+
+
+def validate_labels(action: Any, shape: tuple[int, int], object_ids: tuple[int, ...]
+                    ) -> np.ndarray:
+    """Check a label-map action and return it as a fresh ``(H, W)`` uint8 array.
+
+    Args:
+        action: the agent's label map.
+        shape: the frame's ``(height, width)``.
+        object_ids: the sequence's object labels (0 = background is always allowed).
+
+    Raises:
+        InvalidActionError: not a 2-D integer map of the frame's size, or a label that is
+            neither 0 nor an object of the sequence (255 = void is not a prediction).
+    """
+    labels = np.asarray(action)
+    if labels.ndim != 2 or labels.shape != tuple(shape):
+        raise InvalidActionError(
+            f"action must be a label map of the frame's size, shape (height, width) = "
+            f"{tuple(shape)}; got shape {labels.shape}"
+        )
+    if labels.dtype == np.bool_ or not np.issubdtype(labels.dtype, np.integer):
+        raise InvalidActionError(
+            f"action must be an integer label map (uint8; 0 = background, k = object k); got "
+            f"dtype {labels.dtype}; convert it with .astype(np.uint8)"
+        )
+    if labels.dtype != np.uint8:
+        low, high = int(labels.min(initial=0)), int(labels.max(initial=0))
+        if low < 0 or high > MAX_OBJECTS:
+            raise InvalidActionError(
+                f"action labels must lie in 0..{max(object_ids, default=0)}; got {low}..{high}"
+            )
+    labels = labels.astype(np.uint8, copy=True)
+    present = np.flatnonzero(np.bincount(labels.ravel(), minlength=256))
+    extra = sorted(set(present.tolist()) - {0, *object_ids})
+    if extra:
+        hint = (" (255 is DAVIS's void label, used only in the ground truth; predict 0 or an "
+                "object there)" if DAVIS_VOID_LABEL in extra else "")
+        raise InvalidActionError(
+            f"action contains labels {extra} that are not objects of this sequence; allowed: 0 "
+            f"(background) and {list(object_ids)}{hint}"
+        )
+    return labels
+
+
+def overlay_labels(frame: np.ndarray, labels: np.ndarray, alpha: float = OVERLAY_ALPHA
+                   ) -> np.ndarray:
+    """Draw every object of ``labels`` on ``frame``: a translucent fill and an outline.
+
+    Object ``k`` gets the id colour :func:`unitrack_env.render.id_colour` ``(k)`` (bright and
+    well spread, like the tracks of the association environments); void pixels are skipped.
+    When ``frame`` does not match the labels' size (e.g. ``decode_frames=False``), the
+    objects are drawn on a black canvas.
+    """
+    if frame.shape[:2] != labels.shape:
+        frame = np.zeros((*labels.shape, 3), dtype=np.uint8)
+    canvas = frame.astype(np.float32)
+    thickness = max(1, round(max(labels.shape) / 400))
+    outlines = []
+    for label in np.unique(labels):
+        if label in (0, DAVIS_VOID_LABEL):
+            continue
+        mask = labels == label
+        colour = np.asarray(id_colour(int(label)), dtype=np.float32)
+        canvas[mask] = (1.0 - alpha) * canvas[mask] + alpha * colour
+        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL,
+                                       cv2.CHAIN_APPROX_SIMPLE)
+        outlines.append((contours, id_colour(int(label))))
+    out = np.clip(np.round(canvas), 0, 255).astype(np.uint8)
+    for contours, colour in outlines:
+        cv2.drawContours(out, contours, -1, colour, thickness, lineType=cv2.LINE_AA)
+    return out
+
+
+def scores_from_frames(
+    j: np.ndarray, f: np.ndarray, object_ids: tuple[int, ...], sequence_name: str
+) -> VOSScores:
+    """Build a sequence's DAVIS scores from per-object, per-frame J and F of its scored frames.
+
+    The same statistics as :func:`unitrack_env.metrics.vos.evaluate_vos_sequence`, for
+    values computed frame by frame during an episode.
+
+    Args:
+        j: ``(objects, frames)`` J of the scored frames.
+        f: ``(objects, frames)`` F of the scored frames.
+        object_ids: the sequence's object labels.
+        sequence_name: names the objects ``"<sequence>_<id>"``.
+    """
+    n = len(object_ids)
+    j_stats = np.array([davis_statistics(row) for row in j]).reshape(n, 3)
+    f_stats = np.array([davis_statistics(row) for row in f]).reshape(n, 3)
+    return VOSScores(
+        object_names=tuple(f"{sequence_name}_{obj}" for obj in object_ids),
+        j_per_frame=tuple(j),
+        f_per_frame=tuple(f),
+        j_mean=j_stats[:, 0], j_recall=j_stats[:, 1], j_decay=j_stats[:, 2],
+        f_mean=f_stats[:, 0], f_recall=f_stats[:, 1], f_decay=f_stats[:, 2],
+    )
+
+
+class DAVISEnv(SequenceEnv):
+    """Semi-supervised video object segmentation by mask propagation on DAVIS-2017 data.
+
+    ## Description
+    Each episode is one video sequence of DAVIS-2017 (or any data in its layout). The
+    agent is given the first frame's label map (which pixels belong to which object) and
+    answers with a label map for every frame. The environment scores every answer with
+    the region similarity J and, at the end of the episode, reports the official DAVIS-2017
+    semi-supervised scores of the sequence: J, F and J&F.
+
+    The layout read is ``<root>/JPEGImages/480p/<seq>/00000.jpg ...``,
+    ``<root>/Annotations/480p/<seq>/00000.png ...`` (palette PNGs whose indices are labels:
+    0 background, ``k`` object ``k``, 255 void) and ``<root>/ImageSets/2017/<split>.txt``.
+    DAVIS frames are 854x480, but any size works, and sizes may differ between sequences.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
+    deterministic synthetic data set in the exact DAVIS-2017 layout (two ``val``, one
+    ``train`` and one ``test-dev`` sequence, 432x240, with 2-3 people each who cross and
+    occlude one another; one sequence has void borders), generated once into the user
+    cache, so it works offline.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size.
+    - ``init_labels``: :class:`~unitrack_env.spaces.LabelMap` ``(H, W)`` uint8, the first
+      frame's annotation as the benchmark ships it (0 background, ``k`` object ``k``, 255
+      void), the same at every step. It is the task's input; the annotations of later
+      frames never appear in observations.
+    - ``num_objects``: ``Discrete(255)``, the number of objects. Their labels are the values
+      of ``init_labels`` other than 0 and 255 (``1..num_objects`` in DAVIS).
+
+    ## Action space
+    :class:`~unitrack_env.spaces.LabelMap` ``(H, W)``: the label map of the current frame,
+    of the frame's size, each pixel 0 (background) or an object label. Any integer dtype
+    is accepted (``argmax`` output need not be cast); other shapes, float or bool dtypes,
+    255 (void) and labels that are not objects of the sequence raise
+    ``InvalidActionError`` before anything is recorded. ``action_space.sample()`` draws a
+    valid map for the current episode (the space is narrowed at every reset).
+
+    ## Rewards
+    The frame's contribution to the official J-Mean: the mean J (region IoU outside void
+    pixels, 1 for an object that is absent and not predicted) over the sequence's objects
+    on the frames the DAVIS evaluation scores, and 0 on the first frame (it is given) and
+    on the last frame (the official evaluation drops it). So the episode return divided by
+    ``seq_length - 2`` is exactly the sequence's ``J-Mean``. ``info["j"]`` holds the
+    per-object J of every annotated frame, scored or not. Sequences without annotations
+    (test-dev) give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame of the chosen sequence and its label map. The first
+    step answers that same frame (the official results include ``00000.png``), so an
+    episode has as many steps as the sequence has frames. ``info`` holds ``sequence``,
+    ``frame_index`` (0-based, the frame file's number), ``seq_length``, ``frame_rate`` (24),
+    ``image_size`` ``(height, width)``, ``benchmark``, ``has_ground_truth``, ``object_ids``
+    and ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the agent has answered the last frame (there is no
+    truncation). The final ``info["metrics"]`` holds the sequence's DAVIS-2017
+    semi-supervised scores (first and last frames excluded, void pixels ignored, objects
+    compared by label): ``J-Mean``, ``J-Recall``, ``J-Decay``, ``F-Mean``, ``F-Recall``,
+    ``F-Decay`` and ``J&F-Mean``, as fractions (NaN for a sequence of 2 frames or fewer,
+    which has no scored frame). :meth:`write_episode` writes the official result format,
+    ``<folder>/<seq>/<frame>.png`` palette PNGs with the DAVIS palette, and
+    :meth:`score_folder` scores such folders with the same functions (over all objects of
+    all sequences for the combined row, as the DAVIS table does).
+
+    ## Arguments
+    - ``root``: the DAVIS folder holding ``JPEGImages``, ``Annotations`` and ``ImageSets``
+      (default: ``$UNITRACK_DATA/DAVIS`` if that variable is set, else the synthetic
+      default).
+    - ``split``: ``"val"`` (the benchmark's), ``"train"``, ``"test-dev"`` (first frame
+      annotated only: no reward, no metrics), or None for every sequence folder.
+    - ``sequences``: restrict to these sequence names (default: all of the split).
+    - ``resolution``: ``"480p"`` or ``"Full-Resolution"``.
+    - ``year``: ``ImageSets`` sub-folder (``"2017"``).
+    - ``max_frame_size``: bound ``(height, width)`` of the frame and label-map spaces.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; the label maps keep the frame's size).
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` overlays the agent's last label map on the frame it
+      answered (id-coloured translucent masks with outlines).
+
+    ## Version history
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike | None = None,
+        split: str | None = "val",
+        sequences: list[str] | tuple[str, ...] | None = None,
+        resolution: str = "480p",
+        year: str = "2017",
+        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
+        decode_frames: bool = True,
+        prefetch: bool = True,
+        shuffle: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        data_root = resolve_root(root, BENCHMARK_FOLDER)
+        self.synthetic = data_root is None
+        if data_root is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            data_root = ensure_synthetic(BENCHMARK, "davis")
+        self.dataset = DAVISDataset(data_root, split, resolution, year)
+        if sequences is not None:
+            missing = [s for s in sequences if s not in self.dataset.sequence_names]
+            if missing:
+                raise ValueError(
+                    f"sequences {missing} are not in split {split!r} of {data_root}; "
+                    f"available: {', '.join(self.dataset.sequence_names)}"
+                )
+            self.sequence_names = list(sequences)
+        else:
+            self.sequence_names = list(self.dataset.sequence_names)
+        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        self.observation_space = spaces.Dict({
+            "frame": ut_spaces.Image(*self.max_frame_size),
+            "init_labels": ut_spaces.LabelMap(*self.max_frame_size, max_label=255),
+            "num_objects": spaces.Discrete(MAX_OBJECTS + 1),
+        })
+        self.action_space: ut_spaces.LabelMap = ut_spaces.LabelMap(
+            *self.max_frame_size, max_label=MAX_OBJECTS
+        )
+
+        self._loaded: dict[str, VOSSequence] = {}
+        self._sequence: VOSSequence | None = None
+        self._init_labels: np.ndarray | None = None
+        self._frames: FramePrefetcher | None = None
+        self._t = 0
+        self._done = True
+        self._results: list[np.ndarray] = []
+        self._j: list[np.ndarray] = []
+        self._f: list[np.ndarray] = []
+        self._frame: np.ndarray | None = None
+        self._render_frame: np.ndarray | None = None
+        self._render_labels: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ data
+    def _load(self, name: str) -> VOSSequence:
+        sequence = self._loaded.get(name)
+        if sequence is None:
+            sequence = self.dataset.load(name)
+            self._loaded[name] = sequence
+        return sequence
+
+    @property
+    def _shape(self) -> tuple[int, int]:
+        width, height = self._sequence.image_size
+        return height, width
+
+    # ------------------------------------------------------------------ episode control
+    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self._frames is not None:
+            self._frames.close()
+        sequence = self._load(name)
+        width, height = sequence.image_size
+        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
+            raise ValueError(
+                f"{name}: frames are {width}x{height}, larger than max_frame_size="
+                f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
+            )
+        if max(sequence.object_ids) > MAX_OBJECTS:  # pragma: no cover - 255 is void
+            raise DataFormatError(sequence.annotation_paths[0], "object label above 254")
+        self._sequence = sequence
+        self._init_labels = sequence.read_annotation(0)
+        self._init_labels.setflags(write=False)
+        self.action_space.narrow(height, width, (0, *sequence.object_ids))
+        self._frames = FramePrefetcher(partial(_frame_path, sequence.frame_paths),
+                                       prefetch=self.prefetch)
+        self._t = 0
+        self._done = False
+        self._results, self._j, self._f = [], [], []
+        self._render_labels = None
+        observation = self._observe(0)
+        return observation, self._info(reset=True)
+
+    def _observe(self, t: int) -> dict[str, Any]:
+        sequence = self._sequence
+        if self.decode_frames:
+            image = self._frames.get(t)
+            if t + 1 < sequence.num_frames:
+                self._frames.schedule(t + 1)
+            if image.shape[:2] != self._shape:
+                raise DataFormatError(
+                    sequence.frame_paths[t],
+                    f"image is {image.shape[1]}x{image.shape[0]} but the sequence's first frame "
+                    f"is {self._shape[1]}x{self._shape[0]}",
+                )
+        else:
+            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        self._frame = image
+        return self._observation(image)
+
+    def _observation(self, image: np.ndarray) -> dict[str, Any]:
+        return {
+            "frame": image,
+            "init_labels": self._init_labels.copy(),
+            "num_objects": len(self._sequence.object_ids),
+        }
+
+    def _frame_index(self, t: int) -> int:
+        stem = self._sequence.frame_names[t]
+        return int(stem) if stem.isdigit() else t
+
+    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+        sequence = self._sequence
+        out: dict[str, Any] = {"sequence": sequence.name, "frame_index": self._frame_index(self._t)}
+        if reset:
+            out.update(
+                seq_length=sequence.num_frames,
+                frame_rate=DAVIS_FRAME_RATE,
+                image_size=self._shape,
+                benchmark=BENCHMARK,
+                has_ground_truth=sequence.has_ground_truth,
+                object_ids=sequence.object_ids,
+                synthetic=self.synthetic,
+            )
+        return out
+
+    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Record the label map of the current frame, score it, and move to the next frame."""
+        if self._done or self._sequence is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        sequence, t = self._sequence, self._t
+        labels = validate_labels(action, self._shape, sequence.object_ids)
+        self._results.append(labels)
+        reward = 0.0
+        info_extra: dict[str, Any] = {}
+        if sequence.annotation_paths[t] is not None:
+            gt = sequence.read_annotation(t)
+            scored = sequence.has_ground_truth and 0 < t < sequence.num_frames - 1
+            j, f = frame_scores(gt, labels, sequence.object_ids, with_f=scored)
+            if scored:
+                self._j.append(j)
+                self._f.append(f)
+                reward = float(j.mean())
+            info_extra["j"] = j
+        self._render_frame, self._render_labels = self._frame, labels
+        if t + 1 >= sequence.num_frames:
+            self._done = True
+            observation = self._observation(self._fresh(self._frame))
+            info = self._info() | info_extra
+            if sequence.has_ground_truth:
+                info["metrics"] = self.episode_metrics()
+            if self._frames is not None:
+                self._frames.close()
+            return observation, reward, True, False, info
+        self._t = t + 1
+        observation = self._observe(self._t)
+        return observation, reward, False, False, self._info() | info_extra
+
+    # ------------------------------------------------------------------ results
+    def episode_results(self) -> list[np.ndarray]:
+        """Return the label maps recorded so far (one ``(H, W)`` uint8 array per frame)."""
+        return [labels.copy() for labels in self._results]
+
+    def episode_digest(self) -> str:
+        """Return a SHA-256 digest of the recorded label maps."""
+        digest = hashlib.sha256()
+        for labels in self._results:
+            digest.update(np.asarray(labels.shape, dtype=np.int64).tobytes())
+            digest.update(np.ascontiguousarray(labels).tobytes())
+        return digest.hexdigest()
+
+    def episode_scores(self) -> VOSScores:
+        """Return the DAVIS scores of the finished episode (per object and summary).
+
+        Raises:
+            ValueError: the episode is not finished or the sequence has no annotations.
+        """
+        sequence = self._sequence
+        if sequence is None or len(self._results) != sequence.num_frames:
+            raise ValueError("the episode is not finished; play every frame first")
+        if not sequence.has_ground_truth:
+            raise ValueError(f"sequence '{sequence.name}' has no annotations to score against")
+        n = len(sequence.object_ids)
+        j = np.stack(self._j, axis=1) if self._j else np.zeros((n, 0))
+        f = np.stack(self._f, axis=1) if self._f else np.zeros((n, 0))
+        return scores_from_frames(j, f, sequence.object_ids, sequence.name)
+
+    def episode_metrics(self) -> dict[str, float]:
+        """Return the DAVIS summary of the finished episode (``J-Mean``, ..., ``J&F-Mean``)."""
+        return dict(self.episode_scores().summary)
+
+    def sequence_length(self, name: str) -> int:
+        """Return the number of frames (steps) of sequence ``name``."""
+        return self._load(name).num_frames
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether every frame of sequence ``name`` is annotated (train/val, not test-dev)."""
+        return self._load(name).has_ground_truth
+
+    def write_episode(self, folder: Path) -> None:
+        """Write ``<folder>/<seq>/<frame>.png`` palette PNGs (the official result format).
+
+        Every file is written atomically.
+        """
+        if self._sequence is None or not self._results:
+            raise RuntimeError("no episode to write; call reset() and play it first")
+        for t, labels in enumerate(self._results):
+            write_davis_result(folder, self._sequence, t, labels)
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<seq>/<frame>.png`` results with the DAVIS-2017 protocol.
+
+        Like the official evaluation, only the scored frames' PNGs (all but the first and
+        the last) are read.
+
+        Raises:
+            DataFormatError: a result PNG is missing, of another size, or holds a label that
+                is not an object of the sequence.
+        """
+        per_sequence: dict[str, dict[str, float]] = {}
+        scores: dict[str, VOSScores] = {}
+        for name in sequences:
+            sequence = self._load(name)
+            gt = sequence.read_annotations()
+            predictions = [np.zeros_like(gt[0]) for _ in range(sequence.num_frames)]
+            for t in range(1, sequence.num_frames - 1):
+                predictions[t] = self._read_result(Path(folder), sequence, t)
+            scores[name] = evaluate_vos_sequence(gt, predictions, sequence.object_ids,
+                                                 sequence_name=name)
+            per_sequence[name] = dict(scores[name].summary)
+        combined: dict[str, float] = {}
+        if scores:
+            scores[COMBINED] = aggregate_vos(list(scores.values()))
+            combined = dict(scores[COMBINED].summary)
+        return ScoreReport(BENCHMARK, per_sequence, combined, scores)
+
+    @staticmethod
+    def _read_result(folder: Path, sequence: VOSSequence, t: int) -> np.ndarray:
+        path = folder / sequence.name / f"{sequence.frame_names[t]}.png"
+        if not path.is_file():
+            raise DataFormatError(path, f"result of sequence '{sequence.name}' frame "
+                                  f"{sequence.frame_names[t]} not found")
+        labels = read_label_png(path)
+        expected = (sequence.image_size[1], sequence.image_size[0])
+        if labels.shape != expected:
+            raise DataFormatError(path, f"label map is {labels.shape[1]}x{labels.shape[0]}, the "
+                                  f"frames are {expected[1]}x{expected[0]}")
+        extra = sorted(set(np.unique(labels).tolist()) - {0, *sequence.object_ids})
+        if extra:
+            raise DataFormatError(path, f"labels {extra} are not objects of '{sequence.name}' "
+                                  f"(objects: {list(sequence.object_ids)})")
+        return labels
+
+    @property
+    def sequence(self) -> VOSSequence | None:
+        """The sequence of the current episode."""
+        return self._sequence
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """Return the frame with the agent's last label map (or the first-frame labels)."""
+        if self.render_mode is None:
+            return None
+        if self._sequence is None:
+            raise RuntimeError("call reset() before render()")
+        if self._render_labels is None:
+            return overlay_labels(self._frame, self._init_labels)
+        return overlay_labels(self._render_frame, self._render_labels)
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()

@@ -1,0 +1,416 @@
+"""Single object tracking (box propagation) on OTB-2015 data."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import warnings
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from unitrack_env import spaces as ut_spaces
+from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
+from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.errors import DataFormatError, InvalidActionError
+from unitrack_env.frames import FramePrefetcher
+from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.report import COMBINED, ScoreReport
+from unitrack_env.metrics.sot import aggregate_sot, evaluate_sot_sequence, frame_iou
+from unitrack_env.render import draw_boxes
+
+#: Folder of the OTB data under ``$UNITRACK_DATA``.
+BENCHMARK_FOLDER = "OTB"
+#: Name of the rule set in score reports.
+BENCHMARK = "OTB-2015"
+#: Default bound of the frame space (height, width): 4K.
+DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
+#: Colour of the agent's box in renderings (RGB).
+ACTION_COLOUR = (0, 255, 0)
+#: Colour of the initial box drawn before the first step (RGB).
+INIT_COLOUR = (255, 200, 0)
+
+
+def _frame_path(paths: tuple[Path, ...], index: int) -> Path:
+    return paths[index]
+
+
+def _canonical(box: np.ndarray) -> np.ndarray:
+    """Round each number to its shortest float32 decimal, so the result file reads back exactly.
+
+    The recorded box is what :meth:`OTBEnv.write_episode` writes and what the episode's
+    metrics are computed from; reading the file back gives the very same float64 numbers,
+    so ``score_folder`` reproduces ``info["metrics"]`` exactly.
+    """
+    return np.array([float(_format(v)) for v in box], dtype=np.float64)
+
+
+def _format(value: float) -> str:
+    return np.format_float_positional(np.float32(value), unique=True, trim="-")
+
+
+def format_otb_results(boxes: np.ndarray) -> str:
+    """Format ``(T, 4)`` boxes as an OTB result file: ``x,y,w,h`` per line, one per frame."""
+    lines = [",".join(_format(v) for v in row) for row in np.asarray(boxes).reshape(-1, 4)]
+    return "\n".join(lines) + ("\n" if lines else "")
+
+
+def validate_box(action: Any) -> np.ndarray:
+    """Check a box action and return it as ``(4,)`` float64 ``(x, y, w, h)``.
+
+    Raises:
+        InvalidActionError: not 4 numbers, NaN or infinite values, or a negative size.
+    """
+    try:
+        box = np.asarray(action)
+    except (TypeError, ValueError) as err:
+        raise InvalidActionError(f"action must be 4 numbers (x, y, w, h): {err}") from None
+    if box.shape != (4,):
+        raise InvalidActionError(
+            f"action must have shape (4,) as (x, y, w, h) in the ground truth's 1-based pixels; "
+            f"got shape {box.shape}"
+        )
+    if not (np.issubdtype(box.dtype, np.floating) or np.issubdtype(box.dtype, np.integer)):
+        raise InvalidActionError(f"action must hold numbers, got dtype {box.dtype}")
+    box = box.astype(np.float64)
+    if not np.isfinite(box).all():
+        raise InvalidActionError(f"action has a non-finite number: {box.tolist()}")
+    if box[2] < 0 or box[3] < 0:
+        raise InvalidActionError(f"action has a negative width or height: {box.tolist()}")
+    if np.abs(box).max() > ut_spaces.COORD_MAX:
+        raise InvalidActionError(
+            f"action exceeds the coordinate bound {ut_spaces.COORD_MAX:g}: {box.tolist()}"
+        )
+    return box
+
+
+class OTBEnv(SequenceEnv):
+    """Single object tracking by box propagation on an OTB-2015-layout data set.
+
+    ## Description
+    Each episode is one video sequence of OTB-2015 (OTB-100, OTB-50, or any folder in the
+    OTB layout). The agent is given the target's box in the first frame and answers with
+    its box in every frame, like the OTB toolkit's one-pass evaluation (OPE). The
+    environment scores every answer against the ground truth and, at the end of the
+    episode, reports the toolkit's success AUC and precision at 20 pixels.
+
+    The layout read is ``<root>/<Seq>/img/0001.jpg ...`` and ``groundtruth_rect.txt``
+    (commas, tabs or spaces; ``groundtruth_rect.<k>.txt`` for the folders with two
+    targets), with the toolkit's frame ranges for the sequences that do not start at
+    frame 1 (David 300-770, BlurCar1 247-988, Tiger1 without its first 5 frames, ...; see
+    :mod:`unitrack_env.datasets.otb`). A copy whose ground truth is shorter than the
+    toolkit's range (a trimmed fixture, e.g. 199 of Human3's 1698 frames) is played over
+    its annotated frames only, with a warning from the reader.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
+    deterministic synthetic data set in the exact OTB layout (three sequences of a walking
+    person who crosses another one and passes behind an occluder; one ground truth file
+    tab-separated, one grayscale sequence whose images start at ``0011.jpg``), generated
+    once into the user cache, so it works offline.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size (grayscale OTB sequences are given as RGB with three equal channels).
+    - ``init_box``: ``Box((4,), float32)``: the target's box in the first frame,
+      ``(x, y, w, h)`` in the ground truth file's 1-based pixels (the top-left pixel is
+      ``(1, 1)``), the same at every step of the episode. It is the task's input; the
+      ground truth of later frames never appears in observations.
+
+    ## Action space
+    ``Box((4,), float32)``: the target's box ``(x, y, w, h)`` in the current frame, in the
+    same 1-based pixels (finite, ``w, h >= 0``; any numeric dtype of shape ``(4,)`` is
+    accepted). NaN or infinite numbers, negative sizes and other shapes raise
+    ``InvalidActionError`` before anything is recorded. A zero-size box is allowed and is
+    scored as the OTB toolkit scores it (replaced by the previous frame's box).
+
+    ## Rewards
+    The IoU of the box the OTB toolkit scores for this frame with the frame's ground truth:
+    on the first frame the toolkit scores the given box (so the reward is 1), on later
+    frames the agent's box (a zero-size box is replaced by the previous frame's scored
+    box). Frames whose ground truth is not a valid box (NaN, ``w <= 0`` or ``h <= 0``)
+    give 0. The episode return divided by the number of frames is the mean overlap;
+    ``info["iou"]`` repeats the reward.
+
+    ## Starting state
+    ``reset`` returns the first evaluated frame of the chosen sequence (frame 1 for most
+    sequences; David starts at 300) and the initial box. The first step answers that same
+    frame, so an episode has as many steps as the sequence has frames. ``info`` holds
+    ``sequence``, ``frame_index`` (the benchmark's own 1-based frame number), ``seq_length``,
+    ``frame_rate`` (OTB has none; 30), ``image_size`` ``(height, width)``, ``benchmark``,
+    ``has_ground_truth`` and ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the agent has answered the last frame (there is no
+    truncation). The final ``info["metrics"]`` holds the sequence's OTB scores, computed
+    with the toolkit's rules (first frame = ground truth, degenerate boxes repaired, 21
+    overlap thresholds ``0:0.05:1``, strictly greater, 51 precision thresholds, invalid
+    ground truth counted as failures): ``AUC`` (mean success rate; a perfect tracker
+    scores 20/21), ``Precision@20px`` and ``AverageOverlap``. :meth:`write_episode` writes
+    ``<Seq>.txt``, one ``x,y,w,h`` line per frame (the usual OTB result file), and
+    :meth:`score_folder` scores such files with the same functions.
+
+    ## Arguments
+    - ``root``: the OTB folder holding the sequence folders (default: ``$UNITRACK_DATA/OTB``
+      if that variable is set, else the synthetic default).
+    - ``sequences``: restrict to these sequence names (default: every sequence found).
+    - ``max_frame_size``: bound ``(height, width)`` of the frame space.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; saves the decode time).
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws the agent's last box on the frame it answered.
+
+    ## Version history
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike | None = None,
+        sequences: list[str] | tuple[str, ...] | None = None,
+        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
+        decode_frames: bool = True,
+        prefetch: bool = True,
+        shuffle: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        data_root = resolve_root(root, BENCHMARK_FOLDER)
+        self.synthetic = data_root is None
+        if data_root is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            data_root = ensure_synthetic("OTB", "otb")
+        self.dataset = OTBDataset(data_root)
+        if sequences is not None:
+            self.sequence_names = [self.dataset.resolve(s) for s in sequences]
+        else:
+            self.sequence_names = list(self.dataset.sequence_names)
+        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        box_low = np.array([-ut_spaces.COORD_MAX, -ut_spaces.COORD_MAX, 0.0, 0.0], np.float32)
+        box_high = np.float32(ut_spaces.COORD_MAX)
+        self.observation_space = spaces.Dict({
+            "frame": ut_spaces.Image(*self.max_frame_size),
+            "init_box": spaces.Box(box_low, box_high, (4,), np.float32),
+        })
+        self.action_space = spaces.Box(box_low, box_high, (4,), np.float32)
+
+        self._loaded: dict[str, SOTSequence] = {}
+        self._sequence: SOTSequence | None = None
+        self._frames: FramePrefetcher | None = None
+        self._t = 0
+        self._done = True
+        self._results: list[np.ndarray] = []
+        self._scored: np.ndarray | None = None
+        self._frame: np.ndarray | None = None
+        self._render_frame: np.ndarray | None = None
+        self._render_box: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ data
+    def _load(self, name: str) -> SOTSequence:
+        """Read a sequence once (the reader's warning about trimmed copies appears once)."""
+        sequence = self._loaded.get(name)
+        if sequence is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("always")
+                sequence = self.dataset.load(name)
+            self._loaded[name] = sequence
+        return sequence
+
+    @staticmethod
+    def _gt_path(sequence: SOTSequence) -> Path:
+        """The ground-truth file of a sequence (``groundtruth_rect.<k>.txt`` for ``Name.k``)."""
+        folder = sequence.frame_paths[0].parent.parent
+        suffix = sequence.name[len(folder.name):]
+        if not (suffix[1:].isdigit() and suffix.startswith(".")):
+            suffix = ""
+        return folder / f"groundtruth_rect{suffix}.txt"
+
+    # ------------------------------------------------------------------ episode control
+    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self._frames is not None:
+            self._frames.close()
+        sequence = self._load(name)
+        init = sequence.init_box
+        if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):
+            raise DataFormatError(
+                self._gt_path(sequence),
+                f"{name}: the first box {init.tolist()} is not a valid target (finite, w, h > 0)",
+                line=1,
+            )
+        width, height = sequence.image_size
+        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
+            raise ValueError(
+                f"{name}: frames are {width}x{height}, larger than max_frame_size="
+                f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
+            )
+        self._sequence = sequence
+        self._frames = FramePrefetcher(partial(_frame_path, sequence.frame_paths),
+                                       prefetch=self.prefetch)
+        self._t = 0
+        self._done = False
+        self._results = []
+        self._scored = None
+        self._render_box = None
+        observation = self._observe(0)
+        return observation, self._info(reset=True)
+
+    def _observe(self, t: int) -> dict[str, Any]:
+        sequence = self._sequence
+        if self.decode_frames:
+            image = self._frames.get(t)
+            if t + 1 < sequence.num_frames:
+                self._frames.schedule(t + 1)
+            expected = (sequence.image_size[1], sequence.image_size[0])
+            if image.shape[:2] != expected:
+                raise DataFormatError(
+                    sequence.frame_paths[t],
+                    f"image is {image.shape[1]}x{image.shape[0]} but the sequence's first frame "
+                    f"is {expected[1]}x{expected[0]}",
+                )
+        else:
+            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        self._frame = image
+        return {"frame": image, "init_box": sequence.init_box.astype(np.float32)}
+
+    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+        sequence = self._sequence
+        out: dict[str, Any] = {"sequence": sequence.name,
+                               "frame_index": sequence.frame_numbers[self._t]}
+        if reset:
+            out.update(
+                seq_length=sequence.num_frames,
+                frame_rate=30.0,
+                image_size=(sequence.image_size[1], sequence.image_size[0]),
+                benchmark=BENCHMARK,
+                has_ground_truth=sequence.has_ground_truth,
+                synthetic=self.synthetic,
+            )
+        return out
+
+    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Record the box of the current frame, score it, and move to the next frame."""
+        if self._done or self._sequence is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        box = _canonical(validate_box(action))
+        sequence, t = self._sequence, self._t
+        self._results.append(box)
+        gt = sequence.boxes[t]
+        # The box the OTB toolkit scores (metrics.sot.repair_predictions, frame by frame).
+        if t == 0:
+            scored = gt.copy()
+        elif (box[2] <= 0 or box[3] <= 0) and not np.isnan(gt).any():
+            scored = self._scored
+        else:
+            scored = box
+        self._scored = scored
+        reward = frame_iou(scored, gt)
+        self._render_frame, self._render_box = self._frame, box
+        info_extra = {"iou": reward}
+        if t + 1 >= sequence.num_frames:
+            self._done = True
+            observation = {"frame": self._fresh(self._frame),
+                           "init_box": sequence.init_box.astype(np.float32)}
+            info = self._info() | info_extra
+            if sequence.has_ground_truth:
+                info["metrics"] = self.episode_metrics()
+            if self._frames is not None:
+                self._frames.close()
+            return observation, reward, True, False, info
+        self._t = t + 1
+        observation = self._observe(self._t)
+        return observation, reward, False, False, self._info() | info_extra
+
+    # ------------------------------------------------------------------ results
+    def episode_results(self) -> np.ndarray:
+        """Return the boxes recorded so far, ``(frames, 4)`` float64 (one row per frame)."""
+        if not self._results:
+            return np.zeros((0, 4))
+        return np.stack(self._results)
+
+    def episode_digest(self) -> str:
+        """Return a SHA-256 digest of the recorded boxes (rounded to 1e-3)."""
+        rows = np.round(self.episode_results(), 3)
+        return hashlib.sha256(np.ascontiguousarray(rows).tobytes()).hexdigest()
+
+    def episode_metrics(self) -> dict[str, float]:
+        """Score the recorded boxes of the finished episode with the OTB toolkit's rules.
+
+        Raises:
+            ValueError: the episode is not finished.
+        """
+        sequence = self._sequence
+        if sequence is None or len(self._results) != sequence.num_frames:
+            raise ValueError("the episode is not finished; play every frame first")
+        return evaluate_sot_sequence(self.episode_results(), sequence.boxes).as_dict()
+
+    def sequence_length(self, name: str) -> int:
+        """Return the number of frames (steps) of sequence ``name`` (its ground truth rows)."""
+        return self._load(name).num_frames
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` has boxes after the first frame."""
+        return self._load(name).has_ground_truth
+
+    def write_episode(self, folder: Path) -> None:
+        """Write ``<folder>/<sequence>.txt``: one ``x,y,w,h`` line per frame, atomically."""
+        if self._sequence is None or not self._results:
+            raise RuntimeError("no episode to write; call reset() and play it first")
+        atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
+                          format_otb_results(self.episode_results()))
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<sequence>.txt`` result files with the OTB toolkit's rules.
+
+        Raises:
+            DataFormatError: a result file is missing, malformed, or has a different number
+                of rows than the sequence has frames.
+        """
+        per_sequence, scores = {}, {}
+        for name in sequences:
+            sequence = self._load(self.dataset.resolve(name))
+            path = Path(folder) / f"{sequence.name}.txt"
+            if not path.is_file():
+                raise DataFormatError(path, f"no result file for sequence '{sequence.name}'")
+            boxes = read_box_file(path)
+            if len(boxes) != sequence.num_frames:
+                raise DataFormatError(
+                    path, f"has {len(boxes)} boxes but '{sequence.name}' has "
+                    f"{sequence.num_frames} frames (one line per frame, the first included)",
+                )
+            scores[sequence.name] = evaluate_sot_sequence(boxes, sequence.boxes)
+            per_sequence[sequence.name] = scores[sequence.name].as_dict()
+        combined: dict[str, float] = {}
+        if scores:
+            scores[COMBINED] = aggregate_sot(list(scores.values()))
+            combined = scores[COMBINED].as_dict()
+        return ScoreReport(BENCHMARK, per_sequence, combined, scores)
+
+    @property
+    def sequence(self) -> SOTSequence | None:
+        """The sequence of the current episode."""
+        return self._sequence
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """Return the frame with the agent's last box (or the initial box before any step)."""
+        if self.render_mode is None:
+            return None
+        if self._sequence is None:
+            raise RuntimeError("call reset() before render()")
+        if self._render_box is None:
+            return draw_boxes(self._frame, self._sequence.init_box[None], colour=INIT_COLOUR)
+        return draw_boxes(self._render_frame, self._render_box[None], colour=ACTION_COLOUR)
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()
