@@ -27,6 +27,7 @@ _BUILTIN_MODULES: dict[str, str] = {
     "unitrack": "agents.heads.mot",
     "repeat-box": "agents.baselines.repeat",
     "repeat-mask": "agents.baselines.repeat",
+    "repeat-pose": "agents.baselines.repeat_pose",
 }
 
 

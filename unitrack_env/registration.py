@@ -43,6 +43,10 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, "mot"),
     Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot"),
     Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos"),
+    Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"}, "mots"),
+    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, "vis"),
+    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, "pose-prop"),
+    Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {}, "posetrack"),
 )
 
 

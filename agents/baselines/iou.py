@@ -1,4 +1,9 @@
-"""The IoU baseline: box overlap + Hungarian matching with a track life cycle, no appearance."""
+"""The IoU baseline: overlap + Hungarian matching with a track life cycle, no appearance.
+
+It plays box association (MOT: box IoU with a constant-velocity guess) and mask association
+(MOTS, VIS: mask IoU with the track's last mask, via ``pycocotools``) with the same life
+cycle; the observation decides (``"masks"`` in it means mask association).
+"""
 
 from __future__ import annotations
 
@@ -10,7 +15,7 @@ from scipy.optimize import linear_sum_assignment
 
 from agents.base import Agent
 from unitrack_env.geometry import box_iou
-from unitrack_env.spaces import pack_tracks, unpack_detections
+from unitrack_env.spaces import pack_mask_ids, pack_tracks, unpack_detections
 
 
 @dataclass(frozen=True)
@@ -40,13 +45,17 @@ class IoUConfig:
     duplicate_iou: float = 0.3
 
 
-class IoUAgent(Agent, name="iou", tasks=("mot",)):
+class IoUAgent(Agent, name="iou", tasks=("mot", "mots", "vis")):
     """Associates detections to tracks by IoU with a constant-velocity guess.
 
     Per frame: predict each track's box (last box + smoothed velocity, times the frames it
     has been lost), match predictions to detections with the Hungarian algorithm on IoU,
     start a track for every unmatched detection, and drop tracks lost longer than
     ``max_lost_seconds``. Only tracks matched in this frame are reported.
+
+    On mask observations (``masks``, ``scores``, ``num_detections``) the overlap is mask IoU
+    between each track's last mask and the detections (no motion model; masks of one step
+    apart overlap), and the action gives each detection its track id (0 = not reported).
 
     Args:
         max_tracks: action capacity (must match the environment's ``max_tracks``).
@@ -67,6 +76,7 @@ class IoUAgent(Agent, name="iou", tasks=("mot",)):
         self._velocity = np.zeros((0, 4))
         self._hits = np.zeros(0, dtype=np.int64)
         self._lost = np.zeros(0, dtype=np.int64)
+        self._rles: list[dict] = []
 
     def reset(self, observation: Any, info: dict[str, Any]) -> None:
         """Forget all tracks; read the frame rate for the lost-track age."""
@@ -74,6 +84,8 @@ class IoUAgent(Agent, name="iou", tasks=("mot",)):
 
     def act(self, observation: dict[str, Any]) -> dict[str, Any]:
         """Match this frame's detections to the tracks and report the matched tracks."""
+        if "masks" in observation:
+            return self._act_masks(observation)
         cfg = self.config
         self._frame += 1
         boxes, scores = unpack_detections(observation)
@@ -118,3 +130,58 @@ class IoUAgent(Agent, name="iou", tasks=("mot",)):
         if self._frame > cfg.min_hits:
             active &= self._hits >= cfg.min_hits
         return pack_tracks(self._ids[active], self._boxes[active], self.max_tracks)
+
+    def _act_masks(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """Mask association: match by mask IoU, give each detection its track id."""
+        from pycocotools import mask as mask_utils
+
+        cfg = self.config
+        self._frame += 1
+        n = int(observation["num_detections"])
+        capacity = len(observation["scores"])
+        masks = np.asarray(observation["masks"][:n], dtype=bool)
+        valid = np.flatnonzero(np.asarray(observation["scores"][:n]) >= cfg.min_score)
+        rles = mask_utils.encode(np.asfortranarray(masks[valid].transpose(1, 2, 0).astype(np.uint8))
+                                 ) if len(valid) else []
+        det_track = np.full(len(valid), -1, dtype=np.int64)  # track row of each detection
+        matched_tracks = np.zeros(len(self._ids), dtype=bool)
+        if len(self._ids) and len(valid):
+            iou = np.asarray(mask_utils.iou(self._rles, rles, [False] * len(rles))
+                             ).reshape(len(self._ids), len(valid))
+            rows, cols = linear_sum_assignment(-iou)
+            ok = iou[rows, cols] >= cfg.iou_threshold
+            rows, cols = rows[ok], cols[ok]
+            for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+                self._rles[r] = rles[c]
+            self._hits[rows] += 1
+            self._lost[rows] = 0
+            matched_tracks[rows] = True
+            det_track[cols] = rows
+        self._lost[~matched_tracks] += 1
+
+        new = np.flatnonzero(det_track < 0)
+        matched = np.flatnonzero(det_track >= 0)
+        if len(new) and len(matched) and cfg.duplicate_iou < 1.0:
+            overlap = np.asarray(mask_utils.iou([rles[i] for i in new], [rles[i] for i in matched],
+                                                [False] * len(matched))
+                                 ).reshape(len(new), len(matched)).max(axis=1)
+            new = new[overlap < cfg.duplicate_iou]
+        keep = self._lost <= self._max_lost
+        kept_rows = np.flatnonzero(keep)
+        remap = np.full(len(self._ids), -1, dtype=np.int64)
+        remap[kept_rows] = np.arange(len(kept_rows))
+        det_track[matched] = remap[det_track[matched]]
+        det_track[new] = len(kept_rows) + np.arange(len(new))
+        new_ids = np.arange(self._next_id, self._next_id + len(new))
+        self._next_id += len(new)
+        self._ids = np.concatenate([self._ids[keep], new_ids])
+        self._rles = [self._rles[r] for r in kept_rows] + [rles[i] for i in new]
+        self._hits = np.concatenate([self._hits[keep], np.ones(len(new), dtype=np.int64)])
+        self._lost = np.concatenate([self._lost[keep], np.zeros(len(new), dtype=np.int64)])
+
+        ids = np.zeros(n, dtype=np.int64)
+        for j in np.flatnonzero(det_track >= 0):
+            row = det_track[j]
+            if self._frame <= cfg.min_hits or self._hits[row] >= cfg.min_hits:
+                ids[valid[j]] = self._ids[row]
+        return pack_mask_ids(ids, capacity)

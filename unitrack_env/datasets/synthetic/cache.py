@@ -26,6 +26,10 @@ from pathlib import Path
 from types import MappingProxyType
 
 from unitrack_env.datasets.synthetic import davis, motchallenge, otb
+from unitrack_env.datasets.synthetic import jhmdb as jhmdb_synthetic
+from unitrack_env.datasets.synthetic import mots as mots_synthetic
+from unitrack_env.datasets.synthetic import posetrack as posetrack_synthetic
+from unitrack_env.datasets.synthetic import youtube_vis as vis_synthetic
 
 #: Version of the generated data; bump it whenever any writer's output changes, so that
 #: caches of an older generator are not reused.
@@ -46,12 +50,20 @@ WRITERS: Mapping[str, Callable[[Path, str], None]] = MappingProxyType({
     "motchallenge": motchallenge.write_motchallenge,
     "otb": otb.write_otb,
     "davis": davis.write_davis,
+    "mots": mots_synthetic.write_mots,
+    "youtube_vis": vis_synthetic.write_youtube_vis,
+    "jhmdb": jhmdb_synthetic.write_jhmdb,
+    "posetrack": posetrack_synthetic.write_posetrack,
 })
 #: Benchmarks each kind can generate.
 KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "motchallenge": motchallenge.BENCHMARKS,
     "otb": otb.BENCHMARKS,
     "davis": davis.BENCHMARKS,
+    "mots": mots_synthetic.BENCHMARKS,
+    "youtube_vis": vis_synthetic.BENCHMARKS,
+    "jhmdb": ("JHMDB",),
+    "posetrack": posetrack_synthetic.BENCHMARKS,
 })
 
 

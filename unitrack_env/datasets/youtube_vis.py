@@ -1,0 +1,376 @@
+"""Reader and writer of YouTube-VIS 2019 (video instance segmentation) JSON files.
+
+Format (Yang et al., "Video Instance Segmentation", ICCV 2019; the CodaLab page's
+definition, restated in TrackEval's ``docs/YouTube-VIS-format.txt``), MS-COCO style::
+
+    {"info": ..., "videos": [video], "annotations": [annotation], "categories": [category]}
+    video      {"id", "width", "height", "length", "file_names": ["<video>/00000.jpg", ...]}
+    annotation {"id", "video_id", "category_id", "segmentations": [RLE | [polygon] | None],
+                "areas": [float | None], "bboxes": [[x, y, w, h] | None], "iscrowd": 0 | 1}
+    category   {"id", "name", "supercategory"}
+
+with one segmentation per frame of the video (None where the object is absent). Results
+("results.json") are a list of ``{"video_id", "category_id", "segmentations", "score"}``.
+
+Layout read here (the 2019 release): ``<root>/{train,valid,test}.json`` and frames
+``<root>/<split>/JPEGImages/<file_name>``; ``valid`` and ``test`` JSONs have no annotations.
+A video's name is the folder of its frames (the first path component of ``file_names``, as
+TrackEval names sequences).
+
+Detections use the results format: every non-null ``(entry, frame)`` segmentation is one
+detection of that frame with the entry's ``category_id`` and ``score`` (a per-frame
+detector writes one entry per detection, non-null on one frame). ``"public"`` means
+``<root>/detections/<split>.json``, where the embedded synthetic data set puts its own (the
+benchmark ships none); any such file can be given instead, and ``"gt"`` turns the ground
+truth into detections (score 1).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.errors import DataFormatError
+
+#: Splits of the 2019 release.
+SPLITS = ("train", "valid", "test")
+#: Where frames are under the split folder.
+IMAGE_FOLDER = "JPEGImages"
+#: Frame rate of the annotated frames (YouTube-VIS annotates every 5th frame of 30 fps video).
+FRAME_RATE = 6.0
+
+
+def to_rle(segmentation: Any, height: int, width: int, path: Path, where: str) -> dict | None:
+    """Convert a polygon list / uncompressed RLE / compressed RLE to a compressed RLE dict.
+
+    The result's ``counts`` is ``bytes``; None stays None.
+
+    Raises:
+        DataFormatError: an unrecognised or inconsistent segmentation, naming ``where``.
+    """
+    from pycocotools import mask as mask_utils
+
+    if segmentation is None:
+        return None
+    try:
+        if isinstance(segmentation, list):  # polygons
+            if not segmentation or not all(isinstance(p, list) and len(p) >= 6 and len(p) % 2 == 0
+                                           for p in segmentation):
+                raise ValueError("polygons must be lists of >= 3 x,y pairs")
+            return mask_utils.merge(mask_utils.frPyObjects(segmentation, height, width))
+        if isinstance(segmentation, dict) and "counts" in segmentation:
+            size = segmentation.get("size")
+            if list(size or []) != [height, width]:
+                raise ValueError(f"RLE size {size} is not the video's [{height}, {width}]")
+            counts = segmentation["counts"]
+            if isinstance(counts, list):  # uncompressed
+                return mask_utils.frPyObjects(segmentation, height, width)
+            counts = counts.encode("ascii") if isinstance(counts, str) else counts
+            return {"size": [height, width], "counts": counts}
+        raise ValueError("expected an RLE dict, a list of polygons or null")
+    except (ValueError, TypeError, AttributeError, UnicodeEncodeError) as exc:
+        raise DataFormatError(path, str(exc), field=where) from None
+
+
+def rle_to_json(rle: dict | None, *, uncompressed: bool = False) -> dict | None:
+    """Return a JSON-serialisable RLE.
+
+    Compressed with ``str`` counts, or with ``uncompressed`` the list-of-run-lengths form the
+    2019 annotation files use (column-major runs starting with background), which
+    TrackEval's ground-truth loader requires.
+    """
+    if rle is None:
+        return None
+    if uncompressed:
+        from pycocotools import mask as mask_utils
+
+        flat = mask_utils.decode(rle).ravel(order="F").astype(np.int8)
+        edges = np.flatnonzero(np.diff(flat)) + 1
+        bounds = np.concatenate([[0], edges, [flat.size]])
+        runs = np.diff(bounds).tolist()
+        if flat.size and flat[0] == 1:
+            runs = [0] + runs
+        return {"size": [int(v) for v in rle["size"]], "counts": runs}
+    counts = rle["counts"]
+    return {"size": [int(v) for v in rle["size"]],
+            "counts": counts.decode("ascii") if isinstance(counts, bytes) else counts}
+
+
+@dataclass(frozen=True)
+class VisVideo:
+    """One video: id, name (frame folder), frame files (relative), size and length."""
+
+    id: int
+    name: str
+    file_names: tuple[str, ...]
+    height: int
+    width: int
+
+    @property
+    def length(self) -> int:
+        """Number of annotated frames."""
+        return len(self.file_names)
+
+
+@dataclass(frozen=True)
+class VisTrack:
+    """One object track: ground-truth annotation, result entry or detection entry.
+
+    Attributes:
+        video_id: its video.
+        category_id: its class.
+        segmentations: one compressed RLE dict (``bytes`` counts) or None per frame.
+        id: annotation id (-1 for results).
+        score: result / detection score (1.0 for ground truth).
+        iscrowd: the annotation's crowd flag.
+    """
+
+    video_id: int
+    category_id: int
+    segmentations: tuple[dict | None, ...]
+    id: int = -1
+    score: float = 1.0
+    iscrowd: int = 0
+
+
+@dataclass(frozen=True)
+class VisData:
+    """A parsed YouTube-VIS JSON: videos, categories and (where present) annotations."""
+
+    path: Path
+    videos: tuple[VisVideo, ...]
+    categories: dict[int, str]
+    tracks: tuple[VisTrack, ...] | None
+
+    def video(self, name: str) -> VisVideo:
+        """The video named ``name``."""
+        for video in self.videos:
+            if video.name == name:
+                return video
+        raise KeyError(f"no video {name!r} in {self.path}")
+
+    def tracks_of(self, video_id: int) -> list[VisTrack]:
+        """Annotations of one video (empty without annotations)."""
+        return [t for t in self.tracks or () if t.video_id == video_id]
+
+
+def _require(obj: Any, key: str, kind: type | tuple, path: Path, where: str) -> Any:
+    if not isinstance(obj, dict) or key not in obj:
+        raise DataFormatError(path, "missing", field=f"{where}.{key}")
+    value = obj[key]
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise DataFormatError(path, f"has type {type(value).__name__}", field=f"{where}.{key}")
+    return value
+
+
+def _load_json(path: Path, text: str | None) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8") if text is None else text)
+    except FileNotFoundError:
+        raise DataFormatError(path, "file not found") from None
+    except json.JSONDecodeError as exc:
+        raise DataFormatError(path, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFormatError(path, f"cannot read ({exc})") from None
+
+
+def _segmentations(entry: dict, video: VisVideo, path: Path, where: str) -> tuple:
+    segs = _require(entry, "segmentations", list, path, where)
+    if len(segs) != video.length:
+        raise DataFormatError(path, f"has {len(segs)} entries but video {video.id} has "
+                              f"{video.length} frames", field=f"{where}.segmentations")
+    return tuple(to_rle(s, video.height, video.width, path, f"{where}.segmentations[{i}]")
+                 for i, s in enumerate(segs))
+
+
+def parse_vis_json(path: str | os.PathLike, *, text: str | None = None) -> VisData:
+    """Read a YouTube-VIS 2019 annotation file (``annotations`` may be absent or null).
+
+    Raises:
+        DataFormatError: naming the file and the JSON path of the first problem.
+    """
+    path = Path(path)
+    data = _load_json(path, text)
+    if not isinstance(data, dict):
+        raise DataFormatError(path, "top level must be an object with videos and categories")
+    videos = []
+    for i, v in enumerate(_require(data, "videos", list, path, "")):
+        where = f"videos[{i}]"
+        names = _require(v, "file_names", list, path, where)
+        if not names or not all(isinstance(n, str) and "/" in n for n in names):
+            raise DataFormatError(path, "must be non-empty '<video>/<frame>' paths",
+                                  field=f"{where}.file_names")
+        video = VisVideo(_require(v, "id", int, path, where), names[0].split("/")[0],
+                         tuple(names), _require(v, "height", int, path, where),
+                         _require(v, "width", int, path, where))
+        length = v.get("length", video.length)
+        if length != video.length:
+            raise DataFormatError(path, f"length {length} but {video.length} file_names",
+                                  field=f"{where}.length")
+        videos.append(video)
+    by_id = {v.id: v for v in videos}
+    if len(by_id) != len(videos):
+        raise DataFormatError(path, "duplicate video ids", field="videos")
+    categories = {}
+    for i, c in enumerate(_require(data, "categories", list, path, "")):
+        categories[_require(c, "id", int, path, f"categories[{i}]")] = str(
+            _require(c, "name", str, path, f"categories[{i}]"))
+    tracks = None
+    if data.get("annotations") is not None:
+        tracks = []
+        for i, a in enumerate(_require(data, "annotations", list, path, "")):
+            where = f"annotations[{i}]"
+            video_id = _require(a, "video_id", int, path, where)
+            if video_id not in by_id:
+                raise DataFormatError(path, f"unknown video {video_id}", field=f"{where}.video_id")
+            category = _require(a, "category_id", int, path, where)
+            if category not in categories:
+                raise DataFormatError(path, f"unknown category {category}",
+                                      field=f"{where}.category_id")
+            tracks.append(VisTrack(video_id, category,
+                                   _segmentations(a, by_id[video_id], path, where),
+                                   id=_require(a, "id", int, path, where),
+                                   iscrowd=int(a.get("iscrowd", 0))))
+        tracks = tuple(tracks)
+    return VisData(path, tuple(videos), categories, tracks)
+
+
+def parse_vis_results(source: str | os.PathLike | list, videos: dict[int, VisVideo], *,
+                      path: Path | None = None) -> list[VisTrack]:
+    """Read results-format entries (a file or a loaded list) for the given videos.
+
+    Entries of other videos are skipped (a results file covers a whole split).
+
+    Raises:
+        DataFormatError: naming the file and the entry of the first problem.
+    """
+    if isinstance(source, list):
+        data, path = source, path or Path("<results>")
+    else:
+        path = Path(source)
+        data = _load_json(path, None)
+    if not isinstance(data, list):
+        raise DataFormatError(path, "results must be a JSON list of predictions")
+    out = []
+    for i, entry in enumerate(data):
+        where = f"[{i}]"
+        video_id = _require(entry, "video_id", int, path, where)
+        if video_id not in videos:
+            continue
+        score = _require(entry, "score", (int, float), path, where)
+        if not np.isfinite(score):
+            raise DataFormatError(path, "score is not finite", field=f"{where}.score")
+        out.append(VisTrack(video_id, _require(entry, "category_id", int, path, where),
+                            _segmentations(entry, videos[video_id], path, where),
+                            score=float(score)))
+    return out
+
+
+def format_results(tracks: list[VisTrack]) -> str:
+    """Results JSON text: ``[{video_id, category_id, segmentations, score}]``."""
+    return json.dumps([{"video_id": t.video_id, "category_id": t.category_id,
+                        "segmentations": [rle_to_json(s) for s in t.segmentations],
+                        "score": float(t.score)} for t in tracks])
+
+
+def format_annotations(data: VisData, videos: list[VisVideo] | None = None) -> str:
+    """Annotation JSON text (for TrackEval and the synthetic writer), with areas and boxes.
+
+    Annotations carry ``height``/``width``/``length`` and uncompressed RLE as the 2019 train
+    file does (TrackEval reads both).
+    """
+    from pycocotools import mask as mask_utils
+
+    videos = list(data.videos) if videos is None else videos
+    keep = {v.id for v in videos}
+    by_id = {v.id: v for v in videos}
+    annotations = []
+    for k, t in enumerate(data.tracks or ()):
+        if t.video_id not in keep:
+            continue
+        v = by_id[t.video_id]
+        areas = [float(mask_utils.area(s)) if s else None for s in t.segmentations]
+        boxes = [[float(x) for x in mask_utils.toBbox(s)] if s else None for s in t.segmentations]
+        annotations.append({
+            "id": t.id if t.id >= 0 else k + 1, "video_id": t.video_id,
+            "category_id": t.category_id, "iscrowd": t.iscrowd, "height": v.height,
+            "width": v.width, "length": 1,
+            "segmentations": [rle_to_json(s, uncompressed=True) for s in t.segmentations],
+            "areas": areas, "bboxes": boxes,
+        })
+    payload = {
+        "info": {"description": "unitrack-env"},
+        "videos": [{"id": v.id, "width": v.width, "height": v.height, "length": v.length,
+                    "file_names": list(v.file_names)} for v in videos],
+        "categories": [{"id": c, "name": n, "supercategory": "object"}
+                       for c, n in sorted(data.categories.items())],
+        "annotations": annotations if data.tracks is not None else None,
+    }
+    return json.dumps(payload)
+
+
+class YouTubeVISDataset:
+    """A YouTube-VIS 2019 data set on disk (module docstring).
+
+    Args:
+        root: the benchmark folder (``train.json``, ``train/JPEGImages/`` ...).
+        split: ``"train"``, ``"valid"`` or ``"test"``.
+        detections: ``"public"``, ``"gt"`` or a results-format JSON file.
+        annotation_file: override of ``<root>/<split>.json``.
+    """
+
+    def __init__(self, root: str | os.PathLike, split: str = "train",
+                 detections: str | os.PathLike = "public",
+                 annotation_file: str | os.PathLike | None = None) -> None:
+        self.root = Path(root)
+        self.split = split
+        self.annotation_path = Path(annotation_file) if annotation_file else \
+            self.root / f"{split}.json"
+        self.image_root = self.root / split / IMAGE_FOLDER
+        self.data = parse_vis_json(self.annotation_path)
+        self.detections = detections
+        self.sequence_names = [v.name for v in self.data.videos]
+        self._detections: dict[int, list[VisTrack]] | None = None
+
+    @property
+    def has_annotations(self) -> bool:
+        """Whether the split's JSON has annotations."""
+        return self.data.tracks is not None
+
+    def video(self, name: str) -> VisVideo:
+        """The video named ``name``."""
+        return self.data.video(name)
+
+    def frame_path(self, video: VisVideo, index: int) -> Path:
+        """Image file of frame ``index`` (0-based position in ``file_names``)."""
+        return self.image_root / video.file_names[index]
+
+    def detection_path(self) -> Path:
+        """The detection file (for ``detections`` not ``"gt"``)."""
+        if str(self.detections) == "public":
+            return self.root / "detections" / f"{self.split}.json"
+        return Path(self.detections)
+
+    def detections_of(self, video: VisVideo) -> list[VisTrack]:
+        """Detection entries of a video (results format)."""
+        if str(self.detections) == "gt":
+            if not self.has_annotations:
+                raise DataFormatError(self.annotation_path, "detections='gt' needs annotations, "
+                                      "which this split does not have")
+            return self.data.tracks_of(video.id)
+        if self._detections is None:
+            path = self.detection_path()
+            if not path.is_file():
+                raise DataFormatError(path, "detection file not found; YouTube-VIS ships no "
+                                      "detections: pass detections=<results-format JSON> or 'gt'")
+            by_id = {v.id: v for v in self.data.videos}
+            grouped: dict[int, list[VisTrack]] = {}
+            for t in parse_vis_results(path, by_id):
+                grouped.setdefault(t.video_id, []).append(t)
+            self._detections = grouped
+        return self._detections.get(video.id, [])

@@ -1,0 +1,376 @@
+"""Pose propagation on JHMDB (frames + ``joint_positions.mat``, 15 puppet joints)."""
+
+from __future__ import annotations
+
+import colorsys
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from gymnasium import spaces
+
+from unitrack_env import spaces as ut_spaces
+from unitrack_env.datasets.jhmdb import (
+    JHMDB_SKELETON,
+    NUM_JOINTS,
+    JHMDBDataset,
+    PoseSequence,
+    read_joint_positions,
+)
+from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.errors import DataFormatError, InvalidActionError
+from unitrack_env.frames import FramePrefetcher
+from unitrack_env.io import atomic_write_bytes
+from unitrack_env.metrics.pose import (
+    NORMALISERS,
+    PAPER_PCK_THRESHOLDS,
+    PCKCounts,
+    frame_pck,
+    pck_counts,
+)
+from unitrack_env.metrics.report import COMBINED, ScoreReport
+
+#: Default bound of the frame space (height, width): 4K (JHMDB frames are 320x240).
+DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
+#: PCK threshold of the per-step reward.
+REWARD_ALPHA = 0.1
+#: File name of a video's results, inside ``<folder>/<action>/<video>/`` (JHMDB's own).
+RESULT_FILE = "joint_positions.mat"
+
+
+def joint_colours(count: int) -> list[tuple[int, int, int]]:
+    """Return ``count`` well-spread RGB colours (one per joint)."""
+    return [tuple(int(255 * c) for c in colorsys.hsv_to_rgb(i / max(count, 1), 0.9, 1.0))
+            for i in range(count)]  # type: ignore[misc]
+
+
+def draw_skeleton(
+    canvas: np.ndarray,
+    points: np.ndarray,
+    limbs: tuple[tuple[int, int], ...],
+    *,
+    present: np.ndarray | None = None,
+    colour: tuple[int, int, int] | None = None,
+    joint_colours_: list[tuple[int, int, int]] | None = None,
+) -> None:
+    """Draw one skeleton in place: limbs (0-based joint pairs) and joint dots.
+
+    Args:
+        canvas: ``uint8`` RGB image, modified in place.
+        points: ``(J, 2)`` 0-based ``(x, y)``.
+        limbs: joint index pairs to connect.
+        present: ``(J,)`` bool of joints to draw (default: all finite).
+        colour: one colour for the whole skeleton (e.g. its track id's).
+        joint_colours_: a colour per joint (used when ``colour`` is None).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    ok = np.all(np.isfinite(pts), axis=1) & np.all(np.abs(pts) < 1e5, axis=1)
+    if present is not None:
+        ok &= np.asarray(present, bool)
+    size = max(canvas.shape[:2])
+    thickness = max(1, round(size / 400))
+    radius = max(2, round(size / 250))
+    ints = np.round(np.where(ok[:, None], pts, 0)).astype(int)
+    colours = joint_colours_ or joint_colours(len(pts))
+    for a, b in limbs:
+        if ok[a] and ok[b]:
+            c = colour or colours[b]
+            cv2.line(canvas, tuple(ints[a]), tuple(ints[b]), c, thickness, cv2.LINE_AA)
+    for j in np.nonzero(ok)[0]:
+        cv2.circle(canvas, tuple(ints[j]), radius, colour or colours[j], -1, cv2.LINE_AA)
+
+
+def pose_mat_bytes(keypoints: np.ndarray) -> bytes:
+    """Return a ``joint_positions.mat`` (``pos_img`` ``(2, 15, T)``, 1-based) for 0-based joints."""
+    from unitrack_env.datasets.synthetic.jhmdb import joint_positions_mat
+
+    return joint_positions_mat(keypoints)
+
+
+class JHMDBEnv(SequenceEnv):
+    """Pose propagation: follow one person's 15 joints through a JHMDB video.
+
+    ## Description
+    Each episode is one JHMDB video (``"<action>/<video>"``). The agent is given the first
+    frame's 15 joints (neck, belly, face, shoulders, hips, elbows, knees, wrists, ankles, in
+    ``joint_positions.mat`` order) and must predict them in every frame, as in the UniTrack
+    paper's pose propagation (appendix, JHMDB table; the propagation itself is Gaussian
+    belief maps carried by the appearance model's affinities). The final metrics are
+    PCK@0.1 and PCK@0.2.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small deterministic
+    synthetic data set in JHMDB's exact layout (320x240 PNG frames, ``pos_img`` in
+    ``joint_positions.mat``; a walking person crossed by another one), generated once into
+    the user cache.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size (320x240 in JHMDB).
+    - ``init_keypoints``: ``Box((15, 2), float32)``: the first frame's joints ``(x, y)`` in
+      0-based pixels (``pos_img - 1``; the top-left pixel's centre is ``(0, 0)``). This is
+      the task's input; it is the same in every step of an episode. No other ground truth
+      is observed.
+
+    ## Action space
+    ``Box((15, 2), float32)``: the predicted joints of the current frame, same coordinates
+    and joint order as ``init_keypoints``. Wrong shapes, non-numbers and NaN/infinite
+    values raise ``InvalidActionError`` before anything is recorded.
+
+    ## Rewards
+    PCK@0.1 of the frame (:func:`unitrack_env.metrics.pose.frame_pck`): the fraction of the
+    15 joints within ``0.1 x`` the normaliser of the ground truth. The default normaliser
+    is ``0.6 x`` the diagonal of the box spanned by the frame's ground-truth joints, the one
+    of the authors' evaluation script (CRW/TimeCycle ``eval_pck``), which produced every
+    number of the paper's JHMDB table. The first frame is the given input and scores 0
+    (it is never scored).
+
+    ## Starting state
+    ``reset`` returns the first frame and ``init_keypoints``; the agent answers that frame
+    too (echoing ``init_keypoints`` is fine: frame 1 is not scored), so an episode has one
+    step per frame. ``info`` holds ``sequence``, ``frame_index`` (1-based), ``seq_length``,
+    ``frame_rate`` (30, JHMDB's clips are 30 fps), ``image_size`` ``(height, width)`` and
+    ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame. ``info["metrics"]`` holds ``PCK@0.1`` and
+    ``PCK@0.2`` of the video (frames 2..T, per joint, then averaged over the 15 joints, as
+    the authors' script does) as fractions. Results are written per video as
+    ``<folder>/<action>/<video>/joint_positions.mat`` with ``pos_img`` ``(2, 15, T)`` in
+    JHMDB's own 1-based convention (the predicted frame 1 included), readable by the same
+    reader; :meth:`score_folder` pools the joints of all videos before averaging, like
+    the script.
+
+    ## Arguments
+    - ``root``: the JHMDB folder holding ``Rename_Images/`` and ``joint_positions/``
+      (default: ``$UNITRACK_DATA/JHMDB`` if that variable is set, else the synthetic data).
+    - ``split``: None (every annotated video), ``"train"`` or ``"test"`` of the split files.
+    - ``split_index``: 1, 2 or 3 (JHMDB's splits); ``split_dir`` where they are.
+    - ``sequences``: restrict to these ``"<action>/<video>"`` names.
+    - ``normaliser``: ``"box_diagonal"`` (default, the paper's) or ``"box_max_side"``.
+    - ``thresholds``: PCK thresholds of the final metrics (default ``(0.1, 0.2)``).
+    - ``max_frame_size``: bound of the frame space ``(height, width)``.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws the predicted skeleton, one colour per joint.
+
+    ## Version history
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike | None = None,
+        split: str | None = None,
+        split_index: int = 1,
+        split_dir: str | os.PathLike | None = None,
+        sequences: list[str] | tuple[str, ...] | None = None,
+        normaliser: str = "box_diagonal",
+        thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS,
+        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
+        decode_frames: bool = True,
+        prefetch: bool = True,
+        shuffle: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        if normaliser not in NORMALISERS:
+            raise ValueError(f"normaliser must be one of {NORMALISERS}; got {normaliser!r}")
+        data_root = resolve_root(root, "JHMDB")
+        self.synthetic = data_root is None
+        if data_root is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            data_root = ensure_synthetic("JHMDB", kind="jhmdb")
+        self.dataset = JHMDBDataset(data_root, split, split_index, split_dir)
+        if sequences is not None:
+            missing = [s for s in sequences if s not in self.dataset.sequence_names]
+            if missing:
+                raise ValueError(f"sequences {missing} are not in {data_root}; available: "
+                                 f"{', '.join(self.dataset.sequence_names)}")
+            self.sequence_names = list(sequences)
+        else:
+            self.sequence_names = list(self.dataset.sequence_names)
+        self.normaliser = normaliser
+        self.thresholds = tuple(float(t) for t in thresholds)
+        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        joints = spaces.Box(-ut_spaces.COORD_MAX, ut_spaces.COORD_MAX, (NUM_JOINTS, 2),
+                            np.float32)
+        self.observation_space = spaces.Dict(
+            {"frame": ut_spaces.Image(*self.max_frame_size), "init_keypoints": joints})
+        self.action_space = spaces.Box(-ut_spaces.COORD_MAX, ut_spaces.COORD_MAX,
+                                       (NUM_JOINTS, 2), np.float32)
+        self._sequence: PoseSequence | None = None
+        self._frames: FramePrefetcher | None = None
+        self._t = 0
+        self._done = True
+        self._predictions: list[np.ndarray] = []
+        self._frame: np.ndarray | None = None
+        self._render_pose: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ episode control
+    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self._frames is not None:
+            self._frames.close()
+        sequence = self.dataset.load(name)
+        width, height = sequence.image_size
+        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
+            raise ValueError(f"{name}: frames are {width}x{height}, larger than max_frame_size="
+                             f"{self.max_frame_size}; pass a larger max_frame_size")
+        self._sequence = sequence
+        self._frames = FramePrefetcher(sequence.frame_paths.__getitem__, prefetch=self.prefetch)
+        self._t = 0
+        self._done = False
+        self._predictions = []
+        self._render_pose = None
+        return self._observe(0), self._info(reset=True)
+
+    def _observe(self, t: int) -> dict[str, Any]:
+        seq = self._sequence
+        if self.decode_frames:
+            image = self._frames.get(t)
+            if t + 1 < seq.num_frames:
+                self._frames.schedule(t + 1)
+            if image.shape[1::-1] != seq.image_size:
+                raise DataFormatError(seq.frame_paths[t], f"is {image.shape[1]}x{image.shape[0]}"
+                                      f", the video's first frame {seq.image_size[0]}x"
+                                      f"{seq.image_size[1]}")
+        else:
+            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        self._frame = image
+        return {"frame": image, "init_keypoints": seq.init_keypoints.astype(np.float32)}
+
+    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+        seq = self._sequence
+        out: dict[str, Any] = {"sequence": seq.name, "frame_index": self._t + 1}
+        if reset:
+            out.update(seq_length=seq.num_frames, frame_rate=30,
+                       image_size=(seq.image_size[1], seq.image_size[0]),
+                       synthetic=self.synthetic, has_ground_truth=True)
+        return out
+
+    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Record the predicted joints of the current frame, score them, move on."""
+        if self._done or self._sequence is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        pred = _validate_joints(action)
+        t = self._t
+        self._predictions.append(pred)
+        self._render_pose = pred
+        info_extra: dict[str, Any] = {}
+        reward = 0.0
+        if t > 0:
+            reward = frame_pck(pred, self._sequence.keypoints[t], REWARD_ALPHA, self.normaliser)
+            info_extra["pck"] = reward
+        if t + 1 >= self._sequence.num_frames:
+            self._done = True
+            observation = {"frame": self._fresh(self._frame),
+                           "init_keypoints": self._sequence.init_keypoints.astype(np.float32)}
+            info = self._info() | info_extra
+            info["metrics"] = self.episode_metrics()
+            if self._frames is not None:
+                self._frames.close()
+            return observation, reward, True, False, info
+        self._t = t + 1
+        return self._observe(self._t), reward, False, False, self._info() | info_extra
+
+    # ------------------------------------------------------------------ results
+    def episode_predictions(self) -> np.ndarray:
+        """Return the ``(steps, 15, 2)`` joints recorded so far (0-based pixels)."""
+        if not self._predictions:
+            return np.zeros((0, NUM_JOINTS, 2))
+        return np.stack(self._predictions)
+
+    def _counts(self, pred: np.ndarray, gt: np.ndarray) -> PCKCounts:
+        return pck_counts(pred, gt, self.thresholds, method=self.normaliser)
+
+    def episode_metrics(self) -> dict[str, float]:
+        """PCK at every threshold of the recorded video (frame 1 not scored)."""
+        pred = self.episode_predictions()
+        return self._counts(pred, self._sequence.keypoints[: len(pred)]).as_dict()
+
+    def episode_digest(self) -> str:
+        """Return a SHA-256 digest of the recorded joints (rounded to 1e-3 px)."""
+        rows = np.round(self.episode_predictions(), 3)
+        return hashlib.sha256(np.ascontiguousarray(rows).tobytes()).hexdigest()
+
+    def sequence_length(self, name: str) -> int:
+        """Return the number of annotated frames of ``name`` (reads only its ``.mat``)."""
+        return len(read_joint_positions(self.dataset.joint_dir / name / "joint_positions.mat"))
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Every JHMDB video is annotated."""
+        return name in self.dataset.sequence_names
+
+    def write_episode(self, folder: Path) -> None:
+        """Write ``<folder>/<action>/<video>/joint_positions.mat`` (``pos_img``, 1-based)."""
+        if self._sequence is None:
+            raise RuntimeError("no episode to write; call reset() and play it first")
+        atomic_write_bytes(Path(folder) / self._sequence.name / RESULT_FILE,
+                           pose_mat_bytes(self.episode_predictions()))
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<name>/joint_positions.mat`` files; ``COMBINED`` pools all joints.
+
+        Raises:
+            DataFormatError: a result file is missing or does not cover its video's frames.
+        """
+        per_sequence: dict[str, dict[str, float]] = {}
+        pooled: PCKCounts | None = None
+        for name in sequences:
+            path = Path(folder) / name / RESULT_FILE
+            pred = read_joint_positions(path)
+            gt = read_joint_positions(self.dataset.joint_dir / name / "joint_positions.mat")
+            if pred.shape != gt.shape:
+                raise DataFormatError(path, f"holds {len(pred)} frames, the video has {len(gt)}",
+                                      field="pos_img")
+            counts = self._counts(pred, gt)
+            per_sequence[name] = counts.as_dict()
+            pooled = counts if pooled is None else pooled.merge(counts)
+        combined = pooled.as_dict() if pooled is not None else {}
+        return ScoreReport("JHMDB", per_sequence, combined,
+                           scores={**per_sequence, COMBINED: combined})
+
+    @property
+    def sequence(self) -> PoseSequence | None:
+        """The sequence of the current episode."""
+        return self._sequence
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """Return the frame with the last predicted skeleton (``init_keypoints`` at reset)."""
+        if self.render_mode is None:
+            return None
+        if self._sequence is None:
+            raise RuntimeError("call reset() before render()")
+        canvas = np.ascontiguousarray(self._frame).copy()
+        pose = self._render_pose if self._render_pose is not None else self._sequence.keypoints[0]
+        draw_skeleton(canvas, pose, JHMDB_SKELETON)
+        return canvas
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()
+
+
+def _validate_joints(action: Any) -> np.ndarray:
+    """Return the action as ``(15, 2)`` float64, or raise InvalidActionError."""
+    arr = np.asarray(action)
+    if arr.shape != (NUM_JOINTS, 2):
+        raise InvalidActionError(
+            f"action must be the ({NUM_JOINTS}, 2) predicted joints (x, y); got shape {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise InvalidActionError(f"action must hold numbers, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        joint = int(np.argwhere(~np.isfinite(arr))[0, 0])
+        raise InvalidActionError(f"joint {joint} is NaN or infinite: {arr[joint].tolist()}")
+    return arr

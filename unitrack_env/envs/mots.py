@@ -1,0 +1,403 @@
+"""Multi-object tracking and segmentation on MOTS Challenge (MOTS20) and KITTI MOTS data."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from unitrack_env import spaces as ut_spaces
+from unitrack_env.datasets.mots import (
+    BENCHMARKS,
+    CLASS_IDS,
+    CLASS_IGNORE,
+    MaskAnnotations,
+    MOTSDataset,
+    MOTSSequenceInfo,
+    encode_masks,
+    format_instances_txt,
+    resolve_overlaps,
+)
+from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.frames import FramePrefetcher
+from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.mots import MaskClearStream
+from unitrack_env.metrics.report import ScoreReport
+from unitrack_env.render import DETECTION_COLOUR, draw_boxes, id_colour
+
+#: Default capacity of the detection arrays.
+DEFAULT_MAX_DETECTIONS = 128
+#: Default bound of the frame space (height, width): 4K.
+DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
+#: Default split of each benchmark.
+DEFAULT_SPLITS = {"MOTS20": "train", "KITTI-MOTS": "training"}
+#: Folder name under ``$UNITRACK_DATA`` of each benchmark.
+DATA_FOLDERS = {"MOTS20": "MOTS20", "KITTI-MOTS": "KITTI-MOTS"}
+
+
+class MOTSEnv(SequenceEnv):
+    """Multi-object tracking and segmentation by associating detection masks.
+
+    ## Description
+    Each episode is one video sequence of MOTS Challenge (``MOTS20``) or KITTI MOTS. At every
+    step the agent sees one frame and that frame's detection masks, and answers with a track
+    id for each mask (the association step of UniTrack's MOTS head). The environment records
+    the reported masks with their ids, scores them against the ground truth with TrackEval's
+    MOTS rules, and at the end of the episode reports the official metrics (HOTA, sMOTSA,
+    MOTSA, IDF1, IDSW, ...). The recorded episode is written in the official MOTS txt result
+    format (``time_frame id class_id img_height img_width rle``).
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small deterministic
+    synthetic data set in the exact MOTS20 (or KITTI MOTS) layout, generated once into the
+    user cache: textured people walking, crossing and occluding each other, an occluder
+    annotated as an ignore region, and noisy detection masks (dilated/eroded, shifted,
+    missed, false positives, scores).
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native size.
+    - ``masks``: :class:`~unitrack_env.spaces.MaskStack`, ``(num_detections, H, W)`` bool:
+      the detection masks at the frame's size. A stack of masks rather than a label map, so
+      that the mask tasks (MOTS and VIS, where masks may overlap) share one representation;
+      rather than padding, because a padded ``(max_detections, H, W)`` array is megabytes
+      per frame. MOTS masks never overlap: where detection masks of the input file overlap,
+      the pixel goes to the higher-scored detection (MOTS results must be disjoint).
+    - ``boxes``: ``Box((max_detections, 4), float32)``: each mask's tight box ``(x, y, w,
+      h)`` in 0-based pixels (``pycocotools`` ``toBbox`` convention); rows past
+      ``num_detections`` are 0.
+    - ``scores``: ``Box((max_detections,), float32)``: detection scores.
+    - ``num_detections``: ``Discrete(max_detections + 1)``.
+
+    Ground truth never appears in observations.
+
+    ## Action space
+    ``{"ids": Box(0, 2**31 - 1, (max_detections,), int64)}``: ``ids[i]`` is the track id of
+    detection ``i`` for ``i < num_detections``, 0 = not reported; entries past
+    ``num_detections`` are ignored. The unpadded ``{"ids": (num_detections,)}`` is accepted
+    too; ``unitrack_env.spaces.pack_mask_ids`` builds the padded form. Wrong lengths or
+    dtypes, negative ids, and one id given to two masks raise ``InvalidActionError`` before
+    anything is recorded. Reported masks keep the detection's pixels, so results are
+    disjoint, as the MOTS format requires.
+
+    ## Rewards
+    ``TP - FP - IDSW`` of the frame under TrackEval's MOTS evaluation: reported masks that are
+    unmatched and lie more than half inside the ignore regions are dropped, then CLEAR's
+    matching at mask IoU >= 0.5. The episode return divided by the number of ground-truth
+    masks is TrackEval's MOTSA. ``info["clear"]`` has the frame's ``tp``, ``fp``, ``fn`` and
+    ``idsw``. Splits without ground truth give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame and its detections. ``info`` holds ``sequence``,
+    ``frame_index`` (the benchmark's own numbering: MOTS20 1-based, KITTI 0-based),
+    ``seq_length``, ``frame_rate``, ``image_size`` ``(height, width)``, ``benchmark`` and
+    ``has_ground_truth``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame is answered. The final ``info["metrics"]`` holds
+    the sequence's TrackEval metrics (``HOTA``, ``DetA``, ``AssA``, ``sMOTSA``, ``MOTSA``,
+    ``MOTSP``, ``IDF1``, ``IDSW``, ``CLR_FP``, ``CLR_FN``, ... as fractions; ``MOTA``/``MOTP``/
+    ``sMOTA`` are TrackEval's names of the same numbers).
+
+    ## Arguments
+    - ``benchmark``: ``"MOTS20"`` (MOTS Challenge layout) or ``"KITTI-MOTS"``.
+    - ``root``: the benchmark folder (default: ``$UNITRACK_DATA/<benchmark>`` if that
+      variable is set, else the synthetic default).
+    - ``split``: MOTS20 ``"train"``/``"test"``; KITTI ``"training"``/``"testing"``.
+    - ``sequences``: restrict to these sequences.
+    - ``detections``: ``"public"`` (``<seq>/det/det.txt``; KITTI ``<split>/det_02/<seq>.txt``),
+      ``"gt"`` (ground-truth masks as detections) or a folder of ``<seq>.txt`` files, in the
+      MOTS txt format with an optional 7th score field.
+    - ``object_class``: ``"pedestrian"`` or (KITTI) ``"car"``: the class tracked and scored.
+    - ``min_score``: drop detections scored below this.
+    - ``max_detections``, ``max_frame_size``: space capacities.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws id-coloured masks and boxes.
+
+    ## Version history
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        benchmark: str = "MOTS20",
+        root: str | os.PathLike | None = None,
+        split: str | None = None,
+        sequences: list[str] | tuple[str, ...] | None = None,
+        detections: str | os.PathLike = "public",
+        object_class: str = "pedestrian",
+        min_score: float | None = None,
+        max_detections: int = DEFAULT_MAX_DETECTIONS,
+        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
+        decode_frames: bool = True,
+        prefetch: bool = True,
+        shuffle: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        if benchmark not in BENCHMARKS:
+            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {list(BENCHMARKS)}")
+        valid = ["pedestrian"] if benchmark == "MOTS20" else list(CLASS_IDS)
+        if object_class not in valid:
+            raise ValueError(f"object_class={object_class!r} is not a {benchmark} class; "
+                             f"valid: {valid}")
+        self.benchmark = benchmark
+        self.object_class = object_class
+        self.class_id = CLASS_IDS[object_class]
+        data_root = resolve_root(root, DATA_FOLDERS[benchmark])
+        self.synthetic = data_root is None
+        if data_root is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            data_root = ensure_synthetic(benchmark, kind="mots")
+        self.dataset = MOTSDataset(data_root, benchmark, split or DEFAULT_SPLITS[benchmark],
+                                   detections)
+        if sequences is not None:
+            missing = [s for s in sequences if s not in self.dataset.sequence_names]
+            if missing:
+                raise ValueError(f"sequences {missing} are not in {self.dataset.split_dir}; "
+                                 f"available: {', '.join(self.dataset.sequence_names)}")
+            self.sequence_names = list(sequences)
+        else:
+            self.sequence_names = list(self.dataset.sequence_names)
+        self.min_score = min_score
+        self.max_detections = int(max_detections)
+        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        self.observation_space = ut_spaces.mask_observation_space(
+            self.max_detections, self.max_frame_size)
+        self.action_space: spaces.Dict = ut_spaces.mask_id_action_space(self.max_detections)
+
+        self._info_seq: MOTSSequenceInfo | None = None
+        self._gt: MaskAnnotations | None = None
+        self._dets: MaskAnnotations | None = None
+        self._frames: FramePrefetcher | None = None
+        self._k = 0
+        self._done = True
+        self._clear = MaskClearStream()
+        self._results: list[tuple[int, np.ndarray, list[bytes]]] = []
+        self._current: dict[str, Any] = {}
+        self._render_state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ episode control
+    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self._frames is not None:
+            self._frames.close()
+        info = self.dataset.info(name)
+        if info.height > self.max_frame_size[0] or info.width > self.max_frame_size[1]:
+            raise ValueError(f"{name}: frames are {info.width}x{info.height}, larger than "
+                             f"max_frame_size={self.max_frame_size}; pass a larger one")
+        dets = self.dataset.load_detections(name, self.class_id)
+        if self.min_score is not None:
+            dets = dets.select(dets.scores >= self.min_score)
+        counts = np.bincount(dets.frames - info.first_frame, minlength=1) if len(dets) else [0]
+        if len(dets) and (dets.frames.min() < info.first_frame
+                          or dets.frames.max() >= info.first_frame + info.length):
+            bad = int(np.argmax((dets.frames < info.first_frame)
+                                | (dets.frames >= info.first_frame + info.length)))
+            raise dets._error(bad, f"time_frame {dets.frames[bad]} is outside the sequence "
+                              f"({info.first_frame}..{info.first_frame + info.length - 1})",
+                              "time_frame")
+        if max(counts) > self.max_detections:
+            raise ValueError(f"{self.dataset.detection_path(name)}: a frame has {max(counts)} "
+                             f"detections, more than max_detections={self.max_detections}")
+        self._info_seq = info
+        self._gt = self.dataset.ground_truth(name)
+        self._dets = dets
+        self._frames = FramePrefetcher(info.frame_path, prefetch=self.prefetch)
+        self._k = 0
+        self._done = False
+        self._clear.reset()
+        self._results = []
+        self._render_state = None
+        return self._observe(), self._info(reset=True)
+
+    @property
+    def _frame_number(self) -> int:
+        return self._info_seq.first_frame + self._k
+
+    def _observe(self) -> dict[str, Any]:
+        info, t = self._info_seq, self._frame_number
+        if self.decode_frames:
+            image = self._frames.get(t)
+            if self._k + 1 < info.length:
+                self._frames.schedule(t + 1)
+            if image.shape[:2] != (info.height, info.width):
+                raise ValueError(f"{info.frame_path(t)}: image is {image.shape[1]}x"
+                                 f"{image.shape[0]} but the sequence is {info.width}x{info.height}")
+        else:
+            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        rows = self._dets.rows(t)
+        masks = self._dets.decode(rows, info.height, info.width)
+        scores = self._dets.scores[rows]
+        counts = [self._dets.counts[i] for i in rows]
+        if len(masks) > 1 and (masks.sum(axis=0) > 1).any():
+            masks = resolve_overlaps(masks, scores)
+            counts = encode_masks(masks)
+        n = len(rows)
+        boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
+        padded_scores = np.zeros(self.max_detections, dtype=np.float32)
+        boxes[:n] = ut_spaces.mask_boxes(masks)
+        padded_scores[:n] = scores
+        self._current = {"image": image, "masks": masks, "counts": counts}
+        return {"frame": image, "masks": masks, "boxes": boxes, "scores": padded_scores,
+                "num_detections": n}
+
+    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+        info = self._info_seq
+        out: dict[str, Any] = {"sequence": info.name, "frame_index": self._frame_number}
+        if reset:
+            out.update(seq_length=info.length, frame_rate=info.frame_rate,
+                       image_size=(info.height, info.width), benchmark=self.benchmark,
+                       has_ground_truth=self._gt is not None, synthetic=self.synthetic)
+        return out
+
+    def step(self, action: dict[str, Any]
+             ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Record the ids given to this frame's masks, score them, and move on."""
+        if self._done or self._info_seq is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        counts = self._current["counts"]
+        ids = ut_spaces.unpack_mask_ids(action, len(counts), self.max_detections)
+        reported = np.flatnonzero(ids > 0)
+        t = self._frame_number
+        self._results.append((t, ids[reported], [counts[i] for i in reported]))
+        reward, clear = self._score_frame(t, ids[reported], [counts[i] for i in reported])
+        keep = ids > 0
+        self._render_state = (self._current["image"], self._current["masks"][keep], ids[keep])
+        extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
+        if self._k + 1 >= self._info_seq.length:
+            self._done = True
+            observation = self._repeat_observation()
+            info = self._info() | extra
+            if self._gt is not None:
+                info["metrics"] = self.episode_metrics()
+            self._frames.close()
+            return observation, reward, True, False, info
+        self._k += 1
+        return self._observe(), reward, False, False, self._info() | extra
+
+    def _repeat_observation(self) -> dict[str, Any]:
+        masks = self._current["masks"]
+        n = len(masks)
+        boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
+        boxes[:n] = ut_spaces.mask_boxes(masks)
+        scores = np.zeros(self.max_detections, dtype=np.float32)
+        scores[:n] = self._dets.scores[self._dets.rows(self._frame_number)]
+        return {"frame": self._fresh(self._current["image"]), "masks": self._fresh(masks),
+                "boxes": boxes, "scores": scores, "num_detections": n}
+
+    def _score_frame(self, t: int, ids: np.ndarray, counts: list[bytes]
+                     ) -> tuple[float, dict[str, int] | None]:
+        if self._gt is None:
+            return 0.0, None
+        info = self._info_seq
+        rows = self._gt.rows(t)
+        cls = self._gt.classes[rows]
+        gt_rows, ignore_rows = rows[cls == self.class_id], rows[cls == CLASS_IGNORE]
+        size = [info.height, info.width]
+        counts_frame = self._clear.update(
+            self._gt.ids[gt_rows], self._gt.rles(gt_rows), self._gt.rles(ignore_rows),
+            ids, [{"size": size, "counts": c} for c in counts])
+        clear = {"tp": counts_frame.tp, "fp": counts_frame.fp, "fn": counts_frame.fn,
+                 "idsw": counts_frame.idsw}
+        return float(counts_frame.tp - counts_frame.fp - counts_frame.idsw), clear
+
+    # ------------------------------------------------------------------ results
+    def episode_results(self) -> MaskAnnotations:
+        """The masks reported so far with their ids, as MOTS result records."""
+        info = self._info_seq
+        frames, ids, counts = [], [], []
+        for t, frame_ids, frame_counts in self._results:
+            frames += [t] * len(frame_ids)
+            ids += frame_ids.tolist()
+            counts += frame_counts
+        k = len(frames)
+        height = info.height if info is not None else 0
+        width = info.width if info is not None else 0
+        return MaskAnnotations(
+            np.asarray(frames, np.int64), np.asarray(ids, np.int64),
+            np.full(k, self.class_id, np.int64), np.full(k, height, np.int64),
+            np.full(k, width, np.int64), tuple(counts), np.ones(k), np.zeros(k, np.int64))
+
+    def episode_digest(self) -> str:
+        """SHA-256 of the episode's MOTS result text."""
+        text = format_instances_txt(self.episode_results())
+        return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+    def episode_metrics(self) -> dict[str, float]:
+        """TrackEval's MOTS metrics of the recorded episode (needs ground truth)."""
+        from unitrack_env.metrics.mots import score_sequence
+
+        if self._gt is None:
+            raise ValueError("this sequence has no ground truth to score against")
+        score = score_sequence(self._gt, self.episode_results(), seq_length=self._info_seq.length,
+                               benchmark=self.benchmark, object_class=self.object_class,
+                               sequence=self._info_seq.name)
+        return dict(score.summary)
+
+    def sequence_length(self, name: str) -> int:
+        """Number of frames of sequence ``name``."""
+        return self.dataset.info(name).length
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` has ground truth."""
+        return self.dataset.has_ground_truth(name)
+
+    def write_episode(self, folder: Path) -> None:
+        """Write ``<folder>/<sequence>.txt`` in the official MOTS txt result format."""
+        if self._info_seq is None:
+            raise RuntimeError("no episode to write; call reset() and play it first")
+        atomic_write_text(Path(folder) / f"{self._info_seq.name}.txt",
+                          format_instances_txt(self.episode_results()))
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
+        from unitrack_env.metrics.mots import score_folder
+
+        return score_folder(self.dataset, folder, sequences, object_class=self.object_class)
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
+        if self.render_mode is None:
+            return None
+        if self._info_seq is None:
+            raise RuntimeError("call reset() before render()")
+        if self._render_state is None:
+            return draw_masks(self._current["image"], self._current["masks"])
+        return draw_masks(*self._render_state)
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()
+
+
+#: Opacity of the mask overlay in renders.
+MASK_ALPHA = 0.55
+
+
+def draw_masks(frame: np.ndarray, masks: np.ndarray, ids: np.ndarray | None = None
+               ) -> np.ndarray:
+    """Overlay ``(n, H, W)`` masks on a copy of ``frame``.
+
+    With ``ids`` the masks are id-coloured and get labelled boxes, else they are grey. A frame
+    of another size (``decode_frames=False``) is replaced by a black canvas of the masks' size.
+    """
+    canvas = np.ascontiguousarray(frame).copy()
+    if len(masks) and canvas.shape[:2] != masks.shape[1:]:
+        canvas = np.zeros((*masks.shape[1:], 3), dtype=np.uint8)
+    for i, mask in enumerate(masks):
+        colour = np.asarray(id_colour(ids[i]) if ids is not None else DETECTION_COLOUR, float)
+        canvas[mask] = (canvas[mask] * (1 - MASK_ALPHA) + colour * MASK_ALPHA).astype(np.uint8)
+    if ids is not None and len(masks):
+        canvas = draw_boxes(canvas, ut_spaces.mask_boxes(masks), ids, one_based=False)
+    return canvas

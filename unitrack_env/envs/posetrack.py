@@ -1,0 +1,483 @@
+"""Multi-person pose tracking on PoseTrack 2018 (per-sequence JSON, 17 keypoints)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from unitrack_env import spaces as ut_spaces
+from unitrack_env.datasets.posetrack import (
+    NUM_KEYPOINTS,
+    PERSON_CATEGORY,
+    POSETRACK_SKELETON,
+    PoseTrackDataset,
+    PoseTrackPerson,
+    PoseTrackSequence,
+    PoseTrackVideo,
+    read_posetrack_json,
+    write_posetrack_json,
+)
+from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.jhmdb import draw_skeleton
+from unitrack_env.errors import DataFormatError
+from unitrack_env.frames import FramePrefetcher
+from unitrack_env.metrics.posetrack import (
+    POSEVAL_DROPS_LAST_FRAME,
+    PoseFrame,
+    PosevalSequence,
+    evaluate_video,
+    evaluated_frames,
+    summarise,
+)
+from unitrack_env.metrics.report import COMBINED, ScoreReport
+from unitrack_env.render import DETECTION_COLOUR, id_colour
+
+#: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).
+DEFAULT_MAX_PEOPLE = 100
+#: Default capacity of the padded track arrays.
+DEFAULT_MAX_TRACKS = 100
+#: Default bound of the frame space (height, width): 4K.
+DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
+#: Frame rate reported in ``info`` (PoseTrack files do not declare one; its videos are
+#: 25-30 fps).
+FRAME_RATE = 30
+#: Benchmark folder name under ``UNITRACK_DATA`` and in the synthetic cache.
+BENCHMARK = "PoseTrack2018"
+#: ``detections=`` value: the annotated poses without their ids.
+ORACLE = "oracle"
+_LIMBS = tuple((a - 1, b - 1) for a, b in POSETRACK_SKELETON)
+
+
+class PoseTrackEnv(SequenceEnv):
+    """Multi-person pose tracking by association on PoseTrack 2018 data.
+
+    ## Description
+    Each episode is one PoseTrack video. At every step the agent sees a frame and that
+    frame's person poses (17 keypoints each, without identities) and answers with a track
+    id per pose it keeps. The environment scores the answer with poseval's per-keypoint
+    CLEAR MOT rules (head-normalised distance <= 0.5, see
+    :mod:`unitrack_env.metrics.posetrack`) and reports poseval's MOTA, the IDF1 and ID
+    switches the UniTrack paper adds, precision and recall at the end of the episode.
+
+    **Observations (pose detections).** ``detections=`` names a folder of
+    ``<sequence>.json`` files in the PoseTrack result format (``images`` + ``annotations``
+    with ``keypoints``, per-keypoint ``scores`` and a pose ``score``; ``track_id`` is
+    ignored). The UniTrack paper uses the pose estimates of LightTrack, which are not
+    available offline, so on real data without ``detections=`` the environment falls back
+    to **oracle detections**: the annotated poses of the labelled frames with their ids
+    removed, sorted left to right, score 1 (``info["oracle_detections"]`` is True). Oracle
+    detections make MOTA an identity-only score; report them as such. The synthetic data
+    set ships simulated pose-estimator detections (misses, jitter, hallucinated occluded
+    joints, false poses), used by default. A split without annotation files and without
+    ``detections=`` runs with no poses.
+
+    **Frames.** An episode visits the frames listed in the sequence file's ``images`` (all
+    frames of a release video; ``nframes`` is reported as ``info["nframes_declared"]``).
+    The bundled real fixture (mmpose's trimmed copy) lists one labelled frame of a
+    149-frame video, so its episodes have one step; poseval drops the last evaluated frame
+    of every sequence, so with the default ``drop_last_frame=True`` such a one-frame
+    sequence has no evaluated frame and its metrics are NaN. A test split (frames only) is
+    read from ``images/test/<sequence>/``.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, uint8 RGB at native size.
+    - ``keypoints``: ``Box((max_people, 17, 3), float32)``: ``(x, y, score)`` per keypoint
+      in the file's pixels and PoseTrack's keypoint order (nose, head_bottom, head_top,
+      left/right ear, shoulders, elbows, wrists, hips, knees, ankles); score in ``[0, 1]``,
+      0 for a keypoint the detector did not find (coordinates then 0). Rows past
+      ``num_people`` are 0.
+    - ``scores``: ``Box((max_people,), float32)``: pose scores.
+    - ``num_people``: ``Discrete(max_people + 1)``.
+
+    ``unitrack_env.spaces.unpack_poses`` returns the valid rows. Ground truth never appears
+    in observations (oracle detections carry no ids).
+
+    ## Action space
+    A ``Dict`` of padded arrays, mirroring the MOT action: ``ids`` ``(max_tracks,) int64``
+    (>= 1), ``keypoints`` ``(max_tracks, 17, 3) float32`` (the tracked poses, usually the
+    observed ones echoed; a keypoint with score 0 is not predicted) and ``num_tracks``
+    ``Discrete(max_tracks + 1)``. Build it with ``unitrack_env.spaces.pack_pose_tracks``;
+    the unpadded ``{"ids": (k,), "keypoints": (k, 17, 3)}`` is accepted. Wrong shapes or
+    dtypes, NaN/inf, scores outside ``[0, 1]``, ids < 1 or duplicate ids raise
+    ``InvalidActionError`` before anything is recorded.
+
+    ## Rewards
+    On every frame poseval evaluates (labelled frames with people, except the last one
+    when ``drop_last_frame``): ``sum over the 15 poseval joints of (TP - FP - IDSW)``
+    (``TP`` = matched keypoints incl. switches). Other frames give 0. The episode return
+    divided by the number of ground-truth keypoints (``info["metrics"]["num_objects"]``)
+    is the keypoint-pooled MOTA; the reported MOTA averages the per-joint MOTAs instead.
+    ``info["clear"]`` has the frame's ``tp``, ``fp``, ``fn``, ``idsw`` summed over joints.
+    Splits without ground truth give 0.
+
+    ## Starting state
+    ``reset`` returns the first frame and its poses. ``info`` holds ``sequence``,
+    ``frame_index`` (0-based frame number of the file name, PoseTrack's own),
+    ``image_id``, ``is_labeled``, ``seq_length``, ``frame_rate`` (30; not in the files),
+    ``image_size`` ``(height, width)``, ``nframes_declared``, ``has_ground_truth``,
+    ``detections`` (``"synthetic"``, ``"oracle"``, ``"folder"`` or ``"none"``),
+    ``oracle_detections`` and ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame. ``info["metrics"]`` holds poseval's metrics
+    as fractions: ``MOTA``, ``IDF1`` (means over joints), ``IDSW`` (sum over joints),
+    ``MOTP``, ``Precision``, ``Recall``, ``MOTA/<body part>`` (poseval's columns),
+    ``<metric>/<joint>`` per joint, and counts. Results are written as the official
+    PoseTrack 2018 result JSON ``<folder>/<sequence>.json`` (the ground truth's ``images``,
+    one annotation per track with ``track_id``, ``keypoints`` ``(x, y, 1)`` or
+    ``(0, 0, 0)``, ``scores`` and ``score``), which :meth:`score_folder` re-reads.
+
+    ## Arguments
+    - ``root``: folder holding ``posetrack_data/`` (default: ``$UNITRACK_DATA/PoseTrack2018``
+      if that variable is set, else the synthetic data).
+    - ``split``: ``"train"``, ``"val"`` (default, the paper's) or ``"test"``.
+    - ``sequences``: restrict to these sequence names.
+    - ``detections``: a folder of ``<sequence>.json`` pose detections, ``"oracle"``, or
+      None (synthetic: its simulated detections; real: oracle, or none for test).
+    - ``min_score``: drop detected poses scored below this.
+    - ``max_people``, ``max_tracks``, ``max_frame_size``: space capacities.
+    - ``drop_last_frame``: leave out the last evaluated frame per sequence like poseval.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws the tracked skeletons coloured by id.
+
+    ## Version history
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike | None = None,
+        split: str = "val",
+        sequences: list[str] | tuple[str, ...] | None = None,
+        detections: str | os.PathLike | None = None,
+        min_score: float | None = None,
+        max_people: int = DEFAULT_MAX_PEOPLE,
+        max_tracks: int = DEFAULT_MAX_TRACKS,
+        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
+        drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME,
+        decode_frames: bool = True,
+        prefetch: bool = True,
+        shuffle: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        data_root = resolve_root(root, BENCHMARK)
+        self.synthetic = data_root is None
+        if data_root is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            data_root = ensure_synthetic(BENCHMARK, kind="posetrack")
+        self.dataset = PoseTrackDataset(data_root, split)
+        if sequences is not None:
+            missing = [s for s in sequences if s not in self.dataset.sequence_names]
+            if missing:
+                raise ValueError(f"sequences {missing} are not in {self.dataset.data_dir} "
+                                 f"({split}); available: {', '.join(self.dataset.sequence_names)}")
+            self.sequence_names = list(sequences)
+        else:
+            self.sequence_names = list(self.dataset.sequence_names)
+        self.detection_source, self.detection_dir = self._detection_source(data_root, detections)
+        self.min_score = min_score
+        self.max_people = int(max_people)
+        self.max_tracks = int(max_tracks)
+        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.drop_last_frame = bool(drop_last_frame)
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        self.observation_space = spaces.Dict({
+            "frame": ut_spaces.Image(*self.max_frame_size),
+            "keypoints": ut_spaces.keypoint_array_space(self.max_people, NUM_KEYPOINTS),
+            "scores": spaces.Box(0.0, ut_spaces.FLOAT_MAX, (self.max_people,), np.float32),
+            "num_people": spaces.Discrete(self.max_people + 1),
+        })
+        self.action_space = ut_spaces.pose_track_action_space(self.max_tracks, NUM_KEYPOINTS)
+        self._sequence: PoseTrackSequence | None = None
+        self._poses: list[tuple[np.ndarray, np.ndarray]] = []
+        self._evaluated: set[int] = set()
+        self._frames: FramePrefetcher | None = None
+        self._k = 0
+        self._done = True
+        self._poseval = PosevalSequence()
+        self._results: list[list[PoseTrackPerson]] = []
+        self._frame: np.ndarray | None = None
+        self._render_tracks: tuple[np.ndarray, np.ndarray] | None = None
+        self._render_frame: np.ndarray | None = None
+
+    def _detection_source(self, data_root: Path, detections: str | os.PathLike | None
+                          ) -> tuple[str, Path | None]:
+        if detections is None:
+            if self.synthetic:
+                from unitrack_env.datasets.synthetic.posetrack import DETECTIONS_FOLDER
+
+                return "synthetic", Path(data_root) / DETECTIONS_FOLDER / self.dataset.split
+            return (ORACLE if self.dataset.annotated else "none"), None
+        if str(detections) == ORACLE:
+            if not self.dataset.annotated:
+                raise ValueError(f"detections='oracle' needs annotations, and split "
+                                 f"'{self.dataset.split}' has none; pass a detection folder")
+            return ORACLE, None
+        folder = Path(detections).expanduser()
+        if not folder.is_dir():
+            raise DataFormatError(folder, "detections= is not a folder of <sequence>.json files")
+        return "folder", folder
+
+    # ------------------------------------------------------------------ episode control
+    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self._frames is not None:
+            self._frames.close()
+        sequence = self.dataset.load(name)
+        width, height = sequence.image_size
+        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
+            raise ValueError(f"{name}: frames are {width}x{height}, larger than max_frame_size="
+                             f"{self.max_frame_size} (height, width); pass a larger one")
+        self._poses = self._load_poses(sequence)
+        most = max((len(s) for s, _ in self._poses), default=0)
+        if most > self.max_people:
+            raise ValueError(f"{name}: a frame has {most} poses, more than max_people="
+                             f"{self.max_people}; pass a larger max_people")
+        self._sequence = sequence
+        self._evaluated = (set(evaluated_frames(sequence.ground_truth,
+                                                drop_last_frame=self.drop_last_frame))
+                           if sequence.ground_truth is not None else set())
+        self._frames = FramePrefetcher(sequence.frame_paths.__getitem__, prefetch=self.prefetch)
+        self._k = 0
+        self._done = False
+        self._poseval = PosevalSequence()
+        self._results = []
+        self._render_tracks = None
+        return self._observe(0), self._info(reset=True)
+
+    def _load_poses(self, sequence: PoseTrackSequence) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per frame ``(scores (n,), keypoints (n, 17, 3))`` from the detection source."""
+        empty = (np.zeros(0, np.float32), np.zeros((0, NUM_KEYPOINTS, 3), np.float32))
+        if self.detection_source == "none":
+            return [empty] * sequence.length
+        if self.detection_source == ORACLE:
+            per_image = sequence.ground_truth.people
+            out = []
+            for people in per_image:
+                poses = [_observed_pose(p, oracle=True) for p in people]
+                poses.sort(key=lambda sp: _leftmost(sp[1]))  # no file (= track id) order
+                out.append(_stack(poses) if poses else empty)
+            return out
+        path = self.detection_dir / f"{sequence.name}.json"
+        video = read_posetrack_json(path)
+        position = {image.id: k for k, image in enumerate(sequence.images)}
+        lists: list[list[tuple[float, np.ndarray]]] = [[] for _ in sequence.images]
+        for image, people in zip(video.images, video.people, strict=True):
+            if image.id not in position:
+                if people:
+                    raise DataFormatError(path, f"has poses on image {image.id}, which sequence "
+                                                f"'{sequence.name}' does not list", field="images")
+                continue
+            for person in people:
+                lists[position[image.id]].append(_observed_pose(person, oracle=False))
+        out = []
+        for poses in lists:
+            if self.min_score is not None:
+                poses = [sp for sp in poses if sp[0] >= self.min_score]
+            out.append(_stack(poses) if poses else empty)
+        return out
+
+    def _observe(self, k: int) -> dict[str, Any]:
+        seq = self._sequence
+        if self.decode_frames:
+            image = self._frames.get(k)
+            if k + 1 < seq.length:
+                self._frames.schedule(k + 1)
+            if image.shape[1::-1] != seq.image_size:
+                raise DataFormatError(seq.frame_paths[k], f"is {image.shape[1]}x{image.shape[0]},"
+                                      f" the sequence says {seq.image_size[0]}x"
+                                      f"{seq.image_size[1]}")
+        else:
+            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        self._frame = image
+        return self._pose_observation(k, image)
+
+    def _pose_observation(self, k: int, image: np.ndarray) -> dict[str, Any]:
+        scores, poses = self._poses[k]
+        n = len(scores)
+        keypoints = np.zeros((self.max_people, NUM_KEYPOINTS, 3), dtype=np.float32)
+        pose_scores = np.zeros(self.max_people, dtype=np.float32)
+        keypoints[:n] = poses
+        pose_scores[:n] = scores
+        return {"frame": image, "keypoints": keypoints, "scores": pose_scores, "num_people": n}
+
+    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+        seq = self._sequence
+        image = seq.images[self._k]
+        out: dict[str, Any] = {"sequence": seq.name, "frame_index": image.frame_index,
+                               "image_id": image.id, "is_labeled": bool(image.is_labeled)}
+        if reset:
+            out.update(
+                seq_length=seq.length, frame_rate=FRAME_RATE,
+                image_size=(seq.image_size[1], seq.image_size[0]),
+                nframes_declared=image.nframes if image.nframes is not None else seq.length,
+                has_ground_truth=seq.ground_truth is not None,
+                detections=self.detection_source,
+                oracle_detections=self.detection_source == ORACLE,
+                synthetic=self.synthetic,
+            )
+        return out
+
+    def step(self, action: dict[str, Any]
+             ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Record the pose tracks of the current frame, score them, move to the next frame."""
+        if self._done or self._sequence is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        ids, keypoints = ut_spaces.unpack_pose_tracks(action, self.max_tracks, NUM_KEYPOINTS)
+        k = self._k
+        image = self._sequence.images[k]
+        people = [_result_person(image.id, int(i), kp) for i, kp in zip(ids, keypoints,
+                                                                          strict=True)]
+        self._results.append(people)
+        self._render_frame, self._render_tracks = self._frame, (ids, keypoints)
+        reward, info_extra = 0.0, {}
+        gt = self._sequence.ground_truth
+        if k in self._evaluated:
+            counts = self._poseval.update(PoseFrame.from_people(gt.people[k]),
+                                          PoseFrame.from_people(people), image.ignore_regions)
+            reward = float(counts.mota_numerator)
+            info_extra["clear"] = {"tp": int(counts.detections.sum()),
+                                   "fp": int(counts.false_positives.sum()),
+                                   "fn": int(counts.misses.sum()),
+                                   "idsw": int(counts.switches.sum())}
+        if k + 1 >= self._sequence.length:
+            self._done = True
+            observation = self._pose_observation(k, self._fresh(self._frame))
+            info = self._info() | info_extra
+            if gt is not None:
+                info["metrics"] = summarise([self._poseval.counts()])
+            if self._frames is not None:
+                self._frames.close()
+            return observation, reward, True, False, info
+        self._k = k + 1
+        return self._observe(self._k), reward, False, False, self._info() | info_extra
+
+    # ------------------------------------------------------------------ results
+    def episode_results(self) -> PoseTrackVideo:
+        """Return the recorded tracks as a PoseTrack 2018 result (the sequence's images)."""
+        if self._sequence is None:
+            raise RuntimeError("no episode; call reset() first")
+        people = self._results + [[] for _ in range(self._sequence.length - len(self._results))]
+        return PoseTrackVideo(list(self._sequence.images), people, [dict(PERSON_CATEGORY)])
+
+    def episode_digest(self) -> str:
+        """Return a SHA-256 digest of the recorded ids and keypoints (rounded to 1e-3)."""
+        digest = hashlib.sha256()
+        for k, people in enumerate(self._results):
+            for person in people:
+                row = np.concatenate([[k, person.track_id], person.keypoints.reshape(-1)])
+                digest.update(np.round(row, 3).tobytes())
+        return digest.hexdigest()
+
+    def sequence_length(self, name: str) -> int:
+        """Return the number of frames of ``name`` (its ``images`` entries or image files)."""
+        return self.dataset.sequence_length(name)
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether ``name`` has an annotation file."""
+        return self.dataset.has_ground_truth(name)
+
+    def write_episode(self, folder: Path) -> None:
+        """Write ``<folder>/<sequence>.json`` in the official PoseTrack 2018 result format."""
+        if self._sequence is None:
+            raise RuntimeError("no episode to write; call reset() and play it first")
+        write_posetrack_json(Path(folder) / f"{self._sequence.name}.json", self.episode_results())
+
+    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
+        per_sequence: dict[str, dict[str, float]] = {}
+        counts = []
+        for name in sequences:
+            gt = read_posetrack_json(self.dataset.annotation_dir / f"{name}.json")
+            pred = read_posetrack_json(Path(folder) / f"{name}.json")
+            try:
+                seq_counts = evaluate_video(gt, pred, drop_last_frame=self.drop_last_frame)
+            except ValueError as err:
+                raise DataFormatError(Path(folder) / f"{name}.json", str(err)) from err
+            counts.append(seq_counts)
+            per_sequence[name] = summarise([seq_counts])
+        combined = summarise(counts) if counts else {}
+        return ScoreReport(BENCHMARK, per_sequence, combined,
+                           scores={**per_sequence, COMBINED: combined})
+
+    @property
+    def sequence(self) -> PoseTrackSequence | None:
+        """The sequence of the current episode."""
+        return self._sequence
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """Return the frame with the tracked skeletons coloured by id (detections at reset)."""
+        if self.render_mode is None:
+            return None
+        if self._sequence is None:
+            raise RuntimeError("call reset() before render()")
+        if self._render_tracks is None:
+            canvas = np.ascontiguousarray(self._frame).copy()
+            for pose in self._poses[self._k][1]:
+                draw_skeleton(canvas, pose[:, :2], _LIMBS, present=pose[:, 2] > 0,
+                              colour=DETECTION_COLOUR)
+            return canvas
+        canvas = np.ascontiguousarray(self._render_frame).copy()
+        ids, keypoints = self._render_tracks
+        for track_id, pose in zip(ids, keypoints, strict=True):
+            draw_skeleton(canvas, pose[:, :2], _LIMBS, present=pose[:, 2] > 0,
+                          colour=id_colour(int(track_id)))
+        return canvas
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()
+
+
+def _observed_pose(person: PoseTrackPerson, *, oracle: bool) -> tuple[float, np.ndarray]:
+    """A person as ``(pose score, (17, 3) float32 (x, y, keypoint score))``."""
+    present = person.annotated
+    if oracle or person.scores is None or person.scores.size == 0:
+        joint_scores = present.astype(np.float64)
+    else:
+        joint_scores = np.where(present, np.clip(person.scores, 0.0, 1.0), 0.0)
+    pose = np.zeros((NUM_KEYPOINTS, 3), dtype=np.float32)
+    pose[present, :2] = person.keypoints[present, :2]
+    pose[:, 2] = joint_scores
+    if oracle:
+        score = 1.0
+    elif person.score is not None:
+        score = person.score
+    else:
+        score = float(joint_scores[present].mean()) if present.any() else 0.0
+    return max(0.0, float(score)), pose
+
+
+def _leftmost(pose: np.ndarray) -> float:
+    present = pose[:, 2] > 0
+    return float(pose[present, 0].min()) if present.any() else float("inf")
+
+
+def _stack(poses: list[tuple[float, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    return (np.array([s for s, _ in poses], dtype=np.float32),
+            np.stack([p for _, p in poses]).astype(np.float32))
+
+
+def _result_person(image_id: int, track_id: int, keypoints: np.ndarray) -> PoseTrackPerson:
+    """One tracked pose in the result format: ``(x, y, 1)`` if its score > 0 else ``(0, 0, 0)``."""
+    present = keypoints[:, 2] > 0
+    out = np.zeros((NUM_KEYPOINTS, 3))
+    out[present, :2] = keypoints[present, :2]
+    out[present, 2] = 1.0
+    scores = np.where(present, keypoints[:, 2], 0.0)
+    score = float(scores[present].mean()) if present.any() else 0.0
+    return PoseTrackPerson(image_id=image_id, keypoints=out, track_id=track_id, scores=scores,
+                           score=score, extra={"category_id": 1})

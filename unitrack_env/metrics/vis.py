@@ -1,0 +1,146 @@
+"""Official YouTube-VIS track mAP through TrackEval 1.3.0 (``YouTubeVIS`` + ``TrackMAP``).
+
+TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
+licence) restates the YouTube-VIS evaluation (Yang et al., ICCV 2019): a predicted track
+matches a ground-truth track by spatio-temporal mask IoU (intersections and unions summed
+over the video's frames); AP is averaged over IoU thresholds 0.50:0.05:0.95 and 101 recall
+points, per category, then over categories. As the MOTChallenge adapter does, this one uses
+TrackEval's data set class and metric directly (no ``Evaluator``: nothing is printed,
+plotted or written), in a private temporary folder.
+
+Data contract: ground truth is a :class:`~unitrack_env.datasets.youtube_vis.VisData`, results
+a list of :class:`~unitrack_env.datasets.youtube_vis.VisTrack` (results format). Scores are
+TrackEval's fields averaged over the IoU thresholds (``AP_all``, ``AR_all``, and the area
+ranges ``AP_area_s`` ... ``AR_area_l``, set as TrackEval's YouTube-VIS script sets them),
+plus ``AP`` (= ``AP_all``, the challenge's mAP), ``AP50``, ``AP75`` and ``AR`` (=
+``AR_all``). Per-video numbers are the metric over that video alone; the combined row
+accumulates all videos before averaging, as the leaderboard does. Undefined values (no
+ground truth and no prediction of any category) are -1, TrackEval's convention.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.datasets.youtube_vis import (
+    VisData,
+    VisTrack,
+    VisVideo,
+    format_annotations,
+    format_results,
+)
+from unitrack_env.errors import DataFormatError
+from unitrack_env.metrics.report import COMBINED, ScoreReport
+
+#: Split name used inside the temporary TrackEval layout.
+_SPLIT = "eval"
+_TRACKER = "tracker"
+#: Index of IoU 0.50 and 0.75 in TrackEval's thresholds 0.50:0.05:0.95.
+IOU50_INDEX, IOU75_INDEX = 0, 5
+
+
+#: TrackMAP's area ranges for YouTube-VIS (TrackEval's ``scripts/run_youtube_vis.py``):
+#: small < 128^2, medium < 256^2, large, in pixels; time ranges are off there (YouTube-VIS
+#: gives no track lengths).
+AREA_RANGES = ([0**2, 128**2], [128**2, 256**2], [256**2, 1e5**2])
+
+
+def _metric() -> Any:
+    from trackeval.metrics import TrackMAP
+
+    return TrackMAP({"PRINT_CONFIG": False, "USE_TIME_RANGES": False,
+                     "AREA_RANGES": [list(r) for r in AREA_RANGES]})
+
+
+def _flatten(res: dict[str, Any]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for name, value in res.items():
+        if name.startswith(("AP_", "AR_")):
+            arr = np.asarray(value, dtype=np.float64)
+            out[name] = -1.0 if (arr <= -1).all() else float(np.mean(arr))
+    ap = np.asarray(res["AP_all"], dtype=np.float64)
+    out["AP"] = out["AP_all"]
+    out["AP50"] = float(ap[IOU50_INDEX])
+    out["AP75"] = float(ap[IOU75_INDEX])
+    out["AR"] = out["AR_all"]
+    return out
+
+
+def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[VisVideo], *,
+                 source: Path | None = None) -> ScoreReport:
+    """Track mAP of ``results`` on ``videos`` of ``ground_truth``, per video and combined.
+
+    Raises:
+        ValueError: ``ground_truth`` has no annotations or ``videos`` is empty.
+        DataFormatError: TrackEval rejected the data (naming ``source``).
+    """
+    if ground_truth.tracks is None:
+        raise ValueError(f"{ground_truth.path} has no annotations to score against")
+    if not videos:
+        raise ValueError("no videos to score")
+    import trackeval.datasets as te_datasets
+    from trackeval.utils import TrackEvalException
+
+    metric = _metric()
+    ids = {v.id for v in videos}
+    kept = [r for r in results if r.video_id in ids]
+    with tempfile.TemporaryDirectory(prefix="unitrack-vis-") as tmp:
+        gt_dir = Path(tmp) / "gt" / f"youtube_vis_{_SPLIT}"
+        gt_dir.mkdir(parents=True)
+        (gt_dir / "gt.json").write_text(format_annotations(ground_truth, list(videos)))
+        trk_dir = Path(tmp) / "trk" / f"youtube_vis_{_SPLIT}" / _TRACKER / "data"
+        trk_dir.mkdir(parents=True)
+        (trk_dir / "results.json").write_text(format_results(kept))
+        config = {"GT_FOLDER": str(Path(tmp) / "gt") + "/",
+                  "TRACKERS_FOLDER": str(Path(tmp) / "trk") + "/",
+                  "OUTPUT_FOLDER": tmp, "TRACKERS_TO_EVAL": [_TRACKER], "SPLIT_TO_EVAL": _SPLIT,
+                  "PRINT_CONFIG": False, "CLASSES_TO_EVAL": None}
+        captured = io.StringIO()
+        per_class: dict[str, dict[str, Any]] = {}
+        try:
+            with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
+                dataset = te_datasets.YouTubeVIS(config)
+                for seq in dataset.seq_list:
+                    raw = dataset.get_raw_seq_data(_TRACKER, seq)
+                    for cls in dataset.class_list:
+                        data = dataset.get_preprocessed_seq_data(raw, cls)
+                        per_class.setdefault(cls, {})[seq] = metric.eval_sequence(data)
+        except TrackEvalException as exc:
+            raise DataFormatError(source or Path("<results>"),
+                                  f"TrackEval rejected the data: {exc}") from exc
+    seqs = [v.name for v in videos]
+    per_sequence = {}
+    for seq in seqs:
+        classes = {cls: metric.combine_sequences({seq: res[seq]}) for cls, res in per_class.items()}
+        per_sequence[seq] = _flatten(metric.combine_classes_class_averaged(classes))
+    combined = metric.combine_classes_class_averaged(
+        {cls: metric.combine_sequences(res) for cls, res in per_class.items()})
+    return ScoreReport(benchmark="YouTube-VIS-2019", per_sequence=per_sequence,
+                       combined=_flatten(combined), scores={COMBINED: combined})
+
+
+def merge_result_files(folder: str | Path, sequences: list[str] | None = None) -> list[dict]:
+    """Concatenate per-video result files ``<folder>/<video>.json`` into one results list.
+
+    The list is what the challenge's ``results.json`` holds (dump it with ``json.dump``).
+    """
+    import json
+
+    folder = Path(folder)
+    names = sequences if sequences is not None else sorted(p.stem for p in folder.glob("*.json"))
+    out: list[dict] = []
+    for name in names:
+        path = folder / f"{name}.json"
+        try:
+            out += json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise DataFormatError(path, f"result file for video '{name}' is missing") from None
+        except json.JSONDecodeError as exc:
+            raise DataFormatError(path, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    return out
