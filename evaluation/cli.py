@@ -2,7 +2,8 @@
 
 Commands:
     unitrack evaluate --env ID [--root DIR] --agent NAME --out DIR
-    unitrack score --benchmark MOT17 --gt DIR --results DIR [--out metrics.json]
+    unitrack score --env ID [--root DIR] --results DIR [--out metrics.json]
+    unitrack score --benchmark MOT17 --gt DIR --results DIR        (MOTChallenge shortcut)
     unitrack render --env ID [--root DIR] --agent NAME --sequence NAME --out video.mp4
     unitrack list
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -19,11 +21,22 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-#: Metrics shown in tables, in this order (TrackEval names).
-TABLE_METRICS = ("HOTA", "DetA", "AssA", "MOTA", "MOTP", "IDF1", "IDSW", "CLR_FP", "CLR_FN",
-                 "MT", "ML")
+#: Columns of the results table per task (the metrics' official names), in this order.
+TASK_COLUMNS: dict[str, tuple[str, ...]] = {
+    "mot": ("HOTA", "DetA", "AssA", "MOTA", "MOTP", "IDF1", "IDSW", "CLR_FP", "CLR_FN",
+            "MT", "ML"),
+    "mots": ("HOTA", "DetA", "AssA", "sMOTSA", "MOTSA", "MOTSP", "IDF1", "IDSW", "CLR_FP",
+             "CLR_FN"),
+    "vis": ("AP", "AP50", "AP75", "AR"),
+    "posetrack": ("MOTA", "IDF1", "IDSW", "MOTP", "Precision", "Recall"),
+    "sot": ("AUC", "Precision@20px", "AverageOverlap"),
+    "vos": ("J&F-Mean", "J-Mean", "J-Recall", "J-Decay", "F-Mean", "F-Recall", "F-Decay"),
+    "pose-prop": ("PCK@0.1", "PCK@0.2"),
+}
 #: Metrics that are counts (printed as integers, not percentages).
 COUNT_METRICS = frozenset({"IDSW", "CLR_FP", "CLR_FN", "CLR_TP", "MT", "ML", "PT", "Frag"})
+#: Columns shown for a task the table does not know: the first metrics found.
+FALLBACK_COLUMNS = 8
 
 
 def _parse_value(text: str) -> Any:
@@ -44,25 +57,39 @@ def parse_key_values(items: Sequence[str] | None, what: str) -> dict[str, Any]:
     return out
 
 
+def table_columns(task: str, rows: list[dict[str, float]]) -> list[str]:
+    """The task's columns that occur in ``rows`` (or the first metrics, for unknown tasks)."""
+    present = {key for row in rows for key in row}
+    if task in TASK_COLUMNS:
+        return [name for name in TASK_COLUMNS[task] if name in present]
+    seen: list[str] = []
+    for row in rows:
+        seen += [key for key in row if key not in seen]
+    return seen[:FALLBACK_COLUMNS]
+
+
 def metrics_table(
     per_sequence: dict[str, dict[str, float]],
     combined: dict[str, float] | None,
     title: str,
     fps: dict[str, float] | None = None,
+    task: str = "mot",
 ) -> Table:
     """Build a rich table: one row per sequence plus the combined row (percent, counts)."""
+    rows = list(per_sequence.values()) + ([combined] if combined else [])
+    columns = table_columns(task, rows)
     table = Table(title=title)
     table.add_column("sequence")
-    for name in TABLE_METRICS:
+    for name in columns:
         table.add_column(name, justify="right")
     if fps is not None:
         table.add_column("FPS", justify="right")
 
     def cells(metrics: dict[str, float]) -> list[str]:
         out = []
-        for name in TABLE_METRICS:
+        for name in columns:
             value = metrics.get(name)
-            if value is None:
+            if value is None or value != value:  # missing or NaN (nothing to score)
                 out.append("-")
             elif name in COUNT_METRICS:
                 out.append(f"{value:.0f}")
@@ -113,20 +140,43 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
         console.print(f"{len(report.records)} sequence(s) written to {report.out / 'data'} "
                       "(no ground truth in this split, nothing to score)")
     else:
+        import unitrack_env
+
         console.print(metrics_table(report.scores.per_sequence, report.scores.combined,
-                                    f"{args.agent} on {args.env}", fps))
+                                    f"{args.agent} on {args.env}", fps,
+                                    task=unitrack_env.task_of(args.env)))
     console.print(f"metrics: {report.out / 'metrics.json'}")
     return 0
 
 
 def _cmd_score(args: argparse.Namespace, console: Console) -> int:
-    from unitrack_env.metrics.motchallenge import score_folder
-
     sequences = args.sequences.split(",") if args.sequences else None
-    report = score_folder(args.gt, args.results, benchmark=args.benchmark, sequences=sequences)
-    console.print(metrics_table(report.per_sequence, report.combined, f"{args.results}"))
+    if args.env:
+        import gymnasium as gym
+
+        import unitrack_env
+
+        env = gym.make(args.env, **_env_kwargs(args))
+        base = env.unwrapped
+        names = sequences or [n for n in base.sequence_names if base.has_ground_truth(n)]
+        report = base.score_folder(Path(args.results), names)
+        task = unitrack_env.task_of(args.env)
+        env.close()
+    elif args.benchmark and args.gt:
+        from unitrack_env.metrics.motchallenge import score_folder
+
+        report = score_folder(args.gt, args.results, benchmark=args.benchmark,
+                              sequences=sequences)
+        task = "mot"
+    else:
+        raise ValueError("score needs --env ID [--root DIR] [--split S], or (MOTChallenge) "
+                         "--benchmark MOT17 --gt DIR")
+    console.print(metrics_table(report.per_sequence, report.combined, f"{args.results}",
+                                task=task))
     if args.out:
-        Path(args.out).write_text(report.to_json())
+        from evaluation.runner import json_safe
+
+        Path(args.out).write_text(json.dumps(json_safe(json.loads(report.to_json())), indent=2))
         console.print(f"metrics: {args.out}")
     return 0
 
@@ -183,10 +233,16 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     ev.set_defaults(func=_cmd_evaluate)
 
-    sc = sub.add_parser("score", help="score a folder of MOTChallenge result files")
-    sc.add_argument("--benchmark", required=True, help="MOT15, MOT16, MOT17 or MOT20")
-    sc.add_argument("--gt", required=True, help="folder of sequence folders with gt/gt.txt")
-    sc.add_argument("--results", required=True, help="folder of <sequence>.txt result files")
+    sc = sub.add_parser("score", help="score a folder of result files in the official format")
+    sc.add_argument("--env", help="environment id whose data and metrics to use")
+    sc.add_argument("--root", help="benchmark folder (with --env; default: synthetic data)")
+    sc.add_argument("--split", help="split folder (with --env)")
+    sc.add_argument("--env-arg", action="append", metavar="KEY=VALUE",
+                    help="extra environment argument (with --env, repeatable)")
+    sc.add_argument("--benchmark", help="MOTChallenge shortcut: MOT15, MOT16, MOT17 or MOT20")
+    sc.add_argument("--gt", help="MOTChallenge shortcut: folder of sequences with gt/gt.txt")
+    sc.add_argument("--results", required=True,
+                    help="results folder (as written by `unitrack evaluate` under <out>/data)")
     sc.add_argument("--sequences", help="comma-separated sequence names (default: all files)")
     sc.add_argument("--out", help="write the metrics as JSON here")
     sc.set_defaults(func=_cmd_score)

@@ -21,6 +21,7 @@ sequences are skipped.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import time
@@ -82,6 +83,17 @@ class RunReport:
     def combined(self) -> dict[str, float]:
         """Combined metrics over all sequences (empty for splits without ground truth)."""
         return self.scores.combined if self.scores is not None else {}
+
+
+def json_safe(value: Any) -> Any:
+    """Replace NaN/inf floats (metrics of sequences with nothing to score) by None (null)."""
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def play_episode(
@@ -249,5 +261,6 @@ def run(
                     "combined": scores.combined}
     else:
         payload["note"] = "this split has no ground truth; results were written, not scored"
-    atomic_write_text(out / "metrics.json", json.dumps(payload, indent=2))
+    atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
+                                                       allow_nan=False))
     return RunReport(out, {n: records[n] for n in names}, scores, skipped)
