@@ -1,1 +1,78 @@
+"""Level 1 of UniTrack: the shared appearance model producing stride-8 feature maps.
 
+Public API:
+
+* :class:`AppearanceModel` -- images in, ``(B, C, ceil(H/8), ceil(W/8))`` features out;
+  default weights ``"imagenet-lite0"`` (EfficientNet-Lite0, ImageNet, offline; stage5 run
+  at stride 8, 112 channels).
+* :func:`letterbox` / :class:`Letterbox` -- JDE-style 1088 x 608 letterbox with box mapping.
+* :class:`ModelIdentity` -- (architecture, layer, weights digest, normalisation) for cache keys.
+* Checkpoints: :class:`LoadReport`, :class:`KeyRemap`, :data:`DEFAULT_REMAPS`,
+  :class:`CheckpointError`, :func:`load_checkpoint`.
+* Weights table: :data:`DEFAULT_WEIGHT_LOADERS`, :class:`WeightsSource`.
+* Cache: :class:`FeatureCache`, :class:`CacheKey`, :class:`CachedAppearanceModel`.
+* Architectures: :class:`ResNet`, :class:`EfficientNetLite0`.
+"""
+
+from agents.appearance.checkpoints import (
+    CIFAR_MEAN,
+    CIFAR_STD,
+    DEFAULT_REMAPS,
+    IMAGENET_MEAN,
+    IMAGENET_STD,
+    CheckpointError,
+    KeyRemap,
+    LoadReport,
+    load_checkpoint,
+)
+from agents.appearance.efficientnet_lite import EfficientNetLite0
+from agents.appearance.feature_cache import (
+    CachedAppearanceModel,
+    CacheKey,
+    FeatureCache,
+    FeatureCacheWarning,
+)
+from agents.appearance.model import (
+    ARCHITECTURES,
+    DEFAULT_LAYERS,
+    DEFAULT_WEIGHT_LOADERS,
+    FEATURE_STRIDE,
+    MOT_INPUT_SIZE,
+    AppearanceModel,
+    Letterbox,
+    ModelIdentity,
+    WeightsSource,
+    letterbox,
+    weights_digest,
+)
+from agents.appearance.resnet import ResNet, infer_resnet_arch
+
+__all__ = [
+    "ARCHITECTURES",
+    "CIFAR_MEAN",
+    "CIFAR_STD",
+    "DEFAULT_LAYERS",
+    "DEFAULT_REMAPS",
+    "DEFAULT_WEIGHT_LOADERS",
+    "FEATURE_STRIDE",
+    "IMAGENET_MEAN",
+    "IMAGENET_STD",
+    "MOT_INPUT_SIZE",
+    "AppearanceModel",
+    "CacheKey",
+    "CachedAppearanceModel",
+    "CheckpointError",
+    "EfficientNetLite0",
+    "FeatureCache",
+    "FeatureCacheWarning",
+    "KeyRemap",
+    "Letterbox",
+    "LoadReport",
+    "ModelIdentity",
+    "ResNet",
+    "WeightsSource",
+    "infer_resnet_arch",
+    "letterbox",
+    "load_checkpoint",
+    "weights_digest",
+]
