@@ -1,0 +1,342 @@
+"""Constant-velocity Kalman filter for box tracks (the motion cue of association).
+
+The filter follows the form used by DeepSORT (Wojke et al., ICIP 2017) and adopted by JDE
+and UniTrack (paper, appendix C.1): the state is the eight-dimensional vector
+
+    ``(u, v, a, h, du, dv, da, dh)``
+
+where ``(u, v)`` is the box centre, ``a = w / h`` the aspect ratio, ``h`` the height, and the
+last four entries their velocities (per frame). Measurements are ``(u, v, a, h)``.
+
+Note on the aspect ratio: the UniTrack paper's text writes ``gamma = h / w``, but the DeepSORT
+filter it cites (and the authors' code) uses ``a = w / h``; the absolute noise levels chosen
+for the aspect ratio below (``1e-2``, ``1e-1``) are calibrated for ``w / h``, so we use
+``w / h``.
+
+Noise model (DeepSORT): position and velocity standard deviations are proportional to the
+current box height, with weights ``std_weight_position = 1/20`` and
+``std_weight_velocity = 1/160``; the aspect ratio, being unit-less, gets fixed standard
+deviations instead. All of these are fields of :class:`KalmanConfig`.
+
+Every method is batched over tracks and vectorised: ``mean`` is ``(n, 8)``, ``covariance``
+``(n, 8, 8)``, measurements ``(n, 4)``. All arithmetic is ``float64``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+STATE_DIM = 8
+"""Dimension of the state ``(u, v, a, h, du, dv, da, dh)``."""
+
+MEASUREMENT_DIM = 4
+"""Dimension of a measurement ``(u, v, a, h)``."""
+
+CHI2_95_4DOF = 9.4877
+"""0.95 quantile of the chi-square distribution with 4 degrees of freedom.
+
+Squared Mahalanobis distances of 4-d measurements above this value fall outside the 95%
+confidence region of the predicted measurement; the paper (eq. gate, appendix C.1) and
+DeepSORT gate matches with it (``scipy.stats.chi2.ppf(0.95, 4) = 9.48773``).
+"""
+
+
+@dataclass(frozen=True)
+class KalmanConfig:
+    """Noise parameters of the constant-velocity box filter (DeepSORT values).
+
+    Attributes:
+        std_weight_position: Standard deviation of position-like quantities (u, v, h) as a
+            fraction of the box height, used for the process noise and the measurement
+            noise. DeepSORT: ``1/20``.
+        std_weight_velocity: Standard deviation of velocities (du, dv, dh) per frame as a
+            fraction of the box height, used for the process noise. DeepSORT: ``1/160``.
+        initial_position_factor: At track start the position standard deviations are
+            ``initial_position_factor * std_weight_position * h``. DeepSORT: ``2``.
+        initial_velocity_factor: At track start the velocity standard deviations are
+            ``initial_velocity_factor * std_weight_velocity * h`` (the velocity is unknown,
+            so it starts very uncertain). DeepSORT: ``10``.
+        aspect_std: Standard deviation of the aspect ratio in the initial covariance and in
+            the process noise (absolute, unit-less). DeepSORT: ``1e-2``.
+        aspect_velocity_std: Standard deviation of the aspect-ratio velocity in the initial
+            covariance and the process noise. DeepSORT: ``1e-5``.
+        aspect_measurement_std: Standard deviation of the measured aspect ratio.
+            DeepSORT: ``1e-1``.
+        time_step: Time between two consecutive predictions, in frames. ``1``.
+    """
+
+    std_weight_position: float = 1.0 / 20.0
+    std_weight_velocity: float = 1.0 / 160.0
+    initial_position_factor: float = 2.0
+    initial_velocity_factor: float = 10.0
+    aspect_std: float = 1e-2
+    aspect_velocity_std: float = 1e-5
+    aspect_measurement_std: float = 1e-1
+    time_step: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "std_weight_position",
+            "std_weight_velocity",
+            "initial_position_factor",
+            "initial_velocity_factor",
+            "aspect_std",
+            "aspect_velocity_std",
+            "aspect_measurement_std",
+            "time_step",
+        ):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"KalmanConfig.{name} must be a positive number, got {value!r}")
+
+
+def xywh_to_xyah(boxes: np.ndarray) -> np.ndarray:
+    """Convert ``(x, y, w, h)`` boxes to Kalman measurements ``(u, v, a, h)``.
+
+    Args:
+        boxes: ``(n, 4)`` boxes (top-left corner, width, height).
+
+    Returns:
+        ``(n, 4)`` ``float64`` array of centre, aspect ratio ``w / h`` and height.
+
+    >>> xywh_to_xyah(np.array([[10.0, 20.0, 4.0, 8.0]]))
+    array([[12. , 24. ,  0.5,  8. ]])
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    out = np.empty_like(b)
+    out[:, 0] = b[:, 0] + b[:, 2] / 2.0
+    out[:, 1] = b[:, 1] + b[:, 3] / 2.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[:, 2] = b[:, 2] / b[:, 3]
+    out[:, 3] = b[:, 3]
+    return out
+
+
+def xyah_to_xywh(states: np.ndarray) -> np.ndarray:
+    """Convert ``(u, v, a, h, ...)`` states or measurements to ``(x, y, w, h)`` boxes.
+
+    Args:
+        states: ``(n, k)`` array with ``k >= 4``; only the first four columns are read.
+
+    Returns:
+        ``(n, 4)`` ``float64`` boxes.
+
+    >>> xyah_to_xywh(np.array([[12.0, 24.0, 0.5, 8.0]]))
+    array([[10., 20.,  4.,  8.]])
+    """
+    s = np.asarray(states, dtype=np.float64)
+    s = s.reshape(-1, s.shape[-1])[:, :4]
+    w = s[:, 2] * s[:, 3]
+    return np.stack([s[:, 0] - w / 2.0, s[:, 1] - s[:, 3] / 2.0, w, s[:, 3]], axis=1)
+
+
+class KalmanFilter:
+    """Batched constant-velocity Kalman filter on ``(u, v, a, h)`` and their velocities.
+
+    The filter holds no track state: callers keep ``mean``/``covariance`` per track and pass
+    stacked arrays, so one instance can serve any number of tracks.
+
+    Args:
+        config: Noise parameters; DeepSORT's values by default.
+
+    Example:
+        >>> kf = KalmanFilter()
+        >>> mean, cov = kf.initiate(np.array([[50.0, 50.0, 0.5, 100.0]]))
+        >>> mean, cov = kf.predict(mean, cov)
+        >>> kf.gating_distance(mean, cov, np.array([[50.0, 50.0, 0.5, 100.0]])).shape
+        (1, 1)
+    """
+
+    def __init__(self, config: KalmanConfig | None = None) -> None:
+        self.config = config if config is not None else KalmanConfig()
+        dt = self.config.time_step
+        motion = np.eye(STATE_DIM)
+        motion[:MEASUREMENT_DIM, MEASUREMENT_DIM:] = dt * np.eye(MEASUREMENT_DIM)
+        self._motion = motion  # F: x_{t+1} = F x_t
+
+    @property
+    def motion_matrix(self) -> np.ndarray:
+        """The ``(8, 8)`` state transition matrix ``F`` (a copy)."""
+        return self._motion.copy()
+
+    # ------------------------------------------------------------------ noise models
+    def _position_like_std(self, height: np.ndarray, weight: float, aspect: float) -> np.ndarray:
+        """Return ``(n, 4)`` stds ``(w*h, w*h, aspect, w*h)`` for heights ``(n,)``."""
+        std = np.empty((len(height), MEASUREMENT_DIM))
+        std[:, 0] = std[:, 1] = std[:, 3] = weight * height
+        std[:, 2] = aspect
+        return std
+
+    def _process_covariance(self, height: np.ndarray) -> np.ndarray:
+        """Return the ``(n, 8, 8)`` diagonal process noise ``Q`` for heights ``(n,)``."""
+        c = self.config
+        std = np.concatenate(
+            [
+                self._position_like_std(height, c.std_weight_position, c.aspect_std),
+                self._position_like_std(height, c.std_weight_velocity, c.aspect_velocity_std),
+            ],
+            axis=1,
+        )
+        return _batched_diag(std**2)
+
+    def _measurement_covariance(self, height: np.ndarray) -> np.ndarray:
+        """Return the ``(n, 4, 4)`` diagonal measurement noise ``R`` for heights ``(n,)``."""
+        c = self.config
+        std = self._position_like_std(height, c.std_weight_position, c.aspect_measurement_std)
+        return _batched_diag(std**2)
+
+    # ------------------------------------------------------------------ filter steps
+    def initiate(self, measurements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Create track states from first measurements.
+
+        The velocity starts at 0; the covariance is diagonal with standard deviations
+        ``initial_position_factor * std_weight_position * h`` for ``u, v, h``,
+        ``aspect_std`` for ``a``, ``initial_velocity_factor * std_weight_velocity * h``
+        for ``du, dv, dh`` and ``aspect_velocity_std`` for ``da``.
+
+        Args:
+            measurements: ``(n, 4)`` measurements ``(u, v, a, h)``.
+
+        Returns:
+            ``(mean (n, 8), covariance (n, 8, 8))``.
+        """
+        z = _as_measurements(measurements, "measurements")
+        c = self.config
+        mean = np.concatenate([z, np.zeros_like(z)], axis=1)
+        h = z[:, 3]
+        std = np.concatenate(
+            [
+                self._position_like_std(
+                    h, c.initial_position_factor * c.std_weight_position, c.aspect_std
+                ),
+                self._position_like_std(
+                    h, c.initial_velocity_factor * c.std_weight_velocity, c.aspect_velocity_std
+                ),
+            ],
+            axis=1,
+        )
+        return mean, _batched_diag(std**2)
+
+    def predict(self, mean: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance states by one time step: ``x = F x``, ``P = F P F^T + Q``.
+
+        The process noise ``Q`` uses the height of the state before the prediction.
+
+        Args:
+            mean: ``(n, 8)`` state means.
+            covariance: ``(n, 8, 8)`` state covariances.
+
+        Returns:
+            Predicted ``(mean, covariance)``, new arrays of the same shapes.
+        """
+        mean, covariance = _as_state(mean, covariance)
+        q = self._process_covariance(mean[:, 3])
+        new_mean = mean @ self._motion.T
+        new_cov = self._motion @ covariance @ self._motion.T + q
+        return new_mean, new_cov
+
+    def project(self, mean: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project states into measurement space: ``(H x, H P H^T + R)``.
+
+        Args:
+            mean: ``(n, 8)`` state means.
+            covariance: ``(n, 8, 8)`` state covariances.
+
+        Returns:
+            ``(mean (n, 4), covariance (n, 4, 4))`` of the predicted measurement.
+        """
+        mean, covariance = _as_state(mean, covariance)
+        r = self._measurement_covariance(mean[:, 3])
+        d = MEASUREMENT_DIM
+        return mean[:, :d].copy(), covariance[:, :d, :d] + r
+
+    def update(
+        self, mean: np.ndarray, covariance: np.ndarray, measurements: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Correct states with measurements (one measurement per track).
+
+        ``K = P H^T S^-1``, ``x = x + K (z - H x)``, ``P = P - K S K^T`` with
+        ``S = H P H^T + R``.
+
+        Args:
+            mean: ``(n, 8)`` predicted state means.
+            covariance: ``(n, 8, 8)`` predicted state covariances.
+            measurements: ``(n, 4)`` measurements ``(u, v, a, h)``.
+
+        Returns:
+            Corrected ``(mean, covariance)``.
+        """
+        mean, covariance = _as_state(mean, covariance)
+        z = _as_measurements(measurements, "measurements")
+        if len(z) != len(mean):
+            raise ValueError(
+                f"update needs one measurement per track: got {len(z)} measurements "
+                f"for {len(mean)} tracks"
+            )
+        proj_mean, proj_cov = self.project(mean, covariance)
+        d = MEASUREMENT_DIM
+        cross = covariance[:, :, :d]  # P H^T, (n, 8, 4)
+        # K^T = S^-1 (P H^T)^T, solved rather than inverted (S is symmetric positive definite).
+        gain = np.linalg.solve(proj_cov, cross.transpose(0, 2, 1)).transpose(0, 2, 1)
+        innovation = z - proj_mean
+        new_mean = mean + np.einsum("nij,nj->ni", gain, innovation)
+        new_cov = covariance - gain @ proj_cov @ gain.transpose(0, 2, 1)
+        new_cov = 0.5 * (new_cov + new_cov.transpose(0, 2, 1))  # keep it exactly symmetric
+        return new_mean, new_cov
+
+    def gating_distance(
+        self, mean: np.ndarray, covariance: np.ndarray, measurements: np.ndarray
+    ) -> np.ndarray:
+        """Squared Mahalanobis distances between predicted tracks and measurements.
+
+        ``d[i, j] = (z_j - H x_i)^T S_i^-1 (z_j - H x_i)`` on the full 4-d measurement
+        (paper eq. cm). Compare with :data:`CHI2_95_4DOF` to gate.
+
+        Args:
+            mean: ``(n, 8)`` state means (typically after :meth:`predict`).
+            covariance: ``(n, 8, 8)`` state covariances.
+            measurements: ``(m, 4)`` measurements ``(u, v, a, h)``.
+
+        Returns:
+            ``(n, m)`` ``float64`` array.
+        """
+        mean, covariance = _as_state(mean, covariance)
+        z = _as_measurements(measurements, "measurements")
+        if len(mean) == 0 or len(z) == 0:
+            return np.zeros((len(mean), len(z)))
+        proj_mean, proj_cov = self.project(mean, covariance)
+        diff = z[None, :, :] - proj_mean[:, None, :]  # (n, m, 4)
+        chol = np.linalg.cholesky(proj_cov)  # (n, 4, 4), lower
+        # Solve L y = diff^T per track; ||y||^2 is the squared Mahalanobis distance.
+        y = np.linalg.solve(chol, diff.transpose(0, 2, 1))  # (n, 4, m)
+        return np.einsum("nkm,nkm->nm", y, y)
+
+
+def _batched_diag(values: np.ndarray) -> np.ndarray:
+    """Return ``(n, k, k)`` diagonal matrices from ``(n, k)`` diagonals."""
+    n, k = values.shape
+    out = np.zeros((n, k, k))
+    idx = np.arange(k)
+    out[:, idx, idx] = values
+    return out
+
+
+def _as_measurements(values: np.ndarray, name: str) -> np.ndarray:
+    z = np.asarray(values, dtype=np.float64)
+    if z.ndim != 2 or z.shape[1] != MEASUREMENT_DIM:
+        raise ValueError(f"{name} must have shape (n, 4) as (u, v, a, h), got {z.shape}")
+    if not np.all(np.isfinite(z)):
+        raise ValueError(f"{name} contain NaN or infinite values (a box with zero height?)")
+    return z
+
+
+def _as_state(mean: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    m = np.asarray(mean, dtype=np.float64)
+    p = np.asarray(covariance, dtype=np.float64)
+    if m.ndim != 2 or m.shape[1] != STATE_DIM:
+        raise ValueError(f"mean must have shape (n, 8), got {m.shape}")
+    if p.shape != (len(m), STATE_DIM, STATE_DIM):
+        raise ValueError(f"covariance must have shape ({len(m)}, 8, 8), got {p.shape}")
+    return m, p
