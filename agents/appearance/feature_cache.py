@@ -4,7 +4,7 @@ Comparing heads or hyper-parameters on the same frames should not recompute the 
 :class:`FeatureCache` stores one ``.npy`` file per frame under a directory named after
 everything that determines the features::
 
-    <root>/<model key>-<H>x<W>/<sequence>/<frame:06d>.npy
+    <root>/<model key>-<H>x<W>/<sequence>/<frame:06d>-<pixel fingerprint>.npy
 
 where ``<model key>`` is :meth:`ModelIdentity.key` (architecture, layer, SHA-256 digest of
 the weights, input normalisation) and ``H x W`` the network input size. A ``model.json``
@@ -67,12 +67,30 @@ class CacheKey:
         input_size: ``(height, width)`` of the network input.
         sequence: Sequence name.
         frame: Frame index (the benchmark's own numbering).
+        content: Fingerprint of the frame's pixels (:func:`image_fingerprint`), so that two
+            data sets with the same sequence names, or a frame that changed on disk, never
+            share an entry. Empty: key by name and index only.
     """
 
     model: str
     input_size: tuple[int, int]
     sequence: str
     frame: int
+    content: str = ""
+
+
+FINGERPRINT_STRIDE: int = 61
+"""Every this-many-th byte of a frame enters its fingerprint (fast; ~35 kB of a 1088x608
+frame, enough to tell different frames apart)."""
+
+
+def image_fingerprint(image: np.ndarray) -> str:
+    """A short hex digest of an image's shape and a strided sample of its bytes."""
+    flat = np.ascontiguousarray(image).reshape(-1)
+    digest = hashlib.blake2b(digest_size=8)
+    digest.update(repr(image.shape).encode())
+    digest.update(flat[::FINGERPRINT_STRIDE].tobytes())
+    return digest.hexdigest()
 
 
 def _safe(name: str) -> str:
@@ -123,9 +141,10 @@ class FeatureCache:
     def path(self, key: CacheKey) -> Path:
         """File that holds ``key``'s entry."""
         height, width = key.input_size
+        suffix = f"-{key.content}" if key.content else ""
         return (
             self.root / f"{key.model}-{height}x{width}" / _safe(key.sequence)
-            / f"{key.frame:0{FRAME_DIGITS}d}.npy"
+            / f"{key.frame:0{FRAME_DIGITS}d}{suffix}.npy"
         )
 
     def _report(self, path: Path, reason: str) -> None:
@@ -254,7 +273,8 @@ class CachedAppearanceModel:
             raise ValueError(f"{batch.shape[0]} images but {len(frame_list)} frame indices")
         input_size = (int(batch.shape[1]), int(batch.shape[2]))
         expected = self.model.feature_shape(*input_size)
-        keys = [CacheKey(self._model_key, input_size, sequence, int(f)) for f in frame_list]
+        keys = [CacheKey(self._model_key, input_size, sequence, int(f), image_fingerprint(img))
+                for f, img in zip(frame_list, batch, strict=True)]
         found: dict[int, np.ndarray] = {}
         todo: list[int] = []
         for i, key in enumerate(keys):

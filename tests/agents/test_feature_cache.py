@@ -159,9 +159,9 @@ def test_cached_model_runs_the_backbone_only_on_misses(tmp_path: Path) -> None:
     single = cached.features(frames[2], sequence="seq", frames=3)
     assert batches == [2, 1] and single.shape == (1, 256, 3, 4)
     folder = tmp_path / f"{model.identity.key()}-24x32"
-    assert sorted(p.name for p in (folder / "seq").iterdir()) == [
-        "000001.npy", "000002.npy", "000003.npy"
-    ]
+    names = sorted(p.name for p in (folder / "seq").iterdir())
+    assert [n.split("-")[0] for n in names] == ["000001", "000002", "000003"]
+    assert all(n.endswith(".npy") and len(n.split("-")[1]) == 16 + 4 for n in names)
     assert (folder / "model.json").is_file()
     # Another model (different weights) does not see these entries.
     other = CachedAppearanceModel(AppearanceModel("random", seed=1), tmp_path)
@@ -171,3 +171,17 @@ def test_cached_model_runs_the_backbone_only_on_misses(tmp_path: Path) -> None:
         cached.features(frames, sequence="seq", frames=[1])
     assert cached.describe()["cache"] == str(tmp_path)
     assert os.listdir(tmp_path)  # sanity: something was written
+
+
+def test_same_sequence_name_with_other_pixels_does_not_share_an_entry(tmp_path):
+    from agents.appearance import AppearanceModel, CachedAppearanceModel
+
+    model = AppearanceModel("random", arch="resnet18")
+    cached = CachedAppearanceModel(model, tmp_path)
+    a = np.zeros((64, 64, 3), np.uint8)
+    b = np.full((64, 64, 3), 200, np.uint8)
+    first = cached.features(a, sequence="seq", frames=1)
+    other = cached.features(b, sequence="seq", frames=1)  # another data set, same name
+    assert cached.cache.misses == 2 and not torch.allclose(first, other)
+    again = cached.features(a, sequence="seq", frames=1)
+    assert cached.cache.hits == 1 and torch.equal(again, first)
