@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import ScoreReport
 
 #: Environment variable naming a folder that holds benchmark folders (``MOT17/``, ``DAVIS/``,
@@ -61,6 +62,11 @@ class SequenceEnv(gym.Env):
 
     sequence_names: list[str]
 
+    #: Frame decoder of the current episode (subclasses set it; :meth:`close` stops it).
+    _frames: FramePrefetcher | None = None
+    #: Whether the data set is the embedded synthetic default (set by :meth:`_data_root`).
+    synthetic: bool = False
+
     def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -71,6 +77,43 @@ class SequenceEnv(gym.Env):
         self.shuffle = shuffle
         self._order: list[str] | None = None
         self._cursor = 0
+
+    def _data_root(
+        self, root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
+        **synthetic_kwargs: Any,
+    ) -> Path:
+        """The folder to read: ``root``, ``$UNITRACK_DATA/<folder>``, or the synthetic default.
+
+        ``synthetic_args`` go to :func:`unitrack_env.datasets.synthetic.ensure_synthetic`
+        (benchmark and kind) when the synthetic default is used; sets :attr:`synthetic`.
+        """
+        path = resolve_root(root, folder)
+        self.synthetic = path is None
+        if path is None:
+            from unitrack_env.datasets.synthetic import ensure_synthetic
+
+            path = ensure_synthetic(*synthetic_args, **synthetic_kwargs)
+        return path
+
+    @staticmethod
+    def _select_sequences(
+        requested: list[str] | tuple[str, ...] | None, available: list[str], where: object
+    ) -> list[str]:
+        """Validate a user's ``sequences=`` against the data set (None: all of them)."""
+        if requested is None:
+            return list(available)
+        missing = [s for s in requested if s not in available]
+        if missing:
+            raise ValueError(
+                f"sequences {missing} are not in {where}; available: {', '.join(available)}"
+            )
+        return list(requested)
+
+    def close(self) -> None:
+        """Stop the frame prefetching thread, if any."""
+        if self._frames is not None:
+            self._frames.close()
+        super().close()
 
     def _choose_sequence(self, seed: int | None, options: dict[str, Any] | None) -> str:
         options = options or {}

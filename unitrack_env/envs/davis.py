@@ -20,7 +20,7 @@ from unitrack_env.datasets.davis import (
     read_label_png,
     write_davis_result,
 )
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import COMBINED, ScoreReport
@@ -253,23 +253,11 @@ class DAVISEnv(SequenceEnv):
         render_mode: str | None = None,
     ) -> None:
         super().__init__(shuffle=shuffle, render_mode=render_mode)
-        data_root = resolve_root(root, BENCHMARK_FOLDER)
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic(BENCHMARK, "davis")
+        data_root = self._data_root(root, BENCHMARK_FOLDER, BENCHMARK, "davis")
         self.dataset = DAVISDataset(data_root, split, resolution, year)
-        if sequences is not None:
-            missing = [s for s in sequences if s not in self.dataset.sequence_names]
-            if missing:
-                raise ValueError(
-                    f"sequences {missing} are not in split {split!r} of {data_root}; "
-                    f"available: {', '.join(self.dataset.sequence_names)}"
-                )
-            self.sequence_names = list(sequences)
-        else:
-            self.sequence_names = list(self.dataset.sequence_names)
+        self.sequence_names = self._select_sequences(
+            sequences, self.dataset.sequence_names, f"split {split!r} of {data_root}"
+        )
         self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
         self.decode_frames = decode_frames
         self.prefetch = prefetch
@@ -520,8 +508,3 @@ class DAVISEnv(SequenceEnv):
             return overlay_labels(self._frame, self._init_labels)
         return overlay_labels(self._render_frame, self._render_labels)
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()

@@ -20,7 +20,7 @@ from unitrack_env.datasets.jhmdb import (
     PoseSequence,
     read_joint_positions,
 )
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_bytes
@@ -180,21 +180,11 @@ class JHMDBEnv(SequenceEnv):
         super().__init__(shuffle=shuffle, render_mode=render_mode)
         if normaliser not in NORMALISERS:
             raise ValueError(f"normaliser must be one of {NORMALISERS}; got {normaliser!r}")
-        data_root = resolve_root(root, "JHMDB")
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic("JHMDB", kind="jhmdb")
+        data_root = self._data_root(root, "JHMDB", "JHMDB", kind="jhmdb")
         self.dataset = JHMDBDataset(data_root, split, split_index, split_dir)
-        if sequences is not None:
-            missing = [s for s in sequences if s not in self.dataset.sequence_names]
-            if missing:
-                raise ValueError(f"sequences {missing} are not in {data_root}; available: "
-                                 f"{', '.join(self.dataset.sequence_names)}")
-            self.sequence_names = list(sequences)
-        else:
-            self.sequence_names = list(self.dataset.sequence_names)
+        self.sequence_names = self._select_sequences(
+            sequences, self.dataset.sequence_names, data_root
+        )
         self.normaliser = normaliser
         self.thresholds = tuple(float(t) for t in thresholds)
         self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
@@ -354,11 +344,6 @@ class JHMDBEnv(SequenceEnv):
         draw_skeleton(canvas, pose, JHMDB_SKELETON)
         return canvas
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()
 
 
 def _validate_joints(action: Any) -> np.ndarray:

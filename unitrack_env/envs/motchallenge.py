@@ -18,7 +18,7 @@ from unitrack_env.datasets.motchallenge import (
     MOTSequence,
     read_seqinfo,
 )
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.clear_stream import StreamingClear
@@ -131,23 +131,11 @@ class MOTChallengeEnv(SequenceEnv):
         if benchmark not in BENCHMARKS:
             raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
         self.benchmark = benchmark
-        data_root = resolve_root(root, benchmark)
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic(benchmark)
+        data_root = self._data_root(root, benchmark, benchmark)
         self.dataset = MOTChallengeDataset(data_root, benchmark, split, detections)
-        if sequences is not None:
-            missing = [s for s in sequences if s not in self.dataset.sequence_names]
-            if missing:
-                raise ValueError(
-                    f"sequences {missing} are not in {self.dataset.split_dir}; available: "
-                    f"{', '.join(self.dataset.sequence_names)}"
-                )
-            self.sequence_names = list(sequences)
-        else:
-            self.sequence_names = list(self.dataset.sequence_names)
+        self.sequence_names = self._select_sequences(
+            sequences, self.dataset.sequence_names, self.dataset.split_dir
+        )
         self.min_score = min_score
         self.max_detections = int(max_detections)
         self.max_tracks = int(max_tracks)
@@ -364,11 +352,6 @@ class MOTChallengeEnv(SequenceEnv):
         ids, boxes = self._render_tracks
         return draw_boxes(self._render_frame, boxes, ids)
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()
 
 
 #: printf formats of the result columns (MOTChallenge files use 2 decimals; keep 3).

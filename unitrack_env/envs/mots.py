@@ -22,7 +22,7 @@ from unitrack_env.datasets.mots import (
     format_instances_txt,
     resolve_overlaps,
 )
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mots import MaskClearStream
@@ -149,22 +149,12 @@ class MOTSEnv(SequenceEnv):
         self.benchmark = benchmark
         self.object_class = object_class
         self.class_id = CLASS_IDS[object_class]
-        data_root = resolve_root(root, DATA_FOLDERS[benchmark])
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic(benchmark, kind="mots")
+        data_root = self._data_root(root, DATA_FOLDERS[benchmark], benchmark, kind="mots")
         self.dataset = MOTSDataset(data_root, benchmark, split or DEFAULT_SPLITS[benchmark],
                                    detections)
-        if sequences is not None:
-            missing = [s for s in sequences if s not in self.dataset.sequence_names]
-            if missing:
-                raise ValueError(f"sequences {missing} are not in {self.dataset.split_dir}; "
-                                 f"available: {', '.join(self.dataset.sequence_names)}")
-            self.sequence_names = list(sequences)
-        else:
-            self.sequence_names = list(self.dataset.sequence_names)
+        self.sequence_names = self._select_sequences(
+            sequences, self.dataset.sequence_names, self.dataset.split_dir
+        )
         self.min_score = min_score
         self.max_detections = int(max_detections)
         self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
@@ -374,11 +364,6 @@ class MOTSEnv(SequenceEnv):
             return draw_masks(self._current["image"], self._current["masks"])
         return draw_masks(*self._render_state)
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()
 
 
 #: Opacity of the mask overlay in renders.

@@ -14,7 +14,7 @@ from gymnasium import spaces
 
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_text
@@ -180,12 +180,7 @@ class OTBEnv(SequenceEnv):
         render_mode: str | None = None,
     ) -> None:
         super().__init__(shuffle=shuffle, render_mode=render_mode)
-        data_root = resolve_root(root, BENCHMARK_FOLDER)
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic("OTB", "otb")
+        data_root = self._data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
         self.dataset = OTBDataset(data_root)
         if sequences is not None:
             self.sequence_names = [self.dataset.resolve(s) for s in sequences]
@@ -409,8 +404,3 @@ class OTBEnv(SequenceEnv):
             return draw_boxes(self._frame, self._sequence.init_box[None], colour=INIT_COLOUR)
         return draw_boxes(self._render_frame, self._render_box[None], colour=ACTION_COLOUR)
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()

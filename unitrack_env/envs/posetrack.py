@@ -22,7 +22,7 @@ from unitrack_env.datasets.posetrack import (
     read_posetrack_json,
     write_posetrack_json,
 )
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.envs.jhmdb import draw_skeleton
 from unitrack_env.errors import DataFormatError
 from unitrack_env.frames import FramePrefetcher
@@ -169,21 +169,11 @@ class PoseTrackEnv(SequenceEnv):
         render_mode: str | None = None,
     ) -> None:
         super().__init__(shuffle=shuffle, render_mode=render_mode)
-        data_root = resolve_root(root, BENCHMARK)
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic(BENCHMARK, kind="posetrack")
+        data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
         self.dataset = PoseTrackDataset(data_root, split)
-        if sequences is not None:
-            missing = [s for s in sequences if s not in self.dataset.sequence_names]
-            if missing:
-                raise ValueError(f"sequences {missing} are not in {self.dataset.data_dir} "
-                                 f"({split}); available: {', '.join(self.dataset.sequence_names)}")
-            self.sequence_names = list(sequences)
-        else:
-            self.sequence_names = list(self.dataset.sequence_names)
+        self.sequence_names = self._select_sequences(
+            sequences, self.dataset.sequence_names, f"{self.dataset.data_dir} ({split})"
+        )
         self.detection_source, self.detection_dir = self._detection_source(data_root, detections)
         self.min_score = min_score
         self.max_people = int(max_people)
@@ -435,11 +425,6 @@ class PoseTrackEnv(SequenceEnv):
                           colour=id_colour(int(track_id)))
         return canvas
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()
 
 
 def _observed_pose(person: PoseTrackPerson, *, oracle: bool) -> tuple[float, np.ndarray]:

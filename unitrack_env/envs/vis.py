@@ -22,7 +22,7 @@ from unitrack_env.datasets.youtube_vis import (
     format_results,
     parse_vis_results,
 )
-from unitrack_env.envs.base import SequenceEnv, resolve_root
+from unitrack_env.envs.base import SequenceEnv
 from unitrack_env.envs.mots import draw_masks
 from unitrack_env.errors import DataFormatError
 from unitrack_env.frames import FramePrefetcher
@@ -125,20 +125,11 @@ class VISEnv(SequenceEnv):
         render_mode: str | None = None,
     ) -> None:
         super().__init__(shuffle=shuffle, render_mode=render_mode)
-        data_root = resolve_root(root, BENCHMARK)
-        self.synthetic = data_root is None
-        if data_root is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            data_root = ensure_synthetic(BENCHMARK, kind="youtube_vis")
+        data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
         self.dataset = YouTubeVISDataset(data_root, split, detections, annotation_file)
-        if sequences is not None:
-            missing = [s for s in sequences if s not in self.dataset.sequence_names]
-            if missing:
-                raise ValueError(f"videos {missing} are not in {self.dataset.annotation_path}")
-            self.sequence_names = list(sequences)
-        else:
-            self.sequence_names = list(self.dataset.sequence_names)
+        self.sequence_names = self._select_sequences(
+            sequences, self.dataset.sequence_names, self.dataset.annotation_path
+        )
         self.categories = dict(self.dataset.data.categories)
         self.min_score = min_score
         self.max_detections = int(max_detections)
@@ -339,8 +330,3 @@ class VISEnv(SequenceEnv):
             return draw_masks(self._current["image"], self._current["masks"])
         return draw_masks(*self._render_state)
 
-    def close(self) -> None:
-        """Stop the frame prefetching thread."""
-        if self._frames is not None:
-            self._frames.close()
-        super().close()
