@@ -106,17 +106,18 @@ class SequenceScore(Mapping[str, float]):
         return len(self.summary)
 
 
-def _make_metrics() -> list[Any]:
+def trackeval_metrics() -> list[Any]:
+    """Fresh, quiet TrackEval HOTA, CLEAR, Identity and Count metric objects."""
     from trackeval.metrics import CLEAR, HOTA, Count, Identity
 
     quiet = {"PRINT_CONFIG": False}
     return [HOTA(), CLEAR(dict(quiet)), Identity(dict(quiet)), Count()]
 
 
-def _flatten(raw: dict[str, dict[str, Any]]) -> dict[str, float]:
+def flatten_results(raw: dict[str, dict[str, Any]]) -> dict[str, float]:
     """One flat dict of floats from TrackEval's per-metric results."""
     out: dict[str, float] = {}
-    for metric in _make_metrics():
+    for metric in trackeval_metrics():
         res = raw[metric.get_name()]
         for name in metric.fields:
             if name not in res:
@@ -355,7 +356,8 @@ def score_sequence(
     _validate_tracker_rows(rows, seq_length, source, line_numbers)
 
     raw = _run_trackeval(seq_dir, rows, name, seq_length, gt_file)
-    return SequenceScore(sequence=seq_dir.name, benchmark=name, summary=_flatten(raw), raw=raw)
+    return SequenceScore(sequence=seq_dir.name, benchmark=name, summary=flatten_results(raw),
+                         raw=raw)
 
 
 def _run_trackeval(
@@ -398,7 +400,7 @@ def _run_trackeval(
             detail = captured.getvalue().strip().splitlines()
             hint = f" ({detail[-1]})" if detail else ""
             raise DataFormatError(gt_file, f"TrackEval rejected the data: {exc}{hint}") from exc
-        return {metric.get_name(): metric.eval_sequence(data) for metric in _make_metrics()}
+        return {metric.get_name(): metric.eval_sequence(data) for metric in trackeval_metrics()}
 
 
 def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScore:
@@ -416,10 +418,10 @@ def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScor
         metric.get_name(): metric.combine_sequences(
             {seq: s.raw[metric.get_name()] for seq, s in scores.items()}
         )
-        for metric in _make_metrics()
+        for metric in trackeval_metrics()
     }
     return SequenceScore(
-        sequence="COMBINED", benchmark=benchmarks.pop(), summary=_flatten(raw), raw=raw
+        sequence="COMBINED", benchmark=benchmarks.pop(), summary=flatten_results(raw), raw=raw
     )
 
 

@@ -43,7 +43,7 @@ from unitrack_env.datasets.mots import (
 )
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.clear_stream import FrameClear, StreamingClear
-from unitrack_env.metrics.motchallenge import SequenceScore
+from unitrack_env.metrics.motchallenge import SequenceScore, flatten_results, trackeval_metrics
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: TrackEval data set class of each benchmark.
@@ -60,21 +60,9 @@ _TRACKER = "tracker"
 _SUB = "data"
 
 
-def _make_metrics() -> list[Any]:
-    from trackeval.metrics import CLEAR, HOTA, Count, Identity
-
-    quiet = {"PRINT_CONFIG": False}
-    return [HOTA(), CLEAR(dict(quiet)), Identity(dict(quiet)), Count()]
-
-
 def _flatten(raw: dict[str, dict[str, Any]]) -> dict[str, float]:
-    out: dict[str, float] = {}
-    for metric in _make_metrics():
-        res = raw[metric.get_name()]
-        for name in metric.fields:
-            if name in res and name not in metric.integer_array_fields:
-                value = res[name]
-                out[name] = float(np.mean(value)) if np.ndim(value) else float(value)
+    """TrackEval's flat summary plus the MOTS names of the CLEAR fields on masks."""
+    out = flatten_results(raw)
     for alias, name in MOTS_ALIASES.items():
         if name in out:
             out[alias] = out[name]
@@ -167,7 +155,7 @@ def _run_trackeval(gt: MaskAnnotations, res: MaskAnnotations, benchmark: str, cl
                 data = dataset.get_preprocessed_seq_data(raw_data, cls)
         except TrackEvalException as exc:
             raise DataFormatError(source, f"TrackEval rejected the data: {exc}") from exc
-        return {metric.get_name(): metric.eval_sequence(data) for metric in _make_metrics()}
+        return {metric.get_name(): metric.eval_sequence(data) for metric in trackeval_metrics()}
 
 
 def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScore:
@@ -177,7 +165,7 @@ def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScor
     raw = {
         metric.get_name(): metric.combine_sequences(
             {seq: s.raw[metric.get_name()] for seq, s in scores.items()})
-        for metric in _make_metrics()
+        for metric in trackeval_metrics()
     }
     benchmark = next(iter(scores.values())).benchmark
     return SequenceScore(sequence=COMBINED, benchmark=benchmark, summary=_flatten(raw), raw=raw)
