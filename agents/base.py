@@ -28,6 +28,10 @@ _BUILTIN_MODULES: dict[str, str] = {
     "repeat-box": "agents.baselines.repeat",
     "repeat-mask": "agents.baselines.repeat",
     "repeat-pose": "agents.baselines.repeat_pose",
+    "unitrack-xcorr": "agents.heads.sot",
+    "unitrack-dcf": "agents.heads.sot",
+    "unitrack-vos": "agents.heads.vos",
+    "unitrack-pose": "agents.heads.pose",
 }
 
 

@@ -1,0 +1,213 @@
+"""The UniTrack pose-propagation head (``unitrack-pose``): belief maps propagated like masks.
+
+UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E.
+
+Per video:
+
+1. The frame is resized to ``input_size`` (the paper's 320 x 320 for JHMDB; None keeps the
+   native size) and goes once through the backbone: a ``(C, h, w)`` stride-8 map.
+2. At reset, each of the ``J`` first-frame joints becomes a Gaussian belief map on the
+   feature grid, ``exp(-d^2 / (2 sigma^2))`` around the joint's position in feature
+   pixels, with ``sigma = max(eta * s_body, 0.5)``, ``eta = 0.01`` and ``s_body`` the larger
+   side of the joints' bounding box (appendix B.2, eq. sbody), all in feature pixels
+   (image pixels / stride; the floor 0.5 is a half feature pixel, so the maps are as sharp
+   as the grid allows for any real body size).
+3. Later frames: the ``J`` maps are propagated together (one affinity, ``J`` label
+   channels) with :class:`~agents.primitives.label_propagation.LabelPropagator` (first frame
+   + 5 latest predictions, radius 12, top-10, temperature 0.05; soft maps reused).
+4. Decoding: **argmax of each map, refined by a soft-argmax** (the map-weighted mean
+   position) over the ``(2 refine_radius + 1)^2`` neighbourhood of the argmax, on the
+   feature grid; mapped back to frame pixels. The local soft-argmax gives sub-cell
+   positions (one cell is 8 input pixels) without being pulled by far-away secondary modes
+   as a global soft-argmax would. A map whose peak falls below ``min_peak`` (the joint has
+   no support left, e.g. it left the frame) keeps the joint's previous position.
+
+Coordinates: keypoints are ``(x, y)`` in 0-based pixels whose centres are integers (the
+environment's convention). Feature cell ``j`` of a map of ``n`` cells over ``N`` pixels is
+centred at pixel ``(j + 0.5) * N / n - 0.5`` (the bilinear, ``align_corners=False``
+correspondence).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from agents.appearance import AppearanceModel
+from agents.base import Agent
+from agents.heads.vos import build_model, make_propagation_config, torch_threads
+from agents.primitives.label_propagation import LabelPropagator
+
+POSE_INPUT_SIZE: tuple[int, int] = (320, 320)
+"""(width, height) frames are resized to (appendix B.2 table, "Pose: 320 x 320")."""
+
+SIGMA_ETA: float = 0.01
+"""``eta``: Gaussian sigma per unit of body size (appendix B.2 table)."""
+
+MIN_SIGMA: float = 0.5
+"""Least Gaussian sigma, in feature pixels (appendix B.2: ``sigma = max(eta s_body, 0.5)``)."""
+
+REFINE_RADIUS: int = 1
+"""Half-side (feature cells) of the soft-argmax neighbourhood around each map's argmax."""
+
+MIN_PEAK: float = 1e-3
+"""A propagated map whose maximum is below this has lost its joint: keep the last position."""
+
+
+@dataclass(frozen=True)
+class UniTrackPoseConfig:
+    """Options of the ``unitrack-pose`` agent.
+
+    Attributes:
+        weights: Appearance-model weights (``"imagenet-lite0"`` default, offline; ``"random"``;
+            a checkpoint path, ...).
+        arch: Backbone architecture (None: the weights' own).
+        layer: Output layer (None: the architecture's default stride-8 layer).
+        device: Torch device.
+        num_threads: Torch threads while the agent acts (None: torch's setting).
+        input_size: ``(width, height)`` the frames are resized to (None: native size).
+        sigma_eta: ``eta`` of ``sigma = max(eta * s_body, min_sigma)``.
+        min_sigma: Least sigma (feature pixels).
+        refine_radius: Soft-argmax neighbourhood half-side (0: plain argmax).
+        min_peak: Peak below which a joint keeps its previous position.
+        propagation: Fields of :class:`LabelPropagationConfig` to override.
+    """
+
+    weights: str = "imagenet-lite0"
+    arch: str | None = None
+    layer: str | None = None
+    device: str = "cpu"
+    num_threads: int | None = None
+    input_size: tuple[int, int] | None = POSE_INPUT_SIZE
+    sigma_eta: float = SIGMA_ETA
+    min_sigma: float = MIN_SIGMA
+    refine_radius: int = REFINE_RADIUS
+    min_peak: float = MIN_PEAK
+    propagation: dict[str, Any] | None = None
+
+
+def belief_maps(points: np.ndarray, shape: tuple[int, int], sigma: float) -> torch.Tensor:
+    """``(J, h, w)`` Gaussian maps centred on ``points`` ``(J, 2)`` (x, y in grid cells)."""
+    h, w = shape
+    ys = torch.arange(h, dtype=torch.float64).view(1, h, 1)
+    xs = torch.arange(w, dtype=torch.float64).view(1, 1, w)
+    pts = torch.as_tensor(np.asarray(points, np.float64))
+    d2 = (xs - pts[:, 0].view(-1, 1, 1)) ** 2 + (ys - pts[:, 1].view(-1, 1, 1)) ** 2
+    return torch.exp(-d2 / (2.0 * sigma * sigma)).float()
+
+
+def body_size(points: np.ndarray) -> float:
+    """``s_body``: the larger side of the joints' bounding box (paper eq. sbody)."""
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    return float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1]))) if len(pts) else 0.0
+
+
+def decode_maps(maps: torch.Tensor, refine_radius: int = REFINE_RADIUS) -> tuple[np.ndarray,
+                                                                                 np.ndarray]:
+    """Peak positions of ``(J, h, w)`` maps: argmax + local soft-argmax.
+
+    Returns:
+        ``(J, 2)`` (x, y) in grid cells and ``(J,)`` peak values.
+    """
+    maps = maps.double()
+    j, h, w = maps.shape
+    flat = maps.reshape(j, -1)
+    peak, index = flat.max(dim=1)
+    rows, cols = (index // w).numpy(), (index % w).numpy()
+    out = np.zeros((j, 2))
+    for k in range(j):
+        r0, r1 = max(0, rows[k] - refine_radius), min(h, rows[k] + refine_radius + 1)
+        c0, c1 = max(0, cols[k] - refine_radius), min(w, cols[k] + refine_radius + 1)
+        patch = maps[k, r0:r1, c0:c1].clamp(min=0)
+        total = float(patch.sum())
+        if total <= 0:
+            out[k] = (cols[k], rows[k])
+            continue
+        yy, xx = torch.meshgrid(torch.arange(r0, r1, dtype=torch.float64),
+                                torch.arange(c0, c1, dtype=torch.float64), indexing="ij")
+        out[k] = (float((patch * xx).sum()) / total, float((patch * yy).sum()) / total)
+    return out, peak.numpy()
+
+
+class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
+    """UniTrack's pose-propagation head (JHMDB).
+
+    Args:
+        appearance_model: A ready :class:`~agents.appearance.AppearanceModel` to share
+            (then ``weights``/``arch``/``layer``/``device`` are ignored).
+        **options: Fields of :class:`UniTrackPoseConfig`.
+
+    Attributes:
+        config: The options.
+        model: The appearance model.
+        propagator: The label-propagation state of the current video.
+        sigma: Gaussian sigma (feature pixels) of the current video's belief maps.
+    """
+
+    def __init__(self, *, appearance_model: AppearanceModel | None = None,
+                 **options: Any) -> None:
+        try:
+            self.config = UniTrackPoseConfig(**options)
+        except TypeError as exc:
+            valid = ", ".join(f.name for f in fields(UniTrackPoseConfig))
+            raise TypeError(f"unitrack-pose: {exc}; valid options: {valid}") from None
+        self.model = build_model(self.config, appearance_model)
+        self.propagator = LabelPropagator(make_propagation_config(self.config.propagation))
+        self.sigma = self.config.min_sigma
+        self._pose: np.ndarray | None = None
+        self._first_answer: np.ndarray | None = None
+        self._frame_size = (1, 1)  # (width, height)
+        self._grid = (1, 1)  # (w, h) of the feature map
+
+    # ------------------------------------------------------------------ coordinates
+    def _to_grid(self, points: np.ndarray) -> np.ndarray:
+        (fw, fh), (gw, gh) = self._frame_size, self._grid
+        return (np.asarray(points, np.float64) + 0.5) * np.array([gw / fw, gh / fh]) - 0.5
+
+    def _to_frame(self, points: np.ndarray) -> np.ndarray:
+        (fw, fh), (gw, gh) = self._frame_size, self._grid
+        return (np.asarray(points, np.float64) + 0.5) * np.array([fw / gw, fh / gh]) - 0.5
+
+    def _features(self, frame: np.ndarray) -> torch.Tensor:
+        size = self.config.input_size
+        if size is not None and (frame.shape[1], frame.shape[0]) != tuple(size):
+            frame = cv2.resize(np.ascontiguousarray(frame), tuple(size),
+                               interpolation=cv2.INTER_LINEAR)
+        return self.model.features(frame)[0]
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
+        """Build the first frame's belief maps and start the memory bank."""
+        pose = np.array(observation["init_keypoints"], dtype=np.float64)
+        frame = observation["frame"]
+        self._frame_size = (frame.shape[1], frame.shape[0])
+        with torch_threads(self.config.num_threads), torch.inference_mode():
+            features = self._features(frame)
+            self._grid = (features.shape[2], features.shape[1])
+            grid_points = self._to_grid(pose)
+            self.sigma = max(self.config.sigma_eta * body_size(grid_points),
+                             self.config.min_sigma)
+            maps = belief_maps(grid_points, (features.shape[1], features.shape[2]), self.sigma)
+            self.propagator.reset(features, maps.to(features.device))
+        self._pose = pose
+        self._first_answer = pose.astype(np.float32)
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        """The ``(J, 2)`` float32 joints ``(x, y)`` of the current frame."""
+        if self._first_answer is not None:  # the first step answers the reset frame
+            answer, self._first_answer = self._first_answer, None
+            return answer
+        if self._pose is None:
+            raise RuntimeError("call reset() with the first observation before act()")
+        with torch_threads(self.config.num_threads), torch.inference_mode():
+            maps = self.propagator.step(self._features(observation["frame"]))
+        cells, peaks = decode_maps(maps.cpu(), self.config.refine_radius)
+        pose = self._to_frame(cells)
+        lost = peaks < self.config.min_peak
+        pose[lost] = self._pose[lost]
+        self._pose = pose
+        return pose.astype(np.float32)

@@ -1,0 +1,122 @@
+"""The UniTrack SOT heads: box propagation with the shared appearance model.
+
+Agents ``unitrack-xcorr`` (SiamFC cross-correlation, fixed first-frame template) and
+``unitrack-dcf`` (DCFNet correlation filter with online update), both from
+:class:`~agents.primitives.box_propagation.BoxPropagator` (UniTrack paper, section 2.3 and
+appendix B.1). Per frame the three scale crops go through the backbone in one batch; the
+DCF head adds one crop at the new position for its online update.
+
+Boxes come and go in the environment's OTB convention: ``(x, y, w, h)`` with 1-based pixels
+(the top-left pixel is ``(1, 1)``), converted to continuous coordinates by subtracting
+``pixel_origin``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+import torch
+
+from agents.appearance import AppearanceModel
+from agents.base import Agent
+from agents.heads.vos import build_model, torch_threads
+from agents.primitives.box_propagation import BoxPropagationConfig, BoxPropagator, BoxState
+
+OTB_PIXEL_ORIGIN: float = 1.0
+"""OTB boxes are 1-based: ``x - 1`` is the left edge in continuous 0-based coordinates."""
+
+
+@dataclass(frozen=True)
+class UniTrackSOTConfig:
+    """Options of the ``unitrack-xcorr`` / ``unitrack-dcf`` agents.
+
+    Attributes:
+        weights: Appearance-model weights (``"imagenet-lite0"`` default, offline;
+            ``"random"``; a checkpoint path, ...).
+        arch: Backbone architecture (None: the weights' own).
+        layer: Output layer (None: the architecture's default stride-8 layer).
+        device: Torch device.
+        num_threads: Torch threads while the agent acts (None: torch's setting).
+        pixel_origin: Coordinate of the first pixel in the boxes (OTB: 1).
+        propagation: Fields of :class:`BoxPropagationConfig` to override (crop_size,
+            context, scale_step, dcf_lambda, ...; ``method`` is set by the agent).
+    """
+
+    weights: str = "imagenet-lite0"
+    arch: str | None = None
+    layer: str | None = None
+    device: str = "cpu"
+    num_threads: int | None = None
+    pixel_origin: float = OTB_PIXEL_ORIGIN
+    propagation: dict[str, Any] | None = None
+
+
+class _UniTrackSOTAgent(Agent):
+    """Shared body of the two SOT heads (``method`` set by the subclass)."""
+
+    method: str = "dcf"
+
+    def __init__(self, *, appearance_model: AppearanceModel | None = None,
+                 **options: Any) -> None:
+        try:
+            self.config = UniTrackSOTConfig(**options)
+        except TypeError as exc:
+            valid = ", ".join(f.name for f in fields(UniTrackSOTConfig))
+            raise TypeError(f"{self.name}: {exc}; valid options: {valid}") from None
+        overrides = dict(self.config.propagation or {})
+        overrides["method"] = self.method
+        try:
+            box_config = replace(BoxPropagationConfig(), **overrides)
+        except TypeError as exc:
+            valid = ", ".join(f.name for f in fields(BoxPropagationConfig))
+            raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
+        self.model = build_model(self.config, appearance_model)
+        self.propagator = BoxPropagator(self.model.features, box_config,
+                                        stride=self.model.stride)
+        self._first_answer: np.ndarray | None = None
+
+    def reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
+        """Initialise the template / filter on the first frame and ``init_box``."""
+        x, y, w, h = (float(v) for v in np.asarray(observation["init_box"], np.float64))
+        left, top = x - self.config.pixel_origin, y - self.config.pixel_origin
+        with torch_threads(self.config.num_threads), torch.inference_mode():
+            self.propagator.reset(observation["frame"],
+                                  BoxState(left + w / 2, top + h / 2, w, h))
+        self._first_answer = np.array([x, y, w, h], np.float32)
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        """The box ``(x, y, w, h)`` (float32, 1-based pixels) of the current frame."""
+        if self._first_answer is not None:  # the first step answers the reset frame
+            answer, self._first_answer = self._first_answer, None
+            return answer
+        if self.propagator.state is None:
+            raise RuntimeError("call reset() with the first observation before act()")
+        with torch_threads(self.config.num_threads), torch.inference_mode():
+            st = self.propagator.step(observation["frame"])
+        origin = self.config.pixel_origin
+        return np.array([st.cx - st.w / 2 + origin, st.cy - st.h / 2 + origin, st.w, st.h],
+                        np.float32)
+
+
+class UniTrackXCorrAgent(_UniTrackSOTAgent, name="unitrack-xcorr", tasks=("sot",)):
+    """UniTrack SOT with the cross-correlation (SiamFC) head.
+
+    Args:
+        appearance_model: A ready model to share (then the model options are ignored).
+        **options: Fields of :class:`UniTrackSOTConfig`.
+    """
+
+    method = "xcorr"
+
+
+class UniTrackDCFAgent(_UniTrackSOTAgent, name="unitrack-dcf", tasks=("sot",)):
+    """UniTrack SOT with the correlation-filter (DCFNet) head.
+
+    Args:
+        appearance_model: A ready model to share (then the model options are ignored).
+        **options: Fields of :class:`UniTrackSOTConfig`.
+    """
+
+    method = "dcf"

@@ -1,0 +1,182 @@
+"""The UniTrack VOS head: mask propagation with the shared appearance model (``unitrack-vos``).
+
+Per video (UniTrack paper, section 2.3 and appendix B.2; ``OFFICIAL-CODE-FACTS.md``, "Mask
+and pose propagation"):
+
+1. At reset, the first frame's label map (0 background, ``k`` object ``k``, 255 void) becomes
+   one-hot channels ``[background, object_1, ...]`` (void counts as background), downsampled
+   bilinearly to the feature grid ``(ceil(H/8), ceil(W/8))``; the first frame's features
+   and these soft labels start the memory bank of
+   :class:`~agents.primitives.label_propagation.LabelPropagator`.
+2. The first step answers the first frame itself with the given labels (void as background).
+3. Every later frame: one backbone pass at full resolution (DAVIS 480p), propagation of the
+   soft labels (first frame + 5 latest predictions, radius 12, top-10, temperature 0.05),
+   bilinear upsampling of the soft labels to the frame size, argmax, channel -> object label.
+
+Features are computed once per frame (the first frame's at reset) under
+``torch.inference_mode()``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from agents.appearance import AppearanceModel
+from agents.base import Agent
+from agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
+
+VOID_LABEL: int = 255
+"""DAVIS's void label (ambiguous pixels of the annotation); treated as background."""
+
+
+@dataclass(frozen=True)
+class UniTrackVOSConfig:
+    """Options of the ``unitrack-vos`` agent.
+
+    Attributes:
+        weights: Appearance-model weights (``"imagenet-lite0"`` default, offline; ``"random"``
+            is the paper's random-init baseline; a checkpoint path, ...).
+        arch: Backbone architecture (None: the weights' own).
+        layer: Output layer (None: the architecture's default stride-8 layer).
+        device: Torch device.
+        num_threads: Torch threads while the agent acts (None: torch's setting).
+        propagation: Fields of :class:`LabelPropagationConfig` to override (memory_size,
+            radius, topk, temperature, ...).
+        antialias: Antialias the bilinear downsampling of the first frame's labels to the
+            feature grid (averages each cell's pixels instead of sampling 2 x 2 of them).
+    """
+
+    weights: str = "imagenet-lite0"
+    arch: str | None = None
+    layer: str | None = None
+    device: str = "cpu"
+    num_threads: int | None = None
+    propagation: dict[str, Any] | None = None
+    antialias: bool = True
+
+    def propagation_config(self) -> LabelPropagationConfig:
+        """The :class:`LabelPropagationConfig` these options describe."""
+        return make_propagation_config(self.propagation)
+
+
+def make_propagation_config(options: dict[str, Any] | None) -> LabelPropagationConfig:
+    """A :class:`LabelPropagationConfig` from a dict of overrides, with a clear error."""
+    try:
+        return LabelPropagationConfig(**(options or {}))
+    except TypeError as exc:
+        valid = ", ".join(f.name for f in fields(LabelPropagationConfig))
+        raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
+
+
+@contextlib.contextmanager
+def torch_threads(num_threads: int | None) -> Iterator[None]:
+    """Run the body with ``torch.set_num_threads(num_threads)`` (None: leave it alone)."""
+    if num_threads is None:
+        yield
+        return
+    if num_threads < 1:
+        raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
+    previous = torch.get_num_threads()
+    torch.set_num_threads(num_threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def build_model(config: Any, model: AppearanceModel | None) -> AppearanceModel:
+    """The shared model if given, else one built from ``config``'s weights/arch/layer/device."""
+    if model is not None:
+        return model
+    return AppearanceModel(config.weights, arch=config.arch, layer=config.layer,
+                           device=config.device)
+
+
+def labels_to_onehot(labels: np.ndarray, object_ids: tuple[int, ...]) -> torch.Tensor:
+    """``(1 + n, H, W)`` float one-hot ``[background, object_ids...]``; void is background."""
+    lab = torch.from_numpy(np.ascontiguousarray(labels).astype(np.int64))
+    channels = [torch.ones_like(lab, dtype=torch.float32)]
+    for obj in object_ids:
+        channels.append((lab == obj).float())
+    onehot = torch.stack(channels)
+    onehot[0] = 1.0 - onehot[1:].sum(0).clamp(max=1.0)
+    return onehot
+
+
+class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
+    """UniTrack's mask-propagation head for semi-supervised VOS (DAVIS).
+
+    Args:
+        appearance_model: A ready :class:`~agents.appearance.AppearanceModel` to share
+            (then ``weights``/``arch``/``layer``/``device`` are ignored).
+        **options: Fields of :class:`UniTrackVOSConfig`.
+
+    Attributes:
+        config: The options.
+        model: The appearance model.
+        propagator: The label-propagation state of the current video.
+        object_ids: Labels of the current video's objects (channel ``i + 1`` is object
+            ``object_ids[i]``).
+    """
+
+    def __init__(self, *, appearance_model: AppearanceModel | None = None,
+                 **options: Any) -> None:
+        try:
+            self.config = UniTrackVOSConfig(**options)
+        except TypeError as exc:
+            valid = ", ".join(f.name for f in fields(UniTrackVOSConfig))
+            raise TypeError(f"unitrack-vos: {exc}; valid options: {valid}") from None
+        self.model = build_model(self.config, appearance_model)
+        self.propagator = LabelPropagator(self.config.propagation_config())
+        self.object_ids: tuple[int, ...] = ()
+        self._first_answer: np.ndarray | None = None
+        self._lookup = np.zeros(1, np.uint8)
+        self._size = (0, 0)
+
+    def reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
+        """Read the first frame's labels; compute its features; start the memory bank."""
+        labels = np.asarray(observation["init_labels"])
+        ids = sorted(int(v) for v in np.unique(labels) if v not in (0, VOID_LABEL))
+        self.object_ids = tuple(ids)
+        self._lookup = np.array([0, *ids], dtype=np.uint8)
+        answer = labels.astype(np.uint8, copy=True)
+        answer[answer == VOID_LABEL] = 0
+        self._first_answer = answer
+        frame = observation["frame"]
+        self._size = labels.shape[:2]
+        if frame.shape[:2] != self._size:
+            raise ValueError(
+                f"frame {frame.shape[:2]} and init_labels {self._size} differ in size; "
+                "unitrack-vos needs the decoded frames (decode_frames=True)"
+            )
+        with torch_threads(self.config.num_threads):
+            features = self.model.features(frame)[0]
+            onehot = labels_to_onehot(labels, self.object_ids).to(features.device)
+            small = F.interpolate(onehot[None], size=features.shape[1:], mode="bilinear",
+                                  align_corners=False, antialias=self.config.antialias)[0]
+            self.propagator.reset(features, small)
+
+    def act(self, observation: dict[str, Any]) -> np.ndarray:
+        """The label map ``(H, W)`` uint8 of the current frame."""
+        if self._first_answer is not None:  # the first step answers the reset frame
+            answer, self._first_answer = self._first_answer, None
+            return answer
+        if self.propagator.memory_length == 0:
+            raise RuntimeError("call reset() with the first observation before act()")
+        with torch_threads(self.config.num_threads), torch.inference_mode():
+            features = self.model.features(observation["frame"])[0]
+            soft = self.propagator.step(features)
+            return self.decode(soft)
+
+    def decode(self, soft: torch.Tensor) -> np.ndarray:
+        """Soft labels ``(1 + n, h, w)`` -> ``(H, W)`` uint8 object labels (bilinear + argmax)."""
+        full = F.interpolate(soft[None], size=self._size, mode="bilinear", align_corners=False)[0]
+        channel = full.argmax(0).numpy().astype(np.intp)
+        return self._lookup[channel]

@@ -1,0 +1,150 @@
+"""Label propagation (level 2): the fast tiled search against the dense definition, and
+known answers for the radius, the first frame, the memory bank and the soft labels."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from agents.primitives.label_propagation import (
+    LabelPropagationConfig,
+    LabelPropagator,
+    normalize_features,
+    propagate_dense,
+)
+
+
+def random_video(frames: int, c: int = 8, h: int = 13, w: int = 21, k: int = 3, seed: int = 0):
+    gen = torch.Generator().manual_seed(seed)
+    feats = [normalize_features(torch.randn(c, h, w, generator=gen)) for _ in range(frames)]
+    labels = [torch.rand(k, h, w, generator=gen) for _ in range(frames)]
+    return feats, labels
+
+
+@pytest.mark.parametrize("tile", [1, 5, 16, 64])
+@pytest.mark.parametrize("radius", [0.0, 2.5, 12.0])
+def test_tiled_search_equals_the_dense_definition(tile, radius):
+    feats, labels = random_video(7)
+    prop = LabelPropagator(LabelPropagationConfig(tile_size=tile, radius=radius,
+                                                  max_affinity_elements=3000))
+    prop.reset(feats[0], labels[0])
+    for t in range(1, 6):
+        prop.push(feats[t], labels[t])
+    assert prop.memory_length == 6
+    ref = propagate_dense(feats[6], feats[:6], labels[:6], [None] + [radius] * 5)
+    torch.testing.assert_close(prop.propagate(feats[6]), ref, atol=1e-5, rtol=0)
+
+
+def test_first_frame_radius_and_no_radius_options():
+    feats, labels = random_video(4, seed=1)
+    prop = LabelPropagator(LabelPropagationConfig(radius=None, first_frame_radius=3.0))
+    prop.reset(feats[0], labels[0])
+    prop.push(feats[1], labels[1])
+    prop.push(feats[2], labels[2])
+    ref = propagate_dense(feats[3], feats[:3], labels[:3], [3.0, None, None])
+    torch.testing.assert_close(prop.propagate(feats[3]), ref, atol=1e-5, rtol=0)
+
+
+def one_hot_features(h: int, w: int, codes: dict[tuple[int, int], int], default: int,
+                     c: int = 4) -> torch.Tensor:
+    feats = torch.zeros(c, h, w)
+    feats[default] = 1.0
+    for (y, x), code in codes.items():
+        feats[:, y, x] = 0.0
+        feats[code, y, x] = 1.0
+    return feats
+
+
+def test_radius_limits_recent_frames_but_not_the_first():
+    h, w = 3, 20
+    query = one_hot_features(h, w, {}, default=0)  # every query looks like code 0
+    background = torch.zeros(2, h, w)
+    background[0] = 1.0
+    # Recent frame: the only code-0 location is (1, 15), labelled object.
+    recent = one_hot_features(h, w, {(1, 15): 0}, default=1)
+    recent_labels = background.clone()
+    recent_labels[:, 1, 15] = torch.tensor([0.0, 1.0])
+    cfg = LabelPropagationConfig(topk=1, radius=12.0, memory_size=2)
+    # First frame: nothing alike (code 2) -> background everywhere.
+    prop = LabelPropagator(cfg)
+    prop.reset(one_hot_features(h, w, {}, default=2), background)
+    prop.push(recent, recent_labels)
+    out = prop.propagate(query)
+    assert out[1, 1, 10] == 1.0  # 5 px from the match: found
+    assert out[1, 1, 0] == 0.0  # 15 px away: beyond the radius, background
+    # The first frame has no radius: a far match there is found.
+    first = one_hot_features(h, w, {(1, 19): 0}, default=2)
+    first_labels = background.clone()
+    first_labels[:, 1, 19] = torch.tensor([0.0, 1.0])
+    prop.reset(first, first_labels)
+    prop.push(recent, recent_labels)
+    assert prop.propagate(query)[1, 1, 0] == 1.0
+
+
+def test_translation_is_followed_exactly():
+    gen = torch.Generator().manual_seed(3)
+    big = normalize_features(torch.randn(16, 24, 30, generator=gen))
+    first, moved = big[:, 2:22, 2:28], big[:, 4:24, 0:26]  # content shifts by (-2, +2)
+    labels = torch.zeros(1, 20, 26)
+    labels[0, 8:12, 10:14] = 1.0
+    prop = LabelPropagator(LabelPropagationConfig(topk=1))
+    prop.reset(first, labels)
+    out = prop.step(moved)
+    expected = torch.zeros(1, 20, 26)
+    expected[0, 6:10, 12:16] = 1.0
+    # Where the moved frame shows content of the first one, the labels move with it.
+    torch.testing.assert_close(out[:, :18, 2:], expected[:, :18, 2:])
+    assert prop.memory_length == 2
+
+
+def test_memory_bank_keeps_the_first_and_latest_frames():
+    feats, labels = random_video(10, seed=4)
+    prop = LabelPropagator(LabelPropagationConfig(memory_size=3))
+    prop.reset(feats[0], labels[0])
+    for t in range(1, 9):
+        prop.push(feats[t], labels[t])
+    assert prop.memory_length == 3
+    ref = propagate_dense(feats[9], [feats[0], feats[7], feats[8]],
+                          [labels[0], labels[7], labels[8]], [None, 12.0, 12.0])
+    torch.testing.assert_close(prop.propagate(feats[9]), ref, atol=1e-5, rtol=0)
+
+
+def test_soft_labels_stay_convex_and_recurrent():
+    feats, _ = random_video(8, seed=5, k=2)
+    onehot = torch.zeros(2, 13, 21)
+    onehot[0, :, :10] = 1.0
+    onehot[1, :, 10:] = 1.0
+    prop = LabelPropagator()
+    prop.reset(feats[0], onehot)
+    for t in range(1, 8):
+        out = prop.step(feats[t])
+        assert out.min() >= 0 and out.max() <= 1 + 1e-6
+        torch.testing.assert_close(out.sum(0), torch.ones(13, 21))
+    assert prop.memory_length == 6
+
+
+def test_bfloat16_affinities_are_close_to_float32():
+    feats, labels = random_video(7, c=32, seed=6)
+    out = {}
+    for dtype in ("float32", "bfloat16"):
+        prop = LabelPropagator(LabelPropagationConfig(affinity_dtype=dtype, temperature=0.5))
+        prop.reset(feats[0], labels[0])
+        for t in range(1, 6):
+            prop.push(feats[t], labels[t])
+        out[dtype] = prop.propagate(feats[6])
+    assert (out["float32"] - out["bfloat16"]).abs().mean() < 0.02
+
+
+def test_errors_name_what_to_fix():
+    with pytest.raises(ValueError, match="memory_size"):
+        LabelPropagationConfig(memory_size=0)
+    with pytest.raises(ValueError, match="affinity_dtype"):
+        LabelPropagationConfig(affinity_dtype="float16")
+    prop = LabelPropagator()
+    with pytest.raises(RuntimeError, match="reset"):
+        prop.step(torch.zeros(4, 5, 5))
+    with pytest.raises(ValueError, match="downsample"):
+        prop.reset(torch.zeros(4, 5, 5), torch.zeros(2, 10, 10))
+    prop.reset(torch.randn(4, 5, 5), torch.zeros(2, 5, 5))
+    with pytest.raises(ValueError, match="one size"):
+        prop.step(torch.randn(4, 6, 5))

@@ -1,0 +1,180 @@
+"""The UniTrack propagation heads (SOT, VOS, pose) end to end: registry, behaviour, beating
+the repeat baselines (fast synthetic smoke episodes; the real fixtures under ``slow``), and
+episode goldens."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import unitrack_env  # noqa: F401  (registers the ids)
+from agents import make_agent
+from agents.appearance import AppearanceModel
+from agents.base import agent_class
+
+GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
+ONE = {"num_threads": 1}
+#: Fast SOT settings: half-size crops (the paper's 520 costs 4 backbone passes per frame).
+FAST_SOT = {**ONE, "propagation": {"crop_size": 256}}
+#: Float noise from thread counts and BLAS may move metrics slightly; actions not compared.
+GOLDEN_TOLERANCE = 2e-3
+
+
+@pytest.fixture(scope="module")
+def model() -> AppearanceModel:
+    return AppearanceModel()  # EfficientNet-Lite0 ImageNet, offline
+
+
+def play(env: gym.Env, agent: Any, sequence: str) -> tuple[dict[str, float], list[Any]]:
+    obs, info = env.reset(options={"sequence": sequence})
+    agent.reset(obs, info)
+    actions = []
+    while True:
+        action = agent.act(obs)
+        actions.append(action)
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            return info.get("metrics", {}), actions
+
+
+def test_registered_with_their_tasks():
+    assert agent_class("unitrack-xcorr").tasks == ("sot",)
+    assert agent_class("unitrack-dcf").tasks == ("sot",)
+    assert agent_class("unitrack-vos").tasks == ("vos",)
+    assert agent_class("unitrack-pose").tasks == ("pose-prop",)
+    with pytest.raises(TypeError, match="valid options"):
+        make_agent("unitrack-vos", radius=3)
+    with pytest.raises(TypeError, match="valid"):
+        make_agent("unitrack-dcf", propagation={"lamda": 1.0})
+
+
+def test_vos_first_answer_and_void(model):
+    agent = make_agent("unitrack-vos", appearance_model=model, **ONE)
+    labels = np.zeros((48, 64), np.uint8)
+    labels[10:30, 10:30] = 2
+    labels[0, :] = 255
+    frame = np.random.default_rng(0).integers(0, 255, (48, 64, 3), dtype=np.uint8)
+    obs = {"frame": frame, "init_labels": labels, "num_objects": 1}
+    agent.reset(obs, {})
+    first = agent.act(obs)
+    assert first[0].max() == 0 and (first == 2).sum() == 400
+    again = agent.act(obs)  # the same frame propagated: the object stays where it is
+    assert set(np.unique(again)) <= {0, 2} and (again[12:28, 12:28] == 2).all()
+
+
+def test_pose_decoding_is_subcell():
+    import torch
+
+    from agents.heads.pose import belief_maps, body_size, decode_maps
+
+    maps = belief_maps(np.array([[5.3, 7.6], [0.0, 0.0]]), (12, 12), sigma=1.0)
+    cells, peaks = decode_maps(maps, refine_radius=1)
+    assert abs(cells[0, 0] - 5.3) < 0.2 and abs(cells[0, 1] - 7.6) < 0.2
+    assert peaks[1] == pytest.approx(1.0) and isinstance(maps, torch.Tensor)
+    assert body_size(np.array([[0, 0], [3, 10]])) == 10
+
+
+# ---------------------------------------------------------------------- smoke + goldens
+# One short synthetic episode per head: it must beat its repeat baseline by a margin and
+# match its golden file (pytest --update-goldens re-records).
+SMOKE = [
+    ("UniTrack/OTB-v0", "unitrack-dcf", "SynLateStart", FAST_SOT, "repeat-box", "AUC", 0.3),
+    ("UniTrack/OTB-v0", "unitrack-xcorr", "SynLateStart", FAST_SOT, "repeat-box", "AUC", 0.3),
+    # Measured: 0.257 vs 0.212 (look-alike textured people who occlude one another).
+    ("UniTrack/DAVIS-v0", "unitrack-vos", "syn-occluded", ONE, "repeat-mask", "J-Mean", 0.02),
+    ("UniTrack/JHMDB-v0", "unitrack-pose", "run/SYN_run_f_cm_np1_ri_med_1", ONE,
+     "repeat-pose", "PCK@0.1", 0.2),
+]
+
+
+@pytest.mark.parametrize(("env_id", "agent", "sequence", "agent_kwargs", "baseline", "metric",
+                          "margin"), SMOKE)
+def test_smoke_beats_repeat_and_matches_golden(episode_regression, env_id, agent, sequence,
+                                               agent_kwargs, baseline, metric, margin):
+    name = env_id.split("/")[1].split("-")[0]
+    record = episode_regression.check(
+        env_id, agent=agent, sequence=sequence, agent_kwargs=agent_kwargs,
+        golden=GOLDENS / f"{agent}-{name}-{sequence.replace('/', '__')}.json",
+        tolerance=GOLDEN_TOLERANCE,
+    )
+    base, _ = play(gym.make(env_id), make_agent(baseline), sequence)
+    assert record.metrics[metric] > base[metric] + margin, (record.metrics, base)
+
+
+# ---------------------------------------------------------------------- real data (slow)
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "sequence"), [
+    ("unitrack-dcf", "Crossing"),  # measured AUC 0.775 vs 0.041 for repeat-box
+    # Known failure, measured: AUC 0.039 vs 0.222 for repeat-box (the filter drifts off the
+    # walker early in the trimmed 199-frame Human3 and never recovers).
+    pytest.param("unitrack-dcf", "Human3",
+                 marks=pytest.mark.xfail(strict=False, reason="DCF drifts on Human3")),
+    ("unitrack-xcorr", "Crossing"),
+    ("unitrack-xcorr", "Human3"),
+])
+def test_sot_beats_repeat_on_real_otb(shared_data, model, name, sequence):
+    env = gym.make("UniTrack/OTB-v0", root=str(shared_data / "OTB"))
+    base, _ = play(env, make_agent("repeat-box"), sequence)
+    ours, _ = play(env, make_agent(name, appearance_model=model), sequence)
+    assert ours["AUC"] > base["AUC"], (sequence, ours, base)
+
+
+@pytest.mark.slow
+def test_sot_beats_repeat_on_synthetic_at_paper_settings(model):
+    env = gym.make("UniTrack/OTB-v0")
+    for name in ("unitrack-dcf", "unitrack-xcorr"):
+        for sequence in env.unwrapped.sequence_names:
+            base, _ = play(env, make_agent("repeat-box"), sequence)
+            ours, _ = play(env, make_agent(name, appearance_model=model), sequence)
+            assert ours["AUC"] > base["AUC"], (name, sequence, ours, base)
+
+
+@pytest.mark.slow
+def test_vos_on_real_davis_reaches_the_reference_points(shared_data, model):
+    env = gym.make("UniTrack/DAVIS-v0", root=str(shared_data / "DAVIS"))
+    # Measured here: J-Mean 0.905 (blackswan) and 0.854 (dog) under the official rules;
+    # repeating the first mask gives 0.545 / 0.32.
+    floors = {"blackswan": 0.895, "dog": 0.84}
+    for sequence, floor in floors.items():
+        base, _ = play(env, make_agent("repeat-mask"), sequence)
+        ours, _ = play(env, make_agent("unitrack-vos", appearance_model=model), sequence)
+        assert ours["J-Mean"] > max(floor, base["J-Mean"]), (sequence, ours, base)
+
+
+@pytest.mark.slow
+def test_vos_beats_repeat_on_synthetic_defaults(model):
+    env = gym.make("UniTrack/DAVIS-v0")
+    for sequence in env.unwrapped.sequence_names:
+        base, _ = play(env, make_agent("repeat-mask"), sequence)
+        ours, _ = play(env, make_agent("unitrack-vos", appearance_model=model), sequence)
+        assert ours["J-Mean"] > base["J-Mean"], (sequence, ours, base)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sequence", [
+    "run/SYN_run_f_cm_np1_ri_med_1",
+    "walk/SYN_walk_f_cm_np1_fr_med_1",
+    # Known shortfall, measured: PCK@0.1 0.245 vs 0.277 for repeating the first pose (the
+    # walker is crossed by a look-alike person; joints drift onto the other one).
+    pytest.param("walk/SYN_walk_f_cm_np1_le_med_2",
+                 marks=pytest.mark.xfail(strict=True, reason="pose drifts to the crosser")),
+])
+def test_pose_beats_repeat_on_synthetic_defaults(model, sequence):
+    env = gym.make("UniTrack/JHMDB-v0")
+    base, _ = play(env, make_agent("repeat-pose"), sequence)
+    ours, _ = play(env, make_agent("unitrack-pose", appearance_model=model), sequence)
+    assert ours["PCK@0.1"] > base["PCK@0.1"], (sequence, ours, base)
+
+
+@pytest.mark.slow
+def test_pose_beats_repeat_on_real_jhmdb(shared_data, model):
+    env = gym.make("UniTrack/JHMDB-v0", root=str(shared_data / "JHMDB"))
+    sequence = env.unwrapped.sequence_names[0]
+    base, _ = play(env, make_agent("repeat-pose"), sequence)
+    ours, _ = play(env, make_agent("unitrack-pose", appearance_model=model), sequence)
+    # Measured here: PCK@0.1 0.366, PCK@0.2 0.639; repeating the first pose: 0.002 / 0.015.
+    assert ours["PCK@0.1"] > base["PCK@0.1"] + 0.2 and ours["PCK@0.2"] > 0.5, (ours, base)
