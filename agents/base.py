@@ -24,7 +24,7 @@ AGENTS: dict[str, type[Agent]] = {}
 _BUILTIN_MODULES: dict[str, str] = {
     "iou": "agents.baselines.iou",
     "fresh-ids": "agents.baselines.trivial",
-    "unitrack": "agents.heads.mot",
+    "unitrack": "agents.heads.association",
     "repeat-box": "agents.baselines.repeat",
     "repeat-mask": "agents.baselines.repeat",
     "repeat-pose": "agents.baselines.repeat_pose",

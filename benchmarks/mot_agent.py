@@ -175,7 +175,7 @@ def cache(threads: int) -> None:
                 if not done:
                     seq.append((obs, step_info))
             observations.append(seq)
-        for attempt in range(2):
+        for _attempt in range(2):
             agent = make_agent("unitrack", num_threads=threads,
                                feature_cache=str(Path(tmp) / "agent-features"))
             start = time.perf_counter()

@@ -118,7 +118,8 @@ def track_action_space(max_tracks: int) -> spaces.Dict:
     """Action space of box association tasks: padded ``ids``/``boxes`` and ``num_tracks``."""
     return spaces.Dict(
         {
-            "ids": spaces.Box(1, np.iinfo(np.int32).max, (max_tracks,), np.int64),
+            # ids >= 1; 0 marks the padding past num_tracks
+            "ids": spaces.Box(0, np.iinfo(np.int32).max, (max_tracks,), np.int64),
             "boxes": box_array_space(max_tracks),
             "num_tracks": spaces.Discrete(max_tracks + 1),
         }
@@ -502,7 +503,8 @@ def pose_track_action_space(max_tracks: int, num_keypoints: int) -> spaces.Dict:
     """Action space of pose association tasks: padded ``ids``/``keypoints`` and ``num_tracks``."""
     return spaces.Dict(
         {
-            "ids": spaces.Box(1, np.iinfo(np.int32).max, (max_tracks,), np.int64),
+            # ids >= 1; 0 marks the padding past num_tracks
+            "ids": spaces.Box(0, np.iinfo(np.int32).max, (max_tracks,), np.int64),
             "keypoints": keypoint_array_space(max_tracks, num_keypoints),
             "num_tracks": spaces.Discrete(max_tracks + 1),
         }

@@ -202,3 +202,9 @@ def test_real_mot17_episode(mot17_root):
 def test_check_env_on_real_data(mot17_root, mot15_root):
     check_env(gym.make("UniTrack/MOT17-v0", root=mot17_root).unwrapped)
     check_env(gym.make("UniTrack/MOT15-v0", root=mot15_root).unwrapped)
+
+
+def test_padded_actions_are_in_the_action_space():
+    env = gym.make("UniTrack/MOT16-v0")
+    action = pack_tracks([3, 9], [[1, 2, 3, 4], [-5, 6, 7, 8]], env.unwrapped.max_tracks)
+    assert env.action_space.contains(action)

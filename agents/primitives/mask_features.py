@@ -1,0 +1,353 @@
+"""Object features and Kalman boxes of mask and pose observations (UniTrack appendix C).
+
+Association compares *sets* of location features (see :mod:`agents.primitives.similarity`).
+A box gives a fixed RoIAlign grid; a mask gives the feature-map cells it covers, a set whose
+size varies with the object; a pose is first drawn as a mask. This module holds those
+conversions, independent of any environment:
+
+* :class:`LocalMask` -- a binary mask stored as its tight crop plus the crop's offset in the
+  frame (a full-frame ``(H, W)`` array per person would cost megabytes per frame).
+* :func:`mask_to_box` -- the paper's mask -> box conversion for the Kalman filter (appendix
+  C.1): centre = mean in-mask pixel, half extent = 2 x mean absolute deviation.
+* :func:`pose_to_mask` -- the paper's pose -> mask conversion (appendix C.2): skeleton limbs
+  of width ``max(body size / 20, 8)`` pixels plus the filled torso polygon.
+* :func:`mask_grid` / :func:`mask_location_features` -- the in-mask cells of a stride-8
+  feature map as a variable-size set, capped at ``max_area`` locations by rescaling (the
+  authors' ``max_mask_area``: 200 for MOTS, 1000 for VIS).
+
+Coordinates are continuous pixels of the frame: pixel ``(row r, column c)`` covers
+``[c, c + 1) x [r, r + 1)``, so a mask's tight box is pycocotools' ``toBbox`` box.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from agents.primitives.roi_align import roi_align
+from agents.primitives.similarity import ObjectFeatures
+
+MAX_MASK_AREA_MOTS: int = 200
+"""Most location features kept per mask on MOTS (authors' ``max_mask_area``)."""
+
+MAX_MASK_AREA_VIS: int = 1000
+"""Most location features kept per mask on YouTube-VIS (authors' ``max_mask_area``)."""
+
+MASK_COVERAGE_THRESHOLD: float = 0.5
+"""A feature cell belongs to a mask when at least this fraction of its area is in the mask
+(the mask "downsampled to the feature grid"). A mask covering no cell that much keeps its
+best-covered cell, so that every non-empty mask has at least one location."""
+
+MAD_EXTENT_FACTOR: float = 2.0
+"""Half the box extent is this times the mean absolute deviation of the in-mask pixel
+coordinates (appendix C.1: for a uniform rectangle of half extent h, the mean |y| is h/2)."""
+
+MIN_BOX_EXTENT: float = 1.0
+"""Least width/height (pixels) of a mask's box: a one-pixel-wide mask has zero deviation."""
+
+LIMB_WIDTH_RATIO: float = 0.05
+"""Limb width per unit of body size in the pose -> mask conversion (paper: eta_p = 0.05,
+i.e. the authors' ``extent / 20``)."""
+
+MIN_LIMB_WIDTH: float = 8.0
+"""Least limb width in pixels (authors' code: ``max(extent / 20, 8)``)."""
+
+POSE_LIMBS: tuple[tuple[int, int], ...] = (
+    (2, 1),                      # head top - head bottom
+    (0, 1),                      # nose - head bottom
+    (1, 5), (1, 6),              # head bottom - shoulders (neck)
+    (5, 7), (7, 9),              # left arm
+    (6, 8), (8, 10),             # right arm
+    (5, 6), (5, 11), (6, 12), (11, 12),  # torso outline
+    (11, 13), (13, 15),          # left leg
+    (12, 14), (14, 16),          # right leg
+)
+"""Skeleton segments drawn by :func:`pose_to_mask`, as 0-based PoseTrack keypoint indices
+(nose, head bottom, head top, left/right ear, shoulders, elbows, wrists, hips, knees, ankles).
+The release's own ``skeleton`` field is COCO's (it links the never-annotated ears and leaves
+the head bottom unconnected), so the limbs are listed here; ears are not drawn."""
+
+POSE_POLYGONS: tuple[tuple[int, ...], ...] = ((5, 6, 12, 11),)
+"""Closed skeleton polygons filled by :func:`pose_to_mask`: the torso (left shoulder, right
+shoulder, right hip, left hip). Drawn when at least three of its corners are visible."""
+
+CROP_MARGIN: int = 2
+"""Feature cells kept around a mask's box when cropping the map before RoIAlign (bilinear
+sampling reads the cell after a sample point; RoIAlign's aligned shift moves points by half
+a cell), so that pooling from the crop equals pooling from the whole map."""
+
+SUBPIXEL_BITS: int = 4
+"""Fixed-point fraction bits of cv2's drawing calls (1/16-pixel precision)."""
+
+
+@dataclass(frozen=True)
+class LocalMask:
+    """A binary mask stored as its crop and the crop's top-left pixel in the frame.
+
+    Attributes:
+        mask: ``(h, w)`` bool crop (may be all False only for an empty mask, ``area == 0``).
+        x0: Frame column of the crop's first column.
+        y0: Frame row of the crop's first row.
+    """
+
+    mask: np.ndarray
+    x0: int = 0
+    y0: int = 0
+
+    @classmethod
+    def from_full(cls, mask: np.ndarray) -> LocalMask:
+        """Crop a full-frame ``(H, W)`` mask to its tight box (an empty mask stays 0 x 0)."""
+        full = np.asarray(mask, dtype=bool)
+        if full.ndim != 2:
+            raise ValueError(f"a mask must be 2-d (H, W), got shape {full.shape}")
+        rows = np.flatnonzero(full.any(axis=1))
+        if not rows.size:
+            return cls(np.zeros((0, 0), dtype=bool), 0, 0)
+        cols = np.flatnonzero(full.any(axis=0))
+        crop = full[rows[0]: rows[-1] + 1, cols[0]: cols[-1] + 1]
+        return cls(np.ascontiguousarray(crop), int(cols[0]), int(rows[0]))
+
+    @property
+    def area(self) -> int:
+        """Number of pixels in the mask."""
+        return int(np.count_nonzero(self.mask))
+
+    def tight_box(self) -> np.ndarray:
+        """``(x, y, w, h)`` of the crop (the mask's tight box when cropped by :meth:`from_full`)."""
+        h, w = self.mask.shape
+        return np.array([self.x0, self.y0, w, h], dtype=np.float64)
+
+    def to_full(self, height: int, width: int) -> np.ndarray:
+        """Paste the mask into an all-False ``(height, width)`` frame (clipped at its edges)."""
+        out = np.zeros((height, width), dtype=bool)
+        h, w = self.mask.shape
+        x1, y1 = max(self.x0, 0), max(self.y0, 0)
+        x2, y2 = min(self.x0 + w, width), min(self.y0 + h, height)
+        if x2 > x1 and y2 > y1:
+            out[y1:y2, x1:x2] = self.mask[y1 - self.y0: y2 - self.y0, x1 - self.x0: x2 - self.x0]
+        return out
+
+
+def mask_to_box(mask: LocalMask) -> np.ndarray:
+    """The paper's box of a mask for the Kalman filter (appendix C.1), ``(x, y, w, h)``.
+
+    With in-mask pixel centres ``(x_j, y_j)``: the centre is their mean ``(u, v)``; the half
+    width is ``2 * mean |x_j - u|`` and the half height ``2 * mean |y_j - v|`` (exact for a
+    filled rectangle, and robust to thin protrusions, unlike the tight box). Extents are
+    floored at :data:`MIN_BOX_EXTENT`.
+
+    Raises:
+        ValueError: The mask is empty.
+
+    >>> m = np.zeros((6, 8), bool); m[1:5, 2:8] = True   # a 6 x 4 rectangle at (2, 1)
+    >>> mask_to_box(LocalMask.from_full(m)).tolist()
+    [2.0, 1.0, 6.0, 4.0]
+    """
+    ys, xs = np.nonzero(mask.mask)
+    if not len(xs):
+        raise ValueError("an empty mask has no box; drop empty masks before association")
+    px = xs.astype(np.float64) + (mask.x0 + 0.5)
+    py = ys.astype(np.float64) + (mask.y0 + 0.5)
+    u, v = px.mean(), py.mean()
+    half_w = max(MAD_EXTENT_FACTOR * np.abs(px - u).mean(), MIN_BOX_EXTENT / 2)
+    half_h = max(MAD_EXTENT_FACTOR * np.abs(py - v).mean(), MIN_BOX_EXTENT / 2)
+    return np.array([u - half_w, v - half_h, 2 * half_w, 2 * half_h])
+
+
+def body_size(keypoints: np.ndarray, min_score: float = 0.0) -> float:
+    """Body size of a pose: ``max(x range, y range)`` of its visible keypoints (paper eq. sbody).
+
+    Args:
+        keypoints: ``(K, 3)`` ``(x, y, score)``.
+        min_score: A keypoint is visible when its score is above this.
+    """
+    kp = np.asarray(keypoints, dtype=np.float64)
+    visible = kp[kp[:, 2] > min_score, :2]
+    if not len(visible):
+        return 0.0
+    extent = visible.max(axis=0) - visible.min(axis=0)
+    return float(extent.max())
+
+
+def pose_to_mask(
+    keypoints: np.ndarray,
+    *,
+    min_score: float = 0.0,
+    limbs: Sequence[tuple[int, int]] = POSE_LIMBS,
+    polygons: Sequence[Sequence[int]] = POSE_POLYGONS,
+    width_ratio: float = LIMB_WIDTH_RATIO,
+    min_width: float = MIN_LIMB_WIDTH,
+) -> LocalMask | None:
+    """Draw a pose as a binary mask (the paper's pose -> mask conversion, appendix C.2).
+
+    Every limb whose two keypoints are visible is drawn as a segment of width
+    ``max(width_ratio * body_size, min_width)`` pixels (round caps), every polygon with at
+    least three visible corners is filled, and every visible keypoint gets a disc of that
+    width (so a pose with isolated joints still has pixels there).
+
+    Args:
+        keypoints: ``(K, 3)`` ``(x, y, score)`` in frame pixels.
+        min_score: A keypoint is visible when its score is above this (0 marks a keypoint
+            the detector did not find).
+        limbs: Segments as keypoint index pairs.
+        polygons: Closed polygons to fill, as keypoint index tuples.
+        width_ratio: Limb width per unit of :func:`body_size` (paper 0.05).
+        min_width: Least limb width in pixels (authors' code 8).
+
+    Returns:
+        The mask in frame coordinates (possibly reaching outside the frame), or None when
+        no keypoint is visible.
+
+    >>> kp = np.zeros((17, 3)); kp[5] = (50, 40, 1); kp[11] = (50, 90, 1)
+    >>> m = pose_to_mask(kp)
+    >>> (m.x0, m.y0, m.mask.shape)   # a ~8-pixel-wide vertical stroke with round caps
+    (46, 36, (59, 9))
+    """
+    kp = np.asarray(keypoints, dtype=np.float64)
+    if kp.ndim != 2 or kp.shape[1] != 3:
+        raise ValueError(f"keypoints must be (K, 3) as (x, y, score), got shape {kp.shape}")
+    if not np.all(np.isfinite(kp)):
+        raise ValueError("keypoints contain NaN or infinite values")
+    visible = kp[:, 2] > min_score
+    if not visible.any():
+        return None
+    width = max(width_ratio * body_size(kp, min_score), min_width)
+    radius = width / 2.0
+    pts = kp[visible, :2]
+    x0 = int(math.floor(pts[:, 0].min() - radius)) - 1
+    y0 = int(math.floor(pts[:, 1].min() - radius)) - 1
+    x1 = int(math.ceil(pts[:, 0].max() + radius)) + 1
+    y1 = int(math.ceil(pts[:, 1].max() + radius)) + 1
+    canvas = np.zeros((y1 - y0, x1 - x0), dtype=np.uint8)
+    scale = 1 << SUBPIXEL_BITS
+    # cv2 puts integer coordinates at pixel centres; continuous x maps to x - 0.5.
+    fixed = np.round((kp[:, :2] - (x0 + 0.5, y0 + 0.5)) * scale).astype(np.int64)
+    thickness = max(1, int(round(width)))
+    for a, b in limbs:
+        if visible[a] and visible[b]:
+            cv2.line(canvas, tuple(int(v) for v in fixed[a]), tuple(int(v) for v in fixed[b]),
+                     1, thickness=thickness, lineType=cv2.LINE_8, shift=SUBPIXEL_BITS)
+    for polygon in polygons:
+        corners = [i for i in polygon if visible[i]]
+        if len(corners) >= 3:
+            cv2.fillPoly(canvas, [fixed[corners].astype(np.int32)], 1, lineType=cv2.LINE_8,
+                         shift=SUBPIXEL_BITS)
+    radius_fixed = int(round(radius * scale))
+    for i in np.flatnonzero(visible):
+        cv2.circle(canvas, tuple(int(v) for v in fixed[i]), radius_fixed, 1, thickness=-1,
+                   lineType=cv2.LINE_8, shift=SUBPIXEL_BITS)
+    local = LocalMask(canvas.astype(bool), x0, y0)
+    # Crop to the drawn pixels so that tight_box() is the mask's tight box.
+    cropped = LocalMask.from_full(local.mask)
+    return LocalMask(cropped.mask, cropped.x0 + x0, cropped.y0 + y0)
+
+
+def mask_grid(
+    mask: LocalMask,
+    box_features: np.ndarray,
+    max_area: int | None,
+    coverage_threshold: float = MASK_COVERAGE_THRESHOLD,
+) -> np.ndarray:
+    """The mask's cells on a grid over its box in feature-map units, capped at ``max_area``.
+
+    The mask's crop spans ``box_features`` (x1, y1, x2, y2 in feature cells). The grid has
+    about one cell per feature cell (``round`` of the box size, at least 1); a grid cell is
+    in the mask when its covered fraction is at least ``coverage_threshold``. When more
+    than ``max_area`` cells are in, the grid is shrunk by ``sqrt(max_area / count)`` per
+    axis (repeatedly if rounding leaves it above) -- the authors' "rescaling" cap.
+
+    Returns:
+        ``(rows, cols)`` bool grid with at least one True cell.
+    """
+    if max_area is not None and max_area < 1:
+        raise ValueError(f"max_area must be >= 1 or None, got {max_area}")
+    x1, y1, x2, y2 = (float(v) for v in box_features)
+    rows = max(1, int(round(y2 - y1)))
+    cols = max(1, int(round(x2 - x1)))
+    source = mask.mask.astype(np.float32)
+    while True:
+        coverage = cv2.resize(source, (cols, rows), interpolation=cv2.INTER_AREA)
+        coverage = coverage.reshape(rows, cols)
+        inside = coverage >= coverage_threshold
+        if not inside.any():
+            inside = coverage >= coverage.max()
+        count = int(inside.sum())
+        if max_area is None or count <= max_area:
+            return inside
+        shrink = math.sqrt(max_area / count)
+        rows, cols = max(1, int(rows * shrink)), max(1, int(cols * shrink))
+
+
+def mask_location_features(
+    feature_map: torch.Tensor,
+    masks: Sequence[LocalMask],
+    to_features: Callable[[np.ndarray], np.ndarray],
+    *,
+    max_area: int | None = MAX_MASK_AREA_MOTS,
+    sampling_ratio: int = 2,
+    coverage_threshold: float = MASK_COVERAGE_THRESHOLD,
+    normalize: bool = True,
+) -> list[ObjectFeatures]:
+    """In-mask location features of each mask: a variable-size set per object.
+
+    For every mask, the crop's box is mapped to feature coordinates, RoIAlign pools the
+    feature map on the :func:`mask_grid` of that box, and the cells inside the mask are
+    kept (at most ``max_area``), each L2-normalised, with their grid positions (for CF).
+
+    Args:
+        feature_map: ``(1, C, h, w)`` or ``(C, h, w)`` stride-8 map of the frame.
+        masks: Non-empty masks in frame pixels.
+        to_features: Maps ``(n, 4)`` frame-pixel x1y1x2y2 boxes to feature coordinates
+            (e.g. ``lambda b: letterbox.boxes_to_features(b, stride)``).
+        max_area: Cap on the number of locations per mask (None: no cap).
+        sampling_ratio: Bilinear samples per RoIAlign bin and axis.
+        coverage_threshold: See :func:`mask_grid`.
+        normalize: L2-normalise every location feature.
+
+    Returns:
+        One :class:`~agents.primitives.similarity.ObjectFeatures` per mask: ``(s_i, C)``
+        features (row-major over the grid) and ``(s_i, 2)`` (row, column) positions in
+        feature cells.
+    """
+    fmap = feature_map.unsqueeze(0) if feature_map.ndim == 3 else feature_map
+    if not masks:
+        return []
+    boxes = np.stack([
+        np.array([m.x0, m.y0, m.x0 + m.mask.shape[1], m.y0 + m.mask.shape[0]], np.float64)
+        for m in masks
+    ])
+    feat_boxes = np.asarray(to_features(boxes), dtype=np.float64).reshape(-1, 4)
+    out = []
+    for mask, fbox in zip(masks, feat_boxes, strict=True):
+        if mask.area == 0:
+            raise ValueError("empty mask: drop empty masks before computing features")
+        inside = mask_grid(mask, fbox, max_area, coverage_threshold)
+        rows, cols = inside.shape
+        # Pool from a crop of the map around the box (margin: the bilinear neighbours), so
+        # that RoIAlign does not touch (or pad) the whole map once per mask; same values.
+        height, width = fmap.shape[-2:]
+        cx1 = min(max(int(math.floor(fbox[0])) - CROP_MARGIN, 0), width - 1)
+        cy1 = min(max(int(math.floor(fbox[1])) - CROP_MARGIN, 0), height - 1)
+        cx2 = max(min(int(math.ceil(fbox[2])) + CROP_MARGIN, width), cx1 + 1)
+        cy2 = max(min(int(math.ceil(fbox[3])) + CROP_MARGIN, height), cy1 + 1)
+        crop = fmap[:, :, cy1:cy2, cx1:cx2]
+        roi = torch.as_tensor((fbox - (cx1, cy1, cx1, cy1))[None], dtype=fmap.dtype)
+        pooled = roi_align(crop, roi, (rows, cols), spatial_scale=1.0,
+                           sampling_ratio=sampling_ratio)[0]  # (C, rows, cols)
+        flat = pooled.flatten(1).T  # (rows * cols, C), row-major
+        index = torch.as_tensor(np.flatnonzero(inside.reshape(-1)))
+        features = flat[index]
+        if normalize:
+            features = F.normalize(features, dim=1)
+        r, c = np.divmod(index.numpy(), cols)
+        bin_h = (fbox[3] - fbox[1]) / rows
+        bin_w = (fbox[2] - fbox[0]) / cols
+        positions = np.stack([fbox[1] + (r + 0.5) * bin_h, fbox[0] + (c + 0.5) * bin_w], axis=1)
+        out.append(ObjectFeatures(features, torch.as_tensor(positions, dtype=torch.float64)))
+    return out
