@@ -31,6 +31,7 @@ from agents.appearance.feature_cache import (
     CacheKey,
     FeatureCache,
     FeatureCacheWarning,
+    image_fingerprint,
 )
 from agents.appearance.model import (
     ARCHITECTURES,
@@ -43,6 +44,7 @@ from agents.appearance.model import (
     ModelIdentity,
     WeightsSource,
     letterbox,
+    letterbox_layout,
     weights_digest,
 )
 from agents.appearance.resnet import ResNet, infer_resnet_arch
@@ -72,7 +74,9 @@ __all__ = [
     "ResNet",
     "WeightsSource",
     "infer_resnet_arch",
+    "image_fingerprint",
     "letterbox",
+    "letterbox_layout",
     "load_checkpoint",
     "weights_digest",
 ]

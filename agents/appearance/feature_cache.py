@@ -247,12 +247,32 @@ class CachedAppearanceModel:
             text = json.dumps(asdict(self.identity), indent=2, sort_keys=True).encode()
             _atomic_write_bytes(info, lambda handle: handle.write(text))
 
+    def lookup(
+        self, input_size: tuple[int, int], sequence: str, frame: int, content: str
+    ) -> torch.Tensor | None:
+        """The cached ``(1, C, h, w)`` map of one frame, or None (no computation).
+
+        Args:
+            input_size: ``(height, width)`` of the network input.
+            sequence: Sequence name.
+            frame: Frame index.
+            content: Fingerprint the entry was stored under (see ``fingerprints`` of
+                :meth:`features`).
+        """
+        key = CacheKey(self._model_key, tuple(input_size), sequence, int(frame), content)
+        array = self.cache.get(key, self.model.feature_shape(*input_size))
+        if array is None:
+            return None
+        self.cache.hits += 1
+        return torch.from_numpy(array.astype(np.float32))[None]
+
     def features(
         self,
         images: np.ndarray | Sequence[np.ndarray],
         *,
         sequence: str,
         frames: Sequence[int] | int,
+        fingerprints: Sequence[str] | None = None,
     ) -> torch.Tensor:
         """Feature maps ``(B, C, h, w)`` for frames of one sequence, from the cache when possible.
 
@@ -261,6 +281,9 @@ class CachedAppearanceModel:
                 all of the same size (letterbox first).
             sequence: Sequence name (part of the key).
             frames: Frame index of each image.
+            fingerprints: Content fingerprints to key the entries by (default: of
+                ``images``). A caller that looks entries up before preparing its input (e.g.
+                by the original frame, to skip the letterbox on a hit) passes its own.
 
         Returns:
             float32 CPU tensor of the stored (e.g. float16-rounded) features.
@@ -273,8 +296,10 @@ class CachedAppearanceModel:
             raise ValueError(f"{batch.shape[0]} images but {len(frame_list)} frame indices")
         input_size = (int(batch.shape[1]), int(batch.shape[2]))
         expected = self.model.feature_shape(*input_size)
-        keys = [CacheKey(self._model_key, input_size, sequence, int(f), image_fingerprint(img))
-                for f, img in zip(frame_list, batch, strict=True)]
+        if fingerprints is None:
+            fingerprints = [image_fingerprint(img) for img in batch]
+        keys = [CacheKey(self._model_key, input_size, sequence, int(f), fp)
+                for f, fp in zip(frame_list, fingerprints, strict=True)]
         found: dict[int, np.ndarray] = {}
         todo: list[int] = []
         for i, key in enumerate(keys):

@@ -186,13 +186,14 @@ class Letterbox:
     """A frame resized with its aspect ratio kept and padded to a fixed input size.
 
     Attributes:
-        image: The letterboxed uint8 RGB image ``(H, W, 3)``.
+        image: The letterboxed uint8 RGB image ``(H, W, 3)`` (None for a geometry-only
+            letterbox from :func:`letterbox_layout`).
         scale: ``(sx, sy)`` resize factors (content pixels / original pixels).
         offset: ``(dx, dy)`` padding added left and top, in input pixels.
         original_size: ``(width, height)`` of the original frame.
     """
 
-    image: np.ndarray
+    image: np.ndarray | None
     scale: tuple[float, float]
     offset: tuple[int, int]
     original_size: tuple[int, int]
@@ -239,18 +240,27 @@ def letterbox(
         raise ValueError(
             f"letterbox expects a uint8 RGB image (H, W, 3); got {image.dtype} {image.shape}"
         )
-    height, width = image.shape[:2]
+    layout = letterbox_layout(image.shape[0], image.shape[1], size)
+    (width, height), (dx, dy) = layout.original_size, layout.offset
+    new_w, new_h = round(layout.scale[0] * width), round(layout.scale[1] * height)
+    interp = cv2.INTER_AREA if new_w < width else cv2.INTER_LINEAR
+    resized = cv2.resize(image, (new_w, new_h), interpolation=interp)
+    out = np.full((size[1], size[0], 3), pad_value, dtype=np.uint8)
+    out[dy:dy + new_h, dx:dx + new_w] = resized
+    return Letterbox(out, layout.scale, layout.offset, layout.original_size)
+
+
+def letterbox_layout(height: int, width: int, size: tuple[int, int] = MOT_INPUT_SIZE) -> Letterbox:
+    """The geometry of :func:`letterbox` for a ``height x width`` frame, without any pixels.
+
+    Lets a feature-cache hit map boxes without resizing the frame.
+    """
     target_w, target_h = size
     ratio = min(target_w / width, target_h / height)
     new_w = min(target_w, max(1, round(width * ratio)))
     new_h = min(target_h, max(1, round(height * ratio)))
-    interp = cv2.INTER_AREA if ratio < 1 else cv2.INTER_LINEAR
-    resized = cv2.resize(image, (new_w, new_h), interpolation=interp)
-    dx = (target_w - new_w) // 2
-    dy = (target_h - new_h) // 2
-    out = np.full((target_h, target_w, 3), pad_value, dtype=np.uint8)
-    out[dy:dy + new_h, dx:dx + new_w] = resized
-    return Letterbox(out, (new_w / width, new_h / height), (dx, dy), (width, height))
+    offset = ((target_w - new_w) // 2, (target_h - new_h) // 2)
+    return Letterbox(None, (new_w / width, new_h / height), offset, (width, height))
 
 
 def weights_digest(module: nn.Module, prefixes: Sequence[str] | None = None) -> str:

@@ -73,7 +73,9 @@ from agents.appearance import (
     AppearanceModel,
     CachedAppearanceModel,
     Letterbox,
+    image_fingerprint,
     letterbox,
+    letterbox_layout,
 )
 from agents.base import Agent
 from agents.primitives.association import AssociationConfig, Associator, TrackOutput
@@ -514,19 +516,28 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
 
     # ------------------------------------------------------------------ features
     def feature_map(self, frame: np.ndarray) -> tuple[torch.Tensor, Letterbox]:
-        """Letterbox ``frame`` and return its ``(1, C, h, w)`` feature map and the letterbox."""
-        boxed = letterbox(np.ascontiguousarray(frame), tuple(self.config.input_size))
-        if isinstance(self.model, CachedAppearanceModel):
-            if not self._sequence:
-                raise ValueError(
-                    "the feature cache needs the sequence name: call reset(observation, info) "
-                    "with the environment's info (it holds 'sequence') before act()"
-                )
-            fmap = self.model.features(
-                boxed.image, sequence=self._sequence, frames=self._frame_index
+        """Letterbox ``frame`` and return its ``(1, C, h, w)`` feature map and the letterbox.
+
+        With the feature cache, entries are keyed by the original frame's fingerprint, so a
+        hit needs only the letterbox geometry (no resize).
+        """
+        size = tuple(self.config.input_size)
+        if not isinstance(self.model, CachedAppearanceModel):
+            boxed = letterbox(np.ascontiguousarray(frame), size)
+            return self.model.features(boxed.image), boxed
+        if not self._sequence:
+            raise ValueError(
+                "the feature cache needs the sequence name: call reset(observation, info) "
+                "with the environment's info (it holds 'sequence') before act()"
             )
-        else:
-            fmap = self.model.features(boxed.image)
+        fingerprint = image_fingerprint(frame)
+        fmap = self.model.lookup((size[1], size[0]), self._sequence, self._frame_index,
+                                 fingerprint)
+        if fmap is not None:
+            return fmap, letterbox_layout(frame.shape[0], frame.shape[1], size)
+        boxed = letterbox(np.ascontiguousarray(frame), size)
+        fmap = self.model.features(boxed.image, sequence=self._sequence,
+                                   frames=self._frame_index, fingerprints=[fingerprint])
         return fmap, boxed
 
     def box_features(self, frame: np.ndarray, boxes_xywh: np.ndarray) -> list[torch.Tensor]:

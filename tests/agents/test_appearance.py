@@ -226,3 +226,14 @@ def test_architectures_in_torchvision_layout() -> None:
     assert sum(p.numel() for p in r50.parameters()) == 25_557_032  # torchvision R50 params
     assert sum(p.numel() for p in ResNet("resnet18").parameters()) == 11_689_512
     assert sum(p.numel() for p in EfficientNetLite0().parameters()) == 4_652_008
+
+
+def test_letterbox_layout_matches_letterbox_geometry():
+    from agents.appearance import letterbox, letterbox_layout
+
+    for shape in ((1080, 1920, 3), (480, 640, 3), (100, 37, 3)):
+        full = letterbox(np.zeros(shape, np.uint8))
+        layout = letterbox_layout(shape[0], shape[1])
+        assert layout.image is None
+        assert (layout.scale, layout.offset, layout.original_size) == (
+            full.scale, full.offset, full.original_size)
