@@ -45,6 +45,7 @@ from agents.appearance.model import (
     WeightsSource,
     letterbox,
     letterbox_layout,
+    torch_threads,
     weights_digest,
 )
 from agents.appearance.resnet import ResNet, infer_resnet_arch
@@ -77,6 +78,7 @@ __all__ = [
     "image_fingerprint",
     "letterbox",
     "letterbox_layout",
+    "torch_threads",
     "load_checkpoint",
     "weights_digest",
 ]

@@ -217,6 +217,26 @@ class Letterbox:
         return (boxes - np.array([dx, dy, dx, dy])) / np.array([sx, sy, sx, sy])
 
 
+@contextlib.contextmanager
+def torch_threads(num_threads: int | None) -> Iterator[None]:
+    """Run the body with ``torch.set_num_threads(num_threads)`` (None: leave it alone).
+
+    The previous setting is restored afterwards, so agents sharing a process do not leak
+    their thread counts into each other.
+    """
+    if num_threads is None:
+        yield
+        return
+    if num_threads < 1:
+        raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
+    previous = torch.get_num_threads()
+    torch.set_num_threads(num_threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
 def letterbox(
     image: np.ndarray,
     size: tuple[int, int] = MOT_INPUT_SIZE,
@@ -446,15 +466,8 @@ class AppearanceModel:
     # ------------------------------------------------------------------ inference
     @contextlib.contextmanager
     def _threads(self) -> Iterator[None]:
-        if self.num_threads is None:
+        with torch_threads(self.num_threads):
             yield
-            return
-        previous = torch.get_num_threads()
-        torch.set_num_threads(self.num_threads)
-        try:
-            yield
-        finally:
-            torch.set_num_threads(previous)
 
     def preprocess(self, images: np.ndarray | Sequence[np.ndarray] | torch.Tensor) -> torch.Tensor:
         """Turn uint8 RGB images into a normalised float batch ``(B, 3, H, W)`` on the device.

@@ -57,9 +57,8 @@ Example:
 
 from __future__ import annotations
 
-import contextlib
 import os
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
@@ -76,6 +75,7 @@ from agents.appearance import (
     image_fingerprint,
     letterbox,
     letterbox_layout,
+    torch_threads,
 )
 from agents.base import Agent
 from agents.primitives.association import AssociationConfig, Associator, TrackOutput
@@ -427,7 +427,7 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
 
     def act(self, observation: dict[str, Any]) -> dict[str, Any]:
         """Track one frame; return the action in the environment's format."""
-        with _torch_threads(self.config.num_threads):
+        with torch_threads(self.config.num_threads):
             task = self._use_task(observation)
             self._frame_index += 1
             if task == "mot":
@@ -582,19 +582,3 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         if not parsed.masks:
             return []
         return self.mask_features(frame, parsed.masks)
-
-
-@contextlib.contextmanager
-def _torch_threads(num_threads: int | None) -> Iterator[None]:
-    """Run the body with ``torch.set_num_threads(num_threads)`` (None: leave it alone)."""
-    if num_threads is None:
-        yield
-        return
-    if num_threads < 1:
-        raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
-    previous = torch.get_num_threads()
-    torch.set_num_threads(num_threads)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)

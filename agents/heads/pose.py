@@ -37,9 +37,9 @@ import cv2
 import numpy as np
 import torch
 
-from agents.appearance import AppearanceModel
+from agents.appearance import AppearanceModel, torch_threads
 from agents.base import Agent
-from agents.heads.vos import build_model, make_propagation_config, torch_threads
+from agents.heads.vos import build_model, make_propagation_config
 from agents.primitives.label_propagation import LabelPropagator
 
 POSE_INPUT_SIZE: tuple[int, int] = (320, 320)

@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents.appearance import AppearanceModel
+from agents.appearance import AppearanceModel, torch_threads
 from agents.base import Agent
-from agents.heads.vos import build_model, torch_threads
+from agents.heads.vos import build_model
 from agents.primitives.box_propagation import BoxPropagationConfig, BoxPropagator, BoxState
 
 OTB_PIXEL_ORIGIN: float = 1.0

@@ -19,8 +19,6 @@ Features are computed once per frame (the first frame's at reset) under
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -28,7 +26,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from agents.appearance import AppearanceModel
+from agents.appearance import AppearanceModel, torch_threads
 from agents.base import Agent
 from agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
 
@@ -73,22 +71,6 @@ def make_propagation_config(options: dict[str, Any] | None) -> LabelPropagationC
     except TypeError as exc:
         valid = ", ".join(f.name for f in fields(LabelPropagationConfig))
         raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
-
-
-@contextlib.contextmanager
-def torch_threads(num_threads: int | None) -> Iterator[None]:
-    """Run the body with ``torch.set_num_threads(num_threads)`` (None: leave it alone)."""
-    if num_threads is None:
-        yield
-        return
-    if num_threads < 1:
-        raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
-    previous = torch.get_num_threads()
-    torch.set_num_threads(num_threads)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
 
 
 def build_model(config: Any, model: AppearanceModel | None) -> AppearanceModel:
