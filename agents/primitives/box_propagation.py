@@ -17,7 +17,9 @@ Common machinery (appendix B.1 table; ``OFFICIAL-CODE-FACTS.md``, "Box propagati
   k = 4.5"), resized to ``520 x 520`` (feature map ``65 x 65`` at stride 8), padded with the
   image's mean colour outside the frame;
 * a Hann (cosine) window multiplied onto the crop features (suppresses the crop border and,
-  for DCF, the circular-boundary artefacts);
+  for DCF, the circular-boundary artefacts); the DCF filter itself is trained on features
+  under a tighter window of 1.5 target sizes (:data:`DCF_TEMPLATE_WINDOW`), so that it
+  describes the target rather than the 4.5x context around it;
 * 3 scales ``1.0275^{-1, 0, 1}`` with peak penalties ``0.985^{1, 0, 1}``; the best-scoring
   scale wins, the box size is multiplied by it and clamped to ``[0.2, 5] x`` the initial size;
 * the displacement of the response peak, in feature pixels, is converted to image pixels
@@ -75,6 +77,13 @@ DCF_SIGMA_FACTOR: float = 0.1
 """Gaussian label sigma, as a fraction of the target's size in feature pixels
 (``65 / 4.5 * 0.1 = 1.44`` feature pixels, DCFNet's ``output_sigma_factor``)."""
 
+DCF_TEMPLATE_WINDOW: float | None = 1.5
+"""Extent, in target sizes, of the Hann window on the DCF training features (None: the
+crop-wide window). Not in the paper; the authors' code also trains the filter under a
+separate "inner" window. With the crop-wide window the filter, trained on a crop that is
+95% background, follows the background: on OTB Human3 (first 199 frames) AUC 0.04 -> 0.71
+with 1.5 (1.0: 0.67, 2.0: 0.21); Crossing 0.78 either way (measured, imagenet-lite0)."""
+
 METHODS: tuple[str, ...] = ("xcorr", "dcf")
 """Box propagation methods."""
 
@@ -93,6 +102,9 @@ class BoxPropagationConfig:
         min_size_factor: Least box size, relative to the initial one.
         max_size_factor: Largest box size, relative to the initial one.
         feature_window: Multiply crop features by a Hann window.
+        template_window: DCF only: the features the filter is trained on (first frame and
+            updates) are multiplied by a Hann window covering this many target sizes around
+            the centre instead of the whole crop (None: the crop-wide window).
         template_size: XCorr template side (feature pixels).
         dcf_lambda: DCF regularisation.
         dcf_interp: DCF online update momentum (0: no update).
@@ -109,6 +121,7 @@ class BoxPropagationConfig:
     min_size_factor: float = MIN_SIZE_FACTOR
     max_size_factor: float = MAX_SIZE_FACTOR
     feature_window: bool = True
+    template_window: float | None = DCF_TEMPLATE_WINDOW
     template_size: int = XCORR_TEMPLATE_SIZE
     dcf_lambda: float = DCF_LAMBDA
     dcf_interp: float = DCF_INTERP
@@ -366,8 +379,16 @@ class BoxPropagator:
         self._window: torch.Tensor | None = None
         self.last_scores: np.ndarray = np.zeros(0)
 
-    def _features(self, crops: np.ndarray) -> torch.Tensor:
+    def _features(self, crops: np.ndarray, *, template: bool = False) -> torch.Tensor:
         feats = self.features(crops).float()
+        if template and self.config.method == "dcf" and self.config.template_window:
+            size = feats.shape[-1]
+            side = min(size, max(1, round(size / self.config.context
+                                          * self.config.template_window)))
+            window = torch.zeros(size, size, device=feats.device)
+            start = (size - side) // 2
+            window[start:start + side, start:start + side] = hann_window(side + 2)[1:-1, 1:-1]
+            return feats * window
         if self.config.feature_window:
             size = feats.shape[-1]
             if self._window is None or self._window.shape[-1] != size:
@@ -387,7 +408,7 @@ class BoxPropagator:
         self._window = None
         crops = crop_windows(image, (box.cx, box.cy), self._window_size(box.w, box.h),
                              self.config.crop_size)
-        self.head.init(self._features(crops))
+        self.head.init(self._features(crops, template=True))
 
     def step(self, image: np.ndarray) -> BoxState:
         """Locate the target in a new frame; returns (and keeps) the new box."""
@@ -423,7 +444,7 @@ class BoxPropagator:
         self.state = BoxState(cx, cy, w, h)
         if isinstance(self.head, DCFHead) and cfg.dcf_interp > 0:
             crop = crop_windows(image, (cx, cy), self._window_size(w, h), cfg.crop_size)
-            self.head.update(self._features(crop))
+            self.head.update(self._features(crop, template=True))
         return self.state
 
 

@@ -125,3 +125,32 @@ def test_scale_choice_and_size_clamp():
         [torch.full((3, 3), v) for v in (5.0, 1.0, 1.0)])
     state = tracker.step(np.zeros((64, 64, 3), np.uint8))
     assert (state.w, state.h) == (9.0, 9.0)  # halved, clamped to 0.9 x initial
+
+
+def moving_patch_image(offset: tuple[int, int], size: int = 400) -> np.ndarray:
+    """A static textured background with a 40-px textured target at (180, 180) + offset."""
+    rng = np.random.default_rng(3)
+    background = np.kron(rng.integers(0, 255, (size // 8, size // 8, 3), dtype=np.uint8),
+                         np.ones((8, 8, 1), np.uint8))
+    target = np.kron(rng.integers(0, 255, (5, 5, 3), dtype=np.uint8),
+                     np.ones((8, 8, 1), np.uint8))
+    image = background.copy()
+    y, x = 180 + offset[0], 180 + offset[1]
+    image[y:y + 40, x:x + 40] = target
+    return image
+
+
+def test_dcf_template_window_makes_the_filter_follow_the_target_not_the_background():
+    def track(template_window: float | None) -> BoxState:
+        cfg = BoxPropagationConfig(method="dcf", crop_size=160, num_scales=1,
+                                   template_window=template_window, dcf_interp=0.0)
+        tracker = BoxPropagator(pooled_features, cfg, stride=8)
+        tracker.reset(moving_patch_image((0, 0)), BoxState(200.0, 200.0, 40.0, 40.0))
+        for k in range(1, 4):
+            state = tracker.step(moving_patch_image((8 * k, -8 * k)))
+        return state
+
+    windowed = track(1.5)
+    assert (windowed.cy, windowed.cx) == pytest.approx((224.0, 176.0), abs=3.0)
+    crop_wide = track(None)  # trained on 95% background: stays with the background
+    assert abs(crop_wide.cy - 224.0) + abs(crop_wide.cx - 176.0) > 10.0
