@@ -69,6 +69,16 @@ def test_skeleton_stays_on_the_silhouette_and_walks():
     assert min(visible_counts) < 8 and max(visible_counts) == len(SKELETON_JOINTS)
 
 
+@pytest.mark.parametrize("spec", DEFAULT_SPEC.videos, ids=lambda v: v.video)
+def test_annotated_person_is_in_full_view_at_the_start(spec):
+    """Propagation starts from frame 1's pose: the person must be visible there (as in
+    JHMDB); occlusion by the other person comes later in the clip."""
+    clip = render_scene(spec.scene)
+    visibility = [next(o.visibility for o in clip.frame(t).objects if o.id == PUPPET_ID)
+                  for t in range(clip.num_frames)]
+    assert visibility[0] >= 0.95, visibility[:5]
+
+
 def test_synthetic_layout_is_jhmdb(tmp_path):
     env = gym.make("UniTrack/JHMDB-v0")
     base = env.unwrapped

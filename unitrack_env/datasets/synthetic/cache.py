@@ -33,7 +33,7 @@ from unitrack_env.datasets.synthetic import youtube_vis as vis_synthetic
 
 #: Version of the generated data; bump it whenever any writer's output changes, so that
 #: caches of an older generator are not reused.
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 #: Environment variable that overrides the cache folder.
 CACHE_ENV_VAR = "UNITRACK_CACHE"
 #: Application name given to platformdirs for the default cache folder.
