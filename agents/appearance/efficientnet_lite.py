@@ -262,19 +262,27 @@ class EfficientNetLite0(nn.Module):
 
     def forward_features(self, x: torch.Tensor, layer: str = "stage3") -> torch.Tensor:
         """Run the network up to the end of ``layer`` and return that feature map."""
-        if layer not in LITE0_LAYERS:
-            raise ValueError(f"unknown EfficientNet-Lite0 layer {layer!r}; valid: {LITE0_LAYERS}")
+        return self.forward_layers(x, (layer,))[0]
+
+    def forward_layers(self, x: torch.Tensor, layers: tuple[str, ...]) -> list[torch.Tensor]:
+        """Run the network once, up to the deepest of ``layers``; their maps in that order."""
+        for layer in layers:
+            if layer not in LITE0_LAYERS:
+                raise ValueError(
+                    f"unknown EfficientNet-Lite0 layer {layer!r}; valid: {LITE0_LAYERS}")
+        deepest = max(LITE0_LAYERS.index(layer) for layer in layers)  # stage k is index k
         x = F.relu6(self._bn0(self._conv_stem(x)))
-        if layer == "stem":
-            return x
-        last_stage = 7 if layer == "head" else int(layer.removeprefix("stage"))
-        for block, stage_index in zip(self._blocks, self.block_stage, strict=True):
-            if stage_index > last_stage:
+        out = {"stem": x}
+        stages = self.block_stage
+        for i, (block, stage_index) in enumerate(zip(self._blocks, stages, strict=True)):
+            if stage_index > deepest:
                 break
             x = block(x)
-        if layer == "head":
-            x = F.relu6(self._bn1(self._conv_head(x)))
-        return x
+            if i + 1 == len(stages) or stages[i + 1] != stage_index:
+                out[f"stage{stage_index}"] = x
+        if "head" in layers:
+            out["head"] = F.relu6(self._bn1(self._conv_head(x)))
+        return [out[layer] for layer in layers]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Classify: ImageNet logits ``(B, num_classes)``."""

@@ -36,6 +36,7 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from agents.appearance.checkpoints import (
@@ -91,6 +92,28 @@ stride-8 stage3 (40 channels); MOT17 ground-truth boxes (frame 1 vs last, four s
 all matched by RSM at every stage, mean margin to the best wrong match 0.575 (stage5) vs
 0.543 (stage3). Cost on 2 CPU threads at 1088 x 608: ~0.25 s (stage5) vs ~0.14 s (stage3),
 about ResNet-18 layer3's ~0.20 s. Use ``layer="stage3"`` for the fastest features."""
+
+LAYER_SEPARATOR: str = "+"
+"""Joins several layers into one hypercolumn output, e.g. ``"stage3+stage5"``."""
+
+NORM_EPS: float = 1e-12
+"""Guards the L2 normalisation of hypercolumn parts against all-zero feature vectors."""
+
+
+def split_layers(layer: str) -> tuple[str, ...]:
+    """The layers of a ``layer`` option: ``"stage5"`` -> one, ``"stage3+stage5"`` -> two.
+
+    Several layers make a *hypercolumn* (Hariharan et al., CVPR 2015): every stride-8 map is
+    L2-normalised along channels, scaled by ``1/sqrt(n)`` and the maps are concatenated, so
+    each location's vector has unit norm and the dot product of two such vectors is the mean
+    of the per-layer cosine similarities. The network runs once, to the deepest layer.
+    """
+    parts = tuple(part.strip() for part in str(layer).split(LAYER_SEPARATOR))
+    if not all(parts) or len(set(parts)) != len(parts):
+        raise ValueError(f"layer {layer!r}: give one layer or distinct layers joined by "
+                         f"{LAYER_SEPARATOR!r}, e.g. 'stage3+stage5'")
+    return parts
+
 
 RANDOM_DEFAULT_ARCH: str = "resnet18"
 """Architecture of ``weights="random"`` when none is given (the paper's baseline is R18)."""
@@ -317,7 +340,8 @@ class AppearanceModel:
             ``"resnet101"``. None: the weights' own architecture (inferred from the keys for
             a file; ResNet-18 for random init).
         layer: Output layer (ResNet ``"layer2"``..``"layer4"``; EfficientNet ``"stage3"``..
-            ``"head"``). None: :data:`DEFAULT_LAYERS`. Must have stride 8.
+            ``"head"``), or several joined by ``"+"`` for a hypercolumn (see
+            :func:`split_layers`). None: :data:`DEFAULT_LAYERS`. Each must have stride 8.
         device: Torch device for the network and the returned features.
         num_threads: When given, ``torch.set_num_threads(num_threads)`` for the duration of
             each forward pass (the previous setting is restored afterwards).
@@ -337,7 +361,8 @@ class AppearanceModel:
         module: The ``nn.Module`` (in eval mode, on ``device``).
         identity: :class:`ModelIdentity` of this configuration.
         load_report: :class:`LoadReport` of the weights (None for random init).
-        channels: Channels of the feature map.
+        layers: The output layers (one, or the parts of a hypercolumn).
+        channels: Channels of the feature map (summed over hypercolumn parts).
         stride: Always :data:`FEATURE_STRIDE`.
 
     Example:
@@ -373,8 +398,10 @@ class AppearanceModel:
         resolved = self._resolve(weights, arch, remap, loaders)
         self.arch = resolved.arch
         self.layer = layer if layer is not None else DEFAULT_LAYERS[self.arch]
-        self.module = self._build(self.arch, self.layer, seed)
-        required = self.module.required_prefixes(self.layer)
+        self.layers = split_layers(self.layer)
+        self.module = self._build(self.arch, self.layers, seed)
+        required = tuple(dict.fromkeys(
+            p for name in self.layers for p in self.module.required_prefixes(name)))
         source = resolved.source
         norm_mean, norm_std = source.mean, source.std
         self.load_report: LoadReport | None = None
@@ -404,7 +431,7 @@ class AppearanceModel:
         self.module.eval().to(self.device)
         if channels_last:
             self.module.to(memory_format=torch.channels_last)
-        self.channels = self.module.layer_channels(self.layer)
+        self.channels = sum(self.module.layer_channels(name) for name in self.layers)
         self.stride = FEATURE_STRIDE
         self.identity = ModelIdentity(
             self.arch, self.layer, source.name, weights_digest(self.module, required),
@@ -445,22 +472,27 @@ class AppearanceModel:
             arch, WeightsSource(str(path), path=str(path), remap="auto"), checkpoint
         )
 
-    def _build(self, arch: str, layer: str, seed: int) -> nn.Module:
+    def _build(self, arch: str, layers: tuple[str, ...], seed: int) -> nn.Module:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             if arch == EFFICIENTNET_LITE0:
-                if layer not in LITE0_LAYERS:
-                    raise ValueError(f"unknown {arch} layer {layer!r}; valid: {LITE0_LAYERS}")
+                for layer in layers:
+                    if layer not in LITE0_LAYERS:
+                        raise ValueError(
+                            f"unknown {arch} layer {layer!r}; valid: {LITE0_LAYERS}")
                 # Later stages run at stride 8 (first-block strides set to 1) when asked for.
-                stride8 = EfficientNetLite0.stride_of(layer, stride8=False) != FEATURE_STRIDE
+                stride8 = any(EfficientNetLite0.stride_of(layer, stride8=False)
+                              != FEATURE_STRIDE for layer in layers)
                 module: nn.Module = EfficientNetLite0(stride8=stride8)
             else:
                 module = ResNet(arch, stride8=True)
-        if module.layer_stride(layer) != FEATURE_STRIDE:
-            raise ValueError(
-                f"layer {layer!r} of {arch} has stride {module.layer_stride(layer)}, but the "
-                f"appearance model must produce stride-{FEATURE_STRIDE} maps; choose a later layer"
-            )
+        for layer in layers:
+            if module.layer_stride(layer) != FEATURE_STRIDE:
+                raise ValueError(
+                    f"layer {layer!r} of {arch} has stride {module.layer_stride(layer)}, but "
+                    f"the appearance model must produce stride-{FEATURE_STRIDE} maps; choose "
+                    "a later layer"
+                )
         return module
 
     # ------------------------------------------------------------------ inference
@@ -517,7 +549,12 @@ class AppearanceModel:
             x = self.preprocess(images)
             if self.channels_last:
                 x = x.contiguous(memory_format=torch.channels_last)
-            out = self.module.forward_features(x, self.layer).contiguous()
+            maps = self.module.forward_layers(x, self.layers)
+            if len(maps) == 1:
+                out = maps[0].contiguous()
+            else:  # hypercolumn: unit vectors per layer, equal weights, unit norm overall
+                scale = 1.0 / math.sqrt(len(maps))
+                out = torch.cat([F.normalize(m, dim=1, eps=NORM_EPS) * scale for m in maps], 1)
         expected = (math.ceil(x.shape[2] / FEATURE_STRIDE), math.ceil(x.shape[3] / FEATURE_STRIDE))
         if tuple(out.shape[2:]) != expected:  # an architecture bug, never user input
             raise RuntimeError(f"feature map {tuple(out.shape)} is not stride 8 of {x.shape}")

@@ -198,11 +198,17 @@ class ResNet(nn.Module):
 
     def forward_features(self, x: torch.Tensor, layer: str = "layer3") -> torch.Tensor:
         """Run the network up to the end of ``layer`` and return that feature map."""
-        index = _layer_index(layer)
+        return self.forward_layers(x, (layer,))[0]
+
+    def forward_layers(self, x: torch.Tensor, layers: tuple[str, ...]) -> list[torch.Tensor]:
+        """Run the network once, up to the deepest of ``layers``; their maps in that order."""
+        deepest = max(_layer_index(layer) for layer in layers)
         x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
-        for name in RESNET_LAYERS[: index + 1]:
+        out = {}
+        for name in RESNET_LAYERS[: deepest + 1]:
             x = getattr(self, name)(x)
-        return x
+            out[name] = x
+        return [out[layer] for layer in layers]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Classify: logits ``(B, num_classes)`` (meaningful with the standard strides)."""

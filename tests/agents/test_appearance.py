@@ -112,6 +112,25 @@ def test_layers_that_are_not_stride_8_are_refused(arch: str, layer: str) -> None
         AppearanceModel(weights, arch=arch, layer=layer)
 
 
+def test_hypercolumn_is_the_normalised_layers_side_by_side(lite0: AppearanceModel) -> None:
+    image = np.random.default_rng(4).integers(0, 255, (64, 80, 3), dtype=np.uint8)
+    both = AppearanceModel(layer="stage3+stage5")
+    assert both.layers == ("stage3", "stage5") and both.channels == 40 + 112
+    assert both.identity.layer == "stage3+stage5"  # feature caches keep them apart
+    stage3 = AppearanceModel(layer="stage3").features(image)
+    stage5 = lite0.features(image)
+    feats = both.features(image)
+    unit = torch.nn.functional.normalize
+    torch.testing.assert_close(feats[:, :40], unit(stage3, dim=1) / math.sqrt(2))
+    torch.testing.assert_close(feats[:, 40:], unit(stage5, dim=1) / math.sqrt(2))
+    torch.testing.assert_close(feats.norm(dim=1), torch.ones(1, 8, 10))
+    r18 = AppearanceModel("random", layer="layer2+layer3")
+    assert r18.features(image).shape == (1, 128 + 256, 8, 10)
+    for bad in ("stage3+", "stage5+stage5", "stage2+stage5"):
+        with pytest.raises(ValueError, match="layer"):
+            AppearanceModel(layer=bad)
+
+
 def test_input_forms_agree(lite0: AppearanceModel) -> None:
     rng = np.random.default_rng(1)
     images = [rng.integers(0, 256, (24, 40, 3), dtype=np.uint8) for _ in range(2)]
@@ -142,13 +161,13 @@ def test_num_threads_is_applied_only_during_the_pass() -> None:
     before = torch.get_num_threads()
     model = AppearanceModel("random", num_threads=1)
     seen = []
-    original = model.module.forward_features
+    original = model.module.forward_layers
 
-    def spy(x: torch.Tensor, layer: str) -> torch.Tensor:
+    def spy(x: torch.Tensor, layers: tuple[str, ...]) -> list[torch.Tensor]:
         seen.append(torch.get_num_threads())
-        return original(x, layer)
+        return original(x, layers)
 
-    model.module.forward_features = spy  # type: ignore[method-assign]
+    model.module.forward_layers = spy  # type: ignore[method-assign]
     model.features(np.zeros((16, 16, 3), np.uint8))
     assert seen == [1]
     assert torch.get_num_threads() == before
