@@ -85,13 +85,15 @@ DEFAULT_LAYERS: Mapping[str, str] = MappingProxyType(
 
 ResNet: layer3, as in the paper. EfficientNet-Lite0: stage5 (112 channels) with the stride
 of stage4 set to 1, the paper's own construction (as for ResNet's layer3) applied to this
-network. Measured here with the ImageNet weights (see the project report):
-DAVIS label propagation (blackswan + dog, first frame + 5 previous as context, top-10,
-temperature 0.05) mean J 0.819 for stage5, 0.760 for stage4 and 0.697 for the native
-stride-8 stage3 (40 channels); MOT17 ground-truth boxes (frame 1 vs last, four sequences)
-all matched by RSM at every stage, mean margin to the best wrong match 0.575 (stage5) vs
-0.543 (stage3). Cost on 2 CPU threads at 1088 x 608: ~0.25 s (stage5) vs ~0.14 s (stage3),
-about ResNet-18 layer3's ~0.20 s. Use ``layer="stage3"`` for the fastest features."""
+network. Measured here with the ImageNet weights and the ``unitrack-vos`` head (DAVIS J-mean,
+official rules, blackswan / dog): stage3 (native stride 8, 40 channels) 0.925 / 0.523,
+stage4 0.888 / 0.659, stage5 0.905 / 0.854, stage6 0.790 / 0.741; the hypercolumn
+``"stage3+stage5"`` 0.924 / 0.854, but it loses OTB Human3 with ``unitrack-dcf`` (AUC 0.21
+vs 0.71), so it is an option, not the default. MOT17 ground-truth boxes (frame 1 vs last,
+four sequences) all matched by RSM at every stage, mean margin to the best wrong match
+0.575 (stage5) vs 0.543 (stage3). Cost on 2 CPU threads at 1088 x 608: ~0.25 s (stage5) vs
+~0.14 s (stage3), about ResNet-18 layer3's ~0.20 s. Use ``layer="stage3"`` for the fastest
+features."""
 
 LAYER_SEPARATOR: str = "+"
 """Joins several layers into one hypercolumn output, e.g. ``"stage3+stage5"``."""
