@@ -20,9 +20,9 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import tempfile
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,6 +35,9 @@ import unitrack_env  # noqa: F401  (registers the ids)
 from agents import make_agent
 from agents.appearance import MOT_INPUT_SIZE, AppearanceModel
 from agents.primitives.similarity import rsm
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import Timed, timed_acts  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"
@@ -81,23 +84,6 @@ def _parse() -> Options:
                    (width, height), args.threads)
 
 
-class _Timed:
-    """Wraps a callable and accumulates its wall time."""
-
-    def __init__(self, fn: Callable[..., Any]) -> None:
-        self.fn = fn
-        self.seconds = 0.0
-        self.calls = 0
-
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        start = time.perf_counter()
-        try:
-            return self.fn(*args, **kwargs)
-        finally:
-            self.seconds += time.perf_counter() - start
-            self.calls += 1
-
-
 def speed(options: Options, model: AppearanceModel) -> None:
     """Agent FPS per environment and the backbone's share of the agent's time."""
     print(f"\n== speed: unitrack on CPU, input {options.input_size[0]}x{options.input_size[1]}, "
@@ -107,25 +93,21 @@ def speed(options: Options, model: AppearanceModel) -> None:
     for env_id in SPEED_ENVS:
         env = gym.make(env_id)
         agent = make_agent("unitrack", appearance_model=model, input_size=options.input_size)
-        backbone = _Timed(model.features)
+        backbone = Timed(model.features)
         model.features = backbone  # type: ignore[method-assign]
         try:
             obs, info = env.reset(options={"sequence": env.unwrapped.sequence_names[0]})
             agent.reset(obs, info)
-            assoc = _Timed(agent.associator.step)
+            assoc = Timed(agent.associator.step)
             agent.associator.step = assoc  # type: ignore[method-assign]
-            agent_time, detections, frames = 0.0, 0, 0
+            counts: list[int] = []
             start = time.perf_counter()
-            while frames < options.frames:
-                detections += int(obs.get("num_detections", obs.get("num_people", 0)))
-                t0 = time.perf_counter()
-                action = agent.act(obs)
-                agent_time += time.perf_counter() - t0
-                frames += 1
-                obs, _, terminated, truncated, _ = env.step(action)
-                if terminated or truncated:
-                    break
+            agent_time, frames, obs = timed_acts(
+                env, agent, obs, options.frames,
+                lambda o, sink=counts: sink.append(
+                    int(o.get("num_detections", o.get("num_people", 0)))))
             total = time.perf_counter() - start
+            detections = sum(counts)
         finally:
             del model.features  # back to the class method
         h, w = obs["frame"].shape[:2]

@@ -38,6 +38,9 @@ from agents import make_agent
 from agents.appearance import AppearanceModel
 from agents.base import Agent
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import timed_acts  # noqa: E402  (a sibling file of this script)
+
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
 
@@ -137,15 +140,8 @@ def speed(cfg: Config) -> None:
         agent.reset(obs, info)
         reset_seconds = time.perf_counter() - start
         obs, *_ = env.step(agent.act(obs))  # the first answer is the given target
-        timed.seconds, seconds, frames = 0.0, 0.0, 0
-        for _ in range(cfg.frames - 1):
-            start = time.perf_counter()
-            action = agent.act(obs)
-            seconds += time.perf_counter() - start
-            frames += 1
-            obs, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                break
+        timed.seconds = 0.0
+        seconds, frames, _ = timed_acts(env, agent, obs, cfg.frames - 1)
         per_frame = seconds / frames
         print(f"{task:<10} {sequence:<46} {reset_seconds:8.3f} {per_frame:8.3f} "
               f"{1 / per_frame:6.2f} {timed.seconds / seconds:9.0%}")
