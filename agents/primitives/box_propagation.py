@@ -138,6 +138,8 @@ class BoxPropagationConfig:
             raise ValueError(f"num_scales must be odd and >= 1, got {self.num_scales}")
         if not 0 < self.min_size_factor <= 1 <= self.max_size_factor:
             raise ValueError("need 0 < min_size_factor <= 1 <= max_size_factor")
+        if self.template_window is not None and not self.template_window > 0:
+            raise ValueError(f"template_window must be > 0 or None, got {self.template_window}")
         if not 0 <= self.dcf_interp <= 1 or self.dcf_lambda < 0:
             raise ValueError("need 0 <= dcf_interp <= 1 and dcf_lambda >= 0")
 
@@ -382,19 +384,24 @@ class BoxPropagator:
     def _features(self, crops: np.ndarray, *, template: bool = False) -> torch.Tensor:
         feats = self.features(crops).float()
         if template and self.config.method == "dcf" and self.config.template_window:
-            size = feats.shape[-1]
-            side = min(size, max(1, round(size / self.config.context
-                                          * self.config.template_window)))
-            window = torch.zeros(size, size, device=feats.device)
-            start = (size - side) // 2
-            window[start:start + side, start:start + side] = hann_window(side + 2)[1:-1, 1:-1]
-            return feats * window
+            return feats * self._template_window(feats.shape[-1]).to(feats.device)
         if self.config.feature_window:
             size = feats.shape[-1]
             if self._window is None or self._window.shape[-1] != size:
                 self._window = hann_window(size).to(feats.device)
             feats = feats * self._window
         return feats
+
+    def _template_window(self, size: int) -> torch.Tensor:
+        """The DCF training window: Hann over ``template_window`` target sizes, 0 outside.
+
+        The target spans ``size / context`` feature pixels of a ``size`` x ``size`` map.
+        """
+        side = min(size, max(1, round(size / self.config.context * self.config.template_window)))
+        window = torch.zeros(size, size)
+        start = (size - side) // 2
+        window[start:start + side, start:start + side] = hann_window(side + 2)[1:-1, 1:-1]
+        return window
 
     def _window_size(self, w: float, h: float) -> np.ndarray:
         return np.array([[w * self.config.context, h * self.config.context]])

@@ -30,6 +30,8 @@ def test_paper_defaults():
         BoxPropagationConfig(method="kcf")
     with pytest.raises(ValueError, match="odd"):
         BoxPropagationConfig(num_scales=2)
+    with pytest.raises(ValueError, match="template_window"):
+        BoxPropagationConfig(template_window=0.0)
 
 
 def test_crop_at_unit_scale_is_the_image_block_and_pads_with_the_mean():
