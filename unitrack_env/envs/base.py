@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -48,11 +48,16 @@ def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path 
     return None
 
 
-class SequenceEnv(gym.Env):
-    """Base class: sequence selection, seeding and episode bookkeeping.
+#: The sequence type of an environment (``MOTSequence``, ``VOSSequence``, ...).
+SequenceT = TypeVar("SequenceT")
+
+
+class SequenceEnv(gym.Env, Generic[SequenceT]):
+    """Base class: sequence selection, seeding, episode bookkeeping and the render guard.
 
     Subclasses set :attr:`sequence_names` in ``__init__`` and implement
-    :meth:`_start_episode`, plus the results contract that ``evaluation`` relies on for every
+    :meth:`_start_episode` (which sets ``_sequence``), :meth:`_draw` (the ``rgb_array``
+    picture of the current state), plus the results contract that ``evaluation`` relies on for every
     task: :meth:`sequence_length`, :meth:`has_ground_truth`, :meth:`episode_digest`,
     :meth:`write_episode` (official result format) and :meth:`score_folder` (official
     metrics of a folder of such results).
@@ -66,6 +71,8 @@ class SequenceEnv(gym.Env):
     _frames: FramePrefetcher | None = None
     #: Whether the data set is the embedded synthetic default (set by :meth:`_data_root`).
     synthetic: bool = False
+    #: The sequence of the current episode (None before the first reset).
+    _sequence: SequenceT | None = None
 
     def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -145,6 +152,22 @@ class SequenceEnv(gym.Env):
         return self._start_episode(name)
 
     def _start_episode(self, name: str) -> tuple[Any, dict[str, Any]]:
+        raise NotImplementedError
+
+    @property
+    def sequence(self) -> SequenceT | None:
+        """The sequence of the current episode (None before the first reset)."""
+        return self._sequence
+
+    def render(self) -> np.ndarray | None:
+        """The ``rgb_array`` picture of the current state (None without a render mode)."""
+        if self.render_mode is None:
+            return None
+        if self._sequence is None:
+            raise RuntimeError("call reset() before render()")
+        return self._draw()
+
+    def _draw(self) -> np.ndarray:
         raise NotImplementedError
 
     # ----------------------------------------------------------- results contract

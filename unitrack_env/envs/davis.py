@@ -149,7 +149,7 @@ def scores_from_frames(
     )
 
 
-class DAVISEnv(SequenceEnv):
+class DAVISEnv(SequenceEnv[VOSSequence]):
     """Semi-supervised video object segmentation by mask propagation on DAVIS-2017 data.
 
     ## Description
@@ -492,18 +492,9 @@ class DAVISEnv(SequenceEnv):
                                   f"(objects: {list(sequence.object_ids)})")
         return labels
 
-    @property
-    def sequence(self) -> VOSSequence | None:
-        """The sequence of the current episode."""
-        return self._sequence
-
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """Return the frame with the agent's last label map (or the first-frame labels)."""
-        if self.render_mode is None:
-            return None
-        if self._sequence is None:
-            raise RuntimeError("call reset() before render()")
         if self._render_labels is None:
             return overlay_labels(self._frame, self._init_labels)
         return overlay_labels(self._render_frame, self._render_labels)

@@ -90,7 +90,7 @@ def pose_mat_bytes(keypoints: np.ndarray) -> bytes:
     return joint_positions_mat(keypoints)
 
 
-class JHMDBEnv(SequenceEnv):
+class JHMDBEnv(SequenceEnv[PoseSequence]):
     """Pose propagation: follow one person's 15 joints through a JHMDB video.
 
     ## Description
@@ -327,18 +327,9 @@ class JHMDBEnv(SequenceEnv):
         return ScoreReport("JHMDB", per_sequence, combined,
                            scores={**per_sequence, COMBINED: combined})
 
-    @property
-    def sequence(self) -> PoseSequence | None:
-        """The sequence of the current episode."""
-        return self._sequence
-
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """Return the frame with the last predicted skeleton (``init_keypoints`` at reset)."""
-        if self.render_mode is None:
-            return None
-        if self._sequence is None:
-            raise RuntimeError("call reset() before render()")
         canvas = np.ascontiguousarray(self._frame).copy()
         pose = self._render_pose if self._render_pose is not None else self._sequence.keypoints[0]
         draw_skeleton(canvas, pose, JHMDB_SKELETON)

@@ -34,7 +34,7 @@ DEFAULT_MAX_TRACKS = 512
 DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 
 
-class MOTChallengeEnv(SequenceEnv):
+class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     """Multi-object tracking by association on a MOTChallenge-layout data set.
 
     ## Description
@@ -334,18 +334,9 @@ class MOTChallengeEnv(SequenceEnv):
         return score_folder(self.dataset.split_dir, folder, benchmark=self.benchmark,
                             sequences=sequences)
 
-    @property
-    def sequence(self) -> MOTSequence | None:
-        """The sequence of the current episode."""
-        return self._sequence
-
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """Return the current frame with id-coloured tracks (``rgb_array``), else None."""
-        if self.render_mode is None:
-            return None
-        if self._sequence is None:
-            raise RuntimeError("call reset() before render()")
         if self._render_tracks is None:
             rows = self._detections.rows(self._t)
             return draw_boxes(self._frame, self._detections.boxes[rows])

@@ -39,7 +39,7 @@ DEFAULT_SPLITS = {"MOTS20": "train", "KITTI-MOTS": "training"}
 DATA_FOLDERS = {"MOTS20": "MOTS20", "KITTI-MOTS": "KITTI-MOTS"}
 
 
-class MOTSEnv(SequenceEnv):
+class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
     """Multi-object tracking and segmentation by associating detection masks.
 
     ## Description
@@ -164,7 +164,7 @@ class MOTSEnv(SequenceEnv):
             self.max_detections, self.max_frame_size)
         self.action_space: spaces.Dict = ut_spaces.mask_id_action_space(self.max_detections)
 
-        self._info_seq: MOTSSequenceInfo | None = None
+        self._sequence: MOTSSequenceInfo | None = None
         self._gt: MaskAnnotations | None = None
         self._dets: MaskAnnotations | None = None
         self._frames: FramePrefetcher | None = None
@@ -197,7 +197,7 @@ class MOTSEnv(SequenceEnv):
         if max(counts) > self.max_detections:
             raise ValueError(f"{self.dataset.detection_path(name)}: a frame has {max(counts)} "
                              f"detections, more than max_detections={self.max_detections}")
-        self._info_seq = info
+        self._sequence = info
         self._gt = self.dataset.ground_truth(name)
         self._dets = dets
         self._frames = FramePrefetcher(info.frame_path, prefetch=self.prefetch)
@@ -210,10 +210,10 @@ class MOTSEnv(SequenceEnv):
 
     @property
     def _frame_number(self) -> int:
-        return self._info_seq.first_frame + self._k
+        return self._sequence.first_frame + self._k
 
     def _observe(self) -> dict[str, Any]:
-        info, t = self._info_seq, self._frame_number
+        info, t = self._sequence, self._frame_number
         if self.decode_frames:
             image = self._frames.get(t)
             if self._k + 1 < info.length:
@@ -240,7 +240,7 @@ class MOTSEnv(SequenceEnv):
                 "num_detections": n}
 
     def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        info = self._info_seq
+        info = self._sequence
         out: dict[str, Any] = {"sequence": info.name, "frame_index": self._frame_number}
         if reset:
             out.update(seq_length=info.length, frame_rate=info.frame_rate,
@@ -251,7 +251,7 @@ class MOTSEnv(SequenceEnv):
     def step(self, action: dict[str, Any]
              ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
         """Record the ids given to this frame's masks, score them, and move on."""
-        if self._done or self._info_seq is None:
+        if self._done or self._sequence is None:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         counts = self._current["counts"]
         ids = ut_spaces.unpack_mask_ids(action, len(counts), self.max_detections)
@@ -262,7 +262,7 @@ class MOTSEnv(SequenceEnv):
         keep = ids > 0
         self._render_state = (self._current["image"], self._current["masks"][keep], ids[keep])
         extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
-        if self._k + 1 >= self._info_seq.length:
+        if self._k + 1 >= self._sequence.length:
             self._done = True
             observation = self._repeat_observation()
             info = self._info() | extra
@@ -287,7 +287,7 @@ class MOTSEnv(SequenceEnv):
                      ) -> tuple[float, dict[str, int] | None]:
         if self._gt is None:
             return 0.0, None
-        info = self._info_seq
+        info = self._sequence
         rows = self._gt.rows(t)
         cls = self._gt.classes[rows]
         gt_rows, ignore_rows = rows[cls == self.class_id], rows[cls == CLASS_IGNORE]
@@ -302,7 +302,7 @@ class MOTSEnv(SequenceEnv):
     # ------------------------------------------------------------------ results
     def episode_results(self) -> MaskAnnotations:
         """The masks reported so far with their ids, as MOTS result records."""
-        info = self._info_seq
+        info = self._sequence
         frames, ids, counts = [], [], []
         for t, frame_ids, frame_counts in self._results:
             frames += [t] * len(frame_ids)
@@ -327,9 +327,9 @@ class MOTSEnv(SequenceEnv):
 
         if self._gt is None:
             raise ValueError("this sequence has no ground truth to score against")
-        score = score_sequence(self._gt, self.episode_results(), seq_length=self._info_seq.length,
+        score = score_sequence(self._gt, self.episode_results(), seq_length=self._sequence.length,
                                benchmark=self.benchmark, object_class=self.object_class,
-                               sequence=self._info_seq.name)
+                               sequence=self._sequence.name)
         return dict(score.summary)
 
     def sequence_length(self, name: str) -> int:
@@ -342,9 +342,9 @@ class MOTSEnv(SequenceEnv):
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<sequence>.txt`` in the official MOTS txt result format."""
-        if self._info_seq is None:
+        if self._sequence is None:
             raise RuntimeError("no episode to write; call reset() and play it first")
-        atomic_write_text(Path(folder) / f"{self._info_seq.name}.txt",
+        atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
                           format_instances_txt(self.episode_results()))
 
     def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
@@ -354,12 +354,8 @@ class MOTSEnv(SequenceEnv):
         return score_folder(self.dataset, folder, sequences, object_class=self.object_class)
 
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
-        if self.render_mode is None:
-            return None
-        if self._info_seq is None:
-            raise RuntimeError("call reset() before render()")
         if self._render_state is None:
             return draw_masks(self._current["image"], self._current["masks"])
         return draw_masks(*self._render_state)

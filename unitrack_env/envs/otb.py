@@ -87,7 +87,7 @@ def validate_box(action: Any) -> np.ndarray:
     return box
 
 
-class OTBEnv(SequenceEnv):
+class OTBEnv(SequenceEnv[SOTSequence]):
     """Single object tracking by box propagation on an OTB-2015-layout data set.
 
     ## Description
@@ -388,18 +388,9 @@ class OTBEnv(SequenceEnv):
             combined = scores[COMBINED].as_dict()
         return ScoreReport(BENCHMARK, per_sequence, combined, scores)
 
-    @property
-    def sequence(self) -> SOTSequence | None:
-        """The sequence of the current episode."""
-        return self._sequence
-
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """Return the frame with the agent's last box (or the initial box before any step)."""
-        if self.render_mode is None:
-            return None
-        if self._sequence is None:
-            raise RuntimeError("call reset() before render()")
         if self._render_box is None:
             return draw_boxes(self._frame, self._sequence.init_box[None], colour=INIT_COLOUR)
         return draw_boxes(self._render_frame, self._render_box[None], colour=ACTION_COLOUR)

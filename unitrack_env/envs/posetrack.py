@@ -53,7 +53,7 @@ ORACLE = "oracle"
 _LIMBS = tuple((a - 1, b - 1) for a, b in POSETRACK_SKELETON)
 
 
-class PoseTrackEnv(SequenceEnv):
+class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
     """Multi-person pose tracking by association on PoseTrack 2018 data.
 
     ## Description
@@ -400,18 +400,9 @@ class PoseTrackEnv(SequenceEnv):
         return ScoreReport(BENCHMARK, per_sequence, combined,
                            scores={**per_sequence, COMBINED: combined})
 
-    @property
-    def sequence(self) -> PoseTrackSequence | None:
-        """The sequence of the current episode."""
-        return self._sequence
-
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """Return the frame with the tracked skeletons coloured by id (detections at reset)."""
-        if self.render_mode is None:
-            return None
-        if self._sequence is None:
-            raise RuntimeError("call reset() before render()")
         if self._render_tracks is None:
             canvas = np.ascontiguousarray(self._frame).copy()
             for pose in self._poses[self._k][1]:

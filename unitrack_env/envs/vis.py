@@ -38,7 +38,7 @@ DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 BENCHMARK = "YouTube-VIS-2019"
 
 
-class VISEnv(SequenceEnv):
+class VISEnv(SequenceEnv[VisVideo]):
     """Video instance segmentation by associating per-frame detection masks.
 
     ## Description
@@ -141,7 +141,7 @@ class VISEnv(SequenceEnv):
             num_classes=max(self.categories, default=1))
         self.action_space: spaces.Dict = ut_spaces.mask_id_action_space(self.max_detections)
 
-        self._video: VisVideo | None = None
+        self._sequence: VisVideo | None = None
         self._gt: list[VisTrack] | None = None
         self._dets: list[list[tuple[dict, int, float]]] = []
         self._frames: FramePrefetcher | None = None
@@ -171,7 +171,7 @@ class VISEnv(SequenceEnv):
         if most > self.max_detections:
             raise ValueError(f"{self.dataset.detection_path()}: a frame of {name} has {most} "
                              f"detections, more than max_detections={self.max_detections}")
-        self._video = video
+        self._sequence = video
         self._gt = self.dataset.data.tracks_of(video.id) if self.dataset.has_annotations else None
         self._dets = per_frame
         self._frames = FramePrefetcher(functools.partial(self.dataset.frame_path, video),
@@ -184,7 +184,7 @@ class VISEnv(SequenceEnv):
         return self._observe(), self._info(reset=True)
 
     def _observe(self) -> dict[str, Any]:
-        video, k = self._video, self._k
+        video, k = self._sequence, self._k
         if self.decode_frames:
             image = self._frames.get(k)
             if k + 1 < video.length:
@@ -212,7 +212,7 @@ class VISEnv(SequenceEnv):
                 "classes": classes, "num_detections": n}
 
     def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        video = self._video
+        video = self._sequence
         out: dict[str, Any] = {"sequence": video.name, "frame_index": self._k}
         if reset:
             out.update(video_id=video.id, seq_length=video.length, frame_rate=FRAME_RATE,
@@ -223,7 +223,7 @@ class VISEnv(SequenceEnv):
     def step(self, action: dict[str, Any]
              ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
         """Record the ids given to this frame's detections, score them, and move on."""
-        if self._done or self._video is None:
+        if self._done or self._sequence is None:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         dets = self._current["dets"]
         ids = ut_spaces.unpack_mask_ids(action, len(dets), self.max_detections)
@@ -234,7 +234,7 @@ class VISEnv(SequenceEnv):
         keep = ids > 0
         self._render_state = (self._current["image"], self._current["masks"][keep], ids[keep])
         extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
-        if self._k + 1 >= self._video.length:
+        if self._k + 1 >= self._sequence.length:
             self._done = True
             observation = self._pack(self._fresh(self._current["image"]),
                                      self._fresh(self._current["masks"]), dets)
@@ -260,7 +260,7 @@ class VISEnv(SequenceEnv):
     # ------------------------------------------------------------------ results
     def episode_results(self) -> list[VisTrack]:
         """The tracks recorded so far in the results format, ordered by track id."""
-        if self._video is None:
+        if self._sequence is None:
             return []
         out = []
         for track_id in sorted(self._tracks):
@@ -269,9 +269,10 @@ class VISEnv(SequenceEnv):
             for _, cls, score in frames.values():
                 votes[cls].append(score)
             category = max(votes, key=lambda c: (len(votes[c]), sum(votes[c]), -c))
-            segs = tuple(frames[k][0] if k in frames else None for k in range(self._video.length))
+            length = self._sequence.length
+            segs = tuple(frames[k][0] if k in frames else None for k in range(length))
             score = float(np.mean([s for _, _, s in frames.values()]))
-            out.append(VisTrack(self._video.id, category, segs, score=score))
+            out.append(VisTrack(self._sequence.id, category, segs, score=score))
         return out
 
     def episode_digest(self) -> str:
@@ -284,8 +285,8 @@ class VISEnv(SequenceEnv):
 
         if self._gt is None:
             raise ValueError("this video has no annotations to score against")
-        report = score_videos(self.dataset.data, self.episode_results(), [self._video])
-        return report.per_sequence[self._video.name]
+        report = score_videos(self.dataset.data, self.episode_results(), [self._sequence])
+        return report.per_sequence[self._sequence.name]
 
     def sequence_length(self, name: str) -> int:
         """Number of frames of video ``name``."""
@@ -301,9 +302,9 @@ class VISEnv(SequenceEnv):
         ``unitrack_env.metrics.vis.merge_result_files(folder)`` concatenates them into the
         challenge's ``results.json``.
         """
-        if self._video is None:
+        if self._sequence is None:
             raise RuntimeError("no episode to write; call reset() and play it first")
-        atomic_write_text(Path(folder) / f"{self._video.name}.json",
+        atomic_write_text(Path(folder) / f"{self._sequence.name}.json",
                           format_results(self.episode_results()))
 
     def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
@@ -320,12 +321,8 @@ class VISEnv(SequenceEnv):
         return score_videos(self.dataset.data, results, videos, source=Path(folder))
 
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
+    def _draw(self) -> np.ndarray:
         """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
-        if self.render_mode is None:
-            return None
-        if self._video is None:
-            raise RuntimeError("call reset() before render()")
         if self._render_state is None:
             return draw_masks(self._current["image"], self._current["masks"])
         return draw_masks(*self._render_state)
