@@ -73,6 +73,8 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
     synthetic: bool = False
     #: The sequence of the current episode (None before the first reset).
     _sequence: SequenceT | None = None
+    #: Decode frames (False: observations carry a 1x1 black placeholder instead).
+    decode_frames: bool = True
 
     def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -169,6 +171,24 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
 
     def _draw(self) -> np.ndarray:
         raise NotImplementedError
+
+    def _decode(self, key: int, *, next_key: int | None, size: tuple[int, int],
+                path: str | Path, source: str) -> np.ndarray:
+        """Frame ``key`` of the prefetcher (a 1x1 black placeholder without decoding).
+
+        Schedules ``next_key`` (None: the last frame) and checks the decoded size against
+        ``size`` = ``(width, height)``, the size that ``source`` states (named in the error,
+        e.g. ``"seqinfo.ini"``), raising :class:`DataFormatError` naming ``path``.
+        """
+        if not self.decode_frames:
+            return np.zeros((1, 1, 3), dtype=np.uint8)
+        image = self._frames.get(key)
+        if next_key is not None:
+            self._frames.schedule(next_key)
+        if image.shape[1::-1] != tuple(size):
+            raise DataFormatError(path, f"image is {image.shape[1]}x{image.shape[0]} but "
+                                        f"{source} says {size[0]}x{size[1]}")
+        return image
 
     # ----------------------------------------------------------- results contract
     def sequence_length(self, name: str) -> int:

@@ -324,18 +324,9 @@ class DAVISEnv(SequenceEnv[VOSSequence]):
 
     def _observe(self, t: int) -> dict[str, Any]:
         sequence = self._sequence
-        if self.decode_frames:
-            image = self._frames.get(t)
-            if t + 1 < sequence.num_frames:
-                self._frames.schedule(t + 1)
-            if image.shape[:2] != self._shape:
-                raise DataFormatError(
-                    sequence.frame_paths[t],
-                    f"image is {image.shape[1]}x{image.shape[0]} but the sequence's first frame "
-                    f"is {self._shape[1]}x{self._shape[0]}",
-                )
-        else:
-            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        image = self._decode(t, next_key=t + 1 if t + 1 < sequence.num_frames else None,
+                             size=sequence.image_size, path=sequence.frame_paths[t],
+                             source="the sequence's first frame")
         self._frame = image
         return self._observation(image)
 

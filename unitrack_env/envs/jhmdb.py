@@ -223,16 +223,9 @@ class JHMDBEnv(SequenceEnv[PoseSequence]):
 
     def _observe(self, t: int) -> dict[str, Any]:
         seq = self._sequence
-        if self.decode_frames:
-            image = self._frames.get(t)
-            if t + 1 < seq.num_frames:
-                self._frames.schedule(t + 1)
-            if image.shape[1::-1] != seq.image_size:
-                raise DataFormatError(seq.frame_paths[t], f"is {image.shape[1]}x{image.shape[0]}"
-                                      f", the video's first frame {seq.image_size[0]}x"
-                                      f"{seq.image_size[1]}")
-        else:
-            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        image = self._decode(t, next_key=t + 1 if t + 1 < seq.num_frames else None,
+                             size=seq.image_size, path=seq.frame_paths[t],
+                             source="the video's first frame")
         self._frame = image
         return {"frame": image, "init_keypoints": seq.init_keypoints.astype(np.float32)}
 

@@ -191,18 +191,10 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
 
     def _observe(self, frame: int) -> dict[str, Any]:
         assert self._sequence is not None and self._detections is not None
-        if self.decode_frames:
-            image = self._frames.get(frame)
-            if frame < self._sequence.info.length:
-                self._frames.schedule(frame + 1)
-            expected = (self._sequence.info.height, self._sequence.info.width)
-            if image.shape[:2] != expected:
-                raise ValueError(
-                    f"{self._sequence.info.frame_path(frame)}: image is {image.shape[1]}x"
-                    f"{image.shape[0]} but seqinfo.ini says {expected[1]}x{expected[0]}"
-                )
-        else:
-            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        info = self._sequence.info
+        image = self._decode(frame, next_key=frame + 1 if frame < info.length else None,
+                             size=(info.width, info.height), path=info.frame_path(frame),
+                             source="seqinfo.ini")
         self._frame = image
         rows = self._detections.rows(frame)
         n = rows.stop - rows.start

@@ -214,15 +214,9 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
 
     def _observe(self) -> dict[str, Any]:
         info, t = self._sequence, self._frame_number
-        if self.decode_frames:
-            image = self._frames.get(t)
-            if self._k + 1 < info.length:
-                self._frames.schedule(t + 1)
-            if image.shape[:2] != (info.height, info.width):
-                raise ValueError(f"{info.frame_path(t)}: image is {image.shape[1]}x"
-                                 f"{image.shape[0]} but the sequence is {info.width}x{info.height}")
-        else:
-            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        image = self._decode(t, next_key=t + 1 if self._k + 1 < info.length else None,
+                             size=(info.width, info.height), path=info.frame_path(t),
+                             source="the sequence")
         rows = self._dets.rows(t)
         masks = self._dets.decode(rows, info.height, info.width)
         scores = self._dets.scores[rows]

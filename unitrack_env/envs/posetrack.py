@@ -279,16 +279,9 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
 
     def _observe(self, k: int) -> dict[str, Any]:
         seq = self._sequence
-        if self.decode_frames:
-            image = self._frames.get(k)
-            if k + 1 < seq.length:
-                self._frames.schedule(k + 1)
-            if image.shape[1::-1] != seq.image_size:
-                raise DataFormatError(seq.frame_paths[k], f"is {image.shape[1]}x{image.shape[0]},"
-                                      f" the sequence says {seq.image_size[0]}x"
-                                      f"{seq.image_size[1]}")
-        else:
-            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        image = self._decode(k, next_key=k + 1 if k + 1 < seq.length else None,
+                             size=seq.image_size, path=seq.frame_paths[k],
+                             source="the sequence's first frame")
         self._frame = image
         return self._pose_observation(k, image)
 

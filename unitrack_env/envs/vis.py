@@ -185,16 +185,9 @@ class VISEnv(SequenceEnv[VisVideo]):
 
     def _observe(self) -> dict[str, Any]:
         video, k = self._sequence, self._k
-        if self.decode_frames:
-            image = self._frames.get(k)
-            if k + 1 < video.length:
-                self._frames.schedule(k + 1)
-            if image.shape[:2] != (video.height, video.width):
-                raise ValueError(f"{self.dataset.frame_path(video, k)}: image is "
-                                 f"{image.shape[1]}x{image.shape[0]} but the JSON says "
-                                 f"{video.width}x{video.height}")
-        else:
-            image = np.zeros((1, 1, 3), dtype=np.uint8)
+        image = self._decode(k, next_key=k + 1 if k + 1 < video.length else None,
+                             size=(video.width, video.height),
+                             path=self.dataset.frame_path(video, k), source="the JSON")
         dets = self._dets[k]
         masks = decode_masks([d[0]["counts"] for d in dets], video.height, video.width)
         self._current = {"image": image, "masks": masks, "dets": dets}
