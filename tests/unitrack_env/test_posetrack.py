@@ -29,6 +29,7 @@ from unitrack_env.metrics.posetrack import (
     ClearAccumulator,
     PoseFrame,
     PosevalSequence,
+    SequenceCounts,
     evaluate_video,
     summarise,
 )
@@ -135,6 +136,20 @@ def test_threshold_is_half_the_head_size():
     assert cb.misses.tolist() == [1] * NUM_JOINTS and cb.false_positives.tolist() == [1] * 15
     assert summarise([ca])["MOTP"] == pytest.approx(0.5)
     assert summarise([cb])["MOTA"] == -1.0
+
+
+def test_motp_of_a_joint_without_detections_is_zero_as_in_poseval():
+    """poseval sets a joint's MOTP to 0 when it has no detections and averages those zeros
+    with the rest, so a sequence can score lower than the pooled set (seen on PoseTrack:
+    one sequence 66.7, combined 100)."""
+    zeros = np.zeros(NUM_JOINTS)
+    seen = np.arange(NUM_JOINTS) < 10  # joints 0-9 detected (distance 0), 10-14 only missed
+    first = SequenceCounts(matches=seen * 1.0, switches=zeros, misses=(~seen) * 1.0,
+                           false_positives=zeros, distance=zeros, idf1=zeros, frames=1)
+    second = SequenceCounts(matches=np.ones(NUM_JOINTS), switches=zeros, misses=zeros,
+                            false_positives=zeros, distance=zeros, idf1=zeros, frames=1)
+    assert summarise([first])["MOTP"] == pytest.approx(10 / 15)
+    assert summarise([first, second])["MOTP"] == 1.0
 
 
 def test_id_switch_counts_per_joint_and_sums():

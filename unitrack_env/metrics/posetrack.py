@@ -34,7 +34,9 @@ sequence it globs, which only affects IDF1 there, by design-free accident).
 
 **Scores.** Per joint, counts are summed over sequences, then
 ``MOTA = 1 - (misses + switches + false_positives) / objects``,
-``MOTP = 1 - sum(matched d) / detections`` (``detections = matches + switches``),
+``MOTP = 1 - sum(matched d) / detections`` (``detections = matches + switches``; 0, not
+undefined, for a joint without detections, and averaged over the joints as such, as poseval
+does: a sequence may therefore score below the pooled set),
 ``precision = detections / (detections + false_positives)``,
 ``recall = detections / objects``; per joint ``IDF1`` (py-motmetrics' global min-cost identity
 assignment, ``2 IDTP / (objects + predictions)``) is computed per sequence and **averaged over
