@@ -141,7 +141,7 @@ def speed(cfg: Config) -> None:
         reset_seconds = time.perf_counter() - start
         obs, *_ = env.step(agent.act(obs))  # the first answer is the given target
         timed.seconds = 0.0
-        seconds, frames, _ = timed_acts(env, agent, obs, cfg.frames - 1)
+        seconds, frames, _ = timed_acts(env, agent, obs, max(1, cfg.frames - 1))
         per_frame = seconds / frames
         print(f"{task:<10} {sequence:<46} {reset_seconds:8.3f} {per_frame:8.3f} "
               f"{1 / per_frame:6.2f} {timed.seconds / seconds:9.0%}")
