@@ -7,8 +7,8 @@ An agent is one class with two methods::
         def act(self, observation): ...   # returns the environment's action
 
 Subclassing registers the class under ``name``; ``make_agent("my-tracker", **kwargs)``
-builds it. Built-in agents are imported lazily on first use so that ``import agents`` stays
-cheap (no torch import for the IoU baseline).
+builds it. Built-in agents are imported lazily on first use so that ``import unitrack_env.agents``
+stays cheap (no torch import for the IoU baseline).
 """
 
 from __future__ import annotations
@@ -22,16 +22,16 @@ AGENTS: dict[str, type[Agent]] = {}
 
 #: Built-in agents and the module that defines each one.
 _BUILTIN_MODULES: dict[str, str] = {
-    "iou": "agents.baselines.iou",
-    "fresh-ids": "agents.baselines.trivial",
-    "unitrack": "agents.heads.association",
-    "repeat-box": "agents.baselines.repeat",
-    "repeat-mask": "agents.baselines.repeat",
-    "repeat-pose": "agents.baselines.repeat_pose",
-    "unitrack-xcorr": "agents.heads.sot",
-    "unitrack-dcf": "agents.heads.sot",
-    "unitrack-vos": "agents.heads.vos",
-    "unitrack-pose": "agents.heads.pose",
+    "iou": "unitrack_env.agents.baselines.iou",
+    "fresh-ids": "unitrack_env.agents.baselines.trivial",
+    "unitrack": "unitrack_env.agents.heads.association",
+    "repeat-box": "unitrack_env.agents.baselines.repeat",
+    "repeat-mask": "unitrack_env.agents.baselines.repeat",
+    "repeat-pose": "unitrack_env.agents.baselines.repeat_pose",
+    "unitrack-xcorr": "unitrack_env.agents.heads.sot",
+    "unitrack-dcf": "unitrack_env.agents.heads.sot",
+    "unitrack-vos": "unitrack_env.agents.heads.vos",
+    "unitrack-pose": "unitrack_env.agents.heads.pose",
 }
 
 

@@ -32,9 +32,9 @@ import numpy as np
 import torch
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from agents import make_agent
-from agents.appearance import MOT_INPUT_SIZE, AppearanceModel
-from agents.primitives.similarity import rsm
+from unitrack_env.agents import make_agent
+from unitrack_env.agents.appearance import MOT_INPUT_SIZE, AppearanceModel
+from unitrack_env.agents.primitives.similarity import rsm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import Timed, timed_acts  # noqa: E402  (a sibling file of this script)

@@ -33,11 +33,11 @@ import numpy as np
 import torch
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from agents import make_agent
-from agents.appearance import AppearanceModel, letterbox
-from agents.primitives.association import Associator
-from agents.primitives.similarity import SIMILARITIES
-from evaluation.runner import run
+from unitrack_env.agents import make_agent
+from unitrack_env.agents.appearance import AppearanceModel, letterbox
+from unitrack_env.agents.primitives.association import Associator
+from unitrack_env.agents.primitives.similarity import SIMILARITIES
+from unitrack_env.evaluation.runner import run
 from unitrack_env.frames import read_rgb
 
 REPO = Path(__file__).resolve().parents[1]

@@ -34,9 +34,9 @@ import numpy as np
 import torch
 
 import unitrack_env  # noqa: F401
-from agents import make_agent
-from agents.appearance import AppearanceModel
-from agents.base import Agent
+from unitrack_env.agents import make_agent
+from unitrack_env.agents.appearance import AppearanceModel
+from unitrack_env.agents.base import Agent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import timed_acts  # noqa: E402  (a sibling file of this script)
@@ -151,7 +151,7 @@ def memory(cfg: Config) -> None:
     print("\n== memory (VOS, DAVIS blackswan 480p, M = 6, fresh process) ==")
     code = (
         "import resource, torch, gymnasium as gym, unitrack_env\n"
-        "from agents import make_agent\n"
+        "from unitrack_env.agents import make_agent\n"
         f"torch.set_num_threads({cfg.threads})\n"
         f"env = gym.make('UniTrack/DAVIS-v0', root={str(DATA / 'DAVIS')!r})\n"
         "agent = make_agent('unitrack-vos')\n"

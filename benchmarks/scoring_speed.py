@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from evaluation.crosscheck import motmetrics_summary
-from evaluation.runner import run
 from unitrack_env.datasets.motchallenge import read_seqinfo
+from unitrack_env.evaluation.crosscheck import motmetrics_summary
+from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.mot_preprocess import gt_frames_from_rows, tracker_frames_from_rows
 from unitrack_env.metrics.motchallenge import read_result_file, score_sequence
 
@@ -68,7 +68,7 @@ def main() -> None:
         print(f"  {key:6s} TrackEval {te[key]:.6f}   motmetrics {mm[key]:.6f}")
     if any(abs(te[k] - mm[k]) > 1e-9 for k in ("MOTA", "IDF1", "IDSW")):
         print("  (the libraries match differently after a gap and in crowded overlaps; see the "
-              "evaluation.crosscheck docstring. TrackEval is the official scorer.)")
+              "unitrack_env.evaluation.crosscheck docstring. TrackEval is the official scorer.)")
 
 
 if __name__ == "__main__":

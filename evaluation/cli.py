@@ -118,7 +118,7 @@ def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
-    from evaluation.runner import run
+    from unitrack_env.evaluation.runner import run
 
     sequences = args.sequences.split(",") if args.sequences else None
     report = run(
@@ -174,7 +174,7 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     console.print(metrics_table(report.per_sequence, report.combined, f"{args.results}",
                                 task=task))
     if args.out:
-        from evaluation.runner import json_safe
+        from unitrack_env.evaluation.runner import json_safe
 
         Path(args.out).write_text(json.dumps(json_safe(json.loads(report.to_json())), indent=2))
         console.print(f"metrics: {args.out}")
@@ -182,7 +182,7 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
 
 
 def _cmd_render(args: argparse.Namespace, console: Console) -> int:
-    from evaluation.video import render_episode
+    from unitrack_env.evaluation.video import render_episode
 
     frames = render_episode(
         args.env, args.agent, args.sequence, args.out,
@@ -196,7 +196,7 @@ def _cmd_render(args: argparse.Namespace, console: Console) -> int:
 
 def _cmd_list(args: argparse.Namespace, console: Console) -> int:
     import unitrack_env
-    from evaluation._agents import agents_module
+    from unitrack_env.agents import available_agents
 
     table = Table(title="environments")
     table.add_column("id")
@@ -204,7 +204,7 @@ def _cmd_list(args: argparse.Namespace, console: Console) -> int:
     for variant in unitrack_env.VARIANTS:
         table.add_row(variant.env_id, variant.task)
     console.print(table)
-    console.print("agents: " + ", ".join(agents_module().available_agents()))
+    console.print("agents: " + ", ".join(available_agents()))
     return 0
 
 

@@ -35,7 +35,7 @@ from typing import Any
 import gymnasium as gym
 
 import unitrack_env
-from evaluation._agents import agents_module
+from unitrack_env.agents import make_agent
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import ScoreReport
 
@@ -140,7 +140,7 @@ def _save(out: Path, env: gym.Env, record: SequenceRecord) -> None:
 def _make(spec: RunSpec) -> tuple[gym.Env, Any]:
     unitrack_env.register_all()
     env = gym.make(spec.env_id, **spec.env_kwargs)
-    agent = agents_module().make_agent(spec.agent, **spec.agent_kwargs)
+    agent = make_agent(spec.agent, **spec.agent_kwargs)
     return env, agent
 
 
@@ -220,7 +220,7 @@ def run(
     lengths = {s: base.sequence_length(s) for s in todo}
     records: dict[str, SequenceRecord] = {}
 
-    from evaluation.progress import RunProgress
+    from unitrack_env.evaluation.progress import RunProgress
 
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:
         if workers <= 1 or len(todo) <= 1:

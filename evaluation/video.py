@@ -10,7 +10,7 @@ import cv2
 import gymnasium as gym
 
 import unitrack_env
-from evaluation._agents import agents_module
+from unitrack_env.agents import make_agent
 
 #: FourCC codes by file extension (both ship with opencv-python-headless).
 _FOURCC = {".mp4": "mp4v", ".avi": "MJPG"}
@@ -32,7 +32,7 @@ def render_episode(
         raise ValueError(f"{out}: video extension must be one of {sorted(_FOURCC)}")
     unitrack_env.register_all()
     env = gym.make(env_id, render_mode="rgb_array", **(env_kwargs or {}))
-    tracker = agents_module().make_agent(agent, **(agent_kwargs or {}))
+    tracker = make_agent(agent, **(agent_kwargs or {}))
     writer = None
     frames = 0
     try:

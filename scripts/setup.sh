@@ -20,4 +20,4 @@ else
     "${pip[@]}" -e .
 fi
 "${pip[@]}" --no-deps "trackeval==1.3.0"
-"$venv/bin/python" -c "import unitrack_env, agents, evaluation, trackeval, torch; print('unitrack-env ready:', unitrack_env.__version__, '| torch', torch.__version__)"
+"$venv/bin/python" -c "import unitrack_env.agents, unitrack_env.evaluation, trackeval, torch; print('unitrack-env ready:', unitrack_env.__version__, '| torch', torch.__version__)"

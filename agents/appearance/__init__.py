@@ -14,7 +14,7 @@ Public API:
 * Architectures: :class:`ResNet`, :class:`EfficientNetLite0`.
 """
 
-from agents.appearance.checkpoints import (
+from unitrack_env.agents.appearance.checkpoints import (
     CIFAR_MEAN,
     CIFAR_STD,
     DEFAULT_REMAPS,
@@ -25,15 +25,15 @@ from agents.appearance.checkpoints import (
     LoadReport,
     load_checkpoint,
 )
-from agents.appearance.efficientnet_lite import EfficientNetLite0
-from agents.appearance.feature_cache import (
+from unitrack_env.agents.appearance.efficientnet_lite import EfficientNetLite0
+from unitrack_env.agents.appearance.feature_cache import (
     CachedAppearanceModel,
     CacheKey,
     FeatureCache,
     FeatureCacheWarning,
     image_fingerprint,
 )
-from agents.appearance.model import (
+from unitrack_env.agents.appearance.model import (
     ARCHITECTURES,
     DEFAULT_LAYERS,
     DEFAULT_WEIGHT_LOADERS,
@@ -48,7 +48,7 @@ from agents.appearance.model import (
     torch_threads,
     weights_digest,
 )
-from agents.appearance.resnet import ResNet, infer_resnet_arch
+from unitrack_env.agents.appearance.resnet import ResNet, infer_resnet_arch
 
 __all__ = [
     "ARCHITECTURES",

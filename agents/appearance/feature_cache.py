@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from agents.appearance.model import AppearanceModel
+from unitrack_env.agents.appearance.model import AppearanceModel
 
 DEFAULT_CACHE_DTYPE: type[np.floating] = np.float16
 """On-disk dtype of cached features."""

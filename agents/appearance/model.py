@@ -18,7 +18,8 @@ Weights (the ``weights=`` argument) are resolved in this order:
    which needs torchvision (not a dependency) and may download;
 3. otherwise a checkpoint file path: a torchvision-format ResNet state dict or a
    self-supervised checkpoint, renamed by a remap from
-   :data:`~agents.appearance.checkpoints.DEFAULT_REMAPS` (``remap="auto"`` picks the best).
+   :data:`~unitrack_env.agents.appearance.checkpoints.DEFAULT_REMAPS` (``remap="auto"`` picks the
+   best).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from agents.appearance.checkpoints import (
+from unitrack_env.agents.appearance.checkpoints import (
     DEFAULT_REMAPS,
     IMAGENET_MEAN,
     IMAGENET_STD,
@@ -52,13 +53,13 @@ from agents.appearance.checkpoints import (
     load_state_into,
     read_checkpoint,
 )
-from agents.appearance.efficientnet_lite import (
+from unitrack_env.agents.appearance.efficientnet_lite import (
     LITE0_LAYERS,
     LITE0_MEAN,
     LITE0_STD,
     EfficientNetLite0,
 )
-from agents.appearance.resnet import RESNET_SPECS, ResNet, infer_resnet_arch
+from unitrack_env.agents.appearance.resnet import RESNET_SPECS, ResNet, infer_resnet_arch
 
 FEATURE_STRIDE: int = 8
 """Stride of every feature map this model produces (UniTrack's r = 8)."""
@@ -527,7 +528,7 @@ class AppearanceModel:
             if len(shapes) != 1:
                 raise ValueError(
                     f"images in one batch must have the same size, got {sorted(shapes)}; "
-                    "letterbox them first (agents.appearance.letterbox)"
+                    "letterbox them first (unitrack_env.agents.appearance.letterbox)"
                 )
             batch = np.stack([np.asarray(i) for i in items])
         if batch.ndim == 3:

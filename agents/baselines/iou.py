@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from agents.base import Agent
+from unitrack_env.agents.base import Agent
 from unitrack_env.geometry import box_iou
 from unitrack_env.spaces import (
     pack_mask_ids,

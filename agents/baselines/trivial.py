@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import Agent
+from unitrack_env.agents.base import Agent
 from unitrack_env.spaces import pack_tracks, unpack_detections
 
 

@@ -10,17 +10,20 @@ authors' code in ``OFFICIAL-CODE-FACTS.md``, "Association"):
    boxes or masks, poses without a visible keypoint).
 2. Turn every observation into a box for the Kalman filter and the IoU stages and a region
    for appearance: a box is itself; a mask gives the paper's mean / mean-absolute-deviation
-   box (appendix C.1, :func:`~agents.primitives.mask_features.mask_to_box`); a pose is first
-   drawn as a mask (appendix C.2, :func:`~agents.primitives.mask_features.pose_to_mask`).
+   box (appendix C.1, :func:`~unitrack_env.agents.primitives.mask_features.mask_to_box`); a pose is
+   first drawn as a mask (appendix C.2,
+   :func:`~unitrack_env.agents.primitives.mask_features.pose_to_mask`).
 3. Letterbox the frame to ``input_size`` (default 1088 x 608) and run the appearance model
    once: a stride-8 feature map (frames without observations skip it).
 4. Object features: a box is RoIAlign-pooled into a tall 10 x 4 grid (40 locations); a mask
    (or drawn pose) gives its in-mask feature cells, a variable-size set capped at
    ``max_mask_area`` locations by rescaling (authors: 200 MOTS, 1000 VIS); every location
    is L2-normalised.
-5. Associate with :class:`~agents.primitives.association.Associator` (appearance similarity,
+5. Associate with :class:`~unitrack_env.agents.primitives.association.Associator` (appearance
+   similarity,
    RSM by default, fused with Kalman motion; then IoU; track life cycle). On VIS each class
-   has its own engine (:class:`~agents.primitives.category_gating.CategoryGatedAssociator`):
+   has its own engine
+   (:class:`~unitrack_env.agents.primitives.category_gating.CategoryGatedAssociator`):
    a track only matches detections of its class.
 6. Act in the environment's format: MOT boxes of the confirmed tracks matched in the frame;
    MOTS/VIS one id per detection (0 = not reported); PoseTrack the ids with the matched
@@ -28,7 +31,7 @@ authors' code in ``OFFICIAL-CODE-FACTS.md``, "Association"):
 
 Task defaults (:data:`TASK_DEFAULTS`) follow the authors' per-task settings; where their code
 passes a threshold as an IoU *distance* (``1 - IoU``), it is converted to an IoU here (the
-MOT values are explained in :class:`~agents.primitives.association.AssociationConfig`):
+MOT values are explained in :class:`~unitrack_env.agents.primitives.association.AssociationConfig`):
 
 * ``mot``: chi-square gate 9.4877; a tentative track is confirmed at IoU > 0.8 (paper;
   code 0.7 as a distance); duplicates at IoU > 0.85 (code: 0.15 distance); MOT output
@@ -48,7 +51,7 @@ gate PoseTrack 900003 has 4 id switches instead of 16.
 
 Example:
     >>> import gymnasium as gym, unitrack_env                    # doctest: +SKIP
-    >>> from agents import make_agent                             # doctest: +SKIP
+    >>> from unitrack_env.agents import make_agent                             # doctest: +SKIP
     >>> env = gym.make("UniTrack/MOTS-v0")                        # doctest: +SKIP
     >>> agent = make_agent("unitrack")                            # doctest: +SKIP
     >>> obs, info = env.reset(); agent.reset(obs, info)           # doctest: +SKIP
@@ -67,7 +70,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from agents.appearance import (
+from unitrack_env.agents.appearance import (
     MOT_INPUT_SIZE,
     AppearanceModel,
     CachedAppearanceModel,
@@ -77,10 +80,10 @@ from agents.appearance import (
     letterbox_layout,
     torch_threads,
 )
-from agents.base import Agent
-from agents.primitives.association import AssociationConfig, Associator, TrackOutput
-from agents.primitives.category_gating import CategoryGatedAssociator
-from agents.primitives.mask_features import (
+from unitrack_env.agents.base import Agent
+from unitrack_env.agents.primitives.association import AssociationConfig, Associator, TrackOutput
+from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
+from unitrack_env.agents.primitives.mask_features import (
     MAX_MASK_AREA_MOTS,
     MAX_MASK_AREA_VIS,
     LocalMask,
@@ -88,8 +91,8 @@ from agents.primitives.mask_features import (
     mask_to_box,
     pose_to_mask,
 )
-from agents.primitives.roi_align import roi_align
-from agents.primitives.similarity import SIMILARITIES, ObjectFeatures
+from unitrack_env.agents.primitives.roi_align import roi_align
+from unitrack_env.agents.primitives.similarity import SIMILARITIES, ObjectFeatures
 from unitrack_env.geometry import xywh_to_xyxy
 from unitrack_env.spaces import (
     pack_mask_ids,
@@ -203,7 +206,8 @@ class UniTrackConfig:
     Attributes:
         task: ``"mot"``, ``"mots"``, ``"vis"`` or ``"posetrack"``; None: detect it from the
             first observation (see :func:`detect_task`). Selects :data:`TASK_DEFAULTS`.
-        weights: Appearance-model weights (see :class:`~agents.appearance.AppearanceModel`):
+        weights: Appearance-model weights (see
+        :class:`~unitrack_env.agents.appearance.AppearanceModel`):
             ``"imagenet-lite0"`` (default, offline), ``"random"``, a checkpoint path, ...
         arch: Backbone architecture; None: the weights' own.
         layer: Output layer; None: the architecture's default stride-8 layer.
@@ -333,8 +337,8 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         max_tracks: Action capacity of box and pose tasks; must equal the environment's
             ``max_tracks``. None: the task's default (512 MOT, 100 PoseTrack, the
             environments' defaults). Mask tasks answer one id per detection instead.
-        appearance_model: A ready :class:`~agents.appearance.AppearanceModel` to share between
-            agents (then ``weights``/``arch``/``layer``/``device``/``num_threads`` are
+        appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel` to share
+        between agents (then ``weights``/``arch``/``layer``/``device``/``num_threads`` are
             ignored).
         **options: Fields of :class:`UniTrackConfig`.
 

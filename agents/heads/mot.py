@@ -1,7 +1,7 @@
 """The UniTrack MOT head (agent ``unitrack`` on box observations).
 
-The box head is one mode of the association head in :mod:`agents.heads.association`, which
-serves boxes (MOT), masks (MOTS, VIS) and poses (PoseTrack) with the same agent. Per frame
+The box head is one mode of the association head in :mod:`unitrack_env.agents.heads.association`,
+which serves boxes (MOT), masks (MOTS, VIS) and poses (PoseTrack) with the same agent. Per frame
 on boxes (UniTrack paper, section 2.4 and appendix C.1):
 
 1. Drop detections with a score below ``min_score`` (if set) or an empty box.
@@ -10,8 +10,8 @@ on boxes (UniTrack paper, section 2.4 and appendix C.1):
 3. RoIAlign each detection box on that map into a tall 10 x 4 grid (the authors pass
    ``[4, 10]``, which reads as a transposed wide grid; a tall grid is the sensible shape for
    pedestrians), giving 40 location features of C channels; L2-normalise each location.
-4. Associate with :class:`~agents.primitives.association.Associator` (two-stage: appearance
-   similarity fused with Kalman motion, then IoU; track life cycle) using the chosen
+4. Associate with :class:`~unitrack_env.agents.primitives.association.Associator` (two-stage:
+   appearance similarity fused with Kalman motion, then IoU; track life cycle) using the chosen
    similarity (RSM by default; CF, GF and GPF are the paper's baselines).
 5. Act with the confirmed tracks matched in this frame (MOT output filter: area > 200 and
    w/h <= 1.6).
@@ -20,12 +20,12 @@ Frames with no detections skip the backbone entirely (the authors' code crashed 
 Frame sizes may change between episodes: each frame is letterboxed on its own.
 
 This module keeps the MOT names: :class:`UniTrackMOTAgent` and :class:`UniTrackMOTConfig`
-are the association head's :class:`~agents.heads.association.UniTrackAgent` and
-:class:`~agents.heads.association.UniTrackConfig`.
+are the association head's :class:`~unitrack_env.agents.heads.association.UniTrackAgent` and
+:class:`~unitrack_env.agents.heads.association.UniTrackConfig`.
 
 Example:
     >>> import gymnasium as gym, unitrack_env                    # doctest: +SKIP
-    >>> from agents import make_agent                             # doctest: +SKIP
+    >>> from unitrack_env.agents import make_agent                             # doctest: +SKIP
     >>> env = gym.make("UniTrack/MOT16-v0")                       # doctest: +SKIP
     >>> agent = make_agent("unitrack", similarity="rsm")          # doctest: +SKIP
     >>> obs, info = env.reset(); agent.reset(obs, info)           # doctest: +SKIP
@@ -34,7 +34,7 @@ Example:
 
 from __future__ import annotations
 
-from agents.heads.association import (
+from unitrack_env.agents.heads.association import (
     DEFAULT_MAX_TRACKS,
     MOT_OUTPUT_MAX_ASPECT,
     MOT_OUTPUT_MIN_AREA,

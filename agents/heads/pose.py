@@ -13,8 +13,8 @@ Per video:
    (image pixels / stride; the floor 0.5 is a half feature pixel, so the maps are as sharp
    as the grid allows for any real body size).
 3. Later frames: the ``J`` maps are propagated together (one affinity, ``J`` label
-   channels) with :class:`~agents.primitives.label_propagation.LabelPropagator` (first frame
-   + 5 latest predictions, radius 12, top-10, temperature 0.05; soft maps reused).
+   channels) with :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator` (first
+   frame + 5 latest predictions, radius 12, top-10, temperature 0.05; soft maps reused).
 4. Decoding: **argmax of each map, refined by a soft-argmax** (the map-weighted mean
    position) over the ``(2 refine_radius + 1)^2`` neighbourhood of the argmax, on the
    feature grid; mapped back to frame pixels. The local soft-argmax gives sub-cell
@@ -37,10 +37,10 @@ import cv2
 import numpy as np
 import torch
 
-from agents.appearance import AppearanceModel, torch_threads
-from agents.base import Agent
-from agents.heads.vos import build_model, make_propagation_config
-from agents.primitives.label_propagation import LabelPropagator
+from unitrack_env.agents.appearance import AppearanceModel, torch_threads
+from unitrack_env.agents.base import Agent
+from unitrack_env.agents.heads.vos import build_model, make_propagation_config
+from unitrack_env.agents.primitives.label_propagation import LabelPropagator
 
 POSE_INPUT_SIZE: tuple[int, int] = (320, 320)
 """(width, height) frames are resized to (appendix B.2 table, "Pose: 320 x 320")."""
@@ -137,7 +137,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
     """UniTrack's pose-propagation head (JHMDB).
 
     Args:
-        appearance_model: A ready :class:`~agents.appearance.AppearanceModel` to share
+        appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel` to share
             (then ``weights``/``arch``/``layer``/``device`` are ignored).
         **options: Fields of :class:`UniTrackPoseConfig`.
 

@@ -2,8 +2,8 @@
 
 Agents ``unitrack-xcorr`` (SiamFC cross-correlation, fixed first-frame template) and
 ``unitrack-dcf`` (DCFNet correlation filter with online update), both from
-:class:`~agents.primitives.box_propagation.BoxPropagator` (UniTrack paper, section 2.3 and
-appendix B.1). Per frame the three scale crops go through the backbone in one batch; the
+:class:`~unitrack_env.agents.primitives.box_propagation.BoxPropagator` (UniTrack paper, section 2.3
+and appendix B.1). Per frame the three scale crops go through the backbone in one batch; the
 DCF head adds one crop at the new position for its online update.
 
 Boxes come and go in the environment's OTB convention: ``(x, y, w, h)`` with 1-based pixels
@@ -19,10 +19,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents.appearance import AppearanceModel, torch_threads
-from agents.base import Agent
-from agents.heads.vos import build_model
-from agents.primitives.box_propagation import BoxPropagationConfig, BoxPropagator, BoxState
+from unitrack_env.agents.appearance import AppearanceModel, torch_threads
+from unitrack_env.agents.base import Agent
+from unitrack_env.agents.heads.vos import build_model
+from unitrack_env.agents.primitives.box_propagation import (
+    BoxPropagationConfig,
+    BoxPropagator,
+    BoxState,
+)
 
 OTB_PIXEL_ORIGIN: float = 1.0
 """OTB boxes are 1-based: ``x - 1`` is the left edge in continuous 0-based coordinates."""

@@ -7,7 +7,7 @@ and pose propagation"):
    one-hot channels ``[background, object_1, ...]`` (void counts as background), downsampled
    bilinearly to the feature grid ``(ceil(H/8), ceil(W/8))``; the first frame's features
    and these soft labels start the memory bank of
-   :class:`~agents.primitives.label_propagation.LabelPropagator`.
+   :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`.
 2. The first step answers the first frame itself with the given labels (void as background).
 3. Every later frame: one backbone pass at full resolution (DAVIS 480p), propagation of the
    soft labels (first frame + 5 latest predictions, radius 12, top-10, temperature 0.05),
@@ -26,9 +26,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from agents.appearance import AppearanceModel, torch_threads
-from agents.base import Agent
-from agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
+from unitrack_env.agents.appearance import AppearanceModel, torch_threads
+from unitrack_env.agents.base import Agent
+from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
 
 VOID_LABEL: int = 255
 """DAVIS's void label (ambiguous pixels of the annotation); treated as background."""
@@ -96,7 +96,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
     """UniTrack's mask-propagation head for semi-supervised VOS (DAVIS).
 
     Args:
-        appearance_model: A ready :class:`~agents.appearance.AppearanceModel` to share
+        appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel` to share
             (then ``weights``/``arch``/``layer``/``device`` are ignored).
         **options: Fields of :class:`UniTrackVOSConfig`.
 

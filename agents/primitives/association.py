@@ -52,14 +52,14 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from agents.primitives.kalman import (
+from unitrack_env.agents.primitives.kalman import (
     CHI2_95_4DOF,
     KalmanConfig,
     KalmanFilter,
     xyah_to_xywh,
     xywh_to_xyah,
 )
-from agents.primitives.matching import (
+from unitrack_env.agents.primitives.matching import (
     APPEARANCE_WEIGHT_PAPER,
     fuse_motion,
     iou_cost,

@@ -1,7 +1,8 @@
 """Category gating for association: a track only ever matches detections of its class.
 
 Video instance segmentation (YouTube-VIS, 40 classes) tracks objects of many classes in one
-video. :class:`CategoryGatedAssociator` runs one :class:`~agents.primitives.association.Associator`
+video. :class:`CategoryGatedAssociator` runs one
+:class:`~unitrack_env.agents.primitives.association.Associator`
 per class, so every stage (appearance, IoU, confirmation, duplicate removal) only pairs a
 track with detections of the class it was born with, and numbers the tracks of all classes
 with one id sequence (ids are given in the order tracks are first confirmed).
@@ -14,7 +15,7 @@ from typing import Any, Generic
 
 import numpy as np
 
-from agents.primitives.association import (
+from unitrack_env.agents.primitives.association import (
     AssociationConfig,
     Associator,
     P,

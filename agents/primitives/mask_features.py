@@ -1,6 +1,7 @@
 """Object features and Kalman boxes of mask and pose observations (UniTrack appendix C).
 
-Association compares *sets* of location features (see :mod:`agents.primitives.similarity`).
+Association compares *sets* of location features (see
+:mod:`unitrack_env.agents.primitives.similarity`).
 A box gives a fixed RoIAlign grid; a mask gives the feature-map cells it covers, a set whose
 size varies with the object; a pose is first drawn as a mask. This module holds those
 conversions, independent of any environment:
@@ -30,8 +31,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from agents.primitives.roi_align import roi_align
-from agents.primitives.similarity import ObjectFeatures
+from unitrack_env.agents.primitives.roi_align import roi_align
+from unitrack_env.agents.primitives.similarity import ObjectFeatures
 
 MAX_MASK_AREA_MOTS: int = 200
 """Most location features kept per mask on MOTS (authors' ``max_mask_area``)."""
@@ -311,8 +312,8 @@ def mask_location_features(
         normalize: L2-normalise every location feature.
 
     Returns:
-        One :class:`~agents.primitives.similarity.ObjectFeatures` per mask: ``(s_i, C)``
-        features (row-major over the grid) and ``(s_i, 2)`` (row, column) positions in
+        One :class:`~unitrack_env.agents.primitives.similarity.ObjectFeatures` per mask: ``(s_i,
+        C)`` features (row-major over the grid) and ``(s_i, 2)`` (row, column) positions in
         feature cells.
     """
     fmap = feature_map.unsqueeze(0) if feature_map.ndim == 3 else feature_map

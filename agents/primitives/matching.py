@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from agents.primitives.kalman import CHI2_95_4DOF
+from unitrack_env.agents.primitives.kalman import CHI2_95_4DOF
 from unitrack_env.geometry import box_iou
 
 APPEARANCE_WEIGHT_PAPER = 0.99

@@ -10,10 +10,10 @@ readable diff when a metric moves beyond its tolerance::
         )
 
 Run ``pytest --update-goldens`` to (re)record. The fixture comes from the pytest plugin that
-unitrack-env registers (``evaluation.regression.plugin``).
+unitrack-env registers (``unitrack_env.evaluation.regression.plugin``).
 """
 
-from evaluation.regression.golden import (
+from unitrack_env.evaluation.regression.golden import (
     EpisodeRecord,
     GoldenMismatch,
     check_episode,

@@ -12,8 +12,8 @@ from typing import Any
 import gymnasium as gym
 
 import unitrack_env
-from evaluation._agents import agents_module
-from evaluation.runner import play_episode
+from unitrack_env.agents import make_agent
+from unitrack_env.evaluation.runner import play_episode
 from unitrack_env.io import atomic_write_text
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
@@ -67,7 +67,7 @@ def record_episode(
     env_kwargs = dict(env_kwargs or {})
     agent_kwargs = dict(agent_kwargs or {})
     env = gym.make(env_id, **env_kwargs)
-    tracker = agents_module().make_agent(agent, **agent_kwargs)
+    tracker = make_agent(agent, **agent_kwargs)
     try:
         record, info = play_episode(env, tracker, sequence)
     finally:

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from evaluation.regression.golden import EpisodeRecord, check_episode
+from unitrack_env.evaluation.regression.golden import EpisodeRecord, check_episode
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -26,7 +26,7 @@ class EpisodeRegression:
 
     def check(self, env_id: str, *, agent: str, sequence: str, golden: Any,
               **kwargs: Any) -> EpisodeRecord:
-        """Replay and compare (see :func:`evaluation.regression.check_episode`)."""
+        """Replay and compare (see :func:`unitrack_env.evaluation.regression.check_episode`)."""
         return check_episode(env_id, agent, sequence, golden, update=self.update, **kwargs)
 
 

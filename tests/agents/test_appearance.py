@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 import torch
 
-from agents.appearance import (
+from unitrack_env.agents.appearance import (
     DEFAULT_WEIGHT_LOADERS,
     AppearanceModel,
     EfficientNetLite0,
     ResNet,
     letterbox,
 )
-from agents.appearance.efficientnet_lite import (
+from unitrack_env.agents.appearance.efficientnet_lite import (
     LITE0_CROP_FRACTION,
     LITE0_INPUT_SIZE,
     LITE0_MEAN,
@@ -248,7 +248,7 @@ def test_architectures_in_torchvision_layout() -> None:
 
 
 def test_letterbox_layout_matches_letterbox_geometry():
-    from agents.appearance import letterbox, letterbox_layout
+    from unitrack_env.agents.appearance import letterbox, letterbox_layout
 
     for shape in ((1080, 1920, 3), (480, 640, 3), (100, 37, 3)):
         full = letterbox(np.zeros(shape, np.uint8))

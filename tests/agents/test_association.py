@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.primitives.association import (
+from unitrack_env.agents.primitives.association import (
     AssociationConfig,
     Associator,
     TrackState,
 )
-from agents.primitives.kalman import CHI2_95_4DOF
-from agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
+from unitrack_env.agents.primitives.kalman import CHI2_95_4DOF
+from unitrack_env.agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
 
 RED = np.array([1.0, 0.0, 0.0])
 GREEN = np.array([0.0, 1.0, 0.0])

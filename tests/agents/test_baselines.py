@@ -3,8 +3,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents import available_agents, make_agent
-from agents.base import AGENTS, Agent
+from unitrack_env.agents import available_agents, make_agent
+from unitrack_env.agents.base import AGENTS, Agent
 from unitrack_env.spaces import unpack_tracks
 
 

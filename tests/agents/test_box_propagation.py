@@ -8,7 +8,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from agents.primitives.box_propagation import (
+from unitrack_env.agents.primitives.box_propagation import (
     BoxPropagationConfig,
     BoxPropagator,
     BoxState,

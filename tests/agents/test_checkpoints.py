@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.appearance import (
+from unitrack_env.agents.appearance import (
     CIFAR_MEAN,
     DEFAULT_REMAPS,
     DEFAULT_WEIGHT_LOADERS,

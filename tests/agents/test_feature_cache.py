@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.appearance import (
+from unitrack_env.agents.appearance import (
     AppearanceModel,
     CachedAppearanceModel,
     CacheKey,
@@ -174,7 +174,7 @@ def test_cached_model_runs_the_backbone_only_on_misses(tmp_path: Path) -> None:
 
 
 def test_same_sequence_name_with_other_pixels_does_not_share_an_entry(tmp_path):
-    from agents.appearance import AppearanceModel, CachedAppearanceModel
+    from unitrack_env.agents.appearance import AppearanceModel, CachedAppearanceModel
 
     model = AppearanceModel("random", arch="resnet18")
     cached = CachedAppearanceModel(model, tmp_path)

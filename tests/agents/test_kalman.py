@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.primitives.kalman import (
+from unitrack_env.agents.primitives.kalman import (
     CHI2_95_4DOF,
     KalmanConfig,
     KalmanFilter,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from agents.primitives.label_propagation import (
+from unitrack_env.agents.primitives.label_propagation import (
     LabelPropagationConfig,
     LabelPropagator,
     normalize_features,

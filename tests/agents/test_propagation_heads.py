@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from agents import make_agent
-from agents.appearance import AppearanceModel
-from agents.base import agent_class
+from unitrack_env.agents import make_agent
+from unitrack_env.agents.appearance import AppearanceModel
+from unitrack_env.agents.base import agent_class
 
 GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
 ONE = {"num_threads": 1}
@@ -69,7 +69,7 @@ def test_vos_first_answer_and_void(model):
 def test_pose_decoding_is_subcell():
     import torch
 
-    from agents.heads.pose import belief_maps, body_size, decode_maps
+    from unitrack_env.agents.heads.pose import belief_maps, body_size, decode_maps
 
     maps = belief_maps(np.array([[5.3, 7.6], [0.0, 0.0]]), (12, 12), sigma=1.0)
     cells, peaks = decode_maps(maps, refine_radius=1)

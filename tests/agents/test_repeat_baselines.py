@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents import available_agents, make_agent
-from agents.base import agent_class
-from evaluation.runner import run
+from unitrack_env.agents import available_agents, make_agent
+from unitrack_env.agents.base import agent_class
+from unitrack_env.evaluation.runner import run
 
 
 def test_registered_with_their_tasks():

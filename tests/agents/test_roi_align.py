@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from agents.primitives.roi_align import roi_align
+from unitrack_env.agents.primitives.roi_align import roi_align
 
 
 def _ramp(channels: int = 3, height: int = 20, width: int = 30) -> tuple[torch.Tensor, list]:

@@ -3,8 +3,8 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from agents.primitives.roi_align import roi_align
-from agents.primitives.similarity import (
+from unitrack_env.agents.primitives.roi_align import roi_align
+from unitrack_env.agents.primitives.similarity import (
     RSM_TEMPERATURE,
     SIMILARITIES,
     ObjectFeatures,

@@ -17,18 +17,18 @@ import pytest
 import torch
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from agents import make_agent
-from agents.appearance import AppearanceModel
-from agents.baselines.iou import IoUAgent, object_keypoint_similarity
-from agents.heads.association import (
+from unitrack_env.agents import make_agent
+from unitrack_env.agents.appearance import AppearanceModel
+from unitrack_env.agents.baselines.iou import IoUAgent, object_keypoint_similarity
+from unitrack_env.agents.heads.association import (
     TASK_DEFAULTS,
     UniTrackAgent,
     detect_task,
 )
-from agents.heads.mot import UniTrackMOTAgent
-from agents.primitives.association import Associator
-from agents.primitives.category_gating import CategoryGatedAssociator
-from agents.primitives.mask_features import (
+from unitrack_env.agents.heads.mot import UniTrackMOTAgent
+from unitrack_env.agents.primitives.association import Associator
+from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
+from unitrack_env.agents.primitives.mask_features import (
     MAX_MASK_AREA_MOTS,
     LocalMask,
     body_size,
@@ -37,8 +37,8 @@ from agents.primitives.mask_features import (
     mask_to_box,
     pose_to_mask,
 )
-from agents.primitives.roi_align import roi_align
-from agents.primitives.similarity import rsm
+from unitrack_env.agents.primitives.roi_align import roi_align
+from unitrack_env.agents.primitives.similarity import rsm
 from unitrack_env.spaces import unpack_mask_ids, unpack_pose_tracks
 
 REPO = Path(__file__).resolve().parents[2]
@@ -482,7 +482,7 @@ def test_real_posetrack_frames_run_through_the_runner(tmp_path: Path, agent: str
     root = SHARED_DATA / "PoseTrack2018"
     if not root.is_dir():
         pytest.skip(f"real PoseTrack fixtures not found at {root}")
-    from evaluation.runner import run
+    from unitrack_env.evaluation.runner import run
 
     # One labelled frame per sequence and oracle poses: with poseval's last-frame drop
     # nothing would be scored, so keep it; every person is reported on the episode's first

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from agents import make_agent
-from agents.appearance import AppearanceModel
-from agents.heads.mot import UniTrackMOTAgent
+from unitrack_env.agents import make_agent
+from unitrack_env.agents.appearance import AppearanceModel
+from unitrack_env.agents.heads.mot import UniTrackMOTAgent
 from unitrack_env.spaces import unpack_tracks
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evaluation.crosscheck import iou_distance, motmetrics_summary
+from unitrack_env.evaluation.crosscheck import iou_distance, motmetrics_summary
 from unitrack_env.metrics.mot_preprocess import (
     GtFrame,
     TrackerFrame,

@@ -7,7 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from evaluation.regression import EpisodeRecord, GoldenMismatch, check_episode, compare_records
+from unitrack_env.evaluation.regression import (
+    EpisodeRecord,
+    GoldenMismatch,
+    check_episode,
+    compare_records,
+)
 
 GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
 #: Counts must not move at all; ratios only by float noise.

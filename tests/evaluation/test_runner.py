@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evaluation.cli import main
-from evaluation.runner import run
+from unitrack_env.evaluation.cli import main
+from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.motchallenge import read_result_file
 
 ENV = "UniTrack/MOT16-v0"
@@ -41,7 +41,7 @@ def test_resume_keeps_finished_sequences(tmp_path):
 
 
 def test_a_crash_mid_run_loses_no_finished_sequence(tmp_path, monkeypatch):
-    from agents.baselines.iou import IoUAgent
+    from unitrack_env.agents.baselines.iou import IoUAgent
 
     calls = {"n": 0}
     original = IoUAgent.act
@@ -63,7 +63,7 @@ def test_a_crash_mid_run_loses_no_finished_sequence(tmp_path, monkeypatch):
 
 
 def test_agent_errors_name_sequence_and_frame(tmp_path, monkeypatch):
-    from agents.baselines.iou import IoUAgent
+    from unitrack_env.agents.baselines.iou import IoUAgent
 
     monkeypatch.setattr(IoUAgent, "act", lambda self, obs: 1 / 0)
     with pytest.raises(RuntimeError, match="agent 'iou' failed on sequence 'SYN-01', frame 1"):

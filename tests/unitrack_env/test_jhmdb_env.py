@@ -8,7 +8,7 @@ import pytest
 from scipy.io import loadmat
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from agents.base import make_agent
+from unitrack_env.agents.base import make_agent
 from unitrack_env.datasets.jhmdb import JHMDBDataset, read_joint_positions
 from unitrack_env.datasets.synthetic import render_scene
 from unitrack_env.datasets.synthetic.jhmdb import DEFAULT_SPEC, PUPPET_ID, puppet_joints

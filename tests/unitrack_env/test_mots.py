@@ -200,7 +200,7 @@ def test_overlapping_results_are_rejected_with_the_file_named(tmp_path):
 
 # ------------------------------------------------------------------------ environment
 def test_env_reward_sums_to_motsa_and_results_round_trip(tmp_path):
-    from agents import make_agent
+    from unitrack_env.agents import make_agent
 
     env = gym.make("UniTrack/MOTS-v0")
     agent = make_agent("iou")

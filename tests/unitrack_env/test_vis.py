@@ -119,7 +119,7 @@ def test_track_map_known_answers():
 
 # ------------------------------------------------------------------------ environment
 def test_env_plays_scores_writes_and_rescores(tmp_path):
-    from agents import make_agent
+    from unitrack_env.agents import make_agent
 
     env = gym.make("UniTrack/VIS-v0")
     base = env.unwrapped
