@@ -19,8 +19,8 @@ frames (``<out>/<seq>/00000.png``), which is what the official evaluation reads.
 
 from __future__ import annotations
 
+import io
 import os
-import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +30,7 @@ import numpy as np
 
 from unitrack_env.datasets.otb import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.io import atomic_write_bytes
 
 DAVIS_VOID_LABEL: int = 255
 """Annotation label of void pixels."""
@@ -135,16 +136,10 @@ def write_label_png(
     pixels = np.ascontiguousarray(arr, dtype=np.uint8).tobytes()
     image = _pil_image().frombytes("P", (width, height), pixels)
     image.putpalette(pal.reshape(-1).tolist())
+    buffer = io.BytesIO()
+    image.save(buffer, format="PNG")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            image.save(handle, format="PNG")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write_bytes(path, buffer.getvalue())
     return path
 
 
