@@ -20,7 +20,6 @@ frames (``<out>/<seq>/00000.png``), which is what the official evaluation reads.
 from __future__ import annotations
 
 import io
-import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
