@@ -2,25 +2,41 @@
 
 Every error about input data names the file and, where it applies, the 1-based line and
 the field, so that a user never has to decode a traceback from deep inside numpy.
+
+Every exception here survives ``pickle`` with its message and attributes: the runner's
+worker processes send them to the parent, which must report the real error (an exception
+whose ``__init__`` takes other arguments than ``args`` cannot be unpickled there, and
+``concurrent.futures`` then reports a ``BrokenProcessPool`` instead).
 """
 
 from __future__ import annotations
 
+import functools
+import os
 from pathlib import Path
+from typing import Any
 
 
 class DataFormatError(ValueError):
-    """A data file is missing, unreadable or malformed."""
+    """A data file is missing, unreadable or malformed.
+
+    Attributes:
+        path: the file (or folder) at fault.
+        message: what is wrong and what is allowed (without the location).
+        line: 1-based line, where it applies.
+        field: the field (column, JSON path, INI key), where it applies.
+    """
 
     def __init__(
         self,
-        path: str | Path,
+        path: str | os.PathLike[str],
         message: str,
         *,
         line: int | None = None,
         field: str | None = None,
     ) -> None:
         self.path = Path(path)
+        self.message = message
         self.line = line
         self.field = field
         where = str(self.path)
@@ -29,6 +45,23 @@ class DataFormatError(ValueError):
         if field is not None:
             where += f", field '{field}'"
         super().__init__(f"{where}: {message}")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        rebuild = functools.partial(type(self), line=self.line, field=self.field)
+        return (rebuild, (self.path, self.message), self.__dict__)
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is unreadable, or does not fit the model it is loaded into."""
+
+    def __init__(self, path: str | os.PathLike[str] | None, message: str) -> None:
+        self.path = None if path is None else Path(path)
+        self.message = message
+        where = "<in-memory state dict>" if path is None else str(path)
+        super().__init__(f"{where}: {message}")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.path, self.message), self.__dict__)
 
 
 class InvalidActionError(ValueError):

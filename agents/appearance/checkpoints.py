@@ -27,6 +27,9 @@ from typing import Any
 import torch
 from torch import nn
 
+from unitrack_env.errors import CheckpointError  # defined there so that it pickles
+
+
 IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
 """ImageNet RGB mean of inputs scaled to [0, 1] (torchvision's models and most SSL models)."""
 
@@ -48,15 +51,6 @@ MAX_DETAIL_CHARS: int = 300
 
 MAX_KEYS_IN_MESSAGE: int = 8
 """How many offending keys an error message lists before abbreviating."""
-
-
-class CheckpointError(ValueError):
-    """A checkpoint file is unreadable, or does not fit the model it is loaded into."""
-
-    def __init__(self, path: str | os.PathLike[str] | None, message: str) -> None:
-        self.path = None if path is None else Path(path)
-        where = "<in-memory state dict>" if path is None else str(path)
-        super().__init__(f"{where}: {message}")
 
 
 @dataclass(frozen=True)
