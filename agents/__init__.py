@@ -6,6 +6,13 @@
 'IoUAgent'
 """
 
-from unitrack_env.agents.base import AGENTS, Agent, available_agents, make_agent
+from unitrack_env.agents.base import (
+    AGENTS,
+    Agent,
+    agent_class,
+    agents_for_task,
+    available_agents,
+    make_agent,
+)
 
-__all__ = ["AGENTS", "Agent", "available_agents", "make_agent"]
+__all__ = ["AGENTS", "Agent", "agent_class", "agents_for_task", "available_agents", "make_agent"]

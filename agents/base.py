@@ -8,7 +8,10 @@ An agent is one class with two methods::
 
 Subclassing registers the class under ``name``; ``make_agent("my-tracker", **kwargs)``
 builds it. Built-in agents are imported lazily on first use so that ``import unitrack_env.agents``
-stays cheap (no torch import for the IoU baseline).
+stays cheap (no torch import for the IoU baseline). Agents that live elsewhere are named by
+reference (``"my_package.tracker:MyTracker"``, ``"path/to/file.py:MyTracker"``) or published
+by an installed distribution in the ``unitrack_env.agents`` entry-point group (see
+:mod:`unitrack_env.agents.loading`).
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ from __future__ import annotations
 import abc
 import importlib
 from typing import Any, ClassVar
+
+from unitrack_env.agents.loading import entry_point_agents, is_reference, load_reference
 
 #: Registered agent classes by name (built-ins appear once their module is imported).
 AGENTS: dict[str, type[Agent]] = {}
@@ -45,6 +50,9 @@ class Agent(abc.ABC):
 
     name: ClassVar[str] = ""
     tasks: ClassVar[tuple[str, ...]] = ()
+    #: The dataclass that collects the agent's ``**options`` (its fields are the options the
+    #: CLI's ``--agent-arg`` checks by name and type), or None when ``__init__`` says it all.
+    config_class: ClassVar[type | None] = None
 
     def __init_subclass__(cls, name: str | None = None, tasks: tuple[str, ...] = (),
                           **kwargs: Any) -> None:
@@ -70,22 +78,54 @@ class Agent(abc.ABC):
 
 
 def available_agents() -> list[str]:
-    """Return the names of all known agents (built-in and registered)."""
-    return sorted(set(AGENTS) | set(_BUILTIN_MODULES))
+    """Return the names of all known agents (built-in, registered and installed plug-ins)."""
+    return sorted(set(AGENTS) | set(_BUILTIN_MODULES) | set(entry_point_agents()))
 
 
-def agent_class(name: str) -> type[Agent]:
-    """Return the class registered under ``name``, importing built-ins on demand."""
-    if name not in AGENTS and name in _BUILTIN_MODULES:
-        importlib.import_module(_BUILTIN_MODULES[name])
+def agent_class(spec: str) -> type[Agent]:
+    """Return the agent class named by ``spec`` (a name or a ``module:Class`` reference).
+
+    Raises:
+        KeyError: an unknown name (the message lists the known ones).
+        ImportError: a reference that cannot be imported, or a class that is no agent.
+    """
+    if is_reference(spec):
+        cls = load_reference(spec)
+        if not (issubclass(cls, Agent) or (callable(getattr(cls, "reset", None))
+                                           and callable(getattr(cls, "act", None)))):
+            raise ImportError(f"agent '{spec}' has no reset(observation, info) and "
+                              "act(observation) methods")
+        return cls
+    if spec not in AGENTS and spec in _BUILTIN_MODULES:
+        importlib.import_module(_BUILTIN_MODULES[spec])
+    if spec not in AGENTS:
+        plugin = entry_point_agents().get(spec)
+        if plugin is not None:
+            cls = plugin.load()
+            AGENTS.setdefault(spec, cls)
+            return cls
     try:
-        return AGENTS[name]
+        return AGENTS[spec]
     except KeyError:
         raise KeyError(
-            f"unknown agent '{name}'; available: {', '.join(available_agents())}"
+            f"unknown agent '{spec}'; available: {', '.join(available_agents())} (or name "
+            "one by reference: 'package.module:ClassName' or 'path/to/file.py:ClassName')"
         ) from None
 
 
-def make_agent(name: str, **kwargs: Any) -> Agent:
-    """Build the agent registered under ``name`` with keyword arguments."""
-    return agent_class(name)(**kwargs)
+def agents_for_task(task: str) -> list[str]:
+    """Names of the known agents that declare ``task`` (imports the built-in modules)."""
+    fitting = []
+    for name in available_agents():
+        try:
+            cls = agent_class(name)
+        except (ImportError, KeyError):
+            continue
+        if task in getattr(cls, "tasks", ()):
+            fitting.append(name)
+    return fitting
+
+
+def make_agent(spec: str, **kwargs: Any) -> Agent:
+    """Build the agent named by ``spec`` (see :func:`agent_class`) with keyword arguments."""
+    return agent_class(spec)(**kwargs)

@@ -3,19 +3,23 @@
 Output folder layout (TrackEval's tracker layout, so the folder can be scored again with
 ``unitrack score`` or TrackEval itself)::
 
-    <out>/run.json                 what was run (env id, env and agent arguments)
+    <out>/run.json                 what was run (env id and arguments, agent and its import
+                                   reference, agent arguments)
     <out>/data/...                 results in the task's official format (MOT:
                                    ``<sequence>.txt``), written atomically by the env
-    <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, digest
+    <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, action digest,
+                                   fingerprint of the inputs, digest of the result files
     <out>/metrics.json             per-sequence and combined official metrics
 
 The runner knows no task: it relies on the environment's results contract
-(:class:`unitrack_env.envs.base.SequenceEnv`: ``write_episode``, ``score_folder``,
-``sequence_length``, ``has_ground_truth``, ``episode_digest``). A sequence counts as
-finished once its record exists; the record is written after the results, and every file is
-written with write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and
-never loses a finished sequence. Running again with the same ``out`` resumes: finished
-sequences are skipped.
+(:class:`unitrack_env.envs.base.SequenceEnv`). A sequence counts as finished once its record
+exists; the record is written after the results, and every file is written with
+write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and never loses a
+finished sequence. Running again with the same ``out`` resumes: a finished sequence is kept
+only when its inputs (data files, agent and options) still have the recorded fingerprint and
+its result files still have the recorded digest; otherwise it is played again and the report
+says why. A sequence that fails (bad data, an agent error) does not stop the others; the run
+then raises :class:`RunFailed` naming each failure, after keeping every finished sequence.
 """
 
 from __future__ import annotations
@@ -26,32 +30,68 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
 import unitrack_env
-from unitrack_env.agents import make_agent
+from unitrack_env.agents.base import agent_class
+from unitrack_env.agents.loading import portable_reference
+from unitrack_env.agents.options import check_options
+from unitrack_env.evaluation.identity import RunIdentity, result_digest
+from unitrack_env.evaluation.workers import SequenceFailure, play_in_workers
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import ScoreReport
 
 
+class RunFailed(RuntimeError):
+    """Some sequences failed; the others finished and were kept (``failures`` by name)."""
+
+    def __init__(self, failures: dict[str, str], out: Path) -> None:
+        self.failures = dict(failures)
+        self.out = Path(out)
+        lines = "\n".join(f"  {name}: {message}" for name, message in failures.items())
+        super().__init__(
+            f"{len(failures)} sequence(s) failed (finished ones are kept in {out}; fix the "
+            f"cause and run the same command again to resume):\n{lines}"
+        )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.failures, self.out))
+
+
+class OutputError(OSError):
+    """The output folder cannot be written (read-only, full, failing disk)."""
+
+
 @dataclass(frozen=True)
 class RunSpec:
-    """What to run: everything a worker process needs to rebuild the env and the agent."""
+    """What to run: everything a worker process needs to rebuild the env and the agent.
+
+    ``agent`` is what the user named (a registered name or a reference); ``agent_ref`` is
+    the importable ``module:Class`` it resolved to, used by workers and resumed runs.
+    """
 
     env_id: str
     agent: str
+    agent_ref: str | None = None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     agent_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """JSON-friendly form (paths as strings)."""
         return json.loads(json.dumps(asdict(self), default=str))
+
+    def make_agent(self) -> Any:
+        """Build the agent (by reference when there is one, so workers need no registry)."""
+        return agent_class(self.agent_ref or self.agent)(**self.agent_kwargs)
+
+    def make_env(self) -> gym.Env:
+        """Build the environment."""
+        unitrack_env.register_all()
+        return gym.make(self.env_id, **self.env_kwargs)
 
 
 @dataclass
@@ -63,11 +103,23 @@ class SequenceRecord:
     seconds: float
     digest: str
     episode_return: float
+    inputs: str = ""
+    results: str = ""
 
     @property
     def fps(self) -> float:
         """Frames per second of the whole episode (env + agent)."""
         return self.frames / self.seconds if self.seconds > 0 else float("inf")
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form (with the FPS for readers)."""
+        return asdict(self) | {"fps": self.fps}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> SequenceRecord:
+        """Read a stored record (unknown keys ignored)."""
+        names = cls.__dataclass_fields__
+        return cls(**{key: value for key, value in data.items() if key in names})
 
 
 @dataclass
@@ -78,6 +130,7 @@ class RunReport:
     records: dict[str, SequenceRecord]
     scores: ScoreReport | None
     skipped: list[str]
+    replayed: dict[str, str] = field(default_factory=dict)
 
     @property
     def combined(self) -> dict[str, float]:
@@ -102,10 +155,18 @@ def play_episode(
     sequence: str,
     *,
     on_frame: Callable[[], None] | None = None,
+    on_reset: Callable[[dict[str, Any]], None] | None = None,
 ) -> tuple[SequenceRecord, dict[str, Any]]:
-    """Play one sequence; return its record and the final info (results stay in the env)."""
+    """Play one sequence; return its record and the final info (results stay in the env).
+
+    The one episode loop of the project: the runner, video rendering and the regression
+    helpers all play through it. ``on_reset`` gets the reset info; ``on_frame`` is called
+    after every step.
+    """
     start = time.perf_counter()
     observation, info = env.reset(options={"sequence": sequence})
+    if on_reset is not None:
+        on_reset(info)
     agent.reset(observation, info)
     frames, total = 0, 0.0
     terminated = truncated = False
@@ -114,8 +175,9 @@ def play_episode(
             action = agent.act(observation)
         except Exception as exc:
             raise RuntimeError(
-                f"agent '{getattr(agent, 'name', type(agent).__name__)}' failed on sequence "
-                f"'{sequence}', frame {info.get('frame_index')}: {exc}"
+                f"agent '{getattr(agent, 'name', '') or type(agent).__name__}' failed on "
+                f"sequence '{sequence}', frame {info.get('frame_index')}: "
+                f"{type(exc).__name__}: {exc}"
             ) from exc
         observation, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
@@ -127,58 +189,121 @@ def play_episode(
     return record, info
 
 
-def _finished(out: Path, sequence: str) -> bool:
-    return (out / "sequences" / f"{sequence}.json").is_file()
-
-
-def _save(out: Path, env: gym.Env, record: SequenceRecord) -> None:
-    env.unwrapped.write_episode(out / "data")
-    payload = asdict(record) | {"fps": record.fps}
-    atomic_write_text(out / "sequences" / f"{record.sequence}.json", json.dumps(payload, indent=2))
-
-
-def _make(spec: RunSpec) -> tuple[gym.Env, Any]:
-    unitrack_env.register_all()
-    env = gym.make(spec.env_id, **spec.env_kwargs)
-    agent = make_agent(spec.agent, **spec.agent_kwargs)
-    return env, agent
-
-
-def _worker(spec: RunSpec, out: str, sequence: str, threads: int | None) -> dict[str, Any]:
-    if threads:
-        import torch
-
-        torch.set_num_threads(threads)
-    env, agent = _make(spec)
+def save_episode(out: Path, env: gym.Env, record: SequenceRecord) -> None:
+    """Write the finished episode's results, then its record (the record marks it done)."""
+    base = env.unwrapped
     try:
-        record, _ = play_episode(env, agent, sequence)
-        _save(Path(out), env, record)
-        return asdict(record)
-    finally:
-        agent.close()
-        env.close()
+        base.write_episode(out / "data")
+        record.results = result_digest(out / "data", record.sequence, base.sequence_names)
+        atomic_write_text(out / "sequences" / f"{record.sequence}.json",
+                          json.dumps(record.to_json(), indent=2))
+    except OSError as exc:
+        raise OutputError(exc.errno, f"cannot write the results of '{record.sequence}' to "
+                                     f"{out}: {exc.strerror or exc}") from exc
 
 
-def _check_run_file(out: Path, spec: RunSpec, overwrite: bool) -> None:
+def _record_path(out: Path, sequence: str) -> Path:
+    return out / "sequences" / f"{sequence}.json"
+
+
+def _stale_reason(out: Path, base: Any, name: str, inputs: str) -> str | None:
+    """Why a finished sequence must be played again (None: keep it)."""
+    try:
+        record = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
+    except (OSError, ValueError, TypeError):
+        return "its record is unreadable"
+    if record.inputs != inputs:
+        return "its inputs (data files, agent or options) changed since it was played"
+    if record.results != result_digest(out / "data", name, base.sequence_names):
+        return "its result files are missing or were changed since it was played"
+    return None
+
+
+def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int,
+                   env_id: str) -> tuple[str, str | None]:
+    """The agent's name for the record and its importable reference; options checked."""
+    cls = agent if isinstance(agent, type) else agent_class(agent)
+    name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
+    check_options(cls, agent_kwargs, agent=name)
+    task = unitrack_env.task_of(env_id)
+    tasks = getattr(cls, "tasks", ())
+    if tasks and task not in tasks:
+        from unitrack_env.agents import agents_for_task
+
+        raise ValueError(f"agent '{name}' plays {', '.join(tasks)}, not {task} ({env_id}); "
+                         f"agents for {task}: {', '.join(agents_for_task(task)) or 'none'}")
+    reference = portable_reference(cls)
+    if reference is None and workers > 1:
+        raise ValueError(
+            f"agent class {cls.__qualname__} is defined interactively (a notebook or "
+            "python -c), so worker processes cannot import it; move it to a module (or a "
+            ".py file and pass 'path/to/file.py:ClassName'), or use workers=1"
+        )
+    return name, reference
+
+
+def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
     run_file = out / "run.json"
     if run_file.is_file() and not overwrite:
-        previous = json.loads(run_file.read_text())
+        try:
+            previous = json.loads(run_file.read_text())
+        except ValueError:
+            previous = None
         if previous != spec.to_json():
-            raise ValueError(
-                f"{out} already holds a different run ({previous.get('agent')} on "
-                f"{previous.get('env_id')}); choose another --out, or pass overwrite=True "
-                f"(--overwrite) to replace it"
-            )
-    if overwrite:
-        for sub in ("data", "sequences"):
-            if (out / sub).is_dir():
-                shutil.rmtree(out / sub)
-    atomic_write_text(run_file, json.dumps(spec.to_json(), indent=2))
+            what = (f"({previous.get('agent')} on {previous.get('env_id')})"
+                    if isinstance(previous, dict) else "(unreadable run.json)")
+            raise ValueError(f"{out} already holds a different run {what}; choose another "
+                             "--out, or pass overwrite=True (--overwrite) to replace it")
+    try:
+        if overwrite:
+            for sub in ("data", "sequences"):
+                if (out / sub).is_dir():
+                    shutil.rmtree(out / sub)
+        atomic_write_text(run_file, json.dumps(spec.to_json(), indent=2))
+    except OSError as exc:
+        raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
+
+
+def _play_here(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, todo: list[str],
+               inputs: dict[str, str], bar: Any) -> tuple[dict[str, SequenceRecord],
+                                                         dict[str, str]]:
+    records: dict[str, SequenceRecord] = {}
+    failures: dict[str, str] = {}
+    for name in todo:
+        bar.start_sequence(name)
+        try:
+            record, _ = play_episode(env, agent_obj, name, on_frame=bar.advance)
+        except (ValueError, KeyError, OSError, RuntimeError) as exc:
+            failures[name] = SequenceFailure.describe(exc)
+            continue
+        record.inputs = inputs[name]
+        save_episode(out, env, record)
+        records[name] = record
+    return records, failures
+
+
+def _score_and_write(out: Path, spec: RunSpec, base: Any, names: list[str],
+                     records: dict[str, SequenceRecord]) -> ScoreReport | None:
+    with_gt = [n for n in names if base.has_ground_truth(n)]
+    scores = base.score_folder(out / "data", with_gt) if with_gt else None
+    payload: dict[str, Any] = {
+        "env_id": spec.env_id,
+        "agent": spec.agent,
+        "sequences": {name: records[name].to_json() for name in names},
+    }
+    if scores is not None:
+        payload |= {"benchmark": scores.benchmark, "per_sequence": scores.per_sequence,
+                    "combined": scores.combined}
+    else:
+        payload["note"] = "this split has no ground truth; results were written, not scored"
+    atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
+                                                       allow_nan=False))
+    return scores
 
 
 def run(
     env_id: str,
-    agent: str,
+    agent: str | type,
     *,
     out: str | os.PathLike,
     env_kwargs: dict[str, Any] | None = None,
@@ -188,14 +313,15 @@ def run(
     overwrite: bool = False,
     progress: bool = True,
 ) -> RunReport:
-    """Evaluate a registered agent on every sequence of an environment.
+    """Evaluate an agent on every sequence of an environment.
 
     Args:
         env_id: a registered id, e.g. ``"UniTrack/MOT17-v0"``.
-        agent: a registered agent name, e.g. ``"iou"``.
+        agent: a registered name (``"iou"``), a reference (``"my_module:MyTracker"``,
+            ``"path/to/file.py:MyTracker"``), or the agent class itself.
         out: output folder (see the module docstring); reused to resume.
         env_kwargs: keyword arguments of ``gym.make`` (``root``, ``split``, ...).
-        agent_kwargs: keyword arguments of the agent.
+        agent_kwargs: keyword arguments of the agent (checked against its options).
         sequences: only these sequences (default: all of the split).
         workers: parallel worker processes across sequences (1 = in this process).
         overwrite: discard an existing run in ``out`` instead of resuming it.
@@ -203,64 +329,55 @@ def run(
 
     Returns:
         A :class:`RunReport`; ``metrics.json`` in ``out`` holds the same metrics.
+
+    Raises:
+        RunFailed: some sequences failed (the others are kept and were scored nowhere; rerun
+            to resume once the cause is fixed).
     """
-    spec = RunSpec(env_id, agent, dict(env_kwargs or {}), dict(agent_kwargs or {}))
+    agent_kwargs = dict(agent_kwargs or {})
+    name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
+    spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    _check_run_file(out, spec, overwrite)
-    env, agent_obj = _make(spec)
-    base = env.unwrapped
-    names = list(sequences) if sequences is not None else list(base.sequence_names)
-    unknown = [s for s in names if s not in base.sequence_names]
-    if unknown:
+    env = spec.make_env()
+    try:
+        base = env.unwrapped
+        names = base._select_sequences(list(sequences) if sequences is not None else None,
+                                       list(base.sequence_names), env_id)
+        agent_obj = (agent(**agent_kwargs) if isinstance(agent, type) else spec.make_agent())
+    except BaseException:
         env.close()
-        raise ValueError(f"unknown sequences {unknown}; available: {base.sequence_names}")
-    skipped = [s for s in names if _finished(out, s)]
-    todo = [s for s in names if s not in skipped]
+        raise
+    identity = RunIdentity.of(spec)
+    inputs = {n: identity.sequence_fingerprint(base.sequence_inputs(n)) for n in names}
+    try:
+        _prepare_out(out, spec, overwrite)
+        report = _run_prepared(spec, env, agent_obj, out, names, inputs, workers, progress)
+    finally:
+        agent_obj.close()
+        env.close()
+    return report
+
+
+def _run_prepared(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, names: list[str],
+                  inputs: dict[str, str], workers: int, progress: bool) -> RunReport:
+    base = env.unwrapped
+    finished = [n for n in names if _record_path(out, n).is_file()]
+    replayed = {n: why for n in finished
+                if (why := _stale_reason(out, base, n, inputs[n])) is not None}
+    skipped = [n for n in finished if n not in replayed]
+    todo = [n for n in names if n not in skipped]
     lengths = {s: base.sequence_length(s) for s in todo}
-    records: dict[str, SequenceRecord] = {}
 
     from unitrack_env.evaluation.progress import RunProgress
 
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:
         if workers <= 1 or len(todo) <= 1:
-            try:
-                for name in todo:
-                    bar.start_sequence(name)
-                    record, _ = play_episode(env, agent_obj, name, on_frame=bar.advance)
-                    _save(out, env, record)
-                    records[name] = record
-            finally:
-                agent_obj.close()
-                env.close()
+            records, failures = _play_here(spec, env, agent_obj, out, todo, inputs, bar)
         else:
-            agent_obj.close()
-            env.close()
-            threads = max(1, (os.cpu_count() or 1) // workers)
-            context = get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-                futures = {pool.submit(_worker, spec, str(out), s, threads): s for s in todo}
-                for future in as_completed(futures):
-                    record = SequenceRecord(**future.result())
-                    records[record.sequence] = record
-                    bar.advance(lengths[record.sequence])
-
+            records, failures = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
+    if failures:
+        raise RunFailed(failures, out)
     for name in skipped:
-        data = json.loads((out / "sequences" / f"{name}.json").read_text())
-        data.pop("fps", None)
-        records[name] = SequenceRecord(**data)
-    with_gt = [n for n in names if base.has_ground_truth(n)]
-    scores = base.score_folder(out / "data", with_gt) if with_gt else None
-    payload: dict[str, Any] = {
-        "env_id": env_id,
-        "agent": agent,
-        "sequences": {name: asdict(records[name]) | {"fps": records[name].fps} for name in names},
-    }
-    if scores is not None:
-        payload |= {"benchmark": scores.benchmark, "per_sequence": scores.per_sequence,
-                    "combined": scores.combined}
-    else:
-        payload["note"] = "this split has no ground truth; results were written, not scored"
-    atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
-                                                       allow_nan=False))
-    return RunReport(out, {n: records[n] for n in names}, scores, skipped)
+        records[name] = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
+    scores = _score_and_write(out, spec, base, names, records)
+    return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed)

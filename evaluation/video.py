@@ -1,4 +1,10 @@
-"""Render an agent's episode to a video file (``unitrack render``)."""
+"""Render an agent's episode to a video file (``unitrack render``).
+
+``.mp4`` files are H.264 (``libx264``, ``yuv420p``: what browsers and players play), written
+through the FFmpeg that ships inside the ``imageio-ffmpeg`` wheel (the ``video`` extra:
+``pip install 'unitrack-env[video]'``). ``.avi`` files are Motion-JPEG through OpenCV and
+need no extra.
+"""
 
 from __future__ import annotations
 
@@ -6,14 +12,81 @@ import os
 from pathlib import Path
 from typing import Any
 
-import cv2
-import gymnasium as gym
+import numpy as np
 
-import unitrack_env
-from unitrack_env.agents import make_agent
+#: Video extensions and how they are written.
+FORMATS = {".mp4": "H.264 (imageio-ffmpeg)", ".avi": "Motion-JPEG (OpenCV)"}
 
-#: FourCC codes by file extension (both ship with opencv-python-headless).
-_FOURCC = {".mp4": "mp4v", ".avi": "MJPG"}
+
+def _even(image: np.ndarray) -> np.ndarray:
+    """Pad to even width and height (H.264 in yuv420p needs both even)."""
+    height, width = image.shape[:2]
+    pad_h, pad_w = height % 2, width % 2
+    if not (pad_h or pad_w):
+        return image
+    return np.pad(image, ((0, pad_h), (0, pad_w), (0, 0)))
+
+
+class _H264Writer:
+    def __init__(self, path: Path, size: tuple[int, int], fps: float) -> None:
+        import imageio_ffmpeg
+
+        self._gen = imageio_ffmpeg.write_frames(
+            str(path), size, fps=fps, codec="libx264", pix_fmt_out="yuv420p", quality=None,
+            macro_block_size=1, output_params=["-crf", "20", "-movflags", "+faststart"],
+        )
+        self._gen.send(None)
+
+    def write(self, rgb: np.ndarray) -> None:
+        self._gen.send(np.ascontiguousarray(rgb))
+
+    def close(self) -> None:
+        self._gen.close()
+
+
+class _MJPGWriter:
+    def __init__(self, path: Path, size: tuple[int, int], fps: float) -> None:
+        import cv2
+
+        self._cv2 = cv2
+        self._writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
+        if not self._writer.isOpened():
+            raise OSError(f"{path}: OpenCV could not open a video writer")
+
+    def write(self, rgb: np.ndarray) -> None:
+        self._writer.write(self._cv2.cvtColor(rgb, self._cv2.COLOR_RGB2BGR))
+
+    def close(self) -> None:
+        self._writer.release()
+
+
+def check_video_path(out: str | os.PathLike) -> Path:
+    """Validate the output path and the installed writer before any frame is played."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in FORMATS:
+        raise ValueError(f"{out}: video extension must be one of {sorted(FORMATS)}")
+    if suffix == ".mp4":
+        try:
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError:
+            raise ImportError(
+                "writing .mp4 (H.264) needs imageio-ffmpeg: pip install 'unitrack-env[video]' "
+                "(or write .avi, which needs nothing more)"
+            ) from None
+    return out
+
+
+def video_codec(path: str | os.PathLike) -> str:
+    """The codec of a video file's first video stream, as FFmpeg names it (e.g. ``h264``)."""
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    try:
+        meta = next(reader)
+    finally:
+        reader.close()
+    return str(meta.get("codec", "")).split()[0]
 
 
 def render_episode(
@@ -27,34 +100,39 @@ def render_episode(
     fps: float | None = None,
 ) -> int:
     """Play one sequence and write every rendered frame to ``out``; return the frame count."""
-    out = Path(out)
-    if out.suffix.lower() not in _FOURCC:
-        raise ValueError(f"{out}: video extension must be one of {sorted(_FOURCC)}")
+    import gymnasium as gym
+
+    import unitrack_env
+    from unitrack_env.agents import make_agent
+    from unitrack_env.evaluation.runner import play_episode
+
+    out = check_video_path(out)
     unitrack_env.register_all()
     env = gym.make(env_id, render_mode="rgb_array", **(env_kwargs or {}))
     tracker = make_agent(agent, **(agent_kwargs or {}))
-    writer = None
+    writer: _H264Writer | _MJPGWriter | None = None
     frames = 0
+    rate = fps
+
+    def read_rate(info: dict[str, Any]) -> None:
+        nonlocal rate
+        rate = rate or float(info.get("frame_rate") or 25.0)
+
+    def write_frame() -> None:
+        nonlocal writer, frames
+        image = _even(env.render())
+        if writer is None:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            kind = _H264Writer if out.suffix.lower() == ".mp4" else _MJPGWriter
+            writer = kind(out, (image.shape[1], image.shape[0]), rate)
+        writer.write(image)
+        frames += 1
+
     try:
-        observation, info = env.reset(options={"sequence": sequence})
-        tracker.reset(observation, info)
-        rate = fps or float(info.get("frame_rate", 25.0))
-        terminated = truncated = False
-        while not (terminated or truncated):
-            observation, _, terminated, truncated, _ = env.step(tracker.act(observation))
-            image = env.render()
-            if writer is None:
-                out.parent.mkdir(parents=True, exist_ok=True)
-                height, width = image.shape[:2]
-                fourcc = cv2.VideoWriter_fourcc(*_FOURCC[out.suffix.lower()])
-                writer = cv2.VideoWriter(str(out), fourcc, rate, (width, height))
-                if not writer.isOpened():
-                    raise OSError(f"{out}: OpenCV could not open a video writer")
-            writer.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-            frames += 1
+        play_episode(env, tracker, sequence, on_frame=write_frame, on_reset=read_rate)
     finally:
         if writer is not None:
-            writer.release()
+            writer.close()
         tracker.close()
         env.close()
     return frames

@@ -142,6 +142,8 @@ class IoUAgent(Agent, name="iou", tasks=("mot", "mots", "vis", "posetrack")):
         **config: fields of :class:`IoUConfig`.
     """
 
+    config_class = IoUConfig
+
     def __init__(self, max_tracks: int | None = None, **config: Any) -> None:
         self.config = IoUConfig(**config)
         self._max_tracks = max_tracks

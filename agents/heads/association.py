@@ -351,6 +351,8 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
             state); a :class:`CategoryGatedAssociator` when tracks are gated by class.
     """
 
+    config_class = UniTrackConfig
+
     def __init__(
         self,
         max_tracks: int | None = None,

@@ -148,6 +148,8 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         sigma: Gaussian sigma (feature pixels) of the current video's belief maps.
     """
 
+    config_class = UniTrackPoseConfig
+
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         try:

@@ -60,6 +60,8 @@ class UniTrackSOTConfig:
 class _UniTrackSOTAgent(Agent):
     """Shared body of the two SOT heads (``method`` set by the subclass)."""
 
+    config_class = UniTrackSOTConfig
+
     method: str = "dcf"
 
     def __init__(self, *, appearance_model: AppearanceModel | None = None,

@@ -108,6 +108,8 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
             ``object_ids[i]``).
     """
 
+    config_class = UniTrackVOSConfig
+
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         try:

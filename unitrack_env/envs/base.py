@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.fingerprint import sequence_files
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import ScoreReport
 
@@ -191,6 +192,21 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
         return image
 
     # ----------------------------------------------------------- results contract
+    def sequence_inputs(self, name: str) -> list[Path]:
+        """The files that sequence ``name`` is read from (frames, annotations, detections).
+
+        The runner fingerprints them (:mod:`unitrack_env.fingerprint`) so that a resumed run
+        replays a sequence whose inputs changed. The default takes the files below the data
+        set's folder that belong to the sequence; environments that read files from
+        elsewhere (e.g. user detections) add them.
+        """
+        dataset = getattr(self, "dataset", None)
+        root = getattr(dataset, "root", None) or getattr(dataset, "data_dir", None)
+        if root is None:
+            return []
+        names = getattr(dataset, "sequence_names", self.sequence_names)
+        return sequence_files(Path(root), name, names)
+
     def sequence_length(self, name: str) -> int:
         """Number of frames (steps) of sequence ``name``, without loading it."""
         raise NotImplementedError

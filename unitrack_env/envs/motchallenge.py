@@ -319,6 +319,10 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
                           format_mot_results(self.episode_results()))
 
+    def sequence_inputs(self, name: str) -> list[Path]:
+        """The sequence's folder and its detection file (which may live elsewhere)."""
+        return [*super().sequence_inputs(name), self.dataset.detection_path(name)]
+
     def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
         from unitrack_env.metrics.motchallenge import score_folder

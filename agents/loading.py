@@ -1,0 +1,122 @@
+"""Agents by reference: ``module:Class``, ``path/to/file.py:Class`` and installed plug-ins.
+
+An agent spec is one of
+
+* a registered name (``"iou"``, or any name a subclass of :class:`~unitrack_env.agents.Agent`
+  registered with ``name=``);
+* ``"package.module:ClassName"``: the module is imported (it must be importable, e.g. from
+  the working directory or an installed distribution);
+* ``"path/to/file.py:ClassName"``: the file is loaded as a module;
+* a name published by an installed distribution in the ``unitrack_env.agents`` entry-point
+  group, e.g. in the plug-in's ``pyproject.toml``::
+
+      [project.entry-points."unitrack_env.agents"]
+      my-tracker = "my_package.tracker:MyTracker"
+
+:func:`agent_reference` turns a class back into an importable ``module:Class`` string; the
+runner stores it in ``run.json`` so that worker processes and resumed runs rebuild the same
+class without the user's registry state.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.metadata
+import importlib.util
+import sys
+from pathlib import Path
+from typing import Any
+
+#: Entry-point group in which installed distributions publish named agents.
+ENTRY_POINT_GROUP = "unitrack_env.agents"
+
+
+def entry_point_agents() -> dict[str, importlib.metadata.EntryPoint]:
+    """Named agents published by installed distributions (not imported yet)."""
+    return {ep.name: ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def is_reference(spec: str) -> bool:
+    """Whether ``spec`` is a ``module:Class`` or ``file.py:Class`` reference (not a name)."""
+    target, sep, attribute = spec.rpartition(":")
+    return bool(sep and target and attribute and "/" not in attribute and "\\" not in attribute)
+
+
+def _load_file(path: Path) -> Any:
+    if not path.is_file():
+        raise FileNotFoundError(f"agent file {path} does not exist")
+    resolved = path.resolve()
+    digest = hashlib.sha1(str(resolved).encode()).hexdigest()[:10]
+    name = f"unitrack_user_agents.{resolved.stem}_{digest}"
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, resolved)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot load {resolved} as a Python module")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
+    return module
+
+
+def _is_file(target: str) -> bool:
+    return target.endswith(".py") or "/" in target or "\\" in target
+
+
+def load_reference(spec: str) -> type:
+    """Import the class named by ``module:Class`` or ``path/to/file.py:Class``.
+
+    Raises:
+        ImportError: the module or file cannot be imported, or has no such attribute; the
+            message says which and how the reference is written.
+    """
+    target, _, attribute = spec.rpartition(":")
+    if _is_file(target):
+        module = _load_file(Path(target))
+    else:
+        try:
+            module = importlib.import_module(target)
+        except ModuleNotFoundError as exc:
+            raise ImportError(
+                f"agent '{spec}': cannot import module '{target}' ({exc}); a reference is "
+                "'package.module:ClassName' (importable from the current folder or an installed "
+                "distribution) or 'path/to/file.py:ClassName'"
+            ) from None
+    obj: Any = module
+    for part in attribute.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ImportError(f"agent '{spec}': {target} has no attribute '{attribute}'") from None
+    if not isinstance(obj, type):
+        raise ImportError(f"agent '{spec}' is not a class but {type(obj).__name__}")
+    return obj
+
+
+def agent_reference(cls: type) -> str:
+    """An importable ``module:Qualname`` for ``cls`` (a file path for file-loaded classes)."""
+    module = sys.modules.get(cls.__module__)
+    if cls.__module__.startswith("unitrack_user_agents.") and module is not None:
+        return f"{module.__file__}:{cls.__qualname__}"
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def portable_reference(cls: type) -> str | None:
+    """:func:`agent_reference`, or None when another process could not import it.
+
+    A class defined in ``__main__`` of an interactive session (a notebook, ``python -c``)
+    exists nowhere a worker process could import it from; a script's ``__main__`` is
+    re-imported by ``spawn`` workers, so its classes are portable.
+    """
+    if cls.__module__ == "__main__":
+        main = sys.modules.get("__main__")
+        if getattr(main, "__file__", None) is None:
+            return None
+    if "<locals>" in cls.__qualname__:
+        return None
+    return agent_reference(cls)

@@ -1,0 +1,71 @@
+"""What makes a finished sequence reusable: fingerprints of a run's inputs and results.
+
+A run's identity covers the environment id and arguments, the agent's import reference and
+options, and the content of every file an option names (a checkpoint, a detections file);
+a sequence's fingerprint adds its input files (:meth:`SequenceEnv.sequence_inputs
+<unitrack_env.envs.base.SequenceEnv.sequence_inputs>`). The result digest covers every byte
+of the result files a sequence wrote.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import unitrack_env
+from unitrack_env.fingerprint import files_fingerprint, sequence_files
+
+
+def _named_files(values: Iterable[Any]) -> list[Path]:
+    """Existing files (or the files in existing folders) named by string option values."""
+    found: list[Path] = []
+    for value in values:
+        if isinstance(value, (list, tuple)):
+            found += _named_files(value)
+        elif isinstance(value, str) and value and len(value) < 4096:
+            path = Path(value).expanduser()
+            try:
+                if path.is_file():
+                    found.append(path)
+            except OSError:
+                continue
+    return found
+
+
+@dataclass(frozen=True)
+class RunIdentity:
+    """A digest of everything but the data that decides a sequence's results."""
+
+    digest: str
+
+    @classmethod
+    def of(cls, spec: Any) -> RunIdentity:
+        """The identity of a :class:`~unitrack_env.evaluation.runner.RunSpec`."""
+        described = json.dumps(
+            {"env": spec.env_id, "env_kwargs": spec.env_kwargs, "agent": spec.agent_ref
+             or spec.agent, "agent_kwargs": spec.agent_kwargs,
+             "version": unitrack_env.__version__},
+            sort_keys=True, default=str,
+        )
+        named = [*spec.agent_kwargs.values(), *(
+            v for k, v in spec.env_kwargs.items() if k != "root")]
+        files = files_fingerprint(_named_files(named), content=True)
+        return cls(hashlib.blake2b(f"{described}\n{files}".encode(), digest_size=16).hexdigest())
+
+    def sequence_fingerprint(self, inputs: Iterable[Path]) -> str:
+        """This identity combined with a sequence's input files."""
+        return hashlib.blake2b(f"{self.digest}:{files_fingerprint(inputs)}".encode(),
+                               digest_size=16).hexdigest()
+
+
+def result_digest(folder: Path, sequence: str, all_sequences: Iterable[str]) -> str:
+    """Digest of the result files of ``sequence`` in ``folder`` (every byte)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return files_fingerprint([])
+    files = sequence_files(folder, sequence, all_sequences, shared=False)
+    return files_fingerprint(files, folder, content=True)

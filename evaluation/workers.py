@@ -1,0 +1,115 @@
+"""Sequences played in parallel worker processes, robust to failures on either side.
+
+* A sequence that fails in a worker comes back as a one-line message (the worker catches
+  it), so the pool keeps serving the other sequences; an exception that escapes anyway (a
+  worker killed by the OOM killer) is reported for the sequences it took down.
+* Workers die with their parent: each one watches its parent process and exits when it is
+  gone (killed, crashed), so no orphan keeps writing into the output folder.
+* Workers share the CPU: each one gets ``cpu_count // workers`` torch threads.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+#: Seconds between a worker's checks that its parent is alive.
+WATCHDOG_PERIOD = 0.5
+
+
+class SequenceFailure:
+    """How a failed sequence is described to the user: one line, the real message."""
+
+    @staticmethod
+    def describe(exc: BaseException) -> str:
+        """``message`` for the project's own errors, ``Type: message`` otherwise."""
+        from unitrack_env.errors import CheckpointError, DataFormatError, InvalidActionError
+
+        if isinstance(exc, (DataFormatError, CheckpointError, InvalidActionError)):
+            return str(exc)
+        if isinstance(exc, RuntimeError) and str(exc).startswith("agent '"):
+            return str(exc)
+        if isinstance(exc, KeyError) and exc.args:
+            return str(exc.args[0])
+        return f"{type(exc).__name__}: {exc}"
+
+
+def _watch_parent(parent: int) -> None:
+    def watch() -> None:
+        while True:
+            if os.getppid() != parent:
+                os._exit(1)
+            time.sleep(WATCHDOG_PERIOD)
+
+    threading.Thread(target=watch, name="unitrack-parent-watchdog", daemon=True).start()
+
+
+def _init_worker(parent: int, threads: int) -> None:
+    _watch_parent(parent)
+    if threads:
+        import torch
+
+        torch.set_num_threads(threads)
+
+
+def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any]:
+    """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``."""
+    from unitrack_env.evaluation.runner import OutputError, play_episode, save_episode
+
+    env = agent = None
+    try:
+        env = spec.make_env()
+        agent = spec.make_agent()
+        record, _ = play_episode(env, agent, sequence)
+        record.inputs = inputs
+        save_episode(Path(out), env, record)
+        return "ok", record.to_json()
+    except OutputError:
+        raise
+    except Exception as exc:
+        return "error", SequenceFailure.describe(exc)
+    finally:
+        if agent is not None:
+            agent.close()
+        if env is not None:
+            env.close()
+
+
+def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str],
+                    lengths: dict[str, int], workers: int,
+                    bar: Any) -> tuple[dict[str, Any], dict[str, str]]:
+    """Play ``todo`` in ``workers`` processes; return (records, failures) by sequence."""
+    from unitrack_env.evaluation.runner import SequenceRecord
+
+    records: dict[str, SequenceRecord] = {}
+    failures: dict[str, str] = {}
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
+                               initializer=_init_worker, initargs=(os.getpid(), threads))
+    try:
+        futures = {pool.submit(_play_one, spec, str(out), s, inputs[s]): s for s in todo}
+        for future in as_completed(futures):
+            name = futures[future]
+            try:
+                status, payload = future.result()
+            except BrokenProcessPool:
+                status, payload = "error", ("a worker process died (out of memory or "
+                                            "killed) while playing this sequence")
+            if status == "ok":
+                records[name] = SequenceRecord.from_json(payload)
+                bar.advance(lengths[name])
+            else:
+                failures[name] = payload
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in list(getattr(pool, "_processes", {}).values()):
+            process.terminate()
+        raise
+    pool.shutdown(wait=True)
+    return records, failures
