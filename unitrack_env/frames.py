@@ -6,7 +6,7 @@ while the agent works on frame ``t`` hides most of the decode time.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -18,14 +18,59 @@ from unitrack_env.errors import DataFormatError
 #: OpenCV >= 4.11 decodes straight to RGB, which saves a full-frame colour conversion.
 _IMREAD_RGB = getattr(cv2, "IMREAD_COLOR_RGB", None)
 
+#: JPEG files end with the EOI marker; PNG files with the IEND chunk (type and CRC).
+_JPEG_END = b"\xff\xd9"
+_PNG_END = b"IEND\xaeB`\x82"
+#: Bytes read from a file's end to find its end marker (encoders may pad after it).
+_TAIL_BYTES = 64
+
+
+def check_complete(path: str | Path) -> None:
+    """Refuse a JPEG or PNG file whose end marker is missing (a truncated file).
+
+    libjpeg decodes a truncated JPEG without an error (the missing rows become one flat
+    colour; it only prints "Premature end of JPEG file" on stderr), so the file's tail is
+    checked instead: a JPEG must end with the EOI marker ``FF D9`` (padding after it is
+    allowed), a PNG with its ``IEND`` chunk. Other formats are not checked. Cheap: one
+    small read at the end of the file.
+
+    Raises:
+        DataFormatError: the file is missing, empty, or truncated.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".jpg", ".jpeg"):
+        marker, kind = _JPEG_END, "JPEG end-of-image marker (FF D9)"
+    elif suffix == ".png":
+        marker, kind = _PNG_END, "PNG IEND chunk"
+    else:
+        return
+    try:
+        with path.open("rb") as handle:
+            size = handle.seek(0, 2)
+            handle.seek(max(0, size - _TAIL_BYTES))
+            tail = handle.read()
+    except FileNotFoundError:
+        raise DataFormatError(path, "missing") from None
+    except OSError as exc:
+        raise DataFormatError(path, f"unreadable ({exc})") from None
+    if size == 0:
+        raise DataFormatError(path, "empty image file (0 bytes)")
+    if marker not in tail:
+        raise DataFormatError(
+            path, f"truncated image: no {kind} at the end of its {size} bytes; the file was "
+                  "cut short (an interrupted copy or download); replace it with a complete copy")
+
 
 def read_rgb(path: str | Path) -> np.ndarray:
     """Decode an image file to a ``uint8`` RGB array.
 
     Raises:
-        DataFormatError: the file is missing or not a decodable image.
+        DataFormatError: the file is missing, truncated (see :func:`check_complete`) or not
+            a decodable image.
     """
     path = Path(path)
+    check_complete(path)
     image = cv2.imread(str(path), _IMREAD_RGB if _IMREAD_RGB is not None else cv2.IMREAD_COLOR)
     if image is None:
         reason = "missing" if not path.exists() else "not a decodable image (corrupt or truncated?)"
@@ -62,6 +107,15 @@ class FramePrefetcher:
         if image is None:
             image = read_rgb(self._path_of(index))
         return image
+
+    def check(self, indices: Iterable[int]) -> None:
+        """Refuse a missing or truncated frame among ``indices`` before any is decoded.
+
+        Raises:
+            DataFormatError: naming the first bad file (see :func:`check_complete`).
+        """
+        for index in indices:
+            check_complete(self._path_of(index))
 
     def schedule(self, index: int) -> None:
         """Start decoding ``index`` in the background (no-op when prefetching is off)."""

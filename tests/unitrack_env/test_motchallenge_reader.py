@@ -167,6 +167,11 @@ def test_corrupt_frame_is_reported_by_the_env(tmp_path: Path):
     seq = make_sequence(tmp_path, det="1,-1,1,1,10,20,0.9\n2,-1,1,1,10,20,0.9\n")
     (seq / "img1" / "000002.jpg").write_bytes(b"\xff\xd8 not really a jpeg")
     env = gym.make("UniTrack/MOTChallenge-v0", root=tmp_path)
+    # Refused at reset, before a frame is played (the file has no JPEG end marker).
+    with pytest.raises(DataFormatError, match="000002.jpg: truncated image"):
+        env.reset()
+    # A complete file that still does not decode is reported when decoded.
+    (seq / "img1" / "000002.jpg").write_bytes(b"\xff\xd8 not really a jpeg \xff\xd9")
     observation, _ = env.reset()
     assert observation["frame"].shape == (48, 64, 3)
     with pytest.raises(DataFormatError, match="000002.jpg: not a decodable image"):

@@ -9,12 +9,14 @@ episode. Subclasses provide the data set, the observations and the scoring.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, ClassVar, Generic, TypeVar
 
 import gymnasium as gym
 import numpy as np
 
+from unitrack_env.dependencies import require
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.fingerprint import sequence_files
 from unitrack_env.frames import FramePrefetcher
@@ -77,7 +79,13 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
     #: Decode frames (False: observations carry a 1x1 black placeholder instead).
     decode_frames: bool = True
 
+    #: Import names of the runtime dependencies this environment's scoring needs, checked
+    #: when it is made (:func:`unitrack_env.dependencies.require`).
+    requires: ClassVar[tuple[str, ...]] = ()
+
     def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
+        for module in self.requires:
+            require(module, f"{type(self).__name__} (official scoring)")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode={render_mode!r} is not supported; use one of "
@@ -172,6 +180,19 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
 
     def _draw(self) -> np.ndarray:
         raise NotImplementedError
+
+    def _open_frames(self, path_of: Callable[[int], Path], keys: Iterable[int], *,
+                     prefetch: bool) -> FramePrefetcher:
+        """The frame decoder of a new episode, after checking every frame file.
+
+        Every frame in ``keys`` must exist and be complete (a truncated JPEG would decode to
+        a flat colour without an error), so that a bad file is refused at reset, before a
+        frame is played. Skipped when frames are not decoded.
+        """
+        frames = FramePrefetcher(path_of, prefetch=prefetch)
+        if self.decode_frames:
+            frames.check(keys)
+        return frames
 
     def _decode(self, key: int, *, next_key: int | None, size: tuple[int, int],
                 path: str | Path, source: str) -> np.ndarray:

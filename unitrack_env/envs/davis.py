@@ -313,8 +313,8 @@ class DAVISEnv(SequenceEnv[VOSSequence]):
         self._init_labels = sequence.read_annotation(0)
         self._init_labels.setflags(write=False)
         self.action_space.narrow(height, width, (0, *sequence.object_ids))
-        self._frames = FramePrefetcher(partial(_frame_path, sequence.frame_paths),
-                                       prefetch=self.prefetch)
+        self._frames = self._open_frames(partial(_frame_path, sequence.frame_paths),
+                                         range(sequence.num_frames), prefetch=self.prefetch)
         self._t = 0
         self._done = False
         self._results, self._j, self._f = [], [], []

@@ -214,7 +214,8 @@ class JHMDBEnv(SequenceEnv[PoseSequence]):
             raise ValueError(f"{name}: frames are {width}x{height}, larger than max_frame_size="
                              f"{self.max_frame_size}; pass a larger max_frame_size")
         self._sequence = sequence
-        self._frames = FramePrefetcher(sequence.frame_paths.__getitem__, prefetch=self.prefetch)
+        self._frames = self._open_frames(sequence.frame_paths.__getitem__,
+                                         range(len(sequence.frame_paths)), prefetch=self.prefetch)
         self._t = 0
         self._done = False
         self._predictions = []

@@ -111,6 +111,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     - v0: initial version.
     """
 
+    requires = ("trackeval",)
+
     def __init__(
         self,
         benchmark: str = "MOT17",
@@ -180,7 +182,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
             )
         self._sequence = sequence
         self._detections = detections
-        self._frames = FramePrefetcher(info.frame_path, prefetch=self.prefetch)
+        self._frames = self._open_frames(info.frame_path, range(1, info.length + 1),
+                                         prefetch=self.prefetch)
         self._t = 1
         self._done = False
         self._clear.reset()

@@ -123,6 +123,8 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
     - v0: initial version.
     """
 
+    requires = ("trackeval",)
+
     def __init__(
         self,
         benchmark: str = "MOTS20",
@@ -200,7 +202,9 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
         self._sequence = info
         self._gt = self.dataset.ground_truth(name)
         self._dets = dets
-        self._frames = FramePrefetcher(info.frame_path, prefetch=self.prefetch)
+        self._frames = self._open_frames(
+            info.frame_path, range(info.first_frame, info.first_frame + info.length),
+            prefetch=self.prefetch)
         self._k = 0
         self._done = False
         self._clear.reset()

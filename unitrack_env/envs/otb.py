@@ -247,8 +247,8 @@ class OTBEnv(SequenceEnv[SOTSequence]):
                 f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
             )
         self._sequence = sequence
-        self._frames = FramePrefetcher(partial(_frame_path, sequence.frame_paths),
-                                       prefetch=self.prefetch)
+        self._frames = self._open_frames(partial(_frame_path, sequence.frame_paths),
+                                         range(len(sequence.frame_paths)), prefetch=self.prefetch)
         self._t = 0
         self._done = False
         self._results = []

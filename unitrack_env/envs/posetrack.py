@@ -237,7 +237,8 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
         self._evaluated = (set(evaluated_frames(sequence.ground_truth,
                                                 drop_last_frame=self.drop_last_frame))
                            if sequence.ground_truth is not None else set())
-        self._frames = FramePrefetcher(sequence.frame_paths.__getitem__, prefetch=self.prefetch)
+        self._frames = self._open_frames(sequence.frame_paths.__getitem__,
+                                         range(len(sequence.frame_paths)), prefetch=self.prefetch)
         self._k = 0
         self._done = False
         self._poseval = PosevalSequence()

@@ -109,6 +109,8 @@ class VISEnv(SequenceEnv[VisVideo]):
     - v0: initial version.
     """
 
+    requires = ("trackeval",)
+
     def __init__(
         self,
         root: str | os.PathLike | None = None,
@@ -174,8 +176,8 @@ class VISEnv(SequenceEnv[VisVideo]):
         self._sequence = video
         self._gt = self.dataset.data.tracks_of(video.id) if self.dataset.has_annotations else None
         self._dets = per_frame
-        self._frames = FramePrefetcher(functools.partial(self.dataset.frame_path, video),
-                                       prefetch=self.prefetch)
+        self._frames = self._open_frames(functools.partial(self.dataset.frame_path, video),
+                                         range(video.length), prefetch=self.prefetch)
         self._k = 0
         self._done = False
         self._clear.reset()
