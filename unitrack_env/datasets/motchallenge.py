@@ -20,6 +20,7 @@ Columns are read by position. Every problem is reported as a
 from __future__ import annotations
 
 import configparser
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -138,12 +139,18 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
         values[key] = section[key].strip()
 
     def number(key: str, kind: type) -> float | int:
+        text = values[key]
         try:
-            value = kind(float(values[key])) if kind is int else kind(values[key])
+            value = float(text)
         except ValueError:
-            raise DataFormatError(path, f"'{values[key]}' is not a number", field=key) from None
-        if value <= 0:
-            raise DataFormatError(path, f"must be positive, got {values[key]}", field=key)
+            raise DataFormatError(path, f"'{text}' is not a number", field=key) from None
+        if not math.isfinite(value) or value <= 0:
+            raise DataFormatError(path, f"must be a finite positive number, got {text}",
+                                  field=key)
+        if kind is int:
+            if not value.is_integer():
+                raise DataFormatError(path, f"must be a whole number, got {text}", field=key)
+            return int(value)
         return value
 
     ext = values["imExt"]
@@ -160,24 +167,60 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
 
 
 def _parse_table(
-    path: Path, min_columns: int, field_names: tuple[str, ...]
+    path: Path, min_columns: int, field_names: tuple[str, ...], *, official: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """Parse a comma-separated numeric table; on any problem find the exact line and field.
+
+    Args:
+        path: the file.
+        min_columns: columns every row needs.
+        field_names: names of the columns, for messages.
+        official: the file is also read by TrackEval (``gt.txt``): what TrackEval cannot
+            read (a byte-order mark, blank lines) is refused here, at open, rather than at
+            scoring after a whole episode. Otherwise a BOM is skipped and blank lines ignored.
 
     Returns:
         The table and the 1-based file line of each row (blank lines are skipped).
     """
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise DataFormatError(path, "missing") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise DataFormatError(path, f"unreadable ({exc})") from None
-    lines = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip()]
+    if raw.startswith(b"\xef\xbb\xbf"):
+        if official:
+            raise DataFormatError(
+                path, "starts with a UTF-8 byte-order mark (BOM), which TrackEval, the official "
+                      "scorer, reads as part of the first number; save the file without a BOM",
+                line=1)
+        raw = raw[3:]
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise DataFormatError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})",
+                              line=line) from None
+    numbered = list(enumerate(text.splitlines(), start=1))
+    if official:
+        blank = [i for i, line in numbered if not line.strip()]
+        if blank:
+            lines_text = ", ".join(str(i) for i in blank[:5]) + (" ..." if len(blank) > 5 else "")
+            raise DataFormatError(
+                path, f"blank line(s) at line {lines_text}: TrackEval, the official scorer, "
+                      "cannot read a file with blank lines (it fails when scoring); delete them",
+                line=blank[0])
+    lines = [(i, line) for i, line in numbered if line.strip()]
     if not lines:
         return np.zeros((0, min_columns)), np.zeros(0, dtype=np.int64)
+    rows = []
+    for _, line in lines:
+        cells = line.split(",")
+        if len(cells) > 1 and not cells[-1].strip():
+            cells = cells[:-1]  # a trailing comma, as TrackEval accepts
+        rows.append(cells)
     try:
-        table = np.array([ln.split(",") for _, ln in lines], dtype=np.float64)
+        table = np.array(rows, dtype=np.float64)
     except ValueError:
         table = None  # ragged rows or a bad value: locate it below
     if table is not None and table.ndim == 2 and table.shape[1] >= min_columns:
@@ -186,11 +229,11 @@ def _parse_table(
             return table, np.array([lineno for lineno, _ in lines])
         row, col = np.argwhere(bad)[0]
         raise DataFormatError(
-            path, "is not a finite number", line=lines[row][0], field=field_names[col]
+            path, f"'{rows[row][col].strip()}' is not a finite number", line=lines[row][0],
+            field=field_names[col],
         )
     width = None
-    for lineno, line in lines:
-        cells = line.split(",")
+    for (lineno, _), cells in zip(lines, rows, strict=True):
         if len(cells) < min_columns:
             raise DataFormatError(
                 path,
@@ -203,7 +246,7 @@ def _parse_table(
                 path, f"has {len(cells)} columns where earlier lines have {width}", line=lineno
             )
         width = len(cells)
-        for col, cell in enumerate(cells[:min_columns]):
+        for col, cell in enumerate(cells):
             try:
                 float(cell)
             except ValueError:
@@ -216,8 +259,16 @@ def _parse_table(
     raise DataFormatError(path, "could not be parsed as a numeric table")  # pragma: no cover
 
 
+#: Largest ground-truth id accepted: TrackEval allocates an array indexed by the largest id
+#: (8 bytes per id up to it), so larger ids exhaust memory at scoring.
+MAX_GT_ID = 2**24
+#: TrackEval's MOTChallenge class ids (MOT16/17/20 ``gt.txt`` column 8), 1..13.
+VALID_GT_CLASSES = frozenset(range(1, 14))
+
+
 def _check_rows(
-    path: Path, table: np.ndarray, lines: np.ndarray, length: int | None, kind: str
+    path: Path, table: np.ndarray, lines: np.ndarray, length: int | None, kind: str,
+    *, has_class: bool = False,
 ) -> None:
     frames = table[:, 0]
     bad = (frames != np.round(frames)) | (frames < 1)
@@ -240,6 +291,21 @@ def _check_rows(
             path, f"negative box size {table[i, 4 if name == 'w' else 5]:g}",
             line=int(lines[i]), field=name,
         )
+    if kind == "det":
+        from unitrack_env.spaces import COORD_MAX, FLOAT_MAX
+
+        outside = np.abs(table[:, 2:6]) > COORD_MAX
+        if outside.any():
+            i, col = (int(v) for v in np.argwhere(outside)[0])
+            raise DataFormatError(
+                path, f"{table[i, 2 + col]:g} is outside the observation bounds: box values "
+                      f"must lie in [-{COORD_MAX:g}, {COORD_MAX:g}] pixels",
+                line=int(lines[i]), field=_DET_FIELDS[2 + col])
+        too_big = np.abs(table[:, 6]) > FLOAT_MAX
+        if too_big.any():
+            i = int(np.argmax(too_big))
+            raise DataFormatError(path, f"score {table[i, 6]:g} does not fit a float32",
+                                  line=int(lines[i]), field="score")
     if kind == "gt":
         ids = table[:, 1]
         bad_ids = ids != np.round(ids)
@@ -248,6 +314,35 @@ def _check_rows(
             raise DataFormatError(
                 path, f"id {ids[i]:g} is not an integer", line=int(lines[i]), field="id"
             )
+        bad_ids = (ids < 0) | (ids > MAX_GT_ID)
+        if bad_ids.any():
+            i = int(np.argmax(bad_ids))
+            raise DataFormatError(
+                path, f"id {ids[i]:g} is outside 0..{MAX_GT_ID}: TrackEval indexes an array by "
+                      "ground-truth id (a negative id is scored as another object, a huge one "
+                      "exhausts memory); renumber the ids",
+                line=int(lines[i]), field="id")
+        key = np.stack([frames, ids], axis=1)
+        _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+        if (counts > 1).any():
+            seen: dict[tuple[float, float], int] = {}
+            for i, pair in enumerate(map(tuple, key)):
+                if pair in seen:
+                    raise DataFormatError(
+                        path, f"id {pair[1]:g} appears twice in frame {pair[0]:g} (first on "
+                              f"line {int(lines[seen[pair]])}); TrackEval refuses a ground-truth "
+                              "id more than once per frame",
+                        line=int(lines[i]), field="id")
+                seen[pair] = i
+        if has_class:
+            classes = table[:, 7]
+            bad_cls = ~np.isin(classes, list(VALID_GT_CLASSES))
+            if bad_cls.any():
+                i = int(np.argmax(bad_cls))
+                raise DataFormatError(
+                    path, f"class {classes[i]:g} is not a MOTChallenge class id (1..13, "
+                          "TrackEval refuses others when scoring)",
+                    line=int(lines[i]), field="class")
 
 
 def _annotations(table: np.ndarray, ids: np.ndarray, scores: np.ndarray,
@@ -274,6 +369,9 @@ def read_detections(path: str | Path, length: int | None = None) -> Annotations:
     table, lines = _parse_table(path, 7, _DET_FIELDS)
     _check_rows(path, table, lines, length, "det")
     n = len(table)
+    if not n:
+        warnings.warn(f"{path}: contains no detections; every frame of the sequence will be "
+                      "observed without any (and score zero)", stacklevel=2)
     return _annotations(table, np.full(n, -1), table[:, 6], np.ones(n), np.ones(n))
 
 
@@ -287,8 +385,8 @@ def read_ground_truth(path: str | Path, benchmark: str, length: int | None = Non
     if benchmark not in BENCHMARKS:
         raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
     has_class = benchmark in CLASS_COLUMN_BENCHMARKS
-    table, lines = _parse_table(path, 9 if has_class else 7, _GT_FIELDS)
-    _check_rows(path, table, lines, length, "gt")
+    table, lines = _parse_table(path, 9 if has_class else 7, _GT_FIELDS, official=True)
+    _check_rows(path, table, lines, length, "gt", has_class=has_class)
     n = len(table)
     classes = table[:, 7] if has_class else np.full(n, PEDESTRIAN_CLASS)
     visibility = table[:, 8] if has_class else np.ones(n)
