@@ -273,6 +273,16 @@ class DAVISDataset:
                 ann_dir / f"{frames[0].stem}.png",
                 "first-frame annotation missing; semi-supervised VOS needs it",
             )
+        present = [p for p in annotations if p is not None]
+        if 1 < len(present) < len(annotations):
+            missing = next(i for i, p in enumerate(annotations) if p is None)
+            raise DataFormatError(
+                ann_dir / f"{frames[missing].stem}.png",
+                f"annotation of frame {missing} missing while {len(present)} of the sequence's "
+                f"{len(annotations)} frames are annotated; DAVIS annotates every frame (train, "
+                "val) or only the first (test-dev), and a partly annotated sequence cannot be "
+                "scored",
+            )
         size = read_image_size(frames[0])
         first = read_label_png(annotations[0])
         if first.shape != (size[1], size[0]):
@@ -286,7 +296,37 @@ class DAVISDataset:
                 "no object in the first annotation (labels other than 0 and 255); a DAVIS-2016 "
                 "0/255 mask must be converted to labels 0/1",
             )
+        for path in present[1:]:
+            _check_annotation(path, size)
         return VOSSequence(name, frames, annotations, size, ids)
+
+
+def _check_annotation(path: Path, size: tuple[int, int]) -> None:
+    """Refuse, at open, an annotation that could not be scored as the DAVIS tools score it.
+
+    Reads the PNG header (mode and size); decodes only 8-bit grayscale files, to catch a
+    DAVIS-2016 mask (0 = background, 255 = object) among DAVIS-2017 labels, where its
+    object would silently become void (255) and lower J&F.
+    """
+    image_mod = _pil_image()
+    try:
+        with image_mod.open(path) as image:
+            mode, found = image.mode, image.size
+            values = np.unique(np.asarray(image)) if mode == "L" else None
+    except OSError as err:
+        raise DataFormatError(path, f"missing or unreadable PNG ({err})") from err
+    if mode not in ("P", "L"):
+        raise DataFormatError(
+            path, f"PNG mode {mode!r} is not a label map; DAVIS annotations must be palette "
+                  "('P') PNGs whose indices are object ids")
+    if found != tuple(size):
+        raise DataFormatError(path, f"size {found} differs from the frames' {tuple(size)}")
+    if values is not None and DAVIS_VOID_LABEL in values and set(values.tolist()) <= {
+            0, DAVIS_VOID_LABEL}:
+        raise DataFormatError(
+            path, "8-bit grayscale mask with only the values 0 and 255: a DAVIS-2016 mask, whose "
+                  "object (255) the DAVIS-2017 evaluation reads as void; convert it to a palette "
+                  "PNG with labels 0/1 like the sequence's other annotations")
 
 
 def write_davis_result(
