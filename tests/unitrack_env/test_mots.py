@@ -78,7 +78,7 @@ def test_txt_round_trip_keeps_every_field(tmp_path):
 ])
 def test_txt_errors_name_file_line_and_field(tmp_path, line, match):
     path = tmp_path / "bad.txt"
-    path.write_text(f"1 2001 2 6 8 02124\n{line}\n")
+    path.write_text(f"1 2001 2 6 8 724000g0\n{line}\n")  # a valid 6x8 RLE first
     with pytest.raises(DataFormatError, match=match) as info:
         parse_instances_txt(path)
     assert str(path) in str(info.value) and info.value.line == 2

@@ -91,6 +91,54 @@ def decode_masks(counts: Sequence[bytes], height: int, width: int) -> np.ndarray
     return np.ascontiguousarray(decoded.transpose(2, 0, 1)).astype(bool)
 
 
+def rle_runs(counts: bytes) -> np.ndarray:
+    """Decode a COCO compressed RLE string to its run lengths (no mask is built).
+
+    The string holds one number per run, 5 bits per character (offset 48, bit 5 = "more
+    characters follow", bit 4 of the last character = sign); from the fourth run on, each
+    number is the difference to the run two places before.
+
+    Raises:
+        ValueError: a character outside the alphabet, or a number cut short.
+    """
+    codes = np.frombuffer(counts, dtype=np.uint8).astype(np.int64) - 48
+    if not len(codes):
+        return np.zeros(0, dtype=np.int64)
+    if codes.min() < 0 or codes.max() > 63:
+        bad = int(np.argmax((codes < 0) | (codes > 63)))
+        raise ValueError(f"character {chr(counts[bad])!r} at position {bad} is not RLE text")
+    ends = (codes & 0x20) == 0
+    if not ends[-1]:
+        raise ValueError("the last number is cut short")
+    stops = np.flatnonzero(ends)
+    starts = np.concatenate([[0], stops[:-1] + 1])
+    group = np.repeat(np.arange(len(starts)), stops - starts + 1)
+    position = np.arange(len(codes)) - starts[group]
+    values = np.bincount(group, weights=(codes & 0x1F) << (5 * position)).astype(np.int64)
+    sizes = stops - starts + 1
+    negative = (codes[stops] & 0x10) != 0
+    values[negative] -= np.left_shift(1, 5 * sizes[negative])
+    runs = values.copy()
+    runs[1::2] = np.cumsum(values[1::2])
+    runs[2::2] = np.cumsum(values[2::2])
+    return runs
+
+
+def check_rle(counts: bytes, height: int, width: int) -> str | None:
+    """Return why a compressed RLE is not a ``height x width`` mask, or None when it is."""
+    try:
+        runs = rle_runs(counts)
+    except ValueError as exc:
+        return f"corrupt RLE ({exc})"
+    if len(runs) and runs.min() < 0:
+        return "corrupt RLE (a negative run length)"
+    total = int(runs.sum())
+    if total != height * width:
+        return (f"RLE run lengths sum to {total} pixels, but a {height}x{width} mask has "
+                f"{height * width}")
+    return None
+
+
 def resolve_overlaps(masks: np.ndarray, scores: np.ndarray) -> np.ndarray:
     """Give each pixel claimed by several masks to the highest-scored one (MOTS: disjoint).
 
@@ -263,8 +311,12 @@ def parse_instances_txt(
                                       field="score") from None
             if not np.isfinite(score):
                 raise DataFormatError(path, "score is not finite", line=lineno, field="score")
+        rle = parts[5].encode("ascii", errors="replace")
+        problem = check_rle(rle, h, w)
+        if problem is not None:
+            raise DataFormatError(path, problem, line=lineno, field="rle")
         rows.append((t, obj, cls, h, w, score))
-        counts.append(parts[5].encode("ascii"))
+        counts.append(rle)
         lines.append(lineno)
     return _build(rows, counts, lines, path)
 
@@ -457,7 +509,9 @@ class MOTSDataset:
         if not self.has_ground_truth(name):
             return None
         path = self.gt_path(name)
-        return read_instances_png(path) if path.is_dir() else parse_instances_txt(path)
+        gt = read_instances_png(path) if path.is_dir() else parse_instances_txt(path)
+        check_ground_truth(gt, self.info(name))
+        return gt
 
     def load_detections(self, name: str, class_id: int) -> MaskAnnotations:
         """The sequence's detections of class ``class_id``.
@@ -479,3 +533,49 @@ class MOTSDataset:
                                   "or detections='gt'")
         dets = parse_instances_txt(path, allow_score=True)
         return dets.select(dets.classes == class_id)
+
+
+def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
+    """Refuse ground truth that TrackEval would refuse when scoring, naming file and line.
+
+    Checks: every ``time_frame`` is a frame of the sequence, every mask has the frame's
+    size, no object id twice in one frame, and no two masks of a frame overlap (TrackEval's
+    MOTS readers reject overlapping masks). Works on the run-length encodings (no mask is
+    decoded).
+
+    Raises:
+        DataFormatError: the first problem found.
+    """
+    from pycocotools import mask as mask_utils
+
+    last = info.first_frame + info.length - 1
+    for i in range(len(gt)):
+        if not info.first_frame <= gt.frames[i] <= last:
+            raise gt._error(i, f"time_frame {gt.frames[i]} is not a frame of the sequence "
+                               f"({info.first_frame}..{last})", "time_frame")
+        if (gt.heights[i], gt.widths[i]) != (info.height, info.width):
+            raise gt._error(i, f"mask is {gt.widths[i]}x{gt.heights[i]} but the frames are "
+                               f"{info.width}x{info.height}", "img_height")
+    for frame in np.unique(gt.frames):
+        idx = gt.rows(frame)
+        ids = gt.ids[idx]
+        if len(np.unique(ids)) != len(ids):
+            seen: set[int] = set()
+            for i in idx:
+                if int(gt.ids[i]) in seen:
+                    raise gt._error(int(i), f"id {gt.ids[i]} appears twice in frame {frame}",
+                                    "id")
+                seen.add(int(gt.ids[i]))
+        rles = gt.rles(idx)
+        if len(rles) < 2:
+            continue
+        union = mask_utils.area(mask_utils.merge(rles, intersect=False))
+        if int(union) != int(mask_utils.area(rles).sum()):
+            merged = rles[0]
+            for k in range(1, len(rles)):
+                if mask_utils.area(mask_utils.merge([merged, rles[k]], intersect=True)) > 0:
+                    raise gt._error(
+                        int(idx[k]), f"mask of id {gt.ids[idx[k]]} overlaps another mask of frame "
+                                     f"{frame}; MOTS masks of one frame must be disjoint "
+                                     "(TrackEval refuses overlapping masks)", "rle")
+                merged = mask_utils.merge([merged, rles[k]], intersect=False)

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from unitrack_env.datasets.mots import check_rle
 from unitrack_env.errors import DataFormatError
 
 #: Splits of the 2019 release.
@@ -69,8 +70,20 @@ def to_rle(segmentation: Any, height: int, width: int, path: Path, where: str) -
                 raise ValueError(f"RLE size {size} is not the video's [{height}, {width}]")
             counts = segmentation["counts"]
             if isinstance(counts, list):  # uncompressed
+                if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0
+                           for c in counts):
+                    raise ValueError("uncompressed RLE counts must be non-negative integers")
+                if sum(counts) != height * width:
+                    raise ValueError(f"RLE run lengths sum to {sum(counts)} pixels, but a "
+                                     f"{height}x{width} mask has {height * width}")
                 return mask_utils.frPyObjects(segmentation, height, width)
             counts = counts.encode("ascii") if isinstance(counts, str) else counts
+            if not isinstance(counts, bytes):
+                raise ValueError(f"RLE counts must be a string or a list, not "
+                                 f"{type(counts).__name__}")
+            problem = check_rle(counts, height, width)
+            if problem is not None:
+                raise ValueError(problem)
             return {"size": [height, width], "counts": counts}
         raise ValueError("expected an RLE dict, a list of polygons or null")
     except (ValueError, TypeError, AttributeError, UnicodeEncodeError) as exc:
