@@ -184,6 +184,28 @@ def _require(path: Path, ok: bool, message: str, fld: str) -> None:
         raise DataFormatError(path, message, field=fld)
 
 
+def _int(path: Path, value: Any, fld: str) -> int:
+    """A JSON integer (an integral float such as ``3.0`` is accepted), else a clear error."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+            isinstance(value, float) and not value.is_integer()):
+        raise DataFormatError(path, f"must be an integer, got {type(value).__name__} "
+                                    f"{json.dumps(value)[:60]}", field=fld)
+    return int(value)
+
+
+def _opt_int(path: Path, entry: dict[str, Any], key: str, where: str) -> int | None:
+    value = entry.get(key)
+    return None if value is None else _int(path, value, f"{where}.{key}")
+
+
+def _float(path: Path, value: Any, fld: str) -> float:
+    """A finite JSON number, else a clear error."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise DataFormatError(path, f"must be a finite number, got {type(value).__name__} "
+                                    f"{json.dumps(value)[:60]}", field=fld)
+    return float(value)
+
+
 def _box(path: Path, value: Any, fld: str) -> tuple[float, float, float, float] | None:
     if value is None:
         return None
@@ -196,9 +218,16 @@ def _box(path: Path, value: Any, fld: str) -> tuple[float, float, float, float] 
 
 
 def _keypoint_names(path: Path, categories: list[dict[str, Any]]) -> None:
+    for k, category in enumerate(categories):
+        _require(path, isinstance(category, dict),
+                 f"must be an object like {{'id': 1, 'name': 'person', 'keypoints': [...]}}, got "
+                 f"{type(category).__name__} {json.dumps(category)[:60]}", f"categories[{k}]")
     if not categories:
         return
-    names = tuple(categories[0].get("keypoints", ()))
+    names = categories[0].get("keypoints", ())
+    _require(path, isinstance(names, list) and all(isinstance(n, str) for n in names),
+             "must be a list of keypoint names", "categories[0].keypoints")
+    names = tuple(names)
     if names and names != POSETRACK_KEYPOINTS:
         raise DataFormatError(
             path, f"keypoints {list(names)} differ from the PoseTrack 2018 order "
@@ -212,14 +241,21 @@ def _parse_image(path: Path, k: int, entry: Any) -> PoseTrackImage:
         _require(path, key in entry, f"missing '{key}'", f"{where}.{key}")
     xs = entry.get("ignore_regions_x") or []
     ys = entry.get("ignore_regions_y") or []
+    for key, value in (("ignore_regions_x", xs), ("ignore_regions_y", ys)):
+        _require(path, isinstance(value, list) and all(isinstance(p, list) for p in value),
+                 "must be a list of polygons (lists of numbers)", f"{where}.{key}")
     _require(path, len(xs) == len(ys), "ignore_regions_x and ignore_regions_y differ in length",
              f"{where}.ignore_regions_x")
     regions = []
     for r, (px, py) in enumerate(zip(xs, ys, strict=True)):
         _require(path, len(px) == len(py), f"polygon {r} has {len(px)} x but {len(py)} y",
                  f"{where}.ignore_regions_x")
-        regions.append(np.column_stack([np.asarray(px, np.float64).reshape(-1),
-                                        np.asarray(py, np.float64).reshape(-1)]))
+        try:
+            regions.append(np.column_stack([np.asarray(px, np.float64).reshape(-1),
+                                            np.asarray(py, np.float64).reshape(-1)]))
+        except (TypeError, ValueError):
+            raise DataFormatError(path, f"polygon {r} holds something else than numbers",
+                                  field=f"{where}.ignore_regions_x") from None
     try:
         stem_ok = Path(str(entry["file_name"])).stem.isdigit()
     except TypeError:
@@ -227,11 +263,11 @@ def _parse_image(path: Path, k: int, entry: Any) -> PoseTrackImage:
     _require(path, stem_ok, f"file name {entry['file_name']!r} is not '<frame>.jpg'",
              f"{where}.file_name")
     return PoseTrackImage(
-        id=int(entry["id"]),
+        id=_int(path, entry["id"], f"{where}.id"),
         file_name=str(entry["file_name"]),
         is_labeled=None if entry.get("is_labeled") is None else bool(entry["is_labeled"]),
-        nframes=None if entry.get("nframes") is None else int(entry["nframes"]),
-        frame_id=None if entry.get("frame_id") is None else int(entry["frame_id"]),
+        nframes=_opt_int(path, entry, "nframes", where),
+        frame_id=_opt_int(path, entry, "frame_id", where),
         vid_id=None if entry.get("vid_id") is None else str(entry["vid_id"]),
         ignore_regions=tuple(regions),
         extra={k2: v for k2, v in entry.items()
@@ -257,19 +293,25 @@ def _parse_person(path: Path, k: int, entry: Any) -> PoseTrackPerson:
     scores = entry.get("scores")
     score_arr = None
     if scores is not None:
-        score_arr = np.asarray(scores, dtype=np.float64).reshape(-1)
+        try:
+            score_arr = np.asarray(scores, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise DataFormatError(path, f"must be a list of numbers, got {str(scores)[:60]}",
+                                  field=f"{where}.scores") from None
         _require(path, score_arr.size in (0, NUM_KEYPOINTS),
                  f"has {score_arr.size} scores, expected 0 or {NUM_KEYPOINTS}", f"{where}.scores")
-    track = entry.get("track_id")
+    if entry.get("category_id") is not None:
+        _int(path, entry["category_id"], f"{where}.category_id")
     return PoseTrackPerson(
-        image_id=int(entry["image_id"]),
+        image_id=_int(path, entry["image_id"], f"{where}.image_id"),
         keypoints=flat.reshape(NUM_KEYPOINTS, 3),
-        track_id=None if track is None else int(track),
+        track_id=_opt_int(path, entry, "track_id", where),
         scores=score_arr,
-        score=None if entry.get("score") is None else float(entry["score"]),
+        score=None if entry.get("score") is None else _float(path, entry["score"],
+                                                                 f"{where}.score"),
         bbox=_box(path, entry.get("bbox"), f"{where}.bbox"),
         bbox_head=_box(path, entry.get("bbox_head"), f"{where}.bbox_head"),
-        id=None if entry.get("id") is None else int(entry["id"]),
+        id=_opt_int(path, entry, "id", where),
         extra={k2: v for k2, v in entry.items() if k2 not in _PERSON_FIELDS},
     )
 
