@@ -92,6 +92,42 @@ class Image(spaces.Space[np.ndarray]):
 FLOAT_MAX = float(np.finfo(np.float32).max)
 #: Bound of box coordinates in pixels (generous: boxes may extend past the frame).
 COORD_MAX = 1e5
+#: Largest track id of the action spaces. Official result files store ids as numbers that
+#: are read back as floats (MOTChallenge txt) or JSON numbers; int32 ids survive every one
+#: of them exactly (float64 holds integers only up to 2**53).
+ID_MAX = int(np.iinfo(np.int32).max)
+
+
+def _action_count(action: dict[str, Any], key: str) -> int:
+    """The action's ``key`` count (``num_tracks``) as an int; refuse non-integers."""
+    value = action[key]
+    if isinstance(value, (bool, np.bool_)):
+        raise InvalidActionError(f"action['{key}'] must be an integer, got {value!r}")
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)) and float(value).is_integer():
+        return int(value)
+    raise InvalidActionError(
+        f"action['{key}'] must be an integer (the space is Discrete), got {value!r}")
+
+
+def _checked_ids(ids: np.ndarray, k: int, *, low: int = 1) -> np.ndarray:
+    """The first ``k`` ids as int64 after checking integer values in ``low..ID_MAX``."""
+    ids = ids[:k]
+    if not np.issubdtype(ids.dtype, np.integer):
+        if ids.size and not (np.issubdtype(ids.dtype, np.floating)
+                             and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids))):
+            raise InvalidActionError(f"action['ids'] must be integers, got dtype {ids.dtype}")
+    if ids.size and (ids.max() > ID_MAX):
+        raise InvalidActionError(
+            f"track id {ids.max():.0f} is above {ID_MAX}, the largest id of the action space "
+            "(ids must survive the official result files, which store them as floats)")
+    if ids.size and ids.min() < low:
+        what = "track ids must be >= 1" + (" (0 = not reported)" if low == 0 else "")
+        raise InvalidActionError(f"{what}, got {ids.min():.0f}")
+    return ids.astype(np.int64)
 
 
 def box_array_space(capacity: int) -> spaces.Box:
@@ -178,14 +214,10 @@ def unpack_tracks(
         raise InvalidActionError(f"action['ids'] must be 1-D, got shape {ids.shape}")
     if boxes.ndim != 2 or boxes.shape[1] != 4:
         raise InvalidActionError(f"action['boxes'] must have shape (k, 4), got {boxes.shape}")
-    if not np.issubdtype(ids.dtype, np.integer):
-        if ids.size and not (np.issubdtype(ids.dtype, np.floating)
-                             and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids))):
-            raise InvalidActionError(f"action['ids'] must be integers, got dtype {ids.dtype}")
     if not (np.issubdtype(boxes.dtype, np.floating) or np.issubdtype(boxes.dtype, np.integer)):
         raise InvalidActionError(f"action['boxes'] must be numbers, got dtype {boxes.dtype}")
     if "num_tracks" in action:
-        k = int(action["num_tracks"])
+        k = _action_count(action, "num_tracks")
         if not 0 <= k <= min(len(ids), len(boxes)):
             raise InvalidActionError(
                 f"num_tracks={k} but the arrays hold {len(ids)} ids and {len(boxes)} boxes"
@@ -196,7 +228,7 @@ def unpack_tracks(
             raise InvalidActionError(f"{k} ids but {len(boxes)} boxes")
     if max_tracks is not None and k > max_tracks:
         raise InvalidActionError(f"{k} tracks exceed max_tracks={max_tracks}")
-    ids = ids[:k].astype(np.int64)
+    ids = _checked_ids(ids, k)
     boxes = boxes[:k].astype(np.float64)
     if not np.all(np.isfinite(boxes)):
         row = int(np.argwhere(~np.isfinite(boxes))[0, 0])
@@ -205,8 +237,12 @@ def unpack_tracks(
     if negative.any():
         row = int(np.argmax(negative))
         raise InvalidActionError(f"track {ids[row]} has a negative size {boxes[row].tolist()}")
-    if k and ids.min() < 1:
-        raise InvalidActionError(f"track ids must be >= 1, got {int(ids.min())}")
+    outside = np.abs(boxes) > COORD_MAX
+    if outside.any():
+        row = int(np.argwhere(outside)[0, 0])
+        raise InvalidActionError(
+            f"track {ids[row]} has a box {boxes[row].tolist()} outside the action space: box "
+            f"values must lie in [-{COORD_MAX:g}, {COORD_MAX:g}] pixels")
     if k != len(np.unique(ids)):
         values, counts = np.unique(ids, return_counts=True)
         raise InvalidActionError(f"duplicate track ids in one frame: {values[counts > 1].tolist()}")
@@ -380,14 +416,7 @@ def unpack_mask_ids(
             f" (or {max_detections} padded)" if max_detections is not None else "")
         raise InvalidActionError(
             f"action['ids'] has {len(ids)} entries; this frame has {expected} detections")
-    if not np.issubdtype(ids.dtype, np.integer):
-        if ids.size and not (np.issubdtype(ids.dtype, np.floating)
-                             and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids))):
-            raise InvalidActionError(f"action['ids'] must be integers, got dtype {ids.dtype}")
-    ids = ids[:num_detections].astype(np.int64)
-    if ids.size and ids.min() < 0:
-        raise InvalidActionError(
-            f"track ids must be >= 1 (0 = not reported), got {int(ids.min())}")
+    ids = _checked_ids(ids, num_detections, low=0)
     reported = ids[ids > 0]
     if len(reported) != len(np.unique(reported)):
         values, counts = np.unique(reported, return_counts=True)
@@ -565,14 +594,10 @@ def unpack_pose_tracks(
                                              and kp.shape[1] != num_keypoints):
         want = f"(k, {num_keypoints if num_keypoints is not None else 'K'}, 3)"
         raise InvalidActionError(f"action['keypoints'] must have shape {want}, got {kp.shape}")
-    if ids.size and not np.issubdtype(ids.dtype, np.integer):
-        if not (np.issubdtype(ids.dtype, np.floating) and np.all(np.isfinite(ids))
-                and np.all(ids == np.round(ids))):
-            raise InvalidActionError(f"action['ids'] must be integers, got dtype {ids.dtype}")
     if not (np.issubdtype(kp.dtype, np.floating) or np.issubdtype(kp.dtype, np.integer)):
         raise InvalidActionError(f"action['keypoints'] must be numbers, got dtype {kp.dtype}")
     if "num_tracks" in action:
-        k = int(action["num_tracks"])
+        k = _action_count(action, "num_tracks")
         if not 0 <= k <= min(len(ids), len(kp)):
             raise InvalidActionError(
                 f"num_tracks={k} but the arrays hold {len(ids)} ids and {len(kp)} poses")
@@ -582,15 +607,18 @@ def unpack_pose_tracks(
             raise InvalidActionError(f"{k} ids but {len(kp)} poses")
     if max_tracks is not None and k > max_tracks:
         raise InvalidActionError(f"{k} tracks exceed max_tracks={max_tracks}")
-    ids = ids[:k].astype(np.int64)
+    ids = _checked_ids(ids, k)
     kp = kp[:k].astype(np.float64)
     if not np.all(np.isfinite(kp)):
         row = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise InvalidActionError(f"track {ids[row]} has non-finite keypoints")
     if k and (kp[..., 2].min() < 0 or kp[..., 2].max() > 1):
         raise InvalidActionError("keypoint scores (the third value) must lie in [0, 1]")
-    if k and ids.min() < 1:
-        raise InvalidActionError(f"track ids must be >= 1, got {int(ids.min())}")
+    if k and np.abs(kp[..., :2]).max() > COORD_MAX:
+        row = int(np.argwhere(np.abs(kp[..., :2]) > COORD_MAX)[0, 0])
+        raise InvalidActionError(
+            f"track {ids[row]} has a keypoint outside the action space: x and y must lie in "
+            f"[-{COORD_MAX:g}, {COORD_MAX:g}] pixels")
     if k != len(np.unique(ids)):
         values, counts = np.unique(ids, return_counts=True)
         raise InvalidActionError(f"duplicate track ids in one frame: {values[counts > 1].tolist()}")

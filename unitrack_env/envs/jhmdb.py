@@ -343,4 +343,9 @@ def _validate_joints(action: Any) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         joint = int(np.argwhere(~np.isfinite(arr))[0, 0])
         raise InvalidActionError(f"joint {joint} is NaN or infinite: {arr[joint].tolist()}")
+    if np.abs(arr).max() > ut_spaces.COORD_MAX:
+        joint = int(np.argwhere(np.abs(arr) > ut_spaces.COORD_MAX)[0, 0])
+        raise InvalidActionError(
+            f"joint {joint} {arr[joint].tolist()} is outside the action space: x and y must lie "
+            f"in [-{ut_spaces.COORD_MAX:g}, {ut_spaces.COORD_MAX:g}] pixels")
     return arr
