@@ -33,6 +33,7 @@ import numpy as np
 
 from unitrack_env.datasets.otb import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.spaces import COORD_MAX
 
 JHMDB_JOINT_NAMES: tuple[str, ...] = (
     "neck",
@@ -95,7 +96,11 @@ def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.nda
         raise DataFormatError(path, f"cannot read MATLAB file ({err})") from err
     if "pos_img" not in mat:
         raise DataFormatError(path, "has no 'pos_img' variable", field="pos_img")
-    pos = np.asarray(mat["pos_img"], dtype=np.float64)
+    try:
+        pos = np.asarray(mat["pos_img"], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataFormatError(path, f"pos_img must be a numeric array, got MATLAB class "
+                                    f"{mat['pos_img'].dtype}", field="pos_img") from None
     if pos.ndim == 2 and pos.shape == (2, NUM_JOINTS):  # a one-frame video loses its last axis
         pos = pos[:, :, None]
     if pos.ndim != 3 or pos.shape[:2] != (2, NUM_JOINTS):
@@ -103,6 +108,18 @@ def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.nda
             path, f"pos_img has shape {pos.shape}, expected (2, {NUM_JOINTS}, T)", field="pos_img"
         )
     keypoints = pos.transpose(2, 1, 0).copy()
+    if not np.isfinite(keypoints).all():
+        frame, joint, _ = (int(v) for v in np.argwhere(~np.isfinite(keypoints))[0])
+        raise DataFormatError(
+            path, f"joint {joint} ({JHMDB_JOINT_NAMES[joint]}) of frame {frame + 1} is "
+                  f"{keypoints[frame, joint].tolist()}; every JHMDB joint is annotated with "
+                  "finite coordinates", field="pos_img")
+    if np.abs(keypoints).max() > COORD_MAX:
+        frame, joint, _ = (int(v) for v in np.argwhere(np.abs(keypoints) > COORD_MAX)[0])
+        raise DataFormatError(
+            path, f"joint {joint} ({JHMDB_JOINT_NAMES[joint]}) of frame {frame + 1} is "
+                  f"{keypoints[frame, joint].tolist()}, outside the observation bounds "
+                  f"[-{COORD_MAX:g}, {COORD_MAX:g}] pixels", field="pos_img")
     if zero_based:
         keypoints -= MATLAB_ORIGIN
     return keypoints

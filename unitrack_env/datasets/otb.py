@@ -240,6 +240,34 @@ def read_box_file(path: str | Path, *, allow_nan: bool = True) -> np.ndarray:
     return np.asarray(rows, dtype=np.float64)
 
 
+def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
+    """Refuse ground truth the episode cannot start from or score (rows from ``first`` on).
+
+    The first row is the target the tracker is given: it must be finite with a positive
+    size. No row may have a negative size, and every value must fit the observation bounds.
+    (Rows are file lines here: :func:`read_box_file` refuses blank lines inside the list.)
+    """
+    from unitrack_env.spaces import COORD_MAX
+
+    init = boxes[first]
+    if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):
+        raise DataFormatError(
+            path, f"the first box {init.tolist()} is the target given to the tracker: it must "
+                  "be finite with a positive width and height", line=first + 1)
+    rows = boxes[first:]
+    negative = (rows[:, 2] < 0) | (rows[:, 3] < 0)
+    if negative.any():
+        i = int(np.argmax(negative))
+        raise DataFormatError(path, f"negative box size {rows[i].tolist()}",
+                              line=first + i + 1, field="w" if rows[i, 2] < 0 else "h")
+    outside = np.abs(np.nan_to_num(rows)) > COORD_MAX
+    if outside.any():
+        i, col = (int(v) for v in np.argwhere(outside)[0])
+        raise DataFormatError(
+            path, f"{rows[i, col]:g} is outside the observation bounds [-{COORD_MAX:g}, "
+                  f"{COORD_MAX:g}] pixels", line=first + i + 1, field=_BOX_FIELDS[col])
+
+
 def _read_flags(path: Path, expected: int) -> np.ndarray:
     """Read 0/1 flags written one per line or comma-separated on one line."""
     try:
@@ -372,6 +400,7 @@ class OTBDataset:
             first, omit = min(_numbered_images(folder / "img")), 0
         if len(boxes) <= omit:
             raise DataFormatError(gt_path, f"needs more than {omit} rows")
+        _check_boxes(gt_path, boxes, omit)
         boxes = boxes[omit:]
         numbers = range(first + omit, first + omit + len(boxes))
         frames = _select_frames(folder / "img", numbers)
