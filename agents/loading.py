@@ -109,14 +109,18 @@ def agent_reference(cls: type) -> str:
 def portable_reference(cls: type) -> str | None:
     """:func:`agent_reference`, or None when another process could not import it.
 
-    A class defined in ``__main__`` of an interactive session (a notebook, ``python -c``)
-    exists nowhere a worker process could import it from; a script's ``__main__`` is
-    re-imported by ``spawn`` workers, so its classes are portable.
+    A class defined in ``__main__`` of an interactive session (a notebook, ``python -c``) or
+    in ``exec``'d code exists nowhere a worker process could import it from; a script's
+    ``__main__`` is re-imported by ``spawn`` workers, so its classes are portable.
     """
     if cls.__module__ == "__main__":
         main = sys.modules.get("__main__")
         if getattr(main, "__file__", None) is None:
             return None
-    if "<locals>" in cls.__qualname__:
+        return agent_reference(cls)
+    reference = agent_reference(cls)
+    try:
+        found = load_reference(reference)
+    except (ImportError, FileNotFoundError):
         return None
-    return agent_reference(cls)
+    return reference if found is cls else None

@@ -107,38 +107,44 @@ def _describe(options: dict[str, Any]) -> str:
                      if name != "**")
 
 
-def check_options(cls: type, kwargs: Mapping[str, Any], *, agent: str | None = None) -> None:
-    """Raise :class:`AgentOptionError` for an unknown option or a value of the wrong type."""
-    options = agent_options(cls)
+def check_options(cls: type, kwargs: Mapping[str, Any], *, agent: str | None = None,
+                  kind: str = "agent", extra: Mapping[str, Any] | None = None) -> None:
+    """Raise :class:`AgentOptionError` for an unknown option or a value of the wrong type.
+
+    ``kind`` names what is checked in messages (``"agent"``, ``"environment"``); ``extra``
+    adds options that something other than the class accepts (e.g. ``gym.make``'s own).
+    """
+    options = agent_options(cls) | dict(extra or {})
     label = agent or getattr(cls, "name", "") or cls.__qualname__
     for key, value in kwargs.items():
         if key not in options:
             if "**" in options:
                 continue
             raise AgentOptionError(
-                f"agent '{label}' has no option '{key}'; valid options: {_describe(options)}"
+                f"{kind} '{label}' has no option '{key}'; valid options: {_describe(options)}"
             )
         if not conforms(value, options[key]):
             raise AgentOptionError(
-                f"agent '{label}' option '{key}' must be {_type_name(options[key])}, "
+                f"{kind} '{label}' option '{key}' must be {_type_name(options[key])}, "
                 f"got {value!r} ({type(value).__name__})"
             )
 
 
-def parse_options(cls: type, items: Sequence[str], *, agent: str | None = None) -> dict[str, Any]:
+def parse_options(cls: type, items: Sequence[str], *, agent: str | None = None,
+                  kind: str = "agent", extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Parse ``key=value`` strings into the agent's typed options, checked.
 
     A value is read as a Python literal (``0.5``, ``(640, 480)``, ``None``, ``True``) when
     that fits the option's type; an option that takes a string or a path gets the text as
     written, so ``weights=moco.pth`` needs no quotes.
     """
-    options = agent_options(cls)
+    options = agent_options(cls) | dict(extra or {})
     out: dict[str, Any] = {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip().replace("-", "_")
         if not sep or not key:
-            raise AgentOptionError(f"agent option '{item}' must look like key=value")
+            raise AgentOptionError(f"{kind} option '{item}' must look like key=value")
         tp = options.get(key, options.get("**", Any))
         try:
             value: Any = ast.literal_eval(text)
@@ -147,5 +153,5 @@ def parse_options(cls: type, items: Sequence[str], *, agent: str | None = None) 
         if key in options and not conforms(value, tp) and conforms(text, tp):
             value = text
         out[key] = value
-    check_options(cls, out, agent=agent)
+    check_options(cls, out, agent=agent, kind=kind, extra=extra)
     return out

@@ -1,115 +1,76 @@
-"""The ``unitrack`` command line.
+"""The unitrack command line: evaluate trackers on tracking benchmarks, score, render, check.
 
-Commands:
-    unitrack evaluate --env ID [--root DIR] --agent NAME --out DIR
-    unitrack score --env ID [--root DIR] --results DIR [--out metrics.json]
-    unitrack score --benchmark MOT17 --gt DIR --results DIR        (MOTChallenge shortcut)
-    unitrack render --env ID [--root DIR] --agent NAME --sequence NAME --out video.mp4
-    unitrack list
+Every user error (an unknown id or option, bad data, a full disk, an agent that raises) is
+reported as one line starting with "error:", printed literally; ``--debug`` adds the
+traceback. Finished sequences are always kept: run the same command again to resume.
 """
 
 from __future__ import annotations
 
 import argparse
-import ast
-import json
+import difflib
 import sys
+import traceback
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
-from rich.table import Table
 
-#: Columns of the results table per task (the metrics' official names), in this order.
-TASK_COLUMNS: dict[str, tuple[str, ...]] = {
-    "mot": ("HOTA", "DetA", "AssA", "MOTA", "MOTP", "IDF1", "IDSW", "CLR_FP", "CLR_FN",
-            "MT", "ML"),
-    "mots": ("HOTA", "DetA", "AssA", "sMOTSA", "MOTSA", "MOTSP", "IDF1", "IDSW", "CLR_FP",
-             "CLR_FN"),
-    "vis": ("AP", "AP50", "AP75", "AR"),
-    "posetrack": ("MOTA", "IDF1", "IDSW", "MOTP", "Precision", "Recall"),
-    "sot": ("AUC", "Precision@20px", "AverageOverlap"),
-    "vos": ("J&F-Mean", "J-Mean", "J-Recall", "J-Decay", "F-Mean", "F-Recall", "F-Decay"),
-    "pose-prop": ("PCK@0.1", "PCK@0.2"),
+#: gym.make's own keyword arguments, accepted by every environment.
+GYM_MAKE_OPTIONS: dict[str, Any] = {
+    "max_episode_steps": int | None, "autoreset": bool, "disable_env_checker": bool | None,
 }
-#: Metrics that are counts (printed as integers, not percentages).
-COUNT_METRICS = frozenset({"IDSW", "CLR_FP", "CLR_FN", "CLR_TP", "MT", "ML", "PT", "Frag"})
-#: Columns shown for a task the table does not know: the first metrics found.
-FALLBACK_COLUMNS = 8
+
+EXAMPLES = {
+    "evaluate": """examples:
+  unitrack evaluate --env UniTrack/MOT16-v0 --agent iou --out runs/quickstart
+  unitrack evaluate --env UniTrack/MOT17-v0 --root data/MOT17 --agent unitrack \\
+      --agent-arg weights=moco_v2.pth --workers 2 --out runs/mot17
+  unitrack evaluate --env UniTrack/MOT16-v0 --agent my_trackers:Nearest --out runs/mine
+  unitrack evaluate --env UniTrack/OTB-v0 --agent trackers/sot.py:MySOT --out runs/sot
+""",
+    "score": """examples:
+  unitrack score --env UniTrack/MOT17-v0 --root data/MOT17 --results runs/mot17/data
+  unitrack score --benchmark MOT17 --gt data/MOT17/train --results runs/mot17/data --format csv
+""",
+    "render": """examples:
+  unitrack render --env UniTrack/MOT16-v0 --agent iou --sequence SYN-01 --out syn01.mp4
+""",
+}
 
 
-def _parse_value(text: str) -> Any:
-    try:
-        return ast.literal_eval(text)
-    except (ValueError, SyntaxError):
-        return text
+def _console(stderr: bool = False) -> Console:
+    return Console(stderr=stderr, highlight=False, soft_wrap=stderr)
 
 
-def parse_key_values(items: Sequence[str] | None, what: str) -> dict[str, Any]:
-    """Parse ``key=value`` strings; values are Python literals when they parse as such."""
-    out: dict[str, Any] = {}
-    for item in items or ():
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise SystemExit(f"error: {what} '{item}' must look like key=value")
-        out[key.replace("-", "_")] = _parse_value(value)
-    return out
+def _check_env_id(env_id: str) -> str:
+    """The env id, or a ValueError with the closest registered ids."""
+    import unitrack_env
 
-
-def table_columns(task: str, rows: list[dict[str, float]]) -> list[str]:
-    """The task's columns that occur in ``rows`` (or the first metrics, for unknown tasks)."""
-    present = {key for row in rows for key in row}
-    if task in TASK_COLUMNS:
-        return [name for name in TASK_COLUMNS[task] if name in present]
-    seen: list[str] = []
-    for row in rows:
-        seen += [key for key in row if key not in seen]
-    return seen[:FALLBACK_COLUMNS]
-
-
-def metrics_table(
-    per_sequence: dict[str, dict[str, float]],
-    combined: dict[str, float] | None,
-    title: str,
-    fps: dict[str, float] | None = None,
-    task: str = "mot",
-) -> Table:
-    """Build a rich table: one row per sequence plus the combined row (percent, counts)."""
-    rows = list(per_sequence.values()) + ([combined] if combined else [])
-    columns = table_columns(task, rows)
-    table = Table(title=title)
-    table.add_column("sequence")
-    for name in columns:
-        table.add_column(name, justify="right")
-    if fps is not None:
-        table.add_column("FPS", justify="right")
-
-    def cells(metrics: dict[str, float]) -> list[str]:
-        out = []
-        for name in columns:
-            value = metrics.get(name)
-            if value is None or value != value:  # missing or NaN (nothing to score)
-                out.append("-")
-            elif name in COUNT_METRICS:
-                out.append(f"{value:.0f}")
-            else:
-                out.append(f"{100 * value:.1f}")
-        return out
-
-    for name, metrics in per_sequence.items():
-        extra = [f"{fps[name]:.1f}" if name in fps else "-"] if fps is not None else []
-        table.add_row(name, *cells(metrics), *extra)
-    if combined is not None:
-        extra = [""] if fps is not None else []
-        table.add_row("COMBINED", *cells(combined), *extra, style="bold")
-    return table
+    ids = unitrack_env.env_ids()
+    if env_id in ids:
+        return env_id
+    close = difflib.get_close_matches(env_id, ids, n=3, cutoff=0.5)
+    hint = f"did you mean {' or '.join(close)}? " if close else ""
+    raise ValueError(f"unknown environment '{env_id}'; {hint}`unitrack list` shows all ids")
 
 
 def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    kwargs = parse_key_values(args.env_arg, "--env-arg")
+    """The environment arguments from the command line, checked against the env's options."""
+    import gymnasium as gym
+
+    from unitrack_env.agents.options import parse_options
+
+    env_id = _check_env_id(args.env)
+    import unitrack_env
+
+    unitrack_env.register_all()
+    cls = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point)
+    kwargs = parse_options(cls, args.env_arg or [], agent=env_id, kind="environment",
+                           extra=GYM_MAKE_OPTIONS)
     if args.root is not None:
-        kwargs["root"] = str(Path(args.root).resolve())
+        kwargs["root"] = str(Path(args.root).expanduser().resolve())
     if getattr(args, "split", None):
         kwargs["split"] = args.split
     if getattr(args, "detections", None):
@@ -117,51 +78,77 @@ def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return kwargs
 
 
+def _agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    from unitrack_env.agents import agent_class
+    from unitrack_env.agents.options import parse_options
+
+    return parse_options(agent_class(args.agent), args.agent_arg or [], agent=args.agent)
+
+
+def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
+                   task: str, fmt: str, fps: dict | None = None) -> None:
+    from unitrack_env.evaluation.tables import metrics_csv, metrics_json, metrics_table
+
+    if fmt == "json":
+        console.print(metrics_json(per_sequence, combined), markup=False, soft_wrap=True)
+    elif fmt == "csv":
+        console.print(metrics_csv(per_sequence, combined, task), markup=False, end="",
+                      soft_wrap=True)
+    else:
+        table, dropped = metrics_table(per_sequence, combined, title, fps, task,
+                                       width=console.width)
+        console.print(table)
+        if dropped:
+            console.print(f"({len(dropped)} more column(s) do not fit: {', '.join(dropped)}; "
+                          "--format csv shows every metric)", markup=False)
+
+
 def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
+    import unitrack_env
     from unitrack_env.evaluation.runner import run
 
-    sequences = args.sequences.split(",") if args.sequences else None
-    report = run(
-        args.env,
-        args.agent,
-        out=args.out,
-        env_kwargs=_env_kwargs(args),
-        agent_kwargs=parse_key_values(args.agent_arg, "--agent-arg"),
-        sequences=sequences,
-        workers=args.workers,
-        overwrite=args.overwrite,
-        progress=not args.quiet,
-    )
+    env_kwargs = _env_kwargs(args)
+    agent_kwargs = _agent_kwargs(args)
+    report = run(args.env, args.agent, out=args.out, env_kwargs=env_kwargs,
+                 agent_kwargs=agent_kwargs,
+                 sequences=args.sequences.split(",") if args.sequences else None,
+                 workers=args.workers, overwrite=args.overwrite,
+                 progress=not args.quiet and args.format == "table")
+    log = console if args.format == "table" else _console(stderr=True)
     if report.skipped:
-        console.print(f"resumed: {len(report.skipped)} finished sequence(s) were kept: "
-                      f"{', '.join(report.skipped)}")
-    fps = {name: record.fps for name, record in report.records.items()}
+        log.print(f"resumed: kept {len(report.skipped)} finished sequence(s): "
+                  f"{', '.join(report.skipped)}", markup=False)
+    for name, why in report.replayed.items():
+        log.print(f"replayed {name}: {why}", markup=False)
     if report.scores is None:
-        console.print(f"{len(report.records)} sequence(s) written to {report.out / 'data'} "
-                      "(no ground truth in this split, nothing to score)")
+        log.print(f"{len(report.records)} sequence(s) written to {report.out / 'data'} "
+                  "(no ground truth in this split, nothing to score)", markup=False)
     else:
-        import unitrack_env
-
-        console.print(metrics_table(report.scores.per_sequence, report.scores.combined,
-                                    f"{args.agent} on {args.env}", fps,
-                                    task=unitrack_env.task_of(args.env)))
-    console.print(f"metrics: {report.out / 'metrics.json'}")
+        fps = {name: record.fps for name, record in report.records.items()}
+        _print_metrics(console, report.scores.per_sequence, report.scores.combined,
+                       f"{args.agent} on {args.env}", unitrack_env.task_of(args.env),
+                       args.format, fps)
+    log.print(f"metrics: {report.out / 'metrics.json'}", markup=False)
     return 0
 
 
 def _cmd_score(args: argparse.Namespace, console: Console) -> int:
+    import json
+
     sequences = args.sequences.split(",") if args.sequences else None
     if args.env:
         import gymnasium as gym
 
         import unitrack_env
 
-        env = gym.make(args.env, **_env_kwargs(args))
-        base = env.unwrapped
-        names = sequences or [n for n in base.sequence_names if base.has_ground_truth(n)]
-        report = base.score_folder(Path(args.results), names)
+        env = gym.make(_check_env_id(args.env), **_env_kwargs(args))
+        try:
+            base = env.unwrapped
+            names = sequences or [n for n in base.sequence_names if base.has_ground_truth(n)]
+            report = base.score_folder(Path(args.results), names)
+        finally:
+            env.close()
         task = unitrack_env.task_of(args.env)
-        env.close()
     elif args.benchmark and args.gt:
         from unitrack_env.metrics.motchallenge import score_folder
 
@@ -171,112 +158,191 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     else:
         raise ValueError("score needs --env ID [--root DIR] [--split S], or (MOTChallenge) "
                          "--benchmark MOT17 --gt DIR")
-    console.print(metrics_table(report.per_sequence, report.combined, f"{args.results}",
-                                task=task))
+    _print_metrics(console, report.per_sequence, report.combined, str(args.results), task,
+                   args.format)
     if args.out:
         from unitrack_env.evaluation.runner import json_safe
+        from unitrack_env.io import atomic_write_text
 
-        Path(args.out).write_text(json.dumps(json_safe(json.loads(report.to_json())), indent=2))
-        console.print(f"metrics: {args.out}")
+        atomic_write_text(args.out, json.dumps(json_safe(json.loads(report.to_json())),
+                                               indent=2))
+        _console(stderr=True).print(f"metrics: {args.out}", markup=False)
     return 0
 
 
 def _cmd_render(args: argparse.Namespace, console: Console) -> int:
-    from unitrack_env.evaluation.video import render_episode
+    from unitrack_env.evaluation.video import check_video_path, render_episode
 
-    frames = render_episode(
-        args.env, args.agent, args.sequence, args.out,
-        env_kwargs=_env_kwargs(args),
-        agent_kwargs=parse_key_values(args.agent_arg, "--agent-arg"),
-        fps=args.fps,
-    )
-    console.print(f"wrote {frames} frames to {args.out}")
+    check_video_path(args.out)
+    frames = render_episode(args.env, args.agent, args.sequence, args.out,
+                            env_kwargs=_env_kwargs(args), agent_kwargs=_agent_kwargs(args),
+                            fps=args.fps)
+    console.print(f"wrote {frames} frames to {args.out}", markup=False)
     return 0
 
 
 def _cmd_list(args: argparse.Namespace, console: Console) -> int:
-    import unitrack_env
-    from unitrack_env.agents import available_agents
+    from rich.table import Table
 
-    table = Table(title="environments")
-    table.add_column("id")
-    table.add_column("task")
+    import unitrack_env
+    from unitrack_env.agents import agent_class, available_agents
+    from unitrack_env.agents.loading import entry_point_agents
+
+    envs = Table(title="environments", title_justify="left")
+    envs.add_column("id", no_wrap=True)
+    envs.add_column("task")
     for variant in unitrack_env.VARIANTS:
-        table.add_row(variant.env_id, variant.task)
-    console.print(table)
-    console.print("agents: " + ", ".join(available_agents()))
+        envs.add_row(variant.env_id, variant.task)
+    console.print(envs)
+    plugins = entry_point_agents()
+    agents = Table(title="agents (--agent NAME, or module:Class, or file.py:Class)",
+                   title_justify="left")
+    for column in ("name", "tasks", "from"):
+        agents.add_column(column, no_wrap=column == "name")
+    for name in available_agents():
+        try:
+            tasks = ", ".join(getattr(agent_class(name), "tasks", ()))
+        except Exception as exc:  # a broken plug-in must not hide the others
+            tasks = f"(cannot load: {type(exc).__name__})"
+        source = f"plug-in {plugins[name].value}" if name in plugins else "unitrack-env"
+        agents.add_row(name, tasks, source)
+    console.print(agents)
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``unitrack``."""
-    parser = argparse.ArgumentParser(prog="unitrack", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+def _cmd_doctor(args: argparse.Namespace, console: Console) -> int:
+    from unitrack_env.evaluation.doctor import diagnose
 
-    def env_options(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--env", required=True, help="environment id, e.g. UniTrack/MOT17-v0")
-        p.add_argument("--root", help="benchmark folder (default: embedded synthetic data)")
-        p.add_argument("--split", help="split folder, e.g. train or test")
-        p.add_argument("--detections", help="'public' or a folder of <sequence>.txt files")
-        p.add_argument("--env-arg", action="append", metavar="KEY=VALUE",
-                       help="extra environment argument (repeatable)")
-        p.add_argument("--agent", required=True, help="agent name (see `unitrack list`)")
+    findings = diagnose()
+    marks = {"ok": "ok     ", "warn": "note   ", "problem": "PROBLEM"}
+    for finding in findings:
+        console.print(f"{marks[finding.status]} {finding.check}: {finding.detail}", markup=False)
+        if finding.fix and finding.status != "ok":
+            console.print(f"        fix: {finding.fix}", markup=False)
+    problems = sum(f.status == "problem" for f in findings)
+    console.print(f"{problems} problem(s)" if problems else "no problems found", markup=False)
+    return 1 if problems else 0
+
+
+def _env_options(p: argparse.ArgumentParser, *, agent: bool = True) -> None:
+    p.add_argument("--env", required=True, help="environment id, e.g. UniTrack/MOT17-v0 "
+                   "(`unitrack list` shows all)")
+    p.add_argument("--root", help="benchmark folder as the benchmark ships it (default: "
+                   "$UNITRACK_DATA/<benchmark>, else the embedded synthetic data)")
+    p.add_argument("--split", help="split folder, e.g. train, val or test")
+    p.add_argument("--detections", help="association tasks: 'public' (the benchmark's "
+                   "detections) or a folder of <sequence>.txt files in the same format")
+    p.add_argument("--env-arg", action="append", metavar="KEY=VALUE",
+                   help="another environment argument, checked against the environment's "
+                   "options (repeatable), e.g. --env-arg min_score=0.3")
+    if agent:
+        p.add_argument("--agent", required=True, help="agent: a name from `unitrack list`, "
+                       "package.module:ClassName, or path/to/file.py:ClassName")
         p.add_argument("--agent-arg", action="append", metavar="KEY=VALUE",
-                       help="agent argument, e.g. --agent-arg min_score=0.5 (repeatable)")
+                       help="agent option, checked against the agent's options by name and "
+                       "type (repeatable), e.g. --agent-arg weights=moco.pth")
 
-    ev = sub.add_parser("evaluate", help="run an agent on every sequence and score it")
-    env_options(ev)
-    ev.add_argument("--out", required=True, help="output folder (resumed if it exists)")
+
+def _format_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--format", choices=("table", "json", "csv"), default="table",
+                   help="how to print the metrics (default: a table fitted to the terminal)")
+
+
+def _add_commands(sub: Any) -> None:
+    def command(name: str, help_text: str) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=help_text, description=help_text,
+                              epilog=EXAMPLES.get(name),
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+
+    ev = command("evaluate", "run an agent on every sequence of an environment and score it")
+    _env_options(ev)
+    ev.add_argument("--out", required=True, help="output folder: results in the official "
+                    "format, per-sequence records, metrics.json (an existing run is resumed)")
     ev.add_argument("--sequences", help="comma-separated sequence names (default: all)")
-    ev.add_argument("--workers", type=int, default=1, help="parallel worker processes")
-    ev.add_argument("--overwrite", action="store_true", help="discard a previous run in --out")
+    ev.add_argument("--workers", type=int, default=1,
+                    help="parallel worker processes, one sequence each (default: 1)")
+    ev.add_argument("--overwrite", action="store_true",
+                    help="discard a previous run in --out instead of resuming it")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    _format_option(ev)
     ev.set_defaults(func=_cmd_evaluate)
 
-    sc = sub.add_parser("score", help="score a folder of result files in the official format")
+    sc = command("score", "score a folder of result files in the official format")
     sc.add_argument("--env", help="environment id whose data and metrics to use")
     sc.add_argument("--root", help="benchmark folder (with --env; default: synthetic data)")
     sc.add_argument("--split", help="split folder (with --env)")
     sc.add_argument("--env-arg", action="append", metavar="KEY=VALUE",
-                    help="extra environment argument (with --env, repeatable)")
+                    help="another environment argument (with --env, repeatable)")
     sc.add_argument("--benchmark", help="MOTChallenge shortcut: MOT15, MOT16, MOT17 or MOT20")
     sc.add_argument("--gt", help="MOTChallenge shortcut: folder of sequences with gt/gt.txt")
     sc.add_argument("--results", required=True,
                     help="results folder (as written by `unitrack evaluate` under <out>/data)")
     sc.add_argument("--sequences", help="comma-separated sequence names (default: all files)")
-    sc.add_argument("--out", help="write the metrics as JSON here")
+    sc.add_argument("--out", help="also write the metrics as JSON to this file")
+    _format_option(sc)
     sc.set_defaults(func=_cmd_score)
 
-    rd = sub.add_parser("render", help="write a video of an agent's tracks on one sequence")
-    env_options(rd)
-    rd.add_argument("--sequence", required=True)
-    rd.add_argument("--out", required=True, help="video file (.mp4 or .avi)")
+    rd = command("render", "write a video of an agent's tracks on one sequence")
+    _env_options(rd)
+    rd.add_argument("--sequence", required=True,
+                    help="the sequence to play (its name in the data set, e.g. MOT17-04-FRCNN)")
+    rd.add_argument("--out", required=True,
+                    help="video file: .mp4 (H.264, needs the video extra) or .avi (MJPEG)")
     rd.add_argument("--fps", type=float, default=None,
                     help="video frame rate (default: the sequence's)")
     rd.set_defaults(func=_cmd_render)
 
-    ls = sub.add_parser("list", help="list environments and agents")
-    ls.set_defaults(func=_cmd_list)
+    command("list", "list environments and agents").set_defaults(func=_cmd_list)
+    command("doctor", "check that this environment can run and score every task (exit "
+            "status 1 on a problem, with the fix)").set_defaults(func=_cmd_doctor)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``unitrack``."""
+    import unitrack_env
+
+    parser = argparse.ArgumentParser(
+        prog="unitrack", description=__doc__.split("\n")[0],
+        epilog="`unitrack COMMAND --help` shows each command's options and examples.",
+    )
+    parser.add_argument("--version", action="version",
+                        version=f"unitrack-env {unitrack_env.__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_commands(sub)
     return parser
 
 
+def _error_text(exc: BaseException) -> str:
+    if isinstance(exc, KeyError) and exc.args and type(exc) is KeyError:
+        return str(exc.args[0])
+    text = str(exc) or type(exc).__name__
+    known = (ValueError, KeyError, OSError, ImportError, RuntimeError)
+    return text if isinstance(exc, known) else f"{type(exc).__name__}: {text}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``unitrack`` command."""
+    """Entry point of the ``unitrack`` command; returns the exit status."""
     args = build_parser().parse_args(argv)
-    # Tables are wide; rich assumes 80 columns when output is not a terminal.
-    console = Console(width=None if sys.stdout.isatty() else 160)
+    console = _console()
     try:
         return args.func(args, console)
     except KeyboardInterrupt:
-        console.print("[yellow]interrupted[/]: finished sequences are kept; run the same "
-                      "command again to resume")
+        _console(stderr=True).print("interrupted: finished sequences are kept; run the same "
+                                    "command again to resume", markup=False)
         return 130
-    except (ValueError, KeyError, FileNotFoundError, ImportError) as exc:
-        message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        console.print(f"[red]error:[/] {message}", highlight=False)
-        return 2
+    except Exception as exc:
+        errors = _console(stderr=True)
+        if args.debug:
+            errors.print("".join(traceback.format_exception(exc)), markup=False)
+        from unitrack_env.evaluation.runner import RunFailed
+
+        errors.print(f"error: {_error_text(exc)}", markup=False)
+        if not args.debug:
+            errors.print("(--debug shows the traceback)", markup=False, style="dim")
+        return 1 if isinstance(exc, RunFailed) else 2
 
 
 if __name__ == "__main__":
     sys.exit(main())
-

@@ -220,8 +220,8 @@ def _stale_reason(out: Path, base: Any, name: str, inputs: str) -> str | None:
 
 
 def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int,
-                   env_id: str) -> tuple[str, str | None]:
-    """The agent's name for the record and its importable reference; options checked."""
+                   env_id: str) -> tuple[type, str, str | None]:
+    """The agent class, its name for the record and its importable reference (checked)."""
     cls = agent if isinstance(agent, type) else agent_class(agent)
     name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
     check_options(cls, agent_kwargs, agent=name)
@@ -239,7 +239,7 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int
             "python -c), so worker processes cannot import it; move it to a module (or a "
             ".py file and pass 'path/to/file.py:ClassName'), or use workers=1"
         )
-    return name, reference
+    return cls, name, reference
 
 
 def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
@@ -335,7 +335,7 @@ def run(
             to resume once the cause is fixed).
     """
     agent_kwargs = dict(agent_kwargs or {})
-    name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
+    cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
     env = spec.make_env()
@@ -343,7 +343,7 @@ def run(
         base = env.unwrapped
         names = base._select_sequences(list(sequences) if sequences is not None else None,
                                        list(base.sequence_names), env_id)
-        agent_obj = (agent(**agent_kwargs) if isinstance(agent, type) else spec.make_agent())
+        agent_obj = cls(**agent_kwargs)
     except BaseException:
         env.close()
         raise

@@ -6,6 +6,7 @@
 True
 """
 
+from unitrack_env import vector as _vector  # noqa: F401 - shared memory for vector envs
 from unitrack_env.registration import VARIANTS, env_ids, register_all, task_of
 
 __version__ = "0.1.0"

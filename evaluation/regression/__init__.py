@@ -6,19 +6,23 @@ readable diff when a metric moves beyond its tolerance::
     def test_my_tracker(episode_regression):
         episode_regression.check(
             "UniTrack/MOT16-v0", agent="my-tracker", sequence="SYN-01",
-            golden="tests/goldens/my-tracker-syn01.json",
+            golden="goldens/my-tracker-syn01.json",  # next to the test file
         )
 
 Run ``pytest --update-goldens`` to (re)record. The fixture comes from the pytest plugin that
 unitrack-env registers (``unitrack_env.evaluation.regression.plugin``).
 """
 
-from unitrack_env.evaluation.regression.golden import (
-    EpisodeRecord,
-    GoldenMismatch,
-    check_episode,
-    compare_records,
-    record_episode,
-)
+from typing import Any
 
 __all__ = ["EpisodeRecord", "GoldenMismatch", "check_episode", "compare_records", "record_episode"]
+
+
+def __getattr__(name: str) -> Any:
+    # Lazy: the pytest plugin (a submodule) loads in every pytest session of the environment
+    # and must not import the environments and agents until a test uses them.
+    if name in __all__:
+        from unitrack_env.evaluation.regression import golden
+
+        return getattr(golden, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

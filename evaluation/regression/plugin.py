@@ -1,12 +1,16 @@
-"""pytest plugin: the ``episode_regression`` fixture and the ``--update-goldens`` flag."""
+"""pytest plugin: the ``episode_regression`` fixture and the ``--update-goldens`` flag.
+
+Installed with unitrack-env (entry point ``pytest11``), so it loads in every pytest session
+of the environment: it imports nothing but pytest until a test uses the fixture.
+"""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import pytest
-
-from unitrack_env.evaluation.regression.golden import EpisodeRecord, check_episode
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -19,18 +23,44 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 class EpisodeRegression:
-    """What the ``episode_regression`` fixture hands to a test."""
+    """What the ``episode_regression`` fixture hands to a test.
 
-    def __init__(self, update: bool) -> None:
+    Args:
+        update: re-record instead of comparing (``--update-goldens``).
+        base: folder that relative golden paths are resolved against (the test file's).
+    """
+
+    def __init__(self, update: bool, base: Path) -> None:
         self.update = update
+        self.base = base
 
-    def check(self, env_id: str, *, agent: str, sequence: str, golden: Any,
-              **kwargs: Any) -> EpisodeRecord:
-        """Replay and compare (see :func:`unitrack_env.evaluation.regression.check_episode`)."""
-        return check_episode(env_id, agent, sequence, golden, update=self.update, **kwargs)
+    def golden_path(self, golden: str | os.PathLike) -> Path:
+        """``golden`` resolved against the test file's folder when relative."""
+        path = Path(golden)
+        return path if path.is_absolute() else self.base / path
+
+    def check(self, env_id: str, *, agent: str, sequence: str, golden: str | os.PathLike,
+              **kwargs: Any) -> Any:
+        """Replay and compare (see :func:`unitrack_env.evaluation.regression.check_episode`).
+
+        Fails with the metric diff alone; skips (with the reason) when the episode's data
+        root is missing, so a clone without the benchmark data passes.
+        """
+        __tracebackhide__ = True
+        from unitrack_env.envs.base import DataRootNotFound
+        from unitrack_env.evaluation.regression.golden import GoldenMismatch, check_episode
+
+        try:
+            return check_episode(env_id, agent, sequence, self.golden_path(golden),
+                                 update=self.update, **kwargs)
+        except DataRootNotFound as exc:
+            pytest.skip(f"no data for {env_id}: {exc}")
+        except GoldenMismatch as exc:
+            pytest.fail(str(exc), pytrace=False)
 
 
 @pytest.fixture
 def episode_regression(request: pytest.FixtureRequest) -> EpisodeRegression:
     """Replay an agent on a recorded episode and fail on metric drift."""
-    return EpisodeRegression(bool(request.config.getoption("--update-goldens")))
+    return EpisodeRegression(bool(request.config.getoption("--update-goldens")),
+                             Path(request.path).parent)

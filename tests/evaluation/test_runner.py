@@ -109,13 +109,13 @@ def test_cli_evaluate_score_and_errors(tmp_path, capsys):
     scored = json.loads((tmp_path / "s.json").read_text())
     assert scored["combined"]["HOTA"] == pytest.approx(gt["combined"]["HOTA"])
     assert main(["evaluate", "--env", ENV, "--agent", "nope", "--out", str(tmp_path / "x")]) == 2
-    assert "unknown agent 'nope'" in capsys.readouterr().out
+    assert "unknown agent 'nope'" in capsys.readouterr().err
     bad = tmp_path / "bad"
     bad.mkdir()
     (bad / "SYN-01.txt").write_text("1,1,a,2,3,4,1,-1,-1,-1\n")
     assert main(["score", "--benchmark", "MOT16", "--gt", str(ensure_synthetic("MOT16") / "train"),
                  "--results", str(bad)]) == 2
-    assert "line 1" in capsys.readouterr().out
+    assert "line 1" in capsys.readouterr().err
 
 
 def test_render_command_writes_a_video(tmp_path):

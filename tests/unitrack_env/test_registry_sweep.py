@@ -84,3 +84,36 @@ def test_results_contract(env_id, tmp_path):
         report = base.score_folder(tmp_path, [name])
         assert set(report.per_sequence) == {name} and report.combined
     env.close()
+
+
+def _first(batch, index=0):
+    """Environment ``index``'s part of a batched observation (dicts, arrays or tuples)."""
+    if isinstance(batch, dict):
+        return {key: _first(value, index) for key, value in batch.items()}
+    return batch[index]
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_async_vector_env_with_shared_memory(env_id):
+    from gymnasium.vector.utils import concatenate, create_empty_array
+
+    envs = gym.make_vec(env_id, num_envs=2, vectorization_mode="async")  # shared memory on
+    single = gym.make(env_id)
+    try:
+        observation, _ = envs.reset(seed=0)
+        expected, _ = single.reset(seed=0)
+        _assert_same(_first(observation), expected)
+        single.action_space.seed(0)
+        action = single.action_space.sample()  # narrowed to this episode by the env
+        if isinstance(action, dict):
+            action = {k: min(v, 3) if k.startswith("num_") else v for k, v in action.items()}
+        space = envs.single_action_space
+        batch = concatenate(space, [action, action], create_empty_array(space, n=2))
+        for _ in range(2):
+            observation, reward, *_ = envs.step(batch)
+            expected, expected_reward, *_ = single.step(action)
+            _assert_same(_first(observation, 1), expected)
+            assert reward[1] == pytest.approx(expected_reward)
+    finally:
+        envs.close()
+        single.close()

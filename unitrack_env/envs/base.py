@@ -27,6 +27,10 @@ from unitrack_env.metrics.report import ScoreReport
 DATA_ENV_VAR = "UNITRACK_DATA"
 
 
+class DataRootNotFound(DataFormatError):
+    """The data folder that ``root=`` or ``$UNITRACK_DATA`` names does not exist."""
+
+
 def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path | None:
     """Return the data root to read, or None for the embedded synthetic default.
 
@@ -36,13 +40,13 @@ def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path 
     if root is not None:
         path = Path(root).expanduser()
         if not path.is_dir():
-            raise DataFormatError(path, "root= is not a folder")
+            raise DataRootNotFound(path, "root= is not a folder")
         return path
     base = os.environ.get(DATA_ENV_VAR)
     if base:
         path = Path(base).expanduser() / benchmark_folder
         if not path.is_dir():
-            raise DataFormatError(
+            raise DataRootNotFound(
                 path,
                 f"{DATA_ENV_VAR}={base} is set but has no '{benchmark_folder}' folder; "
                 f"unset it to use the embedded synthetic data, or pass root=",
