@@ -29,7 +29,7 @@ import hashlib
 import math
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -60,6 +60,12 @@ from unitrack_env.agents.appearance.efficientnet_lite import (
     EfficientNetLite0,
 )
 from unitrack_env.agents.appearance.resnet import RESNET_SPECS, ResNet, infer_resnet_arch
+from unitrack_env.agents.appearance.runtime import (
+    TORCH,
+    CompiledBackbone,
+    FeatureNetwork,
+    resolve_runtime,
+)
 
 FEATURE_STRIDE: int = 8
 """Stride of every feature map this model produces (UniTrack's r = 8)."""
@@ -192,6 +198,10 @@ class ModelIdentity:
             module that computes the output layer (names, dtypes, shapes and values).
         mean: Input normalisation mean.
         std: Input normalisation standard deviation.
+        runtime: Engine that computes the features (``"torch"``, ``"openvino"``,
+            ``"onnxruntime"``; see :mod:`~unitrack_env.agents.appearance.runtime`). Engines
+            agree to float rounding (cosine >= 0.9999), not bit for bit, so caches keep them
+            apart.
     """
 
     arch: str
@@ -200,10 +210,17 @@ class ModelIdentity:
     digest: str
     mean: tuple[float, ...]
     std: tuple[float, ...]
+    runtime: str = TORCH
 
     def key(self) -> str:
-        """A short stable string that changes whenever the features could change."""
+        """A short stable string that changes whenever the features could change.
+
+        The torch runtime keeps the key it had before runtimes existed (old caches stay
+        valid); every other runtime adds its name.
+        """
         text = f"{self.arch}|{self.layer}|{self.digest}|{self.mean}|{self.std}"
+        if self.runtime != TORCH:
+            text += f"|{self.runtime}"
         return hashlib.sha256(text.encode()).hexdigest()[:DIGEST_LENGTH]
 
 
@@ -359,6 +376,14 @@ class AppearanceModel:
             to float rounding; on the project's 2-core CPU no faster, within noise, for
             EfficientNet-Lite0 or ResNet-18, but it can help on other hardware). The returned
             features are ordinary contiguous tensors either way.
+        runtime: Engine that runs the network: ``"torch"`` (eager, the reference; the only
+            one for CUDA), ``"openvino"`` or ``"onnxruntime"`` (the network exported to ONNX
+            once per input size, float32; optional extras ``unitrack-env[openvino]`` /
+            ``[onnxruntime]``), ``"auto"`` (the fastest installed) or None (the environment
+            variable ``UNITRACK_RUNTIME``, default ``"torch"``). See
+            :mod:`~unitrack_env.agents.appearance.runtime`.
+        runtime_cache: Directory of the exported graphs (None: ``$UNITRACK_RUNTIME_CACHE`` or
+            ``~/.cache/unitrack_env/runtime``).
 
     Attributes:
         module: The ``nn.Module`` (in eval mode, on ``device``).
@@ -367,6 +392,7 @@ class AppearanceModel:
         layers: The output layers (one, or the parts of a hypercolumn).
         channels: Channels of the feature map (summed over hypercolumn parts).
         stride: Always :data:`FEATURE_STRIDE`.
+        runtime: The concrete runtime (``"auto"`` and None resolved).
 
     Example:
         >>> model = AppearanceModel()            # EfficientNet-Lite0, ImageNet, offline
@@ -391,6 +417,8 @@ class AppearanceModel:
         allow_partial: bool = False,
         seed: int = 0,
         channels_last: bool = False,
+        runtime: str | None = None,
+        runtime_cache: str | os.PathLike[str] | None = None,
     ) -> None:
         if num_threads is not None and num_threads < 1:
             raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
@@ -398,6 +426,7 @@ class AppearanceModel:
             raise ValueError(f"unknown arch {arch!r}; valid: {ARCHITECTURES}")
         self.device = torch.device(device)
         self.num_threads = num_threads
+        self.runtime = resolve_runtime(runtime, self.device)
         resolved = self._resolve(weights, arch, remap, loaders)
         self.arch = resolved.arch
         self.layer = layer if layer is not None else DEFAULT_LAYERS[self.arch]
@@ -438,8 +467,15 @@ class AppearanceModel:
         self.stride = FEATURE_STRIDE
         self.identity = ModelIdentity(
             self.arch, self.layer, source.name, weights_digest(self.module, required),
-            self.mean, self.std,
+            self.mean, self.std, self.runtime,
         )
+        self._network = FeatureNetwork(self.module, self.layers, _combine_layers)
+        self._compiled: CompiledBackbone | None = None
+        if self.runtime != TORCH:
+            self._compiled = CompiledBackbone(
+                self.runtime, self._network, replace(self.identity, runtime=TORCH).key(),
+                num_threads=num_threads, cache_dir=runtime_cache,
+            )
         self._mean_t = torch.tensor(self.mean, device=self.device).view(1, 3, 1, 1)
         self._std_t = torch.tensor(self.std, device=self.device).view(1, 3, 1, 1)
 
@@ -550,14 +586,12 @@ class AppearanceModel:
         """
         with self._threads(), torch.inference_mode():
             x = self.preprocess(images)
-            if self.channels_last:
-                x = x.contiguous(memory_format=torch.channels_last)
-            maps = self.module.forward_layers(x, self.layers)
-            if len(maps) == 1:
-                out = maps[0].contiguous()
-            else:  # hypercolumn: unit vectors per layer, equal weights, unit norm overall
-                scale = 1.0 / math.sqrt(len(maps))
-                out = torch.cat([F.normalize(m, dim=1, eps=NORM_EPS) * scale for m in maps], 1)
+            if self._compiled is not None:
+                out = self._compiled(x)
+            else:
+                if self.channels_last:
+                    x = x.contiguous(memory_format=torch.channels_last)
+                out = self._network(x).contiguous()
         expected = (math.ceil(x.shape[2] / FEATURE_STRIDE), math.ceil(x.shape[3] / FEATURE_STRIDE))
         if tuple(out.shape[2:]) != expected:  # an architecture bug, never user input
             raise RuntimeError(f"feature map {tuple(out.shape)} is not stride 8 of {x.shape}")
@@ -577,7 +611,7 @@ class AppearanceModel:
             "arch": self.identity.arch, "layer": self.identity.layer,
             "weights": self.identity.weights, "digest": self.identity.digest,
             "mean": list(self.mean), "std": list(self.std), "channels": self.channels,
-            "stride": self.stride, "device": str(self.device),
+            "stride": self.stride, "device": str(self.device), "runtime": self.runtime,
         }
         if self.load_report is not None:
             info["load"] = self.load_report.summary()
@@ -586,8 +620,17 @@ class AppearanceModel:
     def __repr__(self) -> str:
         return (
             f"AppearanceModel(arch={self.arch!r}, layer={self.layer!r}, "
-            f"weights={self.identity.weights!r}, digest={self.identity.digest!r})"
+            f"weights={self.identity.weights!r}, digest={self.identity.digest!r}, "
+            f"runtime={self.runtime!r})"
         )
+
+
+def _combine_layers(maps: list[torch.Tensor]) -> torch.Tensor:
+    """One layer's map as is; several as a hypercolumn (see :func:`split_layers`)."""
+    if len(maps) == 1:
+        return maps[0]
+    scale = 1.0 / math.sqrt(len(maps))  # unit vectors per layer, equal weights, unit norm
+    return torch.cat([F.normalize(m, dim=1, eps=NORM_EPS) * scale for m in maps], 1)
 
 
 def _infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:

@@ -69,6 +69,8 @@ class UniTrackPoseConfig:
         layer: Output layer (None: the architecture's default stride-8 layer).
         device: Torch device.
         num_threads: Torch threads while the agent acts (None: torch's setting).
+        runtime: Appearance-model runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``,
+            ``"auto"`` (fastest installed) or None (``$UNITRACK_RUNTIME``, default torch).
         input_size: ``(width, height)`` the frames are resized to (None: native size).
         sigma_eta: ``eta`` of ``sigma = max(eta * s_body, min_sigma)``.
         min_sigma: Least sigma (feature pixels).
@@ -82,6 +84,7 @@ class UniTrackPoseConfig:
     layer: str | None = None
     device: str = "cpu"
     num_threads: int | None = None
+    runtime: str | None = None
     input_size: tuple[int, int] | None = POSE_INPUT_SIZE
     sigma_eta: float = SIGMA_ETA
     min_sigma: float = MIN_SIGMA

@@ -43,6 +43,8 @@ class UniTrackSOTConfig:
         layer: Output layer (None: the architecture's default stride-8 layer).
         device: Torch device.
         num_threads: Torch threads while the agent acts (None: torch's setting).
+        runtime: Appearance-model runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``,
+            ``"auto"`` (fastest installed) or None (``$UNITRACK_RUNTIME``, default torch).
         pixel_origin: Coordinate of the first pixel in the boxes (OTB: 1).
         propagation: Fields of :class:`BoxPropagationConfig` to override (crop_size,
             context, scale_step, dcf_lambda, ...; ``method`` is set by the agent).
@@ -53,6 +55,7 @@ class UniTrackSOTConfig:
     layer: str | None = None
     device: str = "cpu"
     num_threads: int | None = None
+    runtime: str | None = None
     pixel_origin: float = OTB_PIXEL_ORIGIN
     propagation: dict[str, Any] | None = None
 

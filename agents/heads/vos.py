@@ -45,6 +45,8 @@ class UniTrackVOSConfig:
         layer: Output layer (None: the architecture's default stride-8 layer).
         device: Torch device.
         num_threads: Torch threads while the agent acts (None: torch's setting).
+        runtime: Appearance-model runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``,
+            ``"auto"`` (fastest installed) or None (``$UNITRACK_RUNTIME``, default torch).
         propagation: Fields of :class:`LabelPropagationConfig` to override (memory_size,
             radius, topk, temperature, ...).
         antialias: Antialias the bilinear downsampling of the first frame's labels to the
@@ -56,6 +58,7 @@ class UniTrackVOSConfig:
     layer: str | None = None
     device: str = "cpu"
     num_threads: int | None = None
+    runtime: str | None = None
     propagation: dict[str, Any] | None = None
     antialias: bool = True
 
@@ -74,11 +77,15 @@ def make_propagation_config(options: dict[str, Any] | None) -> LabelPropagationC
 
 
 def build_model(config: Any, model: AppearanceModel | None) -> AppearanceModel:
-    """The shared model if given, else one built from ``config``'s weights/arch/layer/device."""
+    """The shared model if given, else one built from ``config``'s model options.
+
+    Those are ``weights``, ``arch``, ``layer``, ``device``, ``num_threads`` and ``runtime``.
+    """
     if model is not None:
         return model
     return AppearanceModel(config.weights, arch=config.arch, layer=config.layer,
-                           device=config.device)
+                           device=config.device, runtime=getattr(config, "runtime", None),
+                           num_threads=config.num_threads)
 
 
 def labels_to_onehot(labels: np.ndarray, object_ids: tuple[int, ...]) -> torch.Tensor:

@@ -1,0 +1,254 @@
+"""Compiled CPU runtimes for the appearance model: OpenVINO and ONNX Runtime.
+
+:class:`~unitrack_env.agents.appearance.AppearanceModel` runs its network in eager torch by
+default. With ``runtime="openvino"`` or ``runtime="onnxruntime"`` the same network (any
+architecture, layer or hypercolumn, with the loaded weights) is exported to ONNX once per
+input size and run by that engine; the preprocessing (uint8 -> normalised float) stays in
+torch and the features come back as torch tensors, so the heads see no difference.
+
+* **Export.** The network is traced per input ``(height, width)`` (EfficientNet-Lite0's
+  TensorFlow "SAME" padding depends on the size, so the traced graph is size-specific) with a
+  dynamic batch axis. The ONNX file is cached on disk, keyed by the model identity (weights
+  digest, architecture, layer), the input size and the torch version:
+  ``<cache dir>/<identity key>-<H>x<W>-<torch version>.onnx``, written atomically. The cache
+  directory is ``$UNITRACK_RUNTIME_CACHE``, else ``$XDG_CACHE_HOME/unitrack_env/runtime``,
+  else ``~/.cache/unitrack_env/runtime``. Exporting needs the PyPI package ``onnx``.
+* **Compile.** OpenVINO compiles per full input shape (batch included; a static shape is what
+  it optimises best), ONNX Runtime keeps one session per input size. Both are kept in memory
+  for the life of the model.
+* **Precision.** Float32 throughout. OpenVINO's CPU plugin would pick bfloat16 by itself on a
+  CPU with AVX512-BF16 (this project's CPU has it: about 2x faster again, but features
+  cosine ~0.9993, max abs diff ~1); we pin ``INFERENCE_PRECISION_HINT=f32`` (cosine
+  1.0000000, max abs diff ~6e-5 against eager torch).
+* **Threads.** Each engine gets the model's ``num_threads`` (None: torch's current
+  setting at build time), so 2 cores run 2 threads, without oversubscription; ONNX Runtime
+  runs one inter-op thread.
+
+Choice of runtime: :func:`resolve_runtime` maps ``None`` to ``$UNITRACK_RUNTIME`` (default
+``"torch"``) and ``"auto"`` to the fastest installed engine (:data:`AUTO_ORDER`: OpenVINO, then
+ONNX Runtime, then torch; measured on the project's 2-core CPU at 1088 x 608: ~4x and ~2x eager
+torch). Only torch runs on CUDA; ``"auto"`` on a CUDA device is torch.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import os
+import tempfile
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+TORCH: str = "torch"
+OPENVINO: str = "openvino"
+ONNXRUNTIME: str = "onnxruntime"
+AUTO: str = "auto"
+
+RUNTIMES: tuple[str, ...] = (TORCH, OPENVINO, ONNXRUNTIME)
+"""Runtimes the appearance model can run on (plus ``"auto"``)."""
+
+AUTO_ORDER: tuple[str, ...] = (OPENVINO, ONNXRUNTIME, TORCH)
+"""Preference of ``runtime="auto"``: fastest first, as measured on the project's CPU
+(``benchmarks/runtime.py``: EfficientNet-Lite0 stage5 at 1088 x 608, 2 threads)."""
+
+RUNTIME_ENV: str = "UNITRACK_RUNTIME"
+"""Environment variable read when no runtime is given (``runtime=None``)."""
+
+CACHE_ENV: str = "UNITRACK_RUNTIME_CACHE"
+"""Environment variable naming the directory of exported ONNX files."""
+
+RUNTIME_EXTRAS: dict[str, str] = {OPENVINO: "openvino", ONNXRUNTIME: "onnxruntime"}
+"""The ``unitrack-env`` extra that installs each optional runtime."""
+
+ONNX_OPSET: int = 17
+"""ONNX opset of the exported graphs."""
+
+_IMPORT_NAMES: dict[str, tuple[str, ...]] = {
+    OPENVINO: ("openvino", "onnx"), ONNXRUNTIME: ("onnxruntime", "onnx"), TORCH: (),
+}
+
+
+def runtime_installed(name: str) -> bool:
+    """Whether the packages runtime ``name`` needs are importable (torch always is)."""
+    if name not in _IMPORT_NAMES:
+        raise ValueError(f"unknown runtime {name!r}; valid: {RUNTIMES}")
+    return all(importlib.util.find_spec(module) is not None for module in _IMPORT_NAMES[name])
+
+
+def available_runtimes() -> tuple[str, ...]:
+    """The installed runtimes, in :data:`RUNTIMES` order."""
+    return tuple(name for name in RUNTIMES if runtime_installed(name))
+
+
+def resolve_runtime(name: str | None, device: torch.device | str = "cpu") -> str:
+    """The concrete runtime for an option value.
+
+    Args:
+        name: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` (the fastest
+            installed, :data:`AUTO_ORDER`) or None (``$UNITRACK_RUNTIME``, default torch).
+        device: The model's device; only torch runs on a non-CPU device.
+
+    Raises:
+        ValueError: Unknown name, or a compiled runtime asked for on a non-CPU device.
+        ImportError: The named runtime is not installed (the message names the extra).
+    """
+    if name is None:
+        name = os.environ.get(RUNTIME_ENV, "").strip() or TORCH
+    device = torch.device(device)
+    if name == AUTO:
+        if device.type != "cpu":
+            return TORCH
+        return next(r for r in AUTO_ORDER if runtime_installed(r))
+    if name not in RUNTIMES:
+        raise ValueError(f"unknown runtime {name!r}; valid: {(*RUNTIMES, AUTO)} "
+                         f"(or set ${RUNTIME_ENV})")
+    if name != TORCH and device.type != "cpu":
+        raise ValueError(f"runtime {name!r} runs on the CPU only; device is {device}; "
+                         f"use runtime='torch' on {device.type}")
+    if not runtime_installed(name):
+        missing = [m for m in _IMPORT_NAMES[name] if importlib.util.find_spec(m) is None]
+        raise ImportError(
+            f"runtime={name!r} needs {', '.join(missing)}: pip install "
+            f"'unitrack-env[{RUNTIME_EXTRAS[name]}]'"
+        )
+    return name
+
+
+def default_cache_dir() -> Path:
+    """Where exported ONNX graphs are kept (see the module docstring)."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "unitrack_env" / "runtime"
+
+
+class FeatureNetwork(nn.Module):
+    """``images -> features`` as one module: the layers' maps, or their hypercolumn.
+
+    Args:
+        module: A backbone with ``forward_layers(x, layers)``.
+        layers: The output layers (one, or the parts of a hypercolumn).
+        combine: Turns the list of layer maps into the output map (the appearance model's
+            hypercolumn rule).
+    """
+
+    def __init__(self, module: nn.Module, layers: tuple[str, ...],
+                 combine: Callable[[list[torch.Tensor]], torch.Tensor]) -> None:
+        super().__init__()
+        self.module = module
+        self.layers = layers
+        self.combine = combine
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Normalised images ``(B, 3, H, W)`` -> features ``(B, C, h, w)``."""
+        return self.combine(self.module.forward_layers(x, self.layers))
+
+
+def export_onnx(network: nn.Module, height: int, width: int, path: Path) -> Path:
+    """Export ``network`` for ``(B, 3, height, width)`` inputs (dynamic B) to ``path``.
+
+    Written to a temporary file in the same folder and renamed, so concurrent processes
+    exporting the same graph never see a partial file. An existing file is reused.
+    """
+    if path.is_file():
+        return path
+    if importlib.util.find_spec("onnx") is None:
+        raise ImportError("exporting the appearance model needs the PyPI package 'onnx': "
+                          "pip install 'unitrack-env[openvino]' (or [onnxruntime])")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    example = torch.zeros(1, 3, height, width)
+    handle, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".onnx.tmp", dir=path.parent)
+    os.close(handle)
+    try:
+        with warnings.catch_warnings(), torch.inference_mode(False), torch.no_grad():
+            # Sizes computed in Python (SAME padding) trace as constants: intended, the
+            # graph is per input size.
+            warnings.simplefilter("ignore")
+            torch.onnx.export(
+                network, (example,), tmp, dynamo=False, opset_version=ONNX_OPSET,
+                input_names=["images"], output_names=["features"],
+                dynamic_axes={"images": {0: "batch"}, "features": {0: "batch"}},
+            )
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+    return path
+
+
+class CompiledBackbone:
+    """A network exported to ONNX and run by a compiled engine, per input size.
+
+    Args:
+        runtime: ``"openvino"`` or ``"onnxruntime"``.
+        network: The torch network (``images -> features``), in eval mode on the CPU.
+        key: Identity key of the network (weights digest, layer, ...): part of file names.
+        num_threads: Engine threads (None: ``torch.get_num_threads()`` now).
+        cache_dir: Directory of exported graphs (None: :func:`default_cache_dir`).
+    """
+
+    def __init__(self, runtime: str, network: nn.Module, key: str, *,
+                 num_threads: int | None = None, cache_dir: str | os.PathLike[str] | None = None
+                 ) -> None:
+        if runtime not in (OPENVINO, ONNXRUNTIME):
+            raise ValueError(f"CompiledBackbone runs {OPENVINO!r} or {ONNXRUNTIME!r}, "
+                             f"not {runtime!r}")
+        self.runtime = runtime
+        self.network = network
+        self.key = key
+        self.num_threads = num_threads or torch.get_num_threads()
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        self._compiled: dict[tuple[int, ...], Any] = {}
+        self._core: Any = None
+
+    def graph_path(self, height: int, width: int) -> Path:
+        """The cached ONNX file of one input size."""
+        version = torch.__version__.split("+")[0]
+        return self.cache_dir / f"{self.key}-{height}x{width}-torch{version}.onnx"
+
+    def _engine(self, shape: tuple[int, int, int, int]) -> Any:
+        batch, _, height, width = shape
+        key = shape if self.runtime == OPENVINO else (height, width)
+        engine = self._compiled.get(key)
+        if engine is not None:
+            return engine
+        path = export_onnx(self.network, height, width, self.graph_path(height, width))
+        if self.runtime == OPENVINO:
+            import openvino as ov
+
+            if self._core is None:
+                self._core = ov.Core()
+            model = self._core.read_model(str(path))
+            model.reshape({model.inputs[0].any_name: ov.PartialShape(list(shape))})
+            engine = self._core.compile_model(model, "CPU", {
+                "INFERENCE_PRECISION_HINT": "f32",
+                "PERFORMANCE_HINT": "LATENCY",
+                "INFERENCE_NUM_THREADS": self.num_threads,
+            })
+        else:
+            import onnxruntime as ort
+
+            options = ort.SessionOptions()
+            options.intra_op_num_threads = self.num_threads
+            options.inter_op_num_threads = 1
+            options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+            engine = ort.InferenceSession(str(path), options,
+                                          providers=["CPUExecutionProvider"])
+        self._compiled[key] = engine
+        return engine
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        """Features of normalised images ``(B, 3, H, W)`` (float32 CPU tensor)."""
+        array = np.ascontiguousarray(x.detach().to("cpu", torch.float32).numpy())
+        engine = self._engine(tuple(array.shape))
+        if self.runtime == OPENVINO:
+            out = engine(array)[engine.outputs[0]]
+        else:
+            out = engine.run(None, {"images": array})[0]
+        return torch.from_numpy(np.array(out, dtype=np.float32, copy=True))
