@@ -3,8 +3,9 @@
 Agents ``unitrack-xcorr`` (SiamFC cross-correlation, fixed first-frame template) and
 ``unitrack-dcf`` (DCFNet correlation filter with online update), both from
 :class:`~unitrack_env.agents.primitives.box_propagation.BoxPropagator` (UniTrack paper, section 2.3
-and appendix B.1). Per frame the three scale crops go through the backbone in one batch; the
-DCF head adds one crop at the new position for its online update.
+and appendix B.1). Per frame one backbone call: the three scale crops, plus, for the DCF head,
+the previous frame's update crop (at the box found there), whose filter update is applied
+before this frame's response, as if it had run last frame.
 
 Boxes come and go in the environment's OTB convention: ``(x, y, w, h)`` with 1-based pixels
 (the top-left pixel is ``(1, 1)``), converted to continuous coordinates by subtracting

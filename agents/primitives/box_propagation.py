@@ -377,12 +377,15 @@ class BoxPropagator:
             DCFHead(self.config) if self.config.method == "dcf" else XCorrHead(self.config)
         )
         self.state: BoxState | None = None
+        self._pending_update: np.ndarray | None = None
         self._initial = (1.0, 1.0)
         self._window: torch.Tensor | None = None
         self.last_scores: np.ndarray = np.zeros(0)
 
     def _features(self, crops: np.ndarray, *, template: bool = False) -> torch.Tensor:
-        feats = self.features(crops).float()
+        return self._windowed(self.features(crops).float(), template=template)
+
+    def _windowed(self, feats: torch.Tensor, *, template: bool = False) -> torch.Tensor:
         if template and self.config.method == "dcf" and self.config.template_window:
             return feats * self._template_window(feats.shape[-1]).to(feats.device)
         if self.config.feature_window:
@@ -413,6 +416,7 @@ class BoxPropagator:
         self.state = BoxState(box.cx, box.cy, box.w, box.h)
         self._initial = (box.w, box.h)
         self._window = None
+        self._pending_update = None
         crops = crop_windows(image, (box.cx, box.cy), self._window_size(box.w, box.h),
                              self.config.crop_size)
         self.head.init(self._features(crops, template=True))
@@ -426,7 +430,15 @@ class BoxPropagator:
         scales = cfg.scale_factors()
         windows = self._window_size(st.w, st.h) * scales[:, None]
         crops = crop_windows(image, (st.cx, st.cy), windows, cfg.crop_size)
-        feats = self._features(crops)
+        if self._pending_update is not None:
+            # The previous frame's update crop shares this frame's backbone call; the filter
+            # is updated before it responds, exactly as if the update had run last frame.
+            batch = self.features(np.concatenate([self._pending_update, crops])).float()
+            self._pending_update = None
+            self.head.update(self._windowed(batch[:1], template=True))
+            feats = self._windowed(batch[1:])
+        else:
+            feats = self._features(crops)
         responses = self.head.respond(feats)
         peaks = [response_peak(r, circular=self.head.circular, subpixel=cfg.subpixel)
                  for r in responses]
@@ -450,8 +462,10 @@ class BoxPropagator:
                           cfg.max_size_factor * h0))
         self.state = BoxState(cx, cy, w, h)
         if isinstance(self.head, DCFHead) and cfg.dcf_interp > 0:
-            crop = crop_windows(image, (cx, cy), self._window_size(w, h), cfg.crop_size)
-            self.head.update(self._features(crop, template=True))
+            # Cropped now (this frame, the new box), run through the backbone with the next
+            # frame's search crops: one backbone call per frame instead of two.
+            self._pending_update = crop_windows(image, (cx, cy), self._window_size(w, h),
+                                                cfg.crop_size)
         return self.state
 
 

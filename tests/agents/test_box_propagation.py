@@ -156,3 +156,28 @@ def test_dcf_template_window_makes_the_filter_follow_the_target_not_the_backgrou
     assert (windowed.cy, windowed.cx) == pytest.approx((224.0, 176.0), abs=3.0)
     crop_wide = track(None)  # trained on 95% background: stays with the background
     assert abs(crop_wide.cy - 224.0) + abs(crop_wide.cx - 176.0) > 10.0
+
+
+def test_dcf_update_crop_shares_the_next_frames_backbone_call():
+    calls: list[int] = []
+
+    def counted(crops: np.ndarray) -> torch.Tensor:
+        calls.append(len(crops))
+        return pooled_features(crops)
+
+    cfg = BoxPropagationConfig(method="dcf", crop_size=160, dcf_interp=0.2)
+    batched = BoxPropagator(counted, cfg, stride=8)
+    eager = BoxPropagator(pooled_features, cfg, stride=8)  # update run right after its step
+    start = BoxState(200.0, 200.0, 40.0, 40.0)
+    for tracker in (batched, eager):
+        tracker.reset(moving_patch_image((0, 0)), start)
+    calls.clear()
+    for t in range(1, 6):
+        image = moving_patch_image((3 * t, -2 * t))
+        got, want = batched.step(image), eager.step(image)
+        pending = eager._pending_update
+        eager._pending_update = None
+        eager.head.update(eager._features(pending, template=True))
+        assert (got.cx, got.cy, got.w, got.h) == pytest.approx(
+            (want.cx, want.cy, want.w, want.h), abs=1e-4)
+    assert calls == [3, 4, 4, 4, 4]  # one backbone call per frame
