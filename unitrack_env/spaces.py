@@ -113,6 +113,13 @@ def _action_count(action: dict[str, Any], key: str) -> int:
         f"action['{key}'] must be an integer (the space is Discrete), got {value!r}")
 
 
+def _number(value: Any) -> str:
+    """An id as the user wrote it: exact for integers, short for huge floats."""
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    return f"{float(value):.0f}" if abs(float(value)) < 1e16 else f"{float(value):g}"
+
+
 def _checked_ids(ids: np.ndarray, k: int, *, low: int = 1) -> np.ndarray:
     """The first ``k`` ids as int64 after checking integer values in ``low..ID_MAX``."""
     ids = ids[:k]
@@ -122,11 +129,11 @@ def _checked_ids(ids: np.ndarray, k: int, *, low: int = 1) -> np.ndarray:
             raise InvalidActionError(f"action['ids'] must be integers, got dtype {ids.dtype}")
     if ids.size and (ids.max() > ID_MAX):
         raise InvalidActionError(
-            f"track id {ids.max():.0f} is above {ID_MAX}, the largest id of the action space "
-            "(ids must survive the official result files, which store them as floats)")
+            f"track id {_number(ids.max())} is above {ID_MAX}, the largest id of the action "
+            "space (ids must survive the official result files, which store them as floats)")
     if ids.size and ids.min() < low:
         what = "track ids must be >= 1" + (" (0 = not reported)" if low == 0 else "")
-        raise InvalidActionError(f"{what}, got {ids.min():.0f}")
+        raise InvalidActionError(f"{what}, got {_number(ids.min())}")
     return ids.astype(np.int64)
 
 

@@ -87,12 +87,13 @@ def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.nda
     Raises:
         DataFormatError: unreadable file, no ``pos_img``, or a shape other than ``(2, 15, T)``.
     """
-    from scipy.io import loadmat  # scipy is a core dependency; imported here to keep
-    # ``import unitrack_env`` fast.
+    # scipy is a core dependency; imported here to keep ``import unitrack_env`` fast.
+    from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
     try:
         mat = loadmat(str(path))
-    except (OSError, ValueError, NotImplementedError) as err:
+    except (OSError, ValueError, NotImplementedError, MatReadError) as err:
         raise DataFormatError(path, f"cannot read MATLAB file ({err})") from err
     if "pos_img" not in mat:
         raise DataFormatError(path, "has no 'pos_img' variable", field="pos_img")

@@ -244,7 +244,8 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
     """Refuse ground truth the episode cannot start from or score (rows from ``first`` on).
 
     The first row is the target the tracker is given: it must be finite with a positive
-    size. No row may have a negative size, and every value must fit the observation bounds.
+    size; every value must fit the observation bounds. Later rows may be NaN or have a
+    non-positive size: the OTB toolkit leaves such frames out of the evaluation.
     (Rows are file lines here: :func:`read_box_file` refuses blank lines inside the list.)
     """
     from unitrack_env.spaces import COORD_MAX
@@ -255,11 +256,6 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
             path, f"the first box {init.tolist()} is the target given to the tracker: it must "
                   "be finite with a positive width and height", line=first + 1)
     rows = boxes[first:]
-    negative = (rows[:, 2] < 0) | (rows[:, 3] < 0)
-    if negative.any():
-        i = int(np.argmax(negative))
-        raise DataFormatError(path, f"negative box size {rows[i].tolist()}",
-                              line=first + i + 1, field="w" if rows[i, 2] < 0 else "h")
     outside = np.abs(np.nan_to_num(rows)) > COORD_MAX
     if outside.any():
         i, col = (int(v) for v in np.argwhere(outside)[0])
@@ -340,9 +336,14 @@ class OTBDataset:
                 continue
             for gt in sorted(folder.iterdir()):
                 match = OTB_GT_PATTERN.match(gt.name)
-                if match and gt.stat().st_size > 0:
-                    name = folder.name + (f".{match.group(1)}" if match.group(1) else "")
-                    self._specs[name] = (folder, gt)
+                if not match:
+                    continue
+                name = folder.name + (f".{match.group(1)}" if match.group(1) else "")
+                if gt.stat().st_size == 0:
+                    warnings.warn(f"{gt}: empty ground-truth file; sequence {name} skipped",
+                                  stacklevel=2)
+                    continue
+                self._specs[name] = (folder, gt)
         if not self._specs:
             raise DataFormatError(
                 self.root, "no sequence folders with img/ and groundtruth_rect.txt found"
