@@ -1,0 +1,916 @@
+"""The bad-input corpus: every case builds one bad input, opens it as a user would, and names
+the message it must produce.
+
+Each case copies a small synthetic data set (files are symlinks into the synthetic cache;
+only the file a case breaks is a real copy), breaks one thing, and opens it through the
+public API: ``gym.make(...).reset()`` for data (everything must be refused at reset, before
+a frame is played), ``env.step(action)`` for actions, ``AppearanceModel(weights=...)`` for
+checkpoints. :func:`outcome` classifies what happened:
+
+* ``clear``: the expected error (or warning) whose message holds every expected fragment;
+* ``unclear``: an error of a deliberate kind (``ValueError``, ``KeyError``, ``OSError`` and
+  the package's own errors) without the expected content;
+* ``crash``: any other exception (``TypeError``, ``IndexError``, ...);
+* ``silent``: accepted without an error or the expected warning.
+
+``tests/corpus/test_bad_inputs.py`` requires ``clear`` for every case;
+``scripts/make_bad_input_docs.py`` writes the table in ``docs/bad-inputs.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import shutil
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Messages show this instead of the scratch folder of a run.
+DATA = "<data>"
+
+
+# ------------------------------------------------------------------------------ cases
+@dataclass(frozen=True)
+class Case:
+    """One bad input.
+
+    Attributes:
+        id: unique, stable name (``<area>-<what>``).
+        area: the reader, ``action`` or ``checkpoint``.
+        what: the bad input, in words.
+        run: builds the input under a scratch folder and opens it.
+        expect: fragments that the message must contain.
+        kind: ``"error"`` (an exception of type ``error``), ``"warning"`` (a warning), or
+            ``"accepted"`` (a lenient input that must open without an error).
+        error: the exception type of an ``"error"`` case (by name, see :func:`_error_type`).
+    """
+
+    id: str
+    area: str
+    what: str
+    run: Callable[[Path], Any]
+    expect: tuple[str, ...] = ()
+    kind: str = "error"
+    error: str = "DataFormatError"
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a case did: its verdict, the exception type and the message (paths shortened)."""
+
+    verdict: str
+    kind: str
+    message: str
+
+
+def _error_type(name: str) -> type[BaseException]:
+    from unitrack_env import errors
+
+    if hasattr(errors, name):
+        return getattr(errors, name)
+    if name == "CheckpointError":
+        from unitrack_env.agents.appearance.checkpoints import CheckpointError
+
+        return CheckpointError
+    return {"ValueError": ValueError, "TypeError": TypeError, "KeyError": KeyError}[name]
+
+
+#: Exceptions raised on purpose for bad input (wrong or vague message: "unclear").
+_DELIBERATE = (ValueError, KeyError, OSError)
+
+
+def outcome(case: Case, scratch: Path) -> Outcome:
+    """Run ``case`` in the empty folder ``scratch`` and classify what happened."""
+    def clean(text: str) -> str:
+        text = text.replace(str(scratch), DATA)
+        cache = os.environ.get("UNITRACK_CACHE")
+        if cache:
+            text = text.replace(cache, "<cache>")
+        return " ".join(text.split())
+
+    error: Exception | None = None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            case.run(scratch)
+        except Exception as exc:  # noqa: BLE001 - classifying every outcome is the point
+            error = exc
+    notes = [clean(str(w.message)) for w in caught]
+    if case.kind == "warning":  # the warning counts even when an error follows it
+        for note in notes:
+            if all(fragment in note for fragment in case.expect):
+                then = f" (then {type(error).__name__}: {clean(str(error))})" if error else ""
+                return Outcome("clear", "warning", note + then)
+    if error is not None:
+        message = clean(str(error))
+        name = type(error).__name__
+        if case.kind == "error" and isinstance(error, _error_type(case.error)) and all(
+                fragment in message for fragment in case.expect):
+            return Outcome("clear", name, message)
+        deliberate = isinstance(error, _DELIBERATE) or type(error).__module__.startswith(
+            "unitrack_env")
+        return Outcome("unclear" if deliberate else "crash", name, message)
+    if case.kind == "warning":
+        return Outcome("silent", "-", " / ".join(notes))
+    if case.kind == "accepted":
+        return Outcome("clear", "accepted", "(opens; no error)")
+    return Outcome("silent", "-", " / ".join(notes) or "(no error)")
+
+
+# ------------------------------------------------------------------------- data helpers
+def synthetic(kind: str, benchmark: str) -> Path:
+    """The synthetic data set's folder (generated once into the cache)."""
+    from unitrack_env.datasets.synthetic import ensure_synthetic
+
+    return ensure_synthetic(benchmark, kind)
+
+
+def clone(src: Path, dst: Path) -> Path:
+    """Mirror ``src`` at ``dst``: real folders, files as symlinks (see :func:`own`)."""
+    for folder, _, files in os.walk(src):
+        rel = Path(folder).relative_to(src)
+        (dst / rel).mkdir(parents=True, exist_ok=True)
+        for name in files:
+            os.symlink(Path(folder) / name, dst / rel / name)
+    return dst
+
+
+def own(path: Path) -> Path:
+    """Turn a symlinked file into a real copy that a case may change."""
+    if path.is_symlink():
+        data = path.read_bytes()
+        path.unlink()
+        path.write_bytes(data)
+    return path
+
+
+def write(path: Path, data: str | bytes) -> None:
+    """Replace a file's content (a new file where none was)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.is_symlink():
+        path.unlink()
+    if isinstance(data, bytes):
+        path.write_bytes(data)
+    else:
+        path.write_text(data)
+
+
+def edit(path: Path, change: Callable[[str], str]) -> None:
+    """Rewrite a text file through ``change``."""
+    own(path)
+    path.write_text(change(path.read_text()))
+
+
+def set_line(number: int, text: str) -> Callable[[str], str]:
+    """An edit that replaces 1-based line ``number``."""
+    def change(content: str) -> str:
+        lines = content.splitlines()
+        lines[number - 1] = text
+        return "\n".join(lines) + "\n"
+    return change
+
+
+def cells(number: int, **values: Any) -> Callable[[str], str]:
+    """An edit that sets comma-separated cells (``c0=``, ``c1=``, ...) of line ``number``."""
+    def change(content: str) -> str:
+        lines = content.splitlines()
+        parts = lines[number - 1].split(",")
+        for key, value in values.items():
+            parts[int(key[1:])] = str(value)
+        lines[number - 1] = ",".join(parts)
+        return "\n".join(lines) + "\n"
+    return change
+
+
+def truncate(path: Path, keep: float = 0.5) -> None:
+    """Cut a file to a fraction of its bytes (an interrupted copy)."""
+    data = path.read_bytes()
+    write(path, data[: int(len(data) * keep)])
+
+
+def edit_json(path: Path, change: Callable[[Any], Any]) -> None:
+    """Rewrite a JSON file through ``change``, which edits the loaded data in place."""
+    data = json.loads(path.read_text())
+    change(data)
+    write(path, json.dumps(data))
+
+
+# ------------------------------------------------------------------------ openers
+def open_env(env_id: str, root: Path, sequence: str, **kwargs: Any) -> None:
+    """Make the environment on ``root`` and reset it on ``sequence``."""
+    import gymnasium as gym
+
+    import unitrack_env  # noqa: F401  (registers the ids)
+
+    env = gym.make(env_id, root=str(root), **kwargs)
+    try:
+        env.reset(options={"sequence": sequence})
+    finally:
+        env.close()
+
+
+MOT_SEQ = "SYN-01"
+
+
+def mot(change: Callable[[Path], None], **kwargs: Any) -> Callable[[Path], None]:
+    """A MOT17 case: ``change`` breaks ``train/SYN-01`` of a copy of the synthetic MOT17."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("motchallenge", "MOT17"), scratch / "MOT17")
+        change(root / "train" / MOT_SEQ)
+        open_env("UniTrack/MOT17-v0", root, MOT_SEQ, **kwargs)
+    return run
+
+
+MOTS_SEQ = "SYN-01"
+
+
+def mots(change: Callable[[Path], None], **kwargs: Any) -> Callable[[Path], None]:
+    """A MOTS20 case on ``train/SYN-01`` of a copy of the synthetic MOTS20."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("mots", "MOTS20"), scratch / "MOTS20")
+        change(root / "train" / MOTS_SEQ)
+        open_env("UniTrack/MOTS-v0", root, MOTS_SEQ, **kwargs)
+    return run
+
+
+def vis(change: Callable[[Path], None], **kwargs: Any) -> Callable[[Path], None]:
+    """A YouTube-VIS case: ``change`` breaks the copy's root (``train.json``, ...)."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("youtube_vis", "YouTube-VIS-2019"), scratch / "VIS")
+        change(root)
+        open_env("UniTrack/VIS-v0", root, "syn-01", **kwargs)
+    return run
+
+
+POSE_SEQ = "900002_synthetic_val"
+
+
+def posetrack(change: Callable[[Any], Any]) -> Callable[[Path], None]:
+    """A PoseTrack case: ``change`` edits the ground-truth JSON of ``900002_synthetic_val``."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("posetrack", "PoseTrack2018"), scratch / "PoseTrack")
+        edit_json(root / "posetrack_data" / "annotations" / "val" / f"{POSE_SEQ}.json", change)
+        open_env("UniTrack/PoseTrack-v0", root, POSE_SEQ)
+    return run
+
+
+def posetrack_raw(text: str) -> Callable[[Path], None]:
+    """A PoseTrack case whose ground-truth file holds ``text``."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("posetrack", "PoseTrack2018"), scratch / "PoseTrack")
+        write(root / "posetrack_data" / "annotations" / "val" / f"{POSE_SEQ}.json", text)
+        open_env("UniTrack/PoseTrack-v0", root, POSE_SEQ)
+    return run
+
+
+OTB_SEQ = "SynLateStart"
+
+
+def otb(change: Callable[[Path], None]) -> Callable[[Path], None]:
+    """An OTB case: ``change`` breaks ``SynLateStart`` of a copy of the synthetic OTB."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("otb", "OTB"), scratch / "OTB")
+        change(root / OTB_SEQ)
+        open_env("UniTrack/OTB-v0", root, OTB_SEQ)
+    return run
+
+
+DAVIS_SEQ = "syn-occluded"
+
+
+def davis(change: Callable[[Path], None], sequence: str = DAVIS_SEQ) -> Callable[[Path], None]:
+    """A DAVIS case: ``change`` breaks the copy's root (val: syn-crossing, syn-occluded)."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("davis", "DAVIS-2017"), scratch / "DAVIS")
+        change(root)
+        open_env("UniTrack/DAVIS-v0", root, sequence)
+    return run
+
+
+def _davis_png(root: Path, index: int) -> Path:
+    return root / "Annotations" / "480p" / DAVIS_SEQ / f"{index:05d}.png"
+
+
+def _save_png(path: Path, array: np.ndarray) -> None:
+    """Save ``(H, W)`` uint8 as a grayscale PNG, ``(H, W, 3)`` as RGB."""
+    from PIL import Image
+
+    if path.is_symlink():
+        path.unlink()
+    Image.fromarray(np.ascontiguousarray(array, dtype=np.uint8)).save(path)
+
+
+def _gray_2016(root: Path) -> None:
+    from unitrack_env.datasets.davis import read_label_png
+
+    path = _davis_png(root, 5)
+    labels = read_label_png(path)
+    _save_png(path, np.where(labels > 0, 255, 0).astype(np.uint8))
+
+
+def _rgb_annotation(root: Path) -> None:
+    from unitrack_env.datasets.davis import read_label_png
+
+    path = _davis_png(root, 5)
+    labels = read_label_png(path)
+    _save_png(path, np.repeat(labels[..., None] * 100, 3, axis=2).astype(np.uint8))
+
+
+def _small_annotation(root: Path) -> None:
+    from unitrack_env.datasets.davis import read_label_png
+
+    path = _davis_png(root, 5)
+    labels = read_label_png(path)
+    from unitrack_env.datasets.davis import write_label_png
+
+    path.unlink()
+    write_label_png(path, labels[: labels.shape[0] // 2])
+
+
+def _first_gray_2016(root: Path) -> None:
+    from unitrack_env.datasets.davis import read_label_png
+
+    path = _davis_png(root, 0)
+    labels = read_label_png(path)
+    _save_png(path, np.where(labels > 0, 255, 0).astype(np.uint8))
+
+
+JHMDB_SEQ = "run/SYN_run_f_cm_np1_ri_med_1"
+
+
+def jhmdb(change: Callable[[Path, Path], None]) -> Callable[[Path], None]:
+    """A JHMDB case: ``change(mat_file, frame_folder)`` breaks ``run/SYN_run_...``."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("jhmdb", "JHMDB"), scratch / "JHMDB")
+        change(root / "joint_positions" / JHMDB_SEQ / "joint_positions.mat",
+               root / "Rename_Images" / JHMDB_SEQ)
+        open_env("UniTrack/JHMDB-v0", root, JHMDB_SEQ)
+    return run
+
+
+def _mat(change: Callable[[dict], dict]) -> Callable[[Path, Path], None]:
+    def apply(mat: Path, frames: Path) -> None:
+        from scipy.io import loadmat, savemat
+
+        data = {k: v for k, v in loadmat(str(mat)).items() if not k.startswith("__")}
+        data = change(data)
+        mat.unlink()
+        savemat(str(mat), data)
+    return apply
+
+
+def _with_nan(data: dict) -> dict:
+    pos = np.array(data["pos_img"], dtype=np.float64)
+    pos[0, 3, 4] = np.nan
+    data["pos_img"] = pos
+    return data
+
+
+def _far_joint(data: dict) -> dict:
+    pos = np.array(data["pos_img"], dtype=np.float64)
+    pos[1, 2, 0] = 1e9
+    data["pos_img"] = pos
+    return data
+
+
+def _drop_frames(mat: Path, frames: Path) -> None:
+    for path in sorted(frames.iterdir())[-3:]:
+        path.unlink()
+
+
+def _truncate_frame(folder: Path, index: int) -> None:
+    frames = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".jpg", ".png"))
+    truncate(frames[index])
+
+
+# ------------------------------------------------------------------------ actions
+def act(env_id: str, bad: Callable[[dict], Any], sequence: str | None = None,
+        **kwargs: Any) -> Callable[[Path], None]:
+    """An action case: reset the synthetic env and step with ``bad(observation)``."""
+    def run(scratch: Path) -> None:
+        import gymnasium as gym
+
+        import unitrack_env  # noqa: F401
+
+        env = gym.make(env_id, **kwargs)
+        try:
+            obs, _ = env.reset(options={"sequence": sequence} if sequence else None)
+            env.step(bad(obs))
+        finally:
+            env.close()
+    return run
+
+
+def _tracks(ids: Any, boxes: Any, **extra: Any) -> Callable[[dict], dict]:
+    return lambda obs: {"ids": np.asarray(ids), "boxes": np.asarray(boxes, dtype=np.float64),
+                        **extra}
+
+
+BOX = [10.0, 10.0, 20.0, 40.0]
+
+
+def _pose(scores: float = 0.5, x: float = 10.0, **extra: Any) -> Callable[[dict], dict]:
+    def build(obs: dict) -> dict:
+        kp = np.zeros((1, obs["keypoints"].shape[1], 3))
+        kp[..., 0], kp[..., 1], kp[..., 2] = x, 10.0, scores
+        return {"ids": np.array([1]), "keypoints": kp, **extra}
+    return build
+
+
+def _labels(value: int, dtype: Any = np.uint8) -> Callable[[dict], np.ndarray]:
+    return lambda obs: np.full(obs["init_labels"].shape, value, dtype=dtype)
+
+
+# --------------------------------------------------------------------- checkpoints
+class _Payload:
+    """A pickled object whose loading would call a function (never allowed to run)."""
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (print, ("this must never run",))
+
+
+def _resnet18_state() -> dict[str, Any]:
+    import torch
+
+    from unitrack_env.agents.appearance import ResNet
+
+    torch.manual_seed(0)
+    return ResNet("resnet18").state_dict()
+
+
+def checkpoint(make: Callable[[Path], None], **kwargs: Any) -> Callable[[Path], None]:
+    """A checkpoint case: ``make(path)`` writes the file; the model loads it as resnet18."""
+    def run(scratch: Path) -> None:
+        from unitrack_env.agents.appearance import AppearanceModel
+
+        path = scratch / "model.pth"
+        make(path)
+        AppearanceModel(str(path), arch="resnet18", **kwargs)
+    return run
+
+
+def _save(obj_of: Callable[[], Any]) -> Callable[[Path], None]:
+    def make(path: Path) -> None:
+        import torch
+
+        torch.save(obj_of(), path)
+    return make
+
+
+def _truncated_checkpoint(path: Path) -> None:
+    import torch
+
+    torch.save(_resnet18_state(), path)
+    truncate(path, 0.4)
+
+
+def _drop_key(state: dict[str, Any]) -> dict[str, Any]:
+    state.pop("layer2.0.conv1.weight")
+    return state
+
+
+def _reshape(state: dict[str, Any]) -> dict[str, Any]:
+    import torch
+
+    state["layer1.0.conv1.weight"] = torch.zeros(64, 64, 1, 1)
+    return state
+
+
+def _nan_weights(state: dict[str, Any]) -> dict[str, Any]:
+    state["conv1.weight"][0, 0, 0, 0] = float("nan")
+    return state
+
+
+def _pickle_payload(path: Path) -> None:
+    path.write_bytes(pickle.dumps({"state_dict": _Payload()}))
+
+
+# ------------------------------------------------------------------------------ table
+def _c(id: str, what: str, run: Callable[[Path], Any], *expect: str, kind: str = "error",
+       error: str = "DataFormatError") -> Case:
+    return Case(id, id.split("-", 1)[0], what, run, tuple(expect), kind, error)
+
+
+GT = "gt/gt.txt"
+DET = "det/det.txt"
+INI = "seqinfo.ini"
+
+
+def _at(rel: str, change: Callable[[str], str]) -> Callable[[Path], None]:
+    return lambda seq: edit(seq / rel, change)
+
+
+def _a_file(folder: Path) -> Path:
+    write(folder / "notes.txt", "not a data set")
+    return folder / "notes.txt"
+
+
+def _append(rel: str, text: str) -> Callable[[Path], None]:
+    return _at(rel, lambda content: content + text)
+
+
+def _ini(key: str, value: str | None) -> Callable[[Path], None]:
+    def change(content: str) -> str:
+        lines = [ln for ln in content.splitlines() if not ln.startswith(f"{key}=")]
+        if value is not None:
+            lines.append(f"{key}={value}")
+        return "\n".join(lines) + "\n"
+    return _at(INI, change)
+
+
+def _bytes(rel: str, change: Callable[[bytes], bytes]) -> Callable[[Path], None]:
+    def apply(seq: Path) -> None:
+        data = (seq / rel).read_bytes()
+        write(seq / rel, change(data))
+    return apply
+
+
+CASES: tuple[Case, ...] = (
+    # ------------------------------------------------------------- MOTChallenge
+    _c("MOT-gt-blank-lines-at-end", "gt.txt ends with two blank lines",
+       mot(_append(GT, "\n\n")), "gt.txt", "blank line", "TrackEval"),
+    _c("MOT-gt-blank-line-inside", "a blank line between gt rows",
+       mot(_at(GT, lambda c: c.replace("\n", "\n\n", 1))), "line 2", "blank line"),
+    _c("MOT-gt-bom", "gt.txt starts with a UTF-8 byte-order mark",
+       mot(_bytes(GT, lambda b: b"\xef\xbb\xbf" + b)), "gt.txt, line 1", "byte-order mark"),
+    _c("MOT-det-bom", "det.txt starts with a UTF-8 byte-order mark (only we read it)",
+       mot(_bytes(DET, lambda b: b"\xef\xbb\xbf" + b)), kind="accepted"),
+    _c("MOT-gt-trailing-comma", "gt rows end with a comma (TrackEval accepts it)",
+       mot(_at(GT, lambda c: c.replace("\n", ",\n"))), kind="accepted"),
+    _c("MOT-gt-id-above-2**53", "a gt id of 2**53 + 1",
+       mot(_at(GT, cells(1, c1=2**53 + 1))), "line 1, field 'id'", "outside 0..16777216"),
+    _c("MOT-gt-negative-id", "a gt id of -3",
+       mot(_at(GT, cells(2, c1=-3))), "line 2, field 'id'", "id -3 is outside"),
+    _c("MOT-gt-fractional-id", "a gt id of 1.5",
+       mot(_at(GT, cells(2, c1=1.5))), "line 2, field 'id'", "not an integer"),
+    _c("MOT-gt-duplicate-id", "the same gt id twice in frame 1",
+       mot(_at(GT, lambda c: c + c.splitlines()[0] + "\n")), "field 'id'",
+       "id 1 appears twice in frame 1", "first on line 1"),
+    _c("MOT-gt-unknown-class", "gt class 14 (MOT17 has 1..13)",
+       mot(_at(GT, cells(3, c7=14))), "line 3, field 'class'", "class 14"),
+    _c("MOT-gt-frame-past-end", "a gt row for frame 500 of a 72-frame sequence",
+       mot(_at(GT, cells(1, c0=500))), "line 1, field 'frame'", "72 frames"),
+    _c("MOT-gt-frame-zero", "a gt row for frame 0 (frames are 1-based)",
+       mot(_at(GT, cells(1, c0=0))), "line 1, field 'frame'", "frame 0 is not a frame"),
+    _c("MOT-gt-short-row", "a gt row with 5 columns",
+       mot(_at(GT, set_line(4, "4,1,308,220,48"))), "line 4", "5 columns",
+       "expected at least 9"),
+    _c("MOT-gt-word", "a gt cell 'abc'",
+       mot(_at(GT, cells(2, c2="abc"))), "line 2, field 'x'", "'abc' is not a number"),
+    _c("MOT-gt-nan", "a gt cell 'nan'",
+       mot(_at(GT, cells(2, c4="nan"))), "line 2, field 'w'", "not a finite number"),
+    _c("MOT-gt-negative-width", "a gt box of width -5",
+       mot(_at(GT, cells(2, c4=-5))), "line 2, field 'w'", "negative box size -5"),
+    _c("MOT-gt-latin1", "a Latin-1 byte in gt.txt",
+       mot(_bytes(GT, lambda b: b.replace(b"\n", b"\xe9\n", 1))), "line 1", "not UTF-8"),
+    _c("MOT-gt-ragged", "a gt row with 10 columns among rows of 9",
+       mot(_at(GT, lambda c: c.replace("\n", ",7\n", 1))), "line 2",
+       "columns where earlier lines have"),
+    _c("MOT-seqinfo-seqLength-6.9", "seqLength=6.9",
+       mot(_ini("seqLength", "6.9")), "field 'seqLength'", "whole number", "6.9"),
+    _c("MOT-seqinfo-frameRate-nan", "frameRate=nan",
+       mot(_ini("frameRate", "nan")), "field 'frameRate'", "finite positive", "nan"),
+    _c("MOT-seqinfo-frameRate-inf", "frameRate=inf",
+       mot(_ini("frameRate", "inf")), "field 'frameRate'", "finite positive", "inf"),
+    _c("MOT-seqinfo-frameRate-zero", "frameRate=0",
+       mot(_ini("frameRate", "0")), "field 'frameRate'", "finite positive"),
+    _c("MOT-seqinfo-width-word", "imWidth=wide",
+       mot(_ini("imWidth", "wide")), "field 'imWidth'", "'wide' is not a number"),
+    _c("MOT-seqinfo-no-seqLength", "seqinfo.ini without seqLength",
+       mot(_ini("seqLength", None)), "field 'seqLength'", "missing"),
+    _c("MOT-seqinfo-missing", "no seqinfo.ini",
+       mot(lambda seq: (seq / INI).unlink()), "seqinfo.ini", "missing"),
+    _c("MOT-seqinfo-no-section", "seqinfo.ini without the [Sequence] header",
+       mot(_at(INI, lambda c: c.replace("[Sequence]\n", "[Seq]\n"))), "[Sequence]"),
+    _c("MOT-seqinfo-length-past-frames", "seqLength=80 with 72 images",
+       mot(_ini("seqLength", "80")), "000073.jpg", "missing frame 73 of 80"),
+    _c("MOT-det-x-1e9", "a detection at x=1e9",
+       mot(_at(DET, cells(3, c2="1e9"))), "line 3, field 'x'", "outside the observation bounds"),
+    _c("MOT-det-empty", "an empty det.txt",
+       mot(lambda seq: write(seq / DET, "")), "det.txt", "contains no detections",
+       kind="warning"),
+    _c("MOT-det-missing", "no det/det.txt",
+       mot(lambda seq: (seq / DET).unlink()), "det.txt", "missing"),
+    _c("MOT-det-frame-past-end", "a detection in frame 99 of 72",
+       mot(_at(DET, cells(2, c0=99))), "line 2, field 'frame'", "72 frames"),
+    _c("MOT-det-six-columns", "a detection row with 6 columns",
+       mot(_at(DET, set_line(1, "1,-1,5,5,20,40"))), "line 1", "expected at least 7"),
+    _c("MOT-det-score-inf", "a detection score of inf",
+       mot(_at(DET, cells(2, c6="inf"))), "line 2, field 'score'", "not a finite number"),
+    _c("MOT-frame-truncated", "frame 000010.jpg cut to half its bytes",
+       mot(lambda seq: truncate(seq / "img1" / "000010.jpg")), "000010.jpg",
+       "truncated image"),
+    _c("MOT-frame-empty", "frame 000003.jpg is 0 bytes",
+       mot(lambda seq: write(seq / "img1" / "000003.jpg", b"")), "000003.jpg",
+       "empty image file"),
+    _c("MOT-too-many-detections", "max_detections=2 with more detections per frame",
+       mot(lambda seq: None, max_detections=2), "det.txt", "max_detections=2",
+       error="ValueError"),
+    _c("MOT-unknown-sequence", "reset on a sequence that does not exist",
+       lambda scratch: open_env("UniTrack/MOT17-v0", synthetic("motchallenge", "MOT17"),
+                                "SYN-99"), "no sequence 'SYN-99'", "SYN-01",
+       error="UnknownSequenceError"),
+    _c("MOT-root-not-a-folder", "root= names a file",
+       lambda scratch: open_env("UniTrack/MOT17-v0", _a_file(scratch), "SYN-01"),
+       "root= is not a folder"),
+    _c("MOT-root-without-split", "root= without train/",
+       lambda scratch: open_env("UniTrack/MOT17-v0", scratch, "SYN-01"),
+       "split folder missing", "train/"),
+    # --------------------------------------------------------------------- MOTS
+    _c("MOTS-gt-rle-sum", "a gt RLE whose run lengths do not sum to H*W",
+       mots(_at(GT, lambda c: c.replace(c.split()[5], c.split()[5][:-2] + "0", 1))),
+       "gt.txt, line 1, field 'rle'", "sum to", "272x480 mask has 130560"),
+    _c("MOTS-gt-rle-bad-char", "a gt RLE with a space-free character outside the alphabet",
+       mots(_at(GT, lambda c: c.replace(c.split()[5], "~~" + c.split()[5], 1))),
+       "line 1, field 'rle'", "not RLE text"),
+    _c("MOTS-gt-class-3", "a gt row of class 3 (1, 2 or 10)",
+       mots(_at(GT, lambda c: c.replace(" 2 272 ", " 3 272 ", 1))), "line 1, field 'class_id'",
+       "class 3 is not"),
+    _c("MOTS-gt-five-fields", "a gt row with 5 fields",
+       mots(_at(GT, lambda c: "1 2001 2 272 480\n" + c)), "line 1", "expected 6"),
+    _c("MOTS-gt-duplicate-id", "the same object id twice in frame 1",
+       mots(_at(GT, lambda c: c + c.splitlines()[0] + "\n")), "id 2001 appears twice in frame 1"),
+    _c("MOTS-gt-overlap", "two gt masks of frame 1 that overlap",
+       mots(_at(GT, lambda c: c + c.splitlines()[0].replace(" 2001 ", " 2099 ", 1) + "\n")),
+       "mask of id 2099 overlaps", "TrackEval"),
+    _c("MOTS-gt-mask-size", "a gt mask of another size than the frames",
+       mots(_at(GT, lambda c: c + "2 2050 2 10 10 T3\n")), "field 'img_height'",
+       "mask is 10x10", "480x272"),
+    _c("MOTS-gt-frame-past-end", "a gt row in frame 999",
+       mots(_at(GT, lambda c: c + "999" + c.splitlines()[0][1:] + "\n")),
+       "field 'time_frame'", "time_frame 999 is not a frame"),
+    _c("MOTS-gt-word", "a gt time_frame 'one'",
+       mots(_at(GT, lambda c: "one" + c[1:])), "line 1, field 'time_frame'",
+       "'one' is not an integer"),
+    _c("MOTS-det-rle-sum", "a detection RLE whose run lengths do not sum to H*W",
+       mots(_at(DET, lambda c: c.replace(c.split()[5], c.split()[5][:-3] + "0", 1))),
+       "det.txt, line 1, field 'rle'", "sum to"),
+    _c("MOTS-det-score-nan", "a detection score of nan",
+       mots(_at(DET, set_line(1, "1 -1 2 272 480 T3 nan"))), "line 1, field 'score'",
+       "not finite"),
+    _c("MOTS-det-missing", "detections= a folder without the sequence's file",
+       lambda scratch: open_env("UniTrack/MOTS-v0", synthetic("mots", "MOTS20"), MOTS_SEQ,
+                                detections=str(scratch)),
+       "SYN-01.txt", "detection file not found", "detections='gt'"),
+    # ---------------------------------------------------------------------- VIS
+    _c("VIS-json-syntax", "train.json cut in the middle",
+       vis(lambda root: truncate(root / "train.json")), "train.json", "not valid JSON"),
+    _c("VIS-rle-sum", "a segmentation whose uncompressed counts do not sum to H*W",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0][
+           "segmentations"][0]["counts"].append(5))),
+       "annotations[0].segmentations[0]", "sum to"),
+    _c("VIS-rle-string-sum", "a compressed RLE string whose runs do not sum to H*W",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0][
+           "segmentations"].__setitem__(0, {"size": [256, 448], "counts": "0;4"}))),
+       "annotations[0].segmentations[0]", "sum to 15 pixels"),
+    _c("VIS-rle-negative", "uncompressed counts with a negative run",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0][
+           "segmentations"].__setitem__(0, {"size": [256, 448], "counts": [-4, 114692]}))),
+       "annotations[0].segmentations[0]", "non-negative integers"),
+    _c("VIS-rle-size", "an RLE of another size than the video",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0][
+           "segmentations"].__setitem__(0, {"size": [10, 10], "counts": [100]}))),
+       "RLE size [10, 10]", "[256, 448]"),
+    _c("VIS-polygon-short", "a polygon of two points",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0][
+           "segmentations"].__setitem__(0, [[1, 2, 3, 4]]))),
+       "segmentations[0]", "polygons must be lists of >= 3 x,y pairs"),
+    _c("VIS-video-id-string", "a video id written as a string",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["videos"][0].__setitem__(
+           "id", "1"))), "field 'videos[0].id'", "has type str"),
+    _c("VIS-segmentations-length", "an annotation with one segmentation too few",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0][
+           "segmentations"].pop())), "annotations[0].segmentations", "entries but video"),
+    _c("VIS-unknown-category", "an annotation of category 9",
+       vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0].__setitem__(
+           "category_id", 9))), "annotations[0].category_id", "unknown category 9"),
+    _c("VIS-detections-missing", "detections= a file that does not exist",
+       lambda scratch: open_env("UniTrack/VIS-v0", synthetic("youtube_vis", "YouTube-VIS-2019"),
+                                "syn-01", detections=str(scratch / "none.json")),
+       "none.json", "not found"),
+    # ---------------------------------------------------------------- PoseTrack
+    _c("PoseTrack-track-id-list", "track_id is a list",
+       posetrack(lambda d: d["annotations"][0].__setitem__("track_id", [1])),
+       "annotations[0].track_id", "must be an integer, got list"),
+    _c("PoseTrack-image-id-null", "image_id is null",
+       posetrack(lambda d: d["annotations"][0].__setitem__("image_id", None)),
+       "annotations[0].image_id", "must be an integer, got NoneType"),
+    _c("PoseTrack-category-string", "categories holds the string 'person'",
+       posetrack(lambda d: d.__setitem__("categories", ["person"])),
+       "categories[0]", "must be an object"),
+    _c("PoseTrack-category-id-string", "category_id is the string '1'",
+       posetrack(lambda d: d["annotations"][0].__setitem__("category_id", "1")),
+       "annotations[0].category_id", "must be an integer, got str"),
+    _c("PoseTrack-keypoints-50", "keypoints with 50 values (17 x 3 = 51)",
+       posetrack(lambda d: d["annotations"][0].__setitem__(
+           "keypoints", d["annotations"][0]["keypoints"][:50])),
+       "annotations[0].keypoints", "has 50 values, expected 51"),
+    _c("PoseTrack-keypoints-nan", "a keypoint coordinate NaN",
+       posetrack_raw(json.dumps({"images": [{"id": 1, "file_name":
+                                             f"images/val/{POSE_SEQ}/000000.jpg"}],
+                                 "annotations": [{"image_id": 1, "keypoints":
+                                                  [float("nan")] * 51}]})),
+       "annotations[0].keypoints", "NaN or infinite"),
+    _c("PoseTrack-keypoints-word", "a keypoint value 'x'",
+       posetrack(lambda d: d["annotations"][0]["keypoints"].__setitem__(0, "x")),
+       "annotations[0].keypoints", "must be numbers"),
+    _c("PoseTrack-unknown-image", "an annotation of image_id 7 not in images",
+       posetrack(lambda d: d["annotations"][0].__setitem__("image_id", 7)),
+       "annotations[0].image_id", "refers to image_id 7"),
+    _c("PoseTrack-duplicate-image-id", "two images with the same id",
+       posetrack(lambda d: d["images"][1].__setitem__("id", d["images"][0]["id"])),
+       "duplicate image ids"),
+    _c("PoseTrack-file-name", "an image file_name that is not '<frame>.jpg'",
+       posetrack(lambda d: d["images"][0].__setitem__("file_name", "images/val/x/first.jpg")),
+       "images[0].file_name", "is not '<frame>.jpg'"),
+    _c("PoseTrack-json-syntax", "the ground-truth file is not JSON",
+       posetrack_raw("{'images': []"), f"{POSE_SEQ}.json", "not readable JSON"),
+    _c("PoseTrack-nframes-word", "nframes is 'many'",
+       posetrack(lambda d: d["images"][0].__setitem__("nframes", "many")),
+       "images[0].nframes", "must be an integer, got str"),
+    _c("PoseTrack-bbox-head-3", "bbox_head with 3 numbers",
+       posetrack(lambda d: d["annotations"][0].__setitem__("bbox_head", [1, 2, 3])),
+       "annotations[0].bbox_head", "expected 4 numbers"),
+    _c("PoseTrack-score-string", "a person score 'high'",
+       posetrack(lambda d: d["annotations"][0].__setitem__("score", "high")),
+       "annotations[0].score", "must be a finite number"),
+    _c("PoseTrack-ignore-regions-number", "ignore_regions_x is a number",
+       posetrack(lambda d: d["images"][0].update(ignore_regions_x=5, ignore_regions_y=5)),
+       "images[0].ignore_regions_x", "must be a list of polygons"),
+    # ---------------------------------------------------------------------- OTB
+    _c("OTB-first-box-nan", "the first ground-truth box is NaN",
+       otb(_at("groundtruth_rect.txt", set_line(1, "NaN,NaN,NaN,NaN"))),
+       "line 1", "first box", "finite with a positive width and height"),
+    _c("OTB-first-box-zero", "the first box has width 0",
+       otb(_at("groundtruth_rect.txt", cells(1, c2=0))), "line 1", "first box"),
+    _c("OTB-negative-height", "a later box of height -4 (the OTB toolkit leaves it out)",
+       otb(_at("groundtruth_rect.txt", cells(5, c3=-4))), kind="accepted"),
+    _c("OTB-three-numbers", "a row with 3 numbers",
+       otb(_at("groundtruth_rect.txt", set_line(3, "1,2,3"))), "line 3",
+       "expected 4 numbers x,y,w,h, found 3"),
+    _c("OTB-word", "a row with the word 'left'",
+       otb(_at("groundtruth_rect.txt", cells(2, c0="left"))), "line 2, field 'x'",
+       "not a number: 'left'"),
+    _c("OTB-blank-line-inside", "a blank line inside the box list",
+       otb(_at("groundtruth_rect.txt", lambda c: c.replace("\n", "\n\n", 3))),
+       "blank line inside the box list"),
+    _c("OTB-x-1e9", "a box at x=1e9",
+       otb(_at("groundtruth_rect.txt", cells(4, c0="1e9"))), "line 4, field 'x'",
+       "outside the observation bounds"),
+    _c("OTB-empty", "an empty groundtruth_rect.txt",
+       otb(lambda seq: write(seq / "groundtruth_rect.txt", "")), "groundtruth_rect.txt",
+       "empty ground-truth file", "skipped", kind="warning"),
+    _c("OTB-frame-truncated", "a frame cut to half its bytes",
+       otb(lambda seq: _truncate_frame(seq / "img", 12)), "truncated image"),
+    _c("OTB-frames-missing", "fewer images than boxes",
+       otb(lambda seq: [p.unlink() for p in sorted((seq / "img").iterdir())[-2:]]),
+       "img"),
+    # -------------------------------------------------------------------- DAVIS
+    _c("DAVIS-missing-middle-annotation", "a val sequence without its frame-5 annotation",
+       davis(lambda root: _davis_png(root, 5).unlink()), "00005.png",
+       "annotation of frame 5 missing", "cannot be scored"),
+    _c("DAVIS-grayscale-2016-mask", "a DAVIS-2016 grayscale 0/255 mask as frame 5",
+       davis(_gray_2016), "00005.png", "DAVIS-2016 mask", "void"),
+    _c("DAVIS-rgb-annotation", "an RGB annotation PNG as frame 5",
+       davis(_rgb_annotation), "00005.png", "PNG mode 'RGB' is not a label map"),
+    _c("DAVIS-annotation-size", "an annotation half the frame's height",
+       davis(_small_annotation), "00005.png", "differs from the frames'"),
+    _c("DAVIS-first-annotation-missing", "no first-frame annotation",
+       davis(lambda root: _davis_png(root, 0).unlink()), "00000.png",
+       "first-frame annotation missing"),
+    _c("DAVIS-first-annotation-2016", "a DAVIS-2016 0/255 mask as the first annotation",
+       davis(_first_gray_2016), "00000.png", "DAVIS-2016", "0/1"),
+    _c("DAVIS-frame-truncated", "a JPEG frame cut to half its bytes",
+       davis(lambda root: _truncate_frame(root / "JPEGImages" / "480p" / DAVIS_SEQ, 7)),
+       "00007.jpg", "truncated image"),
+    _c("DAVIS-annotation-without-frame", "an annotation PNG with no frame of its name",
+       davis(lambda root: shutil.copy(_davis_png(root, 1), _davis_png(root, 999))),
+       "00999.png", "annotation without a frame"),
+    _c("DAVIS-split-list-missing", "no ImageSets/2017/val.txt",
+       davis(lambda root: (root / "ImageSets" / "2017" / "val.txt").unlink()),
+       "val.txt", "split list missing"),
+    _c("DAVIS-listed-sequence-missing", "val.txt lists a sequence without frames",
+       davis(lambda root: edit(root / "ImageSets" / "2017" / "val.txt",
+                               lambda c: c + "syn-gone\n"), sequence="syn-gone"),
+       "syn-gone", "missing"),
+    # -------------------------------------------------------------------- JHMDB
+    _c("JHMDB-joint-nan", "a joint coordinate NaN in pos_img",
+       jhmdb(_mat(_with_nan)), "joint_positions.mat", "field 'pos_img'", "frame 5",
+       "finite coordinates"),
+    _c("JHMDB-joint-far", "a joint at y=1e9",
+       jhmdb(_mat(_far_joint)), "field 'pos_img'", "outside the observation bounds"),
+    _c("JHMDB-pos-img-shape", "pos_img of shape (2, 14, T)",
+       jhmdb(_mat(lambda d: {"pos_img": np.asarray(d["pos_img"])[:, :14]})),
+       "pos_img has shape", "expected (2, 15, T)"),
+    _c("JHMDB-no-pos-img", "a .mat file without pos_img",
+       jhmdb(_mat(lambda d: {"pos_world": d["pos_world"]} if "pos_world" in d else {
+           "x": np.zeros(3)})), "has no 'pos_img'"),
+    _c("JHMDB-not-matlab", "joint_positions.mat is a text file",
+       jhmdb(lambda mat, frames: write(mat, "not a MATLAB file")), "cannot read MATLAB file"),
+    _c("JHMDB-frames-missing", "three frames fewer than annotated",
+       jhmdb(_drop_frames), "joint_positions.mat", "annotates"),
+    _c("JHMDB-frame-truncated", "a PNG frame cut to half its bytes",
+       jhmdb(lambda mat, frames: _truncate_frame(frames, 3)), "truncated image",
+       "PNG IEND"),
+    # ------------------------------------------------------------------ actions
+    _c("action-num-tracks-2.7", "MOT: num_tracks=2.7",
+       act("UniTrack/MOT17-v0", _tracks([1, 2, 3], [BOX] * 3, num_tracks=2.7)),
+       "num_tracks", "must be an integer", "2.7", error="InvalidActionError"),
+    _c("action-id-above-2**53", "MOT: a track id of 2**53 + 1",
+       act("UniTrack/MOT17-v0", _tracks([2**53 + 1], [BOX])), "9007199254740993",
+       "above 2147483647",
+       error="InvalidActionError"),
+    _c("action-id-float-huge", "MOT: a float track id of 1e300",
+       act("UniTrack/MOT17-v0", _tracks(np.array([1e300]), [BOX])), "track id 1e+300",
+       "above 2147483647",
+       error="InvalidActionError"),
+    _c("action-id-fractional", "MOT: a track id of 1.5",
+       act("UniTrack/MOT17-v0", _tracks(np.array([1.5]), [BOX])), "must be integers",
+       error="InvalidActionError"),
+    _c("action-id-zero", "MOT: a track id of 0",
+       act("UniTrack/MOT17-v0", _tracks([0], [BOX])), "track ids must be >= 1, got 0",
+       error="InvalidActionError"),
+    _c("action-duplicate-ids", "MOT: two tracks with id 4",
+       act("UniTrack/MOT17-v0", _tracks([4, 4], [BOX, BOX])), "duplicate track ids",
+       "[4]", error="InvalidActionError"),
+    _c("action-box-nan", "MOT: a box with NaN",
+       act("UniTrack/MOT17-v0", _tracks([1], [[np.nan, 1, 2, 3]])), "non-finite box",
+       "nan", error="InvalidActionError"),
+    _c("action-box-1e9", "MOT: a box at x=1e9",
+       act("UniTrack/MOT17-v0", _tracks([1], [[1e9, 1, 2, 3]])), "outside the action space",
+       error="InvalidActionError"),
+    _c("action-negative-size", "MOT: a box of width -1",
+       act("UniTrack/MOT17-v0", _tracks([1], [[1, 1, -1, 3]])), "negative size",
+       error="InvalidActionError"),
+    _c("action-num-tracks-too-many", "MOT: num_tracks=5 with 1 track",
+       act("UniTrack/MOT17-v0", _tracks([1], [BOX], num_tracks=5)), "num_tracks=5",
+       error="InvalidActionError"),
+    _c("action-not-a-dict", "MOT: a list instead of a dict",
+       act("UniTrack/MOT17-v0", lambda obs: [[1, *BOX]]), "must be a dict with 'ids' and",
+       error="InvalidActionError"),
+    _c("action-boxes-3-columns", "MOT: boxes of shape (1, 3)",
+       act("UniTrack/MOT17-v0", _tracks([1], [[1, 2, 3]])), "shape (k, 4)",
+       error="InvalidActionError"),
+    _c("action-mots-negative-id", "MOTS: a mask id of -2",
+       act("UniTrack/MOTS-v0", lambda obs: {"ids": np.full(obs["num_detections"], -2)}),
+       ">= 1 (0 = not reported)", error="InvalidActionError"),
+    _c("action-mots-shared-id", "MOTS: one id for two masks",
+       act("UniTrack/MOTS-v0", lambda obs: {"ids": np.full(obs["num_detections"], 3)}),
+       "one track id given to several detections", error="InvalidActionError"),
+    _c("action-pose-score-2", "PoseTrack: a keypoint score of 2",
+       act("UniTrack/PoseTrack-v0", _pose(scores=2.0)), "must lie in [0, 1]",
+       error="InvalidActionError"),
+    _c("action-pose-num-tracks-1.5", "PoseTrack: num_tracks=1.5",
+       act("UniTrack/PoseTrack-v0", _pose(num_tracks=1.5)), "must be an integer",
+       error="InvalidActionError"),
+    _c("action-pose-x-1e9", "PoseTrack: a keypoint at x=1e9",
+       act("UniTrack/PoseTrack-v0", _pose(x=1e9)), "outside the action space",
+       error="InvalidActionError"),
+    _c("action-otb-nan", "OTB: a NaN box",
+       act("UniTrack/OTB-v0", lambda obs: np.array([np.nan, 1, 2, 3])), "non-finite",
+       error="InvalidActionError"),
+    _c("action-otb-three", "OTB: 3 numbers",
+       act("UniTrack/OTB-v0", lambda obs: np.array([1.0, 2.0, 3.0])), "shape (4,)",
+       error="InvalidActionError"),
+    _c("action-davis-unknown-label", "DAVIS: label 7 in a sequence without object 7",
+       act("UniTrack/DAVIS-v0", _labels(7)), "labels [7] that are not objects",
+       error="InvalidActionError"),
+    _c("action-davis-float-map", "DAVIS: a float label map",
+       act("UniTrack/DAVIS-v0", _labels(0, np.float32)), "integer label map",
+       error="InvalidActionError"),
+    _c("action-jhmdb-shape", "JHMDB: joints of shape (14, 2)",
+       act("UniTrack/JHMDB-v0", lambda obs: np.zeros((14, 2))), "(15, 2)",
+       error="InvalidActionError"),
+    _c("action-jhmdb-far", "JHMDB: a joint at x=1e9",
+       act("UniTrack/JHMDB-v0", lambda obs: np.full((15, 2), 1e9)),
+       "outside the action space", error="InvalidActionError"),
+    # -------------------------------------------------------------- checkpoints
+    _c("checkpoint-missing", "weights= a file that does not exist",
+       lambda scratch: checkpoint(lambda path: None)(scratch), "model.pth",
+       "neither a known name", error="ValueError"),
+    _c("checkpoint-text-file", "weights= a text file",
+       checkpoint(lambda path: path.write_text("not a checkpoint")), "model.pth",
+       "not a readable PyTorch checkpoint", error="CheckpointError"),
+    _c("checkpoint-pickled-code", "a pickle that would call a function when loaded",
+       checkpoint(_pickle_payload), "model.pth", "weights_only", error="CheckpointError"),
+    _c("checkpoint-truncated", "a checkpoint cut to 40% of its bytes",
+       checkpoint(_truncated_checkpoint), "model.pth", "not a readable PyTorch checkpoint",
+       error="CheckpointError"),
+    _c("checkpoint-list", "a checkpoint holding a list",
+       checkpoint(_save(lambda: [1, 2, 3])), "expected a dict-like checkpoint, got list",
+       error="CheckpointError"),
+    _c("checkpoint-missing-key", "a resnet18 state dict without layer2.0.conv1.weight",
+       checkpoint(_save(lambda: _drop_key(_resnet18_state()))), "layer2.0.conv1.weight",
+       error="CheckpointError"),
+    _c("checkpoint-wrong-shape", "a resnet18 state dict with a mis-shaped layer1 kernel",
+       checkpoint(_save(lambda: _reshape(_resnet18_state()))), "layer1.0.conv1.weight",
+       error="CheckpointError"),
+    _c("checkpoint-empty-dict", "an empty state dict",
+       checkpoint(_save(dict)), "model.pth", error="CheckpointError"),
+)
