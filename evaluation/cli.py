@@ -311,6 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_commands(sub)
+    from unitrack_env.evaluation.cache_cli import add_parser as add_cache_parser
+
+    add_cache_parser(sub)  # unitrack cache info|prune|clear
     return parser
 
 

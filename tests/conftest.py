@@ -14,9 +14,17 @@ SHARED_DATA = (REPO / ".." / "shared" / "data").resolve()
 
 @pytest.fixture(scope="session", autouse=True)
 def _hermetic_environment(tmp_path_factory: pytest.TempPathFactory):
-    """Generate synthetic data into a per-session cache; ignore a user's UNITRACK_DATA."""
-    saved = {k: os.environ.get(k) for k in ("UNITRACK_CACHE", "UNITRACK_DATA")}
+    """Generate synthetic data into a per-session cache; ignore a user's UNITRACK_DATA.
+
+    The feature cache (on by default) goes to a per-session folder too, never the user's.
+    """
+    keys = ("UNITRACK_CACHE", "UNITRACK_DATA", "UNITRACK_FEATURE_CACHE",
+            "UNITRACK_FEATURE_CACHE_MAX", "UNITRACK_FEATURE_CACHE_RUN")
+    saved = {k: os.environ.get(k) for k in keys}
     os.environ["UNITRACK_CACHE"] = str(tmp_path_factory.mktemp("unitrack-cache"))
+    os.environ["UNITRACK_FEATURE_CACHE"] = str(tmp_path_factory.mktemp("feature-cache"))
+    os.environ.pop("UNITRACK_FEATURE_CACHE_MAX", None)
+    os.environ.pop("UNITRACK_FEATURE_CACHE_RUN", None)
     os.environ.pop("UNITRACK_DATA", None)
     yield
     for key, value in saved.items():
