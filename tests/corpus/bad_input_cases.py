@@ -5,7 +5,9 @@ Each case copies a small synthetic data set (files are symlinks into the synthet
 only the file a case breaks is a real copy), breaks one thing, and opens it through the
 public API: ``gym.make(...).reset()`` for data (everything must be refused at reset, before
 a frame is played), ``env.step(action)`` for actions, ``AppearanceModel(weights=...)`` for
-checkpoints. :func:`outcome` classifies what happened:
+checkpoints, ``unitrack_env.evaluation.cli.main([...])`` for the command line (a non-zero
+exit is an error whose message is ``exit N: <what it printed>``). :func:`outcome`
+classifies what happened:
 
 * ``clear``: the expected error (or warning) whose message holds every expected fragment;
 * ``unclear``: an error of a deliberate kind (``ValueError``, ``KeyError``, ``OSError`` and
@@ -74,6 +76,8 @@ def _error_type(name: str) -> type[BaseException]:
 
     if hasattr(errors, name):
         return getattr(errors, name)
+    if name == "CLIFailed":
+        return CLIFailed
     if name == "CheckpointError":
         from unitrack_env.agents.appearance.checkpoints import CheckpointError
 
@@ -489,6 +493,49 @@ def _nan_weights(state: dict[str, Any]) -> dict[str, Any]:
 
 def _pickle_payload(path: Path) -> None:
     path.write_bytes(pickle.dumps({"state_dict": _Payload()}))
+
+
+# ---------------------------------------------------------------------------- CLI
+class CLIFailed(ValueError):
+    """The command exited with a non-zero status; the message is ``exit N: <its output>``."""
+
+
+def cli(*argv: str, data: Callable[[Path], Path] | None = None) -> Callable[[Path], None]:
+    """A CLI case: run ``unitrack <argv>`` (``{data}`` = ``data(scratch)``, ``{out}`` = a fresh
+    output folder); a non-zero exit raises :class:`CLIFailed` with what the command printed."""
+    def run(scratch: Path) -> None:
+        import contextlib
+        import io
+
+        from unitrack_env.evaluation.cli import main
+
+        root = data(scratch) if data is not None else scratch
+        args = [a.format(data=root, out=scratch / "out") for a in argv]
+        printed = io.StringIO()
+        saved = os.environ.get("COLUMNS")
+        os.environ["COLUMNS"] = "100000"  # no line wrapping inside paths
+        try:
+            with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
+                try:
+                    code = main(args)
+                except SystemExit as exc:  # argparse errors
+                    code = exc.code
+        finally:
+            if saved is None:
+                os.environ.pop("COLUMNS", None)
+            else:
+                os.environ["COLUMNS"] = saved
+        if code:
+            raise CLIFailed(f"exit {code}: {printed.getvalue()}")
+    return run
+
+
+def _mot_with(change: Callable[[Path], None]) -> Callable[[Path], Path]:
+    def build(scratch: Path) -> Path:
+        root = clone(synthetic("motchallenge", "MOT17"), scratch / "MOT17")
+        change(root / "train" / MOT_SEQ)
+        return root
+    return build
 
 
 # ------------------------------------------------------------------------------ table
@@ -913,4 +960,31 @@ CASES: tuple[Case, ...] = (
        error="CheckpointError"),
     _c("checkpoint-empty-dict", "an empty state dict",
        checkpoint(_save(dict)), "model.pth", error="CheckpointError"),
+    # ---------------------------------------------------------------------- CLI
+    _c("CLI-unknown-env", "unitrack evaluate --env UniTrack/Nope-v0",
+       cli("evaluate", "--env", "UniTrack/Nope-v0", "--agent", "iou", "--out", "{out}"),
+       "exit 2:", "UniTrack/Nope-v0", "did you mean", error="CLIFailed"),
+    _c("CLI-unknown-agent", "unitrack evaluate --agent nope",
+       cli("evaluate", "--env", "UniTrack/MOT17-v0", "--agent", "nope", "--out", "{out}"),
+       "exit 2:", "unknown agent 'nope'", "iou", error="CLIFailed"),
+    _c("CLI-mistyped-agent-arg", "unitrack evaluate --agent-arg treshold=0.3",
+       cli("evaluate", "--env", "UniTrack/MOT17-v0", "--agent", "iou", "--agent-arg",
+           "treshold=0.3", "--out", "{out}"),
+       "exit 2:", "no option 'treshold'", "iou_threshold", error="CLIFailed"),
+    _c("CLI-env-arg-type", "unitrack evaluate --env-arg max_detections=abc",
+       cli("evaluate", "--env", "UniTrack/MOT17-v0", "--env-arg", "max_detections=abc",
+           "--agent", "iou", "--out", "{out}"),
+       "exit 2:", "max_detections", "must be int", error="CLIFailed"),
+    _c("CLI-root-missing", "unitrack evaluate --root <a folder that does not exist>",
+       cli("evaluate", "--env", "UniTrack/MOT17-v0", "--root", "{data}/nowhere", "--agent",
+           "iou", "--out", "{out}"),
+       "exit 2:", "nowhere", "root= is not a folder", error="CLIFailed"),
+    _c("CLI-score-results-missing", "unitrack score --results <missing folder>",
+       cli("score", "--env", "UniTrack/MOT17-v0", "--results", "{data}/none"),
+       "exit 2:", "none", "results folder not found", error="CLIFailed"),
+    _c("CLI-data-error-in-run", "unitrack evaluate on a gt.txt with blank lines at the end",
+       cli("evaluate", "--env", "UniTrack/MOT17-v0", "--root", "{data}", "--sequences",
+           MOT_SEQ, "--agent", "iou", "--out", "{out}", "--quiet",
+           data=_mot_with(_append(GT, "\n\n"))),
+       "SYN-01", "gt.txt", "blank line", error="CLIFailed"),
 )
