@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import math
 import os
@@ -85,6 +86,23 @@ def record_episode(
     )
 
 
+def metric_tolerance(tolerance: float | dict[str, float], name: str) -> float:
+    """The absolute tolerance of metric ``name``.
+
+    ``tolerance`` is one number for every metric, or a dict whose keys are metric names or
+    ``fnmatch`` patterns (``"IDF1/*"``): an exact name wins, then the first matching
+    pattern in the dict's order, then ``"*"`` if present, else :data:`DEFAULT_TOLERANCE`.
+    """
+    if not isinstance(tolerance, dict):
+        return float(tolerance)
+    if name in tolerance:
+        return float(tolerance[name])
+    for pattern, value in tolerance.items():
+        if fnmatch.fnmatchcase(name, pattern):
+            return float(value)
+    return DEFAULT_TOLERANCE
+
+
 def compare_records(
     golden: EpisodeRecord,
     actual: EpisodeRecord,
@@ -98,7 +116,8 @@ def compare_records(
     Args:
         golden: the recorded episode.
         actual: the replayed episode.
-        tolerance: absolute tolerance, for all metrics or per metric name.
+        tolerance: absolute tolerance, for all metrics or per metric name or pattern
+            (see :func:`metric_tolerance`).
         metrics: compare only these metrics (default: all in the golden file).
         strict_actions: also fail when the action digest changed while metrics did not.
     """
@@ -114,7 +133,7 @@ def compare_records(
         if name not in actual.metrics:
             problems.append(f"metric '{name}' is missing from the replayed episode")
             continue
-        tol = tolerance.get(name, DEFAULT_TOLERANCE) if isinstance(tolerance, dict) else tolerance
+        tol = metric_tolerance(tolerance, name)
         old, new = golden.metrics[name], actual.metrics[name]
         same = (math.isnan(old) and math.isnan(new)) or abs(new - old) <= tol
         if not same:
