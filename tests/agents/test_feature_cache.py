@@ -556,3 +556,14 @@ def test_a_renamed_copy_of_a_sequence_hits_the_cache_on_every_frame(
     b = reports["MOT17-02-DPM"].scores.per_sequence["MOT17-02-DPM"]
     assert a == b  # same frames, same detections, same features: same metrics
     assert len(_entries(tmp_path / "features")) == frames
+
+
+def test_engines_that_round_differently_never_share_entries(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    model = AppearanceModel("random", seed=0)
+    torch_key = CachedAppearanceModel(model, tmp_path).key((8, 8), KEY.content)
+    model.identity = replace(model.identity, runtime="onnxruntime")
+    other_key = CachedAppearanceModel(model, tmp_path).key((8, 8), KEY.content)
+    cache = FeatureCache(tmp_path)
+    assert cache.path(torch_key) != cache.path(other_key)
