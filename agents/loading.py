@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import importlib.machinery
 import importlib.metadata
 import importlib.util
 import sys
@@ -64,6 +65,32 @@ def _load_file(path: Path) -> Any:
     return module
 
 
+def _import_module(name: str) -> Any:
+    """Import ``name``; a top-level package or module in the current folder is found too.
+
+    ``python -m`` puts the current folder on ``sys.path``, an installed console script does
+    not: looking there as well makes ``unitrack evaluate --agent myagents:MyTracker`` work
+    from the folder that holds ``myagents.py``, as the user expects.
+    """
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        top = name.partition(".")[0]
+        if exc.name != top or top in sys.modules:
+            raise
+        spec = importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
+        if spec is None or spec.loader is None:
+            raise
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[top] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[top]
+            raise
+        return importlib.import_module(name)
+
+
 def _is_file(target: str) -> bool:
     return target.endswith(".py") or "/" in target or "\\" in target
 
@@ -80,7 +107,7 @@ def load_reference(spec: str) -> type:
         module = _load_file(Path(target))
     else:
         try:
-            module = importlib.import_module(target)
+            module = _import_module(target)
         except ModuleNotFoundError as exc:
             raise ImportError(
                 f"agent '{spec}': cannot import module '{target}' ({exc}); a reference is "

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -51,6 +52,9 @@ def _watch_parent(parent: int) -> None:
 
 
 def _init_worker(parent: int, threads: int) -> None:
+    # Ctrl-C reaches the whole process group; the parent handles it (keeps finished
+    # sequences, stops the pool), so the workers must not die mid-write on their own.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _watch_parent(parent)
     if threads:
         import torch
@@ -106,9 +110,10 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str
                 bar.advance(lengths[name])
             else:
                 failures[name] = payload
-    except BaseException:
+    except BaseException:  # Ctrl-C or a failure here: stop the workers, keep what finished
+        processes = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
-        for process in list(getattr(pool, "_processes", {}).values()):
+        for process in processes:
             process.terminate()
         raise
     pool.shutdown(wait=True)

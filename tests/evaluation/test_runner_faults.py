@@ -1,0 +1,204 @@
+"""Faults the runner survives: failing sequences, changed inputs, dead parents, bad disks."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from unitrack_env.datasets.synthetic import ensure_synthetic
+from unitrack_env.evaluation.cli import main
+from unitrack_env.evaluation.runner import OutputError, RunFailed, run
+
+ENV = "UniTrack/MOT16-v0"
+
+
+@pytest.fixture
+def mot16(tmp_path: Path) -> Path:
+    """A private copy of the synthetic MOT16 data set (tests may damage it)."""
+    root = tmp_path / "MOT16"
+    shutil.copytree(ensure_synthetic("MOT16"), root)
+    return root
+
+
+def _corrupt_first_frame(root: Path, sequence: str) -> Path:
+    frame = sorted((root / "train" / sequence / "img1").iterdir())[0]
+    data = frame.read_bytes()
+    frame.write_bytes(data[: len(data) // 2])  # truncated JPEG: no end-of-image marker
+    return frame
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_corrupt_frame_fails_its_sequence_only(tmp_path, mot16, workers, capsys):
+    frame = _corrupt_first_frame(mot16, "SYN-02")
+    out = tmp_path / "run"
+    with pytest.raises(RunFailed) as failed:
+        run(ENV, "iou", out=out, env_kwargs={"root": str(mot16)}, workers=workers,
+            progress=False)
+    assert list(failed.value.failures) == ["SYN-02"]
+    assert str(frame) in failed.value.failures["SYN-02"]
+    assert (out / "sequences" / "SYN-01.json").is_file()
+    assert not (out / "sequences" / "SYN-02.json").exists()
+    code = main(["evaluate", "--env", ENV, "--root", str(mot16), "--agent", "iou", "--out",
+                 str(out), "--workers", str(workers), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and str(frame) in err and "Traceback" not in err
+    assert "1 sequence(s) failed" in err
+
+
+def test_changed_detections_replay_that_sequence_only(tmp_path, mot16):
+    out = tmp_path / "run"
+    first = run(ENV, "iou", out=out, env_kwargs={"root": str(mot16)}, progress=False)
+    (mot16 / "train" / "SYN-01" / "det" / "det.txt").write_text("")
+    with pytest.warns(UserWarning, match="det.txt"):
+        second = run(ENV, "iou", out=out, env_kwargs={"root": str(mot16)}, progress=False)
+    assert second.skipped == ["SYN-02"]
+    assert "inputs" in second.replayed["SYN-01"]
+    assert second.records["SYN-01"].digest != first.records["SYN-01"].digest
+    assert second.scores.per_sequence["SYN-01"]["HOTA"] == 0
+
+
+def test_a_tampered_result_file_is_replayed(tmp_path):
+    out = tmp_path / "run"
+    first = run(ENV, "iou", out=out, progress=False)
+    result = out / "data" / "SYN-02.txt"
+    result.write_text(result.read_text()[: 200])  # truncated by hand
+    second = run(ENV, "iou", out=out, progress=False)
+    assert second.skipped == ["SYN-01"] and "result files" in second.replayed["SYN-02"]
+    assert second.combined == pytest.approx(first.combined)
+
+
+def test_other_agent_options_are_a_different_run_and_a_failed_start_leaves_no_record(
+        tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--agent-arg", "min_hits=abc",
+                 "--out", str(out), "--quiet"]) == 2
+    assert "option 'min_hits' must be int" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--agent-arg", "min_hits=2",
+                 "--out", str(out), "--quiet"]) == 0
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_read_only_out_is_one_clear_line(tmp_path, capsys):  # pragma: no cover - as root
+    out = tmp_path / "run"
+    out.mkdir()
+    out.chmod(0o500)
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", str(out)]) == 2
+    assert "cannot write" in capsys.readouterr().err
+
+
+def test_a_full_disk_keeps_finished_sequences(tmp_path, monkeypatch):
+    import errno
+
+    import unitrack_env.envs.motchallenge as mot
+
+    out = tmp_path / "run"
+    written = []
+    original = mot.atomic_write_text
+
+    def fill_up(path, text):
+        if written:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        written.append(path)
+        original(path, text)
+
+    monkeypatch.setattr(mot, "atomic_write_text", fill_up)
+    with pytest.raises(OutputError, match="No space left on device"):
+        run(ENV, "iou", out=out, progress=False)
+    assert [p.name for p in written] == ["SYN-01.txt"]
+    assert (out / "sequences" / "SYN-01.json").is_file()
+    monkeypatch.setattr(mot, "atomic_write_text", original)
+    resumed = run(ENV, "iou", out=out, progress=False)
+    assert resumed.skipped == ["SYN-01"]
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
+def test_workers_die_with_their_parent(tmp_path):
+    script = (
+        "import time, numpy as np\n"
+        "from unitrack_env.agents import Agent\n"
+        "from unitrack_env.evaluation.runner import run\n"
+        "class Slow(Agent, name='slow-test', tasks=('mot',)):\n"
+        "    def reset(self, observation, info): pass\n"
+        "    def act(self, observation):\n"
+        "        time.sleep(1)\n"
+        "        return {'ids': np.zeros(0, int), 'boxes': np.zeros((0, 4))}\n"
+        "if __name__ == '__main__':\n"
+        f"    run('{ENV}', Slow, out=r'{tmp_path / 'run'}', workers=2, progress=False)\n"
+    )
+    (tmp_path / "slow.py").write_text(script)
+    parent = subprocess.Popen([sys.executable, str(tmp_path / "slow.py")], cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        workers: list[int] = []
+        while len(workers) < 2 and time.monotonic() < deadline:
+            time.sleep(0.5)
+            workers = [p for p in _children(parent.pid)
+                       if "spawn_main" in (Path("/proc") / str(p) / "cmdline").read_text()]
+        assert len(workers) == 2, "the workers did not start"
+        os.kill(parent.pid, signal.SIGKILL)  # as the OOM killer would
+        parent.wait()
+        deadline = time.monotonic() + 20
+        while any(map(_alive, workers)) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(map(_alive, workers))
+        assert not (tmp_path / "run" / "sequences").exists()
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
+def test_cli_reports_user_errors_in_one_line(tmp_path, capsys):
+    cases = {
+        ("--env", "UniTrack/MOT16", "--agent", "iou"): "did you mean UniTrack/MOT16-v0",
+        ("--env", ENV, "--agent", "no-such-agent"): "unknown agent 'no-such-agent'",
+        ("--env", ENV, "--agent", "nope.module:Thing"): "cannot import module 'nope.module'",
+        ("--env", ENV, "--agent", "unitrack-vos"): "agents for mot: fresh-ids, iou, unitrack",
+        ("--env", ENV, "--agent", "iou", "--env-arg", "colour=red"): "has no option 'colour'",
+        ("--env", ENV, "--agent", "iou", "--root", str(tmp_path / "nope")): "is not a folder",
+    }
+    for args, expected in cases.items():
+        code = main(["evaluate", *args, "--out", str(tmp_path / "x"), "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and expected in err and "Traceback" not in err, (args, err)
+    assert not (tmp_path / "x").exists()
+
+
+def test_error_text_is_printed_literally(monkeypatch, capsys):
+    # rich would read "[nan, 1.0, ...]" as markup and print nothing of it
+    from unitrack_env.evaluation import cli
+
+    def boom(args, console):
+        raise ValueError("track 1 has a non-finite box [nan, 1.0, 2.0, 3.0]")
+
+    monkeypatch.setattr(cli, "_cmd_list", boom)
+    assert main(["list"]) == 2
+    assert "[nan, 1.0, 2.0, 3.0]" in capsys.readouterr().err

@@ -1,0 +1,185 @@
+"""A user's first hour, from a wheel, next to other packages (marked ``install``; CI runs it).
+
+In a fresh virtual environment: ``openai-agents`` (which ships a top-level ``agents``
+package) goes in first; then unitrack-env's wheel, first with a plain ``pip install`` (no
+TrackEval: a MOT run must refuse to start and name the fix), then by the README's setup
+script. From a project folder that has its own ``agents/`` and ``evaluation/`` packages and a
+conftest: the README quickstart runs, the project's pytest passes an ``episode_regression``
+golden test of its own agent, and ``unitrack evaluate --agent myagents:MyTracker --workers 2``
+survives a Ctrl-C and resumes to the same metrics as an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.install
+
+MY_AGENTS = '''
+import time
+
+from unitrack_env.agents import Agent
+from unitrack_env.spaces import pack_tracks, unpack_detections
+
+
+class MyTracker(Agent, name="my-tracker", tasks=("mot",)):
+    """Every detection above min_score gets the id of the previous box it overlaps most."""
+
+    def __init__(self, min_score: float = 0.0, delay: float = 0.0):
+        self.min_score, self.delay = min_score, delay
+
+    def reset(self, observation, info):
+        self.next_id, self.previous = 1, []
+
+    def act(self, observation):
+        time.sleep(self.delay)
+        boxes, scores = unpack_detections(observation)
+        boxes = boxes[scores >= self.min_score]
+        ids = []
+        for box in boxes:
+            best, best_iou = None, 0.3
+            for track_id, old in self.previous:
+                x1, y1 = max(box[0], old[0]), max(box[1], old[1])
+                x2 = min(box[0] + box[2], old[0] + old[2])
+                y2 = min(box[1] + box[3], old[1] + old[3])
+                inter = max(0.0, x2 - x1) * max(0.0, y2 - y1)
+                iou = inter / (box[2] * box[3] + old[2] * old[3] - inter)
+                if iou > best_iou and track_id not in ids:
+                    best, best_iou = track_id, iou
+            if best is None:
+                best, self.next_id = self.next_id, self.next_id + 1
+            ids.append(best)
+        self.previous = list(zip(ids, boxes))
+        return pack_tracks(ids, boxes, 512)
+'''
+
+MY_TEST = '''
+import myagents  # noqa: F401 - registers my-tracker
+
+
+def test_my_tracker(episode_regression):
+    episode_regression.check("UniTrack/MOT16-v0", agent="my-tracker", sequence="SYN-01",
+                             golden="goldens/my-tracker.json")
+
+
+def test_real_data_example_skips(episode_regression):
+    episode_regression.check("UniTrack/MOT17-v0", agent="iou", sequence="MOT17-02-FRCNN",
+                             golden="goldens/iou-mot17.json",
+                             env_kwargs={"root": "/nonexistent/MOT17"})
+'''
+
+
+def _run(args: list[str], cwd: Path, env: dict[str, str], timeout: float = 900,
+         check: bool = True) -> subprocess.CompletedProcess:
+    result = subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True,
+                            timeout=timeout)
+    if check and result.returncode != 0:
+        raise AssertionError(f"{' '.join(args)} exited {result.returncode}\n"
+                             f"stdout:\n{result.stdout[-3000:]}\nstderr:\n{result.stderr[-3000:]}")
+    return result
+
+
+@pytest.fixture(scope="module")
+def outsider(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    base = tmp_path_factory.mktemp("outsider")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("UNITRACK_", "VIRTUAL_ENV",
+                                                                     "PYTHON"))}
+    env["UNITRACK_CACHE"] = str(base / "cache")
+    dist = base / "dist"
+    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--quiet", "-w", str(dist),
+          str(REPO)], REPO, env)
+    wheel = next(dist.glob("unitrack_env-*.whl"))
+    venv = base / "venv"
+    _run([sys.executable, "-m", "venv", str(venv)], base, env)
+    python = venv / "bin" / "python"
+    pip = [str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check"]
+    _run([*pip, "openai-agents", "torch==2.13.0", "pytest"], base, env)
+    _run([*pip, str(wheel)], base, env)
+    project = base / "project"
+    for package in ("agents", "evaluation"):
+        (project / package).mkdir(parents=True)
+        (project / package / "__init__.py").write_text(f'"""The user\'s own {package}."""\n')
+    (project / "conftest.py").write_text('"""The user\'s conftest."""\n')
+    (project / "myagents.py").write_text(MY_AGENTS)
+    (project / "test_mine.py").write_text(MY_TEST)
+    env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
+    return {"base": base, "env": env, "python": python, "project": project, "wheel": wheel,
+            "venv": venv, "unitrack": str(venv / "bin" / "unitrack")}
+
+
+def test_plain_pip_install_refuses_before_the_first_frame(outsider):
+    result = _run([outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT16-v0", "--agent",
+                   "iou", "--out", "no-trackeval"], outsider["project"], outsider["env"],
+                  check=False)
+    assert result.returncode == 2
+    assert "pip install --no-deps trackeval==1.3.0" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (outsider["project"] / "no-trackeval" / "data").exists()
+
+
+def test_readme_install_then_quickstart_pytest_and_cli(outsider):
+    project, env = outsider["project"], outsider["env"]
+    _run(["bash", str(REPO / "scripts" / "setup.sh")], REPO,
+         env | {"UNITRACK_VENV": str(outsider["venv"]), "UNITRACK_WHEEL": str(outsider["wheel"])})
+    readme = (REPO / "README.md").read_text()
+    quickstart = re.findall(r"```python\n(.*?)```", readme, re.S)[0]
+    (project / "quickstart.py").write_text(quickstart)
+    printed = _run([str(outsider["python"]), "quickstart.py"], project, env).stdout.split()
+    assert len(printed) == 3 and all(0 <= float(x) <= 1 for x in printed)
+
+    tests = [str(outsider["python"]), "-m", "pytest", "-q", "-p", "no:cacheprovider"]
+    _run([*tests, "--update-goldens"], project, env)
+    assert (project / "goldens" / "my-tracker.json").is_file()
+    assert (project / "goldens" / "my-tracker.json").stat().st_mode & 0o044  # umask, not 0600
+    result = _run(tests + ["-rs"], project, env)
+    assert "1 passed, 1 skipped" in result.stdout and "no data for" in result.stdout
+    golden = json.loads((project / "goldens" / "my-tracker.json").read_text())
+    golden["metrics"]["HOTA"] += 0.01
+    (project / "goldens" / "my-tracker.json").write_text(json.dumps(golden))
+    failed = _run(tests, project, env, check=False)
+    assert failed.returncode == 1 and "HOTA" in failed.stdout
+    assert "site-packages" not in failed.stdout  # the diff, not a library traceback
+
+    evaluate = [outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT17-v0", "--agent",
+                "myagents:MyTracker", "--quiet", "--format", "json"]
+    reference = _run([*evaluate, "--out", "ref"], project, env)
+    # SYN-02 (64 frames) finishes ~1.6 s before SYN-01 (72 frames) at 0.2 s a frame.
+    slow = [*evaluate, "--agent-arg", "delay=0.2", "--workers", "2", "--out", "run"]
+    process = subprocess.Popen(slow, cwd=project, env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    records = project / "run" / "sequences"
+    deadline = time.monotonic() + 300
+    while not (records.is_dir() and any(records.iterdir())) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    os.killpg(process.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    kept = sorted(p.stem for p in records.iterdir())
+    assert kept == ["SYN-02"]
+    resumed = _run(slow, project, env)
+    assert f"resumed: kept {len(kept)}" in resumed.stderr
+    assert json.loads(resumed.stdout) == json.loads(reference.stdout)
+
+
+def test_pytest_of_a_project_with_its_own_evaluation_package_loads_our_plugin(outsider):
+    result = _run([str(outsider["python"]), "-m", "pytest", "--co", "-q", "-p",
+                   "no:cacheprovider"], outsider["project"], outsider["env"])
+    assert "test_my_tracker" in result.stdout
+    check = _run([str(outsider["python"]), "-c", textwrap.dedent("""
+        import agents, evaluation, unitrack_env.agents as ua
+        print(agents.__file__, evaluation.__file__, ua.make_agent("iou").name)
+    """)], outsider["project"], outsider["env"])
+    own, evaluation, name = check.stdout.split()
+    assert own.startswith(str(outsider["project"])) and name == "iou"
+    assert evaluation.startswith(str(outsider["project"]))
