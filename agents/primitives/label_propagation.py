@@ -19,16 +19,22 @@ frames to the current one through the affinity of their stride-8 feature maps:
 Features are L2-normalised per location (the inner product of the paper is then a cosine,
 the scale the temperature 0.05 is meant for).
 
-Implementation (CPU-friendly, memory bounded). The top-k of the union of several candidate
-sets is the top-k of the union of each set's top-k, so the two kinds of context are
+Implementation (CPU-friendly, memory bounded, float32). The top-k of the union of several
+candidate sets is the top-k of the union of each set's top-k, so the two kinds of context are
 searched separately and merged exactly:
 
-* first frame: dense affinity ``(queries, h*w)``, processed in chunks of queries so that no
-  more than ``max_affinity_elements`` numbers exist at once;
-* recent frames: the query grid is cut into ``tile_size`` x ``tile_size`` tiles; each tile
-  only needs the memory window ``(tile_size + 2 r)^2`` around it, so one batched matmul per
-  group of tiles replaces the dense ``(h*w)^2`` affinity. A distance mask keeps exactly the
-  locations within the radius of each query (plus a validity mask at the image borders).
+* first frame: dense affinity ``(queries, h*w)`` by blocks of queries (one matmul and one
+  top-k per block, :data:`FIRST_FRAME_BLOCK_ELEMENTS` affinities at a time, so the block
+  stays in the CPU's cache);
+* recent frames: the query grid is cut into ``tile_size`` x ``tile_size`` tiles. A tile only
+  needs the keys within the radius of one of its queries: the tile's square grown by the
+  radius (its Minkowski sum with the disk, ``t^2 + 4 t r + pi r^2`` locations instead of the
+  ``(t + 2r)^2`` square). Those keys are gathered for a block of tiles and every recent frame
+  with ONE index into a ring buffer that holds every memory frame already zero-padded and
+  channels-last (written once, when the frame enters the memory, not at every step); one
+  batched matmul, one masking pass (radius and map border, a cached boolean mask) and one
+  top-k then serve the whole block. Python loops run over blocks of tiles (a handful per
+  frame), never over tiles.
 
 :func:`propagate_dense` is the plain (slow, memory-hungry) definition used as the
 reference in the tests; :class:`LabelPropagator` is the fast stateful version the heads use.
@@ -55,13 +61,22 @@ TOP_K: int = 10
 TEMPERATURE: float = 0.05
 """``tau``: softmax temperature over the kept affinities (appendix B.2)."""
 
-TILE_SIZE: int = 16
-"""Query tile side of the local search (feature pixels). Larger tiles mean fewer, larger
-matmuls but more wasted window area ((t + 2r)^2 keys per t^2 queries); 16 measured
-fastest here at 480p for r = 12."""
+TILE_SIZE: int = 8
+"""Query tile side of the local search (feature pixels). Larger tiles mean larger matmuls
+but more keys outside a query's radius (``t^2 + 4 t r + pi r^2`` keys per tile against
+``pi r^2`` per query); 8 measured fastest here at 480p for r = 12
+(``benchmarks/label_propagation.py``)."""
 
 MAX_AFFINITY_ELEMENTS: int = 1 << 23
 """Most affinity numbers (float32) held at once, per search: 8 Mi = 32 MiB."""
+
+FIRST_FRAME_BLOCK_ELEMENTS: int = 1 << 20
+"""Affinities per block of the dense first-frame search (4 MiB of float32: a block's matmul
+output is still in cache when its top-k reads it). Capped by ``max_affinity_elements``."""
+
+LOCAL_BLOCK_ELEMENTS: int = 1 << 21
+"""Affinities per block of tiles of the local search (8 MiB of float32). Capped by
+``max_affinity_elements``."""
 
 AFFINITY_DTYPES: dict[str, torch.dtype] = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 """Allowed ``affinity_dtype`` names and their torch dtypes."""
@@ -239,7 +254,10 @@ class LabelPropagator:
         self._recent: deque[tuple[torch.Tensor, torch.Tensor]] = deque(
             maxlen=self.config.memory_size - 1
         )
-        self._mask_cache: dict[tuple[int, int, int, int], torch.Tensor] = {}
+        self._geometry: _LocalGeometry | None = None
+        self._ring_keys: torch.Tensor | None = None  # (slots, Hp * Wp, C), zero-padded
+        self._ring_labels: torch.Tensor | None = None  # (slots, Hp * Wp, K)
+        self._slots: deque[int] = deque()  # ring slots in use, oldest first
 
     # ------------------------------------------------------------------ memory
     def _prepare(self, features: torch.Tensor) -> torch.Tensor:
@@ -260,6 +278,8 @@ class LabelPropagator:
         _check_pair(feats, labels)
         self._first = (feats.contiguous(), labels.contiguous())
         self._recent.clear()
+        self._slots.clear()
+        self._ring_keys = self._ring_labels = None
 
     def push(self, features: torch.Tensor, labels: torch.Tensor) -> None:
         """Add a frame with its (predicted) labels to the recent memory (oldest dropped)."""
@@ -272,20 +292,44 @@ class LabelPropagator:
                 f"frame features {tuple(feats.shape)} / labels {tuple(labels.shape)} do not match "
                 f"the first frame's {tuple(first[0].shape)} / {tuple(first[1].shape)}"
             )
-        if self.config.memory_size > 1:
-            self._recent.append((feats.contiguous(), labels.contiguous()))
+        self._remember(feats, labels)
 
     def step(self, features: torch.Tensor) -> torch.Tensor:
         """Propagate to a new frame and remember it with its prediction; ``(K, h, w)``."""
         feats = self._prepare(features)
         labels = self._propagate_prepared(feats)
-        if self.config.memory_size > 1:
-            self._recent.append((feats.contiguous(), labels.contiguous()))
+        self._remember(feats, labels)
         return labels
 
     def propagate(self, features: torch.Tensor) -> torch.Tensor:
         """Labels ``(K, h, w)`` of a new frame from the memory, without remembering it."""
         return self._propagate_prepared(self._prepare(features))
+
+    def _remember(self, feats: torch.Tensor, labels: torch.Tensor) -> None:
+        """Append to the recent memory; for the local search, also to the padded ring."""
+        cfg = self.config
+        if cfg.memory_size <= 1:
+            return
+        self._recent.append((feats.contiguous(), labels.contiguous()))
+        if cfg.radius is None:
+            return
+        c, h, w = feats.shape
+        geo = self._local_geometry(h, w, feats.device)
+        slots = cfg.memory_size - 1
+        if self._ring_keys is None or self._ring_labels is None:
+            self._ring_keys = feats.new_zeros(slots, geo.padded_h * geo.padded_w, c)
+            self._ring_labels = labels.new_zeros(slots, geo.padded_h * geo.padded_w,
+                                                 labels.shape[0])
+        if len(self._slots) == slots:
+            slot = self._slots.popleft()  # the oldest frame's slot is overwritten
+        else:
+            slot = len(self._slots)
+        pad = geo.pad
+        keys = self._ring_keys[slot].view(geo.padded_h, geo.padded_w, c)
+        keys[pad:pad + h, pad:pad + w] = feats.permute(1, 2, 0)
+        lbl = self._ring_labels[slot].view(geo.padded_h, geo.padded_w, -1)
+        lbl[pad:pad + h, pad:pad + w] = labels.permute(1, 2, 0)
+        self._slots.append(slot)
 
     @property
     def memory_length(self) -> int:
@@ -336,112 +380,143 @@ class LabelPropagator:
         self, q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int, w: int,
         radius: float | None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Top-k of every query over one whole memory frame, in chunks of queries."""
+        """Top-k of every query over one whole memory frame, by blocks of queries."""
         cfg = self.config
         size = h * w
         keys = feats.reshape(feats.shape[0], -1)  # (C, S)
         flat_labels = lbl.reshape(lbl.shape[0], -1).t()  # (S, K)
         k = min(cfg.topk, size)
-        chunk = max(1, cfg.max_affinity_elements // size)
+        block = min(cfg.max_affinity_elements, FIRST_FRAME_BLOCK_ELEMENTS)
+        chunk = max(1, block // size)
         grid = _grid(h, w, q.device) if radius is not None else None
-        out_v, out_l = [], []
+        out_v = torch.empty(q.shape[0], k, device=q.device)
+        out_i = torch.empty(q.shape[0], k, dtype=torch.long, device=q.device)
+        aff = torch.empty(min(chunk, q.shape[0]), size, dtype=q.dtype, device=q.device)
         for start in range(0, q.shape[0], chunk):
-            aff = q[start:start + chunk] @ keys
+            stop = min(q.shape[0], start + chunk)
+            block_aff = aff[:stop - start]
+            torch.mm(q[start:stop], keys, out=block_aff)
             if grid is not None:
-                aff.masked_fill_(torch.cdist(grid[start:start + chunk], grid) > radius,
-                                 float("-inf"))
-            best, index = aff.topk(k, dim=1)
-            out_v.append(best.float())
-            out_l.append(flat_labels[index])  # (n, k, K)
-        return torch.cat(out_v), torch.cat(out_l)
+                block_aff.masked_fill_(torch.cdist(grid[start:stop], grid) > radius,
+                                       float("-inf"))
+            best, index = block_aff.topk(k, dim=1)
+            out_v[start:stop] = best
+            out_i[start:stop] = index
+        return out_v, flat_labels[out_i]
 
-    def _local_mask(self, h: int, w: int, tile: int, pad: int) -> torch.Tensor:
-        """``(tiles_y, tiles_x, tile*tile, (tile+2 pad)^2)`` bool: key not allowed.
-
-        A window location is excluded when it lies outside the query's radius or outside
-        the feature map (padding). Cached per map size (one video has one size).
-        """
-        key = (h, w, tile, pad)
-        cached = self._mask_cache.get(key)
-        if cached is not None:
-            return cached
-        radius = float(self.config.radius or 0.0)
-        win = tile + 2 * pad
-        qy, qx = torch.meshgrid(torch.arange(tile), torch.arange(tile), indexing="ij")
-        ky, kx = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
-        dy = (ky.reshape(1, -1) - pad) - qy.reshape(-1, 1)
-        dx = (kx.reshape(1, -1) - pad) - qx.reshape(-1, 1)
-        outside = (dy * dy + dx * dx).float() > radius * radius  # (T2, L)
-        tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
-        rows = torch.arange(tiles_y).view(-1, 1) * tile + ky.reshape(1, -1) - pad  # (Ty, L)
-        cols = torch.arange(tiles_x).view(-1, 1) * tile + kx.reshape(1, -1) - pad  # (Tx, L)
-        off_map = (
-            ((rows < 0) | (rows >= h)).view(tiles_y, 1, 1, -1)
-            | ((cols < 0) | (cols >= w)).view(1, tiles_x, 1, -1)
-        )
-        mask = outside.view(1, 1, tile * tile, -1) | off_map
-        self._mask_cache.clear()  # keep one size only: bounded memory
-        self._mask_cache[key] = mask
-        return mask
-
-    @staticmethod
-    def _pad_channels_last(maps: torch.Tensor, pad: int, extra_h: int,
-                           extra_w: int) -> torch.Tensor:
-        """``(R, X, h, w)`` -> zero-padded channels-last ``(R, h + 2 pad + eh, w + ..., X)``."""
-        padded = F.pad(maps, (pad, pad + extra_w, pad, pad + extra_h))
-        return padded.permute(0, 2, 3, 1).contiguous()
+    def _local_geometry(self, h: int, w: int, device: torch.device) -> _LocalGeometry:
+        """The local search's layout for an ``h x w`` map (cached: one video, one size)."""
+        cfg = self.config
+        tile = max(1, min(cfg.tile_size, max(h, w)))
+        key = (h, w, tile, float(cfg.radius or 0.0), str(device))
+        if self._geometry is None or self._geometry.key != key:
+            self._geometry = _LocalGeometry.build(h, w, tile, float(cfg.radius or 0.0), device,
+                                                  key)
+        return self._geometry
 
     def _search_local(self, query: torch.Tensor, h: int,
                       w: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Top-k of every query over the radius windows of all recent frames (tiled)."""
+        """Top-k of every query over the radius windows of all recent frames."""
+        if self._ring_keys is None or self._ring_labels is None:
+            raise RuntimeError("the recent memory has no padded ring")  # never: _remember
         cfg = self.config
-        pad = int(math.floor(float(cfg.radius or 0.0)))
-        tile = max(1, min(cfg.tile_size, max(h, w)))
+        c = query.shape[0]
+        geo = self._local_geometry(h, w, query.device)
+        tile, t2 = geo.tile, geo.tile * geo.tile
+        num_tiles, window = geo.key_index.shape
+        slots = torch.tensor(list(self._slots), device=query.device)
+        frames = len(slots)
+        candidates = frames * window
+        k = min(cfg.topk, candidates)
+        num_labels = self._ring_labels.shape[2]
+        # Queries by tile: (T, t^2, C) (zero-padded to whole tiles).
+        padded = F.pad(query, (0, geo.tiles_x * tile - w, 0, geo.tiles_y * tile - h))
+        q_tiles = padded.view(c, geo.tiles_y, tile, geo.tiles_x, tile).permute(
+            1, 3, 2, 4, 0).reshape(num_tiles, t2, c)
+        # Every tile's keys in every recent frame, as rows of the flattened ring.
+        ring_size = geo.padded_h * geo.padded_w
+        rows = (slots.view(1, -1, 1) * ring_size + geo.key_index.unsqueeze(1)).reshape(
+            num_tiles, candidates)  # (T, R * L), frame-major per tile
+        ring_keys = self._ring_keys.view(-1, c)
+        ring_labels = self._ring_labels.view(-1, num_labels)
+        block = min(cfg.max_affinity_elements, LOCAL_BLOCK_ELEMENTS)
+        per_block = max(1, block // (t2 * candidates))
+        out_v = torch.empty(num_tiles, t2, k, device=query.device)
+        out_l = torch.empty(num_tiles, t2, k, num_labels, device=query.device)
+        for start in range(0, num_tiles, per_block):
+            stop = min(num_tiles, start + per_block)
+            n = stop - start
+            block_rows = rows[start:stop]
+            keys = ring_keys.index_select(0, block_rows.reshape(-1)).view(n, candidates, c)
+            aff = torch.bmm(q_tiles[start:stop], keys.transpose(1, 2))  # (n, t^2, R * L)
+            aff.view(n, t2, frames, window).masked_fill_(
+                geo.excluded[start:stop].unsqueeze(2), float("-inf"))
+            best, index = aff.topk(k, dim=2)  # (n, t^2, k)
+            chosen = torch.gather(block_rows.unsqueeze(1).expand(n, t2, candidates), 2, index)
+            out_v[start:stop] = best
+            out_l[start:stop] = ring_labels[chosen]
+        # Tiles back to the map: (T, t^2, ...) -> (h * w, ...).
+        tiles_hw = (geo.tiles_y, geo.tiles_x, tile, tile)
+        out_v = out_v.view(*tiles_hw, k).permute(0, 2, 1, 3, 4).reshape(
+            geo.tiles_y * tile, geo.tiles_x * tile, k)[:h, :w].reshape(h * w, k)
+        out_l = out_l.view(*tiles_hw, k, num_labels).permute(0, 2, 1, 3, 4, 5).reshape(
+            geo.tiles_y * tile, geo.tiles_x * tile, k, num_labels)[:h, :w].reshape(
+            h * w, k, num_labels)
+        return out_v, out_l
+
+
+@dataclass(frozen=True)
+class _LocalGeometry:
+    """Layout of the local search for one map size (see the module docstring).
+
+    Attributes:
+        key: What it was built for ``(h, w, tile, radius, device)``.
+        tile: Tile side.
+        pad: Zero padding of the ring's maps (``floor(radius)``) on every side.
+        tiles_y: Tile rows.
+        tiles_x: Tile columns.
+        padded_h: Rows of a padded ring map (``tiles_y * tile + 2 pad``).
+        padded_w: Columns of a padded ring map.
+        key_index: ``(T, L)`` long: per tile, the flat positions (in a padded map) of the keys
+            within the radius of at least one of its queries.
+        excluded: ``(T, t^2, L)`` bool: key out of the query's radius or off the map.
+    """
+
+    key: tuple[object, ...]
+    tile: int
+    pad: int
+    tiles_y: int
+    tiles_x: int
+    padded_h: int
+    padded_w: int
+    key_index: torch.Tensor
+    excluded: torch.Tensor
+
+    @classmethod
+    def build(cls, h: int, w: int, tile: int, radius: float, device: torch.device,
+              key: tuple[object, ...]) -> _LocalGeometry:
+        pad = int(math.floor(radius))
         tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
-        hp, wp = tiles_y * tile, tiles_x * tile
-        feats = torch.stack([f for f, _ in self._recent])  # (R, C, h, w)
-        lbls = torch.stack([lab for _, lab in self._recent])  # (R, K, h, w)
-        frames, c = feats.shape[:2]
-        num_labels = lbls.shape[1]
-        keys = self._pad_channels_last(feats, pad, hp - h, wp - w)  # (R, H', W', C)
-        key_labels = self._pad_channels_last(lbls, pad, hp - h, wp - w)  # (R, H', W', K)
-        queries = F.pad(query, (0, wp - w, 0, hp - h)).permute(1, 2, 0)  # (hp, wp, C)
+        padded_h, padded_w = tiles_y * tile + 2 * pad, tiles_x * tile + 2 * pad
         win = tile + 2 * pad
-        window = win * win
-        t2 = tile * tile
-        mask = self._local_mask(h, w, tile, pad).to(query.device)  # (Ty, Tx, T2, L)
-        per_tile = t2 * frames * window
-        tiles_per_chunk = max(1, cfg.max_affinity_elements // per_tile)
-        k = min(cfg.topk, frames * window)
-        out_v = torch.empty(hp, wp, k, device=query.device)
-        out_l = torch.empty(hp, wp, k, num_labels, device=query.device)
-        for ty in range(tiles_y):
-            # Overlapping windows as strided views (no copy), copied once per chunk below.
-            strip_k = keys[:, ty * tile:ty * tile + win].unfold(2, win, tile)  # (R,win,X,C,win)
-            strip_l = key_labels[:, ty * tile:ty * tile + win].unfold(2, win, tile)
-            q_rows = queries[ty * tile:(ty + 1) * tile]  # (T, wp, C)
-            q_tiles = q_rows.reshape(tile, tiles_x, tile, c).permute(1, 0, 2, 3).reshape(
-                tiles_x, t2, c)
-            for x0 in range(0, tiles_x, tiles_per_chunk):
-                x1 = min(tiles_x, x0 + tiles_per_chunk)
-                n = x1 - x0
-                # (n, R*L, C): frame-major, then window row, then window column.
-                k_chunk = strip_k[:, :, x0:x1].permute(2, 0, 1, 4, 3).reshape(
-                    n, frames * window, c)
-                aff = torch.bmm(q_tiles[x0:x1], k_chunk.transpose(1, 2))  # (n, T2, R*L)
-                aff = aff.view(n, t2, frames, window).masked_fill_(
-                    mask[ty, x0:x1].unsqueeze(2), float("-inf")).view(n, t2, frames * window)
-                best, index = aff.topk(k, dim=2)  # (n, T2, k)
-                l_chunk = strip_l[:, :, x0:x1].permute(2, 0, 1, 4, 3).reshape(
-                    n, frames * window, num_labels)
-                gathered = torch.gather(
-                    l_chunk.unsqueeze(1).expand(n, t2, frames * window, num_labels), 2,
-                    index.unsqueeze(-1).expand(n, t2, k, num_labels),
-                )
-                out_v[ty * tile:(ty + 1) * tile, x0 * tile:x1 * tile] = best.view(
-                    n, tile, tile, k).permute(1, 0, 2, 3).reshape(tile, n * tile, k)
-                out_l[ty * tile:(ty + 1) * tile, x0 * tile:x1 * tile] = gathered.view(
-                    n, tile, tile, k, num_labels).permute(1, 0, 2, 3, 4).reshape(
-                    tile, n * tile, k, num_labels)
-        return (out_v[:h, :w].reshape(h * w, k),
-                out_l[:h, :w].reshape(h * w, k, num_labels))
+        # Window positions (relative to the tile's top-left query, minus pad) within the
+        # radius of the nearest query of the tile: the tile square grown by the radius.
+        oy, ox = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
+        oy, ox = oy.reshape(-1), ox.reshape(-1)
+        gap_y = torch.clamp(torch.maximum(pad - oy, oy - (pad + tile - 1)), min=0)
+        gap_x = torch.clamp(torch.maximum(pad - ox, ox - (pad + tile - 1)), min=0)
+        keep = (gap_y * gap_y + gap_x * gap_x).double() <= radius * radius
+        oy, ox = oy[keep], ox[keep]  # (L,)
+        ty = torch.arange(tiles_y).repeat_interleave(tiles_x)  # (T,) row-major tiles
+        tx = torch.arange(tiles_x).repeat(tiles_y)
+        rows = ty.view(-1, 1) * tile + oy.view(1, -1)  # (T, L) padded-map rows
+        cols = tx.view(-1, 1) * tile + ox.view(1, -1)
+        key_index = rows * padded_w + cols
+        qy, qx = torch.meshgrid(torch.arange(tile), torch.arange(tile), indexing="ij")
+        dy = oy.view(1, -1) - pad - qy.reshape(-1, 1)  # (t^2, L)
+        dx = ox.view(1, -1) - pad - qx.reshape(-1, 1)
+        outside = (dy * dy + dx * dx).double() > radius * radius
+        off_map = ((rows < pad) | (rows >= pad + h) | (cols < pad) | (cols >= pad + w))
+        excluded = outside.unsqueeze(0) | off_map.unsqueeze(1)  # (T, t^2, L)
+        return cls(key, tile, pad, tiles_y, tiles_x, padded_h, padded_w,
+                   key_index.to(device), excluded.to(device))

@@ -148,3 +148,25 @@ def test_errors_name_what_to_fix():
     prop.reset(torch.randn(4, 5, 5), torch.zeros(2, 5, 5))
     with pytest.raises(ValueError, match="one size"):
         prop.step(torch.randn(4, 6, 5))
+
+
+@pytest.mark.parametrize("tile", [3, 8])
+def test_padded_ring_follows_the_memory_after_wrapping(tile):
+    # More pushes than slots: the ring overwrites the oldest frame's slot; the local search
+    # must still see exactly the first frame and the latest M - 1 frames.
+    feats, labels = random_video(11, h=17, w=10, seed=3)
+    cfg = LabelPropagationConfig(memory_size=4, radius=4.0, tile_size=tile,
+                                 max_affinity_elements=5000)
+    prop = LabelPropagator(cfg)
+    prop.reset(feats[0], labels[0])
+    for t in range(1, 10):
+        prop.push(feats[t], labels[t])
+    memory = [0, 7, 8, 9]
+    ref = propagate_dense(feats[10], [feats[i] for i in memory], [labels[i] for i in memory],
+                          [None, 4.0, 4.0, 4.0])
+    torch.testing.assert_close(prop.propagate(feats[10]), ref, atol=1e-5, rtol=0)
+    prop.reset(feats[1], labels[1])  # a new video empties the ring
+    assert prop.memory_length == 1
+    torch.testing.assert_close(
+        prop.propagate(feats[2]), propagate_dense(feats[2], [feats[1]], [labels[1]], [None]),
+        atol=1e-5, rtol=0)
