@@ -5,7 +5,8 @@ package) goes in first; then unitrack-env's wheel, first with a plain ``pip inst
 TrackEval: a MOT run must refuse to start and name the fix), then by the README's setup
 script. From a project folder that has its own ``agents/`` and ``evaluation/`` packages and a
 conftest: the README quickstart runs, the project's pytest passes an ``episode_regression``
-golden test of its own agent, and ``unitrack evaluate --agent myagents:MyTracker --workers 2``
+golden test of its own agent (docs/regression-tests.md's example), docs/writing-an-agent.md's
+agent runs by reference, and ``unitrack evaluate --agent my_tracker:MyTracker --workers 2``
 survives a Ctrl-C and resumes to the same metrics as an uninterrupted run.
 """
 
@@ -34,10 +35,10 @@ from unitrack_env.spaces import pack_tracks, unpack_detections
 
 
 class MyTracker(Agent, name="my-tracker", tasks=("mot",)):
-    """Every detection above min_score gets the id of the previous box it overlaps most."""
+    """Every detection above threshold gets the id of the previous box it overlaps most."""
 
-    def __init__(self, min_score: float = 0.0, delay: float = 0.0):
-        self.min_score, self.delay = min_score, delay
+    def __init__(self, threshold: float = 0.0, delay: float = 0.0):
+        self.threshold, self.delay = threshold, delay
 
     def reset(self, observation, info):
         self.next_id, self.previous = 1, []
@@ -45,7 +46,7 @@ class MyTracker(Agent, name="my-tracker", tasks=("mot",)):
     def act(self, observation):
         time.sleep(self.delay)
         boxes, scores = unpack_detections(observation)
-        boxes = boxes[scores >= self.min_score]
+        boxes = boxes[scores >= self.threshold]
         ids = []
         for box in boxes:
             best, best_iou = None, 0.3
@@ -64,20 +65,9 @@ class MyTracker(Agent, name="my-tracker", tasks=("mot",)):
         return pack_tracks(ids, boxes, 512)
 '''
 
-MY_TEST = '''
-import myagents  # noqa: F401 - registers my-tracker
-
-
-def test_my_tracker(episode_regression):
-    episode_regression.check("UniTrack/MOT16-v0", agent="my-tracker", sequence="SYN-01",
-                             golden="goldens/my-tracker.json")
-
-
-def test_real_data_example_skips(episode_regression):
-    episode_regression.check("UniTrack/MOT17-v0", agent="iou", sequence="MOT17-02-FRCNN",
-                             golden="goldens/iou-mot17.json",
-                             env_kwargs={"root": "/nonexistent/MOT17"})
-'''
+def _doc_blocks(name: str) -> list[str]:
+    """The Python examples of a documentation page, as written."""
+    return re.findall(r"```python\n(.*?)```", (REPO / "docs" / name).read_text(), re.S)
 
 
 def _run(args: list[str], cwd: Path, env: dict[str, str], timeout: float = 900,
@@ -111,8 +101,11 @@ def outsider(tmp_path_factory: pytest.TempPathFactory) -> dict:
         (project / package).mkdir(parents=True)
         (project / package / "__init__.py").write_text(f'"""The user\'s own {package}."""\n')
     (project / "conftest.py").write_text('"""The user\'s conftest."""\n')
-    (project / "myagents.py").write_text(MY_AGENTS)
-    (project / "test_mine.py").write_text(MY_TEST)
+    (project / "pytest.ini").write_text("[pytest]\npythonpath = .\n")
+    (project / "my_tracker.py").write_text(MY_AGENTS)
+    (project / "nearest.py").write_text(_doc_blocks("writing-an-agent.md")[0])
+    (project / "tests").mkdir()
+    (project / "tests" / "test_my_tracker.py").write_text(_doc_blocks("regression-tests.md")[0])
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
     return {"base": base, "env": env, "python": python, "project": project, "wheel": wheel,
             "venv": venv, "unitrack": str(venv / "bin" / "unitrack")}
@@ -138,21 +131,29 @@ def test_readme_install_then_quickstart_pytest_and_cli(outsider):
     printed = _run([str(outsider["python"]), "quickstart.py"], project, env).stdout.split()
     assert len(printed) == 3 and all(0 <= float(x) <= 1 for x in printed)
 
-    tests = [str(outsider["python"]), "-m", "pytest", "-q", "-p", "no:cacheprovider"]
+    # docs/regression-tests.md's example, recorded from the project, checked from tests/
+    tests = [str(outsider["python"]), "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rs"]
     _run([*tests, "--update-goldens"], project, env)
-    assert (project / "goldens" / "my-tracker.json").is_file()
-    assert (project / "goldens" / "my-tracker.json").stat().st_mode & 0o044  # umask, not 0600
-    result = _run(tests + ["-rs"], project, env)
+    golden = project / "tests" / "goldens" / "my-tracker-SYN-01.json"
+    assert golden.is_file() and golden.stat().st_mode & 0o044  # the umask's mode, not 0600
+    result = _run(tests, project / "tests", env)
     assert "1 passed, 1 skipped" in result.stdout and "no data for" in result.stdout
-    golden = json.loads((project / "goldens" / "my-tracker.json").read_text())
-    golden["metrics"]["HOTA"] += 0.01
-    (project / "goldens" / "my-tracker.json").write_text(json.dumps(golden))
+    record = json.loads(golden.read_text())
+    record["metrics"]["HOTA"] += 0.01
+    golden.write_text(json.dumps(record))
     failed = _run(tests, project, env, check=False)
     assert failed.returncode == 1 and "HOTA" in failed.stdout
     assert "site-packages" not in failed.stdout  # the diff, not a library traceback
 
+    # docs/writing-an-agent.md's example and commands, as written
+    _run([outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT16-v0", "--agent",
+          "nearest:NearestCentre", "--out", "runs/nc"], project, env)
+    _run([outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT16-v0", "--agent",
+          "nearest.py:NearestCentre", "--agent-arg", "max_distance=80", "--workers", "2",
+          "--out", "runs/nc80"], project, env)
+
     evaluate = [outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT17-v0", "--agent",
-                "myagents:MyTracker", "--quiet", "--format", "json"]
+                "my_tracker:MyTracker", "--quiet", "--format", "json"]
     reference = _run([*evaluate, "--out", "ref"], project, env)
     # SYN-02 (64 frames) finishes ~1.6 s before SYN-01 (72 frames) at 0.2 s a frame.
     slow = [*evaluate, "--agent-arg", "delay=0.2", "--workers", "2", "--out", "run"]
@@ -175,7 +176,7 @@ def test_readme_install_then_quickstart_pytest_and_cli(outsider):
 def test_pytest_of_a_project_with_its_own_evaluation_package_loads_our_plugin(outsider):
     result = _run([str(outsider["python"]), "-m", "pytest", "--co", "-q", "-p",
                    "no:cacheprovider"], outsider["project"], outsider["env"])
-    assert "test_my_tracker" in result.stdout
+    assert "test_my_tracker_on_synthetic" in result.stdout
     check = _run([str(outsider["python"]), "-c", textwrap.dedent("""
         import agents, evaluation, unitrack_env.agents as ua
         print(agents.__file__, evaluation.__file__, ua.make_agent("iou").name)

@@ -1,0 +1,132 @@
+"""Agents by reference, by plug-in entry point, and their typed options."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+from typing import Literal
+
+import pytest
+
+from unitrack_env.agents import Agent, agent_class, available_agents, make_agent
+from unitrack_env.agents.base import AGENTS
+from unitrack_env.agents.loading import agent_reference, is_reference, portable_reference
+from unitrack_env.agents.options import (
+    AgentOptionError,
+    agent_options,
+    check_options,
+    conforms,
+    parse_options,
+)
+
+TRACKER = textwrap.dedent('''
+    from unitrack_env.agents import Agent
+
+    class FileTracker(Agent, tasks=("mot",)):
+        def __init__(self, gate: float = 0.5, name_of_run: str = "x"):
+            self.gate = gate
+        def reset(self, observation, info):
+            pass
+        def act(self, observation):
+            return {}
+''')
+
+
+def test_reference_spellings():
+    assert is_reference("pkg.mod:Class") and is_reference("dir/file.py:Class")
+    assert is_reference("C:/trackers/file.py:Class")
+    assert not is_reference("iou") and not is_reference("unitrack-vos")
+    assert agent_class("unitrack_env.agents.baselines.iou:IoUAgent") is agent_class("iou")
+
+
+def test_file_reference_and_its_portable_form(tmp_path):
+    path = tmp_path / "trackers.py"
+    path.write_text(TRACKER)
+    cls = agent_class(f"{path}:FileTracker")
+    assert cls.__name__ == "FileTracker" and make_agent(f"{path}:FileTracker", gate=0.7).gate == 0.7
+    assert agent_reference(cls) == f"{path}:FileTracker"
+    assert portable_reference(cls) == f"{path}:FileTracker"
+
+
+def test_module_reference_from_the_current_folder(tmp_path, monkeypatch):
+    (tmp_path / "cwd_trackers.py").write_text(TRACKER)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delitem(sys.modules, "cwd_trackers", raising=False)
+    cls = agent_class("cwd_trackers:FileTracker")
+    assert cls.__module__ == "cwd_trackers" and portable_reference(cls) == "cwd_trackers:FileTracker"
+
+
+@pytest.mark.parametrize(("spec", "message"), [
+    ("no_such_module_xyz:Tracker", "cannot import module 'no_such_module_xyz'"),
+    ("unitrack_env.agents.baselines.iou:Nope", "has no attribute 'Nope'"),
+    ("unitrack_env.agents.baselines.iou:DEFAULT_MAX_TRACKS", "is not a class"),
+    ("unitrack_env.spaces:Image", r"no reset\(observation, info\)"),
+    ("/nonexistent/file.py:Tracker", "does not exist"),
+])
+def test_bad_references_say_what_is_wrong(spec, message):
+    with pytest.raises((ImportError, FileNotFoundError), match=message):
+        agent_class(spec)
+
+
+def test_unknown_name_lists_the_known_ones():
+    with pytest.raises(KeyError, match="available: .*iou.*module:ClassName"):
+        agent_class("no-such-agent")
+
+
+def test_interactive_classes_are_not_portable():
+    namespace: dict = {}
+    exec(TRACKER.replace("FileTracker", "ExecTracker"), namespace)
+    assert portable_reference(namespace["ExecTracker"]) is None
+
+    def local():
+        class Local(Agent):
+            def reset(self, observation, info): ...
+            def act(self, observation): ...
+        return Local
+
+    assert portable_reference(local()) is None
+
+
+def test_plugins_from_the_entry_point_group(tmp_path, monkeypatch):
+    (tmp_path / "plugin_trackers.py").write_text(TRACKER)
+    info = tmp_path / "plugin_trackers-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: plugin-trackers\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(
+        "[unitrack_env.agents]\nplugin-tracker = plugin_trackers:FileTracker\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        assert "plugin-tracker" in available_agents()
+        assert agent_class("plugin-tracker").__name__ == "FileTracker"
+    finally:
+        AGENTS.pop("plugin-tracker", None)
+
+
+def test_options_of_config_dataclass_agents():
+    options = agent_options(agent_class("iou"))
+    assert options["min_hits"] is int and options["iou_threshold"] is float
+    assert "**" not in options  # IoUConfig's fields are the whole set
+    with pytest.raises(AgentOptionError, match="has no option 'min_hit'.*min_hits \\(int\\)"):
+        check_options(agent_class("iou"), {"min_hit": 3})
+    with pytest.raises(AgentOptionError, match="'min_hits' must be int, got 2.5"):
+        check_options(agent_class("iou"), {"min_hits": 2.5})
+    check_options(agent_class("iou"), {"min_hits": 3, "iou_threshold": 1})  # int is a float
+
+
+def test_cli_values_are_parsed_by_type():
+    unitrack = agent_class("unitrack")
+    parsed = parse_options(unitrack, ["weights=moco.pth", "input_size=(320, 192)",
+                                      "use-motion=False", "layer=stage3+stage5"])
+    assert parsed == {"weights": "moco.pth", "input_size": (320, 192), "use_motion": False,
+                      "layer": "stage3+stage5"}
+    with pytest.raises(AgentOptionError, match="must look like key=value"):
+        parse_options(unitrack, ["weights"])
+    with pytest.raises(AgentOptionError, match="'use_motion' must be bool"):
+        parse_options(unitrack, ["use_motion=maybe"])
+
+
+def test_conforms_understands_common_annotations():
+    assert conforms(None, int | None) and conforms(3, int | None) and not conforms("3", int)
+    assert conforms("rsm", Literal["rsm", "cf"]) and not conforms("x", Literal["rsm", "cf"])
+    assert conforms((1, 2), tuple[int, int]) and not conforms((1, 2, 3), tuple[int, int])
+    assert conforms([1.0, 2], list[float]) and not conforms(True, float)
