@@ -216,9 +216,10 @@ def _cmd_doctor(args: argparse.Namespace, console: Console) -> int:
     findings = diagnose()
     marks = {"ok": "ok     ", "warn": "note   ", "problem": "PROBLEM"}
     for finding in findings:
-        console.print(f"{marks[finding.status]} {finding.check}: {finding.detail}", markup=False)
+        console.print(f"{marks[finding.status]} {finding.check}: {finding.detail}", markup=False,
+                      soft_wrap=True)
         if finding.fix and finding.status != "ok":
-            console.print(f"        fix: {finding.fix}", markup=False)
+            console.print(f"        fix: {finding.fix}", markup=False, soft_wrap=True)
     problems = sum(f.status == "problem" for f in findings)
     console.print(f"{problems} problem(s)" if problems else "no problems found", markup=False)
     return 1 if problems else 0

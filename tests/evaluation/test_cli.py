@@ -1,0 +1,102 @@
+"""The command line as a user meets it: version, help, formats, fitting tables, doctor."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import subprocess
+import sys
+
+import pytest
+
+import unitrack_env
+from unitrack_env.evaluation import doctor
+from unitrack_env.evaluation.cli import build_parser, main
+from unitrack_env.evaluation.tables import metrics_table
+
+ENV = "UniTrack/MOT16-v0"
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0 and unitrack_env.__version__ in capsys.readouterr().out
+
+
+def test_help_is_plain_text_and_documents_every_option():
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse internals
+    for name, sub in commands.items():
+        text = sub.format_help()
+        assert "``" not in text and ":class:" not in text, name
+        for action in sub._actions:  # noqa: SLF001
+            if not isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                assert action.help, f"{name} {action.option_strings} has no help"
+    assert "examples:" in commands["evaluate"].format_help()
+
+
+def test_formats_and_a_table_that_fits_80_columns(tmp_path, capsys):
+    out = str(tmp_path / "r")
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", out, "--quiet",
+                 "--format", "json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data["per_sequence"]) == {"SYN-01", "SYN-02"} and "HOTA" in data["combined"]
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", out, "--quiet",
+                 "--format", "csv"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert [r["sequence"] for r in rows] == ["SYN-01", "SYN-02", "COMBINED"]
+    assert float(rows[2]["HOTA"]) == pytest.approx(data["combined"]["HOTA"])
+
+    per_sequence = {"a-rather-long-sequence-name-01": data["per_sequence"]["SYN-01"]}
+    table, dropped = metrics_table(per_sequence, data["combined"], "t", {"x": 1.0}, "mot",
+                                   width=80)
+    from rich.console import Console
+
+    console = Console(width=80, file=io.StringIO())
+    console.print(table)
+    text = console.file.getvalue()
+    assert "…" not in text and "a-rather-long-sequence-name-01" in text
+    assert max(len(line) for line in text.splitlines()) <= 80
+    assert dropped and dropped[-1] == "ML" and "HOTA" not in dropped
+
+
+def test_render_writes_h264(tmp_path):
+    pytest.importorskip("imageio_ffmpeg")
+    from unitrack_env.evaluation.video import video_codec
+
+    path = tmp_path / "v.mp4"
+    assert main(["render", "--env", ENV, "--agent", "iou", "--sequence", "SYN-01",
+                 "--out", str(path)]) == 0
+    assert video_codec(path) == "h264"
+
+
+def test_doctor_reports_problems_with_their_fix(monkeypatch, capsys):
+    assert main(["doctor"]) == 0
+    assert "trackeval" in capsys.readouterr().out
+
+    def missing() -> doctor.Finding:
+        return doctor.Finding("trackeval", "problem", "not installed",
+                              "pip install --no-deps trackeval==1.3.0")
+
+    monkeypatch.setattr(doctor, "CHECKS", (missing,))
+    assert main(["doctor"]) == 1
+    out = capsys.readouterr().out
+    assert "PROBLEM trackeval" in out and "fix: pip install --no-deps trackeval==1.3.0" in out
+
+
+def test_doctor_finds_the_gui_opencv(monkeypatch):
+    monkeypatch.setattr(doctor, "_version",
+                        lambda name: "4.11" if name == "opencv-python" else None)
+    finding = doctor.check_opencv()
+    assert finding.status == "problem" and "pip uninstall -y opencv-python" in finding.fix
+
+
+def test_the_pytest_plugin_loads_without_the_heavy_parts():
+    code = ("import sys, unitrack_env.evaluation.regression.plugin;"
+            "heavy = [m for m in ('torch', 'unitrack_env.envs', 'unitrack_env.agents', "
+            "'trackeval', 'cv2') if m in sys.modules]; print(heavy)")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True)
+    assert result.stdout.strip() == "[]"
