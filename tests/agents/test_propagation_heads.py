@@ -20,8 +20,22 @@ GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
 ONE = {"num_threads": 1}
 #: Fast SOT settings: half-size crops (the paper's 520 costs 4 backbone passes per frame).
 FAST_SOT = {**ONE, "propagation": {"crop_size": 256}}
-#: Float noise from thread counts and BLAS may move metrics slightly; actions not compared.
-GOLDEN_TOLERANCE = 2e-3
+#: Per-head metric tolerances, derived from the spread measured across CPU kernels and thread
+#: counts by scripts/measure_golden_spread.py (docs/regression-tests.md, "Tolerances across
+#: machines"): twice the largest measured change, and at least one frame's worth of a
+#: metric counted per frame (Precision@20px: 1 of 30 frames). Actions are not compared: the
+#: trackers' float32 arithmetic picks another response peak on another CPU.
+GOLDEN_TOLERANCES: dict[str, dict[str, float]] = {
+    # measured: AUC 0.022, AverageOverlap 0.021 (threads 2, ATEN default), Precision 0
+    "unitrack-dcf": {"AUC": 0.045, "AverageOverlap": 0.045, "Precision@20px": 0.034},
+    # measured: AUC 0.0032 (threads 2), AverageOverlap 0.0021 (oneDNN AVX2: the other
+    # machine's failure, 0.922122, exactly), Precision 0
+    "unitrack-xcorr": {"AUC": 0.007, "AverageOverlap": 0.005, "Precision@20px": 0.034},
+    # measured: no change (identical masks in every setting)
+    "unitrack-vos": {"*": 2e-3},
+    # measured: no change in PCK (4 different action digests, the same PCK)
+    "unitrack-pose": {"*": 4e-3},
+}
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +113,7 @@ def test_smoke_beats_repeat_and_matches_golden(episode_regression, env_id, agent
     record = episode_regression.check(
         env_id, agent=agent, sequence=sequence, agent_kwargs=agent_kwargs,
         golden=GOLDENS / f"{agent}-{name}-{sequence.replace('/', '__')}.json",
-        tolerance=GOLDEN_TOLERANCE,
+        tolerance=GOLDEN_TOLERANCES[agent],
     )
     base, _ = play(gym.make(env_id), make_agent(baseline), sequence)
     assert record.metrics[metric] > base[metric] + margin, (record.metrics, base)
