@@ -29,7 +29,6 @@ from torch import nn
 
 from unitrack_env.errors import CheckpointError  # defined there so that it pickles
 
-
 IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
 """ImageNet RGB mean of inputs scaled to [0, 1] (torchvision's models and most SSL models)."""
 
