@@ -25,6 +25,8 @@ class Variant:
     kwargs: dict[str, Any] = field(default_factory=dict)
     task: str = ""
     version: int = 0
+    #: The folder name under ``$UNITRACK_DATA`` that the id reads (None: ``root=`` only).
+    folder: str | None = None
 
     @property
     def env_id(self) -> str:
@@ -35,18 +37,20 @@ class Variant:
 _MOT = "unitrack_env.envs.motchallenge:MOTChallengeEnv"
 
 VARIANTS: tuple[Variant, ...] = (
-    Variant("MOT15", _MOT, {"benchmark": "MOT15"}, "mot"),
-    Variant("MOT16", _MOT, {"benchmark": "MOT16"}, "mot"),
-    Variant("MOT17", _MOT, {"benchmark": "MOT17"}, "mot"),
-    Variant("MOT20", _MOT, {"benchmark": "MOT20"}, "mot"),
+    Variant("MOT15", _MOT, {"benchmark": "MOT15"}, "mot", folder="MOT15"),
+    Variant("MOT16", _MOT, {"benchmark": "MOT16"}, "mot", folder="MOT16"),
+    Variant("MOT17", _MOT, {"benchmark": "MOT17"}, "mot", folder="MOT17"),
+    Variant("MOT20", _MOT, {"benchmark": "MOT20"}, "mot", folder="MOT20"),
     # Custom data in the MOTChallenge layout; pass root= and the benchmark= rule set.
     Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, "mot"),
-    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot"),
-    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos"),
-    Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"}, "mots"),
-    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, "vis"),
-    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, "pose-prop"),
-    Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {}, "posetrack"),
+    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot", folder="OTB"),
+    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos", folder="DAVIS"),
+    Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"}, "mots",
+            folder="MOTS20"),
+    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, "vis", folder="YouTube-VIS-2019"),
+    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, "pose-prop", folder="JHMDB"),
+    Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {}, "posetrack",
+            folder="PoseTrack2018"),
 )
 
 
@@ -68,4 +72,12 @@ def task_of(env_id: str) -> str:
     for variant in VARIANTS:
         if variant.env_id == env_id:
             return variant.task
+    raise KeyError(f"'{env_id}' is not a unitrack id; registered: {', '.join(env_ids())}")
+
+
+def variant(env_id: str) -> Variant:
+    """The registration row of ``env_id``."""
+    for row in VARIANTS:
+        if row.env_id == env_id:
+            return row
     raise KeyError(f"'{env_id}' is not a unitrack id; registered: {', '.join(env_ids())}")
