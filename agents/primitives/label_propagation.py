@@ -23,9 +23,10 @@ Implementation (CPU-friendly, memory bounded, float32). The top-k of the union o
 candidate sets is the top-k of the union of each set's top-k, so the two kinds of context are
 searched separately and merged exactly:
 
-* first frame: dense affinity ``(queries, h*w)`` by blocks of queries (one matmul and one
-  top-k per block, :data:`FIRST_FRAME_BLOCK_ELEMENTS` affinities at a time, so the block
-  stays in the CPU's cache);
+* first frame: dense affinity ``(queries, h*w)`` by blocks of queries (one matmul into a
+  reused buffer and one top-k per block, at most ``max_affinity_elements`` affinities at a
+  time; smaller, cache-sized blocks measured slower on the shared 2-core machine: every
+  block is a parallel region whose threads must all be scheduled);
 * recent frames: the query grid is cut into ``tile_size`` x ``tile_size`` tiles. A tile only
   needs the keys within the radius of one of its queries: the tile's square grown by the
   radius (its Minkowski sum with the disk, ``t^2 + 4 t r + pi r^2`` locations instead of the
@@ -69,14 +70,6 @@ but more keys outside a query's radius (``t^2 + 4 t r + pi r^2`` keys per tile a
 
 MAX_AFFINITY_ELEMENTS: int = 1 << 23
 """Most affinity numbers (float32) held at once, per search: 8 Mi = 32 MiB."""
-
-FIRST_FRAME_BLOCK_ELEMENTS: int = 1 << 20
-"""Affinities per block of the dense first-frame search (4 MiB of float32: a block's matmul
-output is still in cache when its top-k reads it). Capped by ``max_affinity_elements``."""
-
-LOCAL_BLOCK_ELEMENTS: int = 1 << 21
-"""Affinities per block of tiles of the local search (8 MiB of float32). Capped by
-``max_affinity_elements``."""
 
 AFFINITY_DTYPES: dict[str, torch.dtype] = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 """Allowed ``affinity_dtype`` names and their torch dtypes."""
@@ -386,8 +379,7 @@ class LabelPropagator:
         keys = feats.reshape(feats.shape[0], -1)  # (C, S)
         flat_labels = lbl.reshape(lbl.shape[0], -1).t()  # (S, K)
         k = min(cfg.topk, size)
-        block = min(cfg.max_affinity_elements, FIRST_FRAME_BLOCK_ELEMENTS)
-        chunk = max(1, block // size)
+        chunk = max(1, cfg.max_affinity_elements // size)
         grid = _grid(h, w, q.device) if radius is not None else None
         out_v = torch.empty(q.shape[0], k, device=q.device)
         out_i = torch.empty(q.shape[0], k, dtype=torch.long, device=q.device)
@@ -439,8 +431,7 @@ class LabelPropagator:
             num_tiles, candidates)  # (T, R * L), frame-major per tile
         ring_keys = self._ring_keys.view(-1, c)
         ring_labels = self._ring_labels.view(-1, num_labels)
-        block = min(cfg.max_affinity_elements, LOCAL_BLOCK_ELEMENTS)
-        per_block = max(1, block // (t2 * candidates))
+        per_block = max(1, cfg.max_affinity_elements // (t2 * candidates))
         out_v = torch.empty(num_tiles, t2, k, device=query.device)
         out_l = torch.empty(num_tiles, t2, k, num_labels, device=query.device)
         for start in range(0, num_tiles, per_block):
