@@ -76,14 +76,22 @@ def run_all() -> dict[str, object]:
 
 
 def _cell(text: str) -> str:
+    """Plain text as a table cell (``<data>`` must not read as an HTML tag)."""
+    text = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
     return text.replace("|", "\\|").replace("\n", " ")
+
+
+def uncell(text: str) -> str:
+    """The plain text of a cell written by :func:`_cell`."""
+    text = text.replace("\\|", "|").replace("&lt;", "<").replace("&gt;", ">")
+    return text.replace("&amp;", "&")
 
 
 def row_key(case: object) -> list[str]:
     """The columns of a case's row that come from the corpus alone (checked exactly)."""
     expected = " · ".join(f"`{f}`" for f in case.expect) or "-"
     kind = case.error if case.kind == "error" else case.kind
-    return [f"`{case.id}`", _cell(case.what), _cell(kind), _cell(expected)]
+    return [f"`{case.id}`", _cell(case.what), kind, expected.replace("|", "\\|")]
 
 
 def render(results: dict[str, object]) -> str:
