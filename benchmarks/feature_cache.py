@@ -104,52 +104,65 @@ def _observations(root: Path) -> list[list[tuple[dict, dict]]]:
     return sequences
 
 
-def _play(agent, sequences) -> tuple[float, float]:
-    """(seconds of the whole agent, seconds of its feature stage: letterbox + backbone, or
-    hash + cache read)."""
-    stage = [0.0]
-    feature_map = agent.feature_map
+def _play(agents: list, sequences) -> list[tuple[float, float]]:
+    """Play ``agents`` in lockstep, alternating which goes first on each frame, so a machine
+    that gets busier or quieter slows them alike. Returns per agent (seconds of ``act``,
+    seconds of its feature stage: letterbox + backbone, or hash + cache read)."""
+    totals = [0.0] * len(agents)
+    stages = [0.0] * len(agents)
+    for i, agent in enumerate(agents):
+        feature_map = agent.feature_map
 
-    def timed(frame):
-        start = time.perf_counter()
-        out = feature_map(frame)
-        stage[0] += time.perf_counter() - start
-        return out
+        def timed(frame, i=i, feature_map=feature_map):
+            start = time.perf_counter()
+            out = feature_map(frame)
+            stages[i] += time.perf_counter() - start
+            return out
 
-    agent.feature_map = timed
-    start = time.perf_counter()
+        agent.feature_map = timed
+    turn = 0
     for steps in sequences:
-        agent.reset(steps[0][0], steps[0][1])
+        for agent in agents:
+            agent.reset(steps[0][0], steps[0][1])
         for obs, _ in steps:
-            agent.act(obs)
-    agent.close()
-    return time.perf_counter() - start, stage[0]
+            turn += 1
+            order = list(range(len(agents)))
+            for i in order[turn % len(agents):] + order[:turn % len(agents)]:
+                start = time.perf_counter()
+                agents[i].act(obs)
+                totals[i] += time.perf_counter() - start
+    for agent in agents:
+        agent.close()
+    return list(zip(totals, stages, strict=True))
 
 
 def runs(threads: int, repeats: int) -> None:
     sequences = _observations(SHARED / "MOT17")
     frames = sum(len(s) for s in sequences)
     model = AppearanceModel(num_threads=threads)
+    options = {"appearance_model": model, "num_threads": threads}
     off, first, second = [], [], []
     stages: dict[str, list[float]] = {"off": [], "first": [], "second": []}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(repeats):
             folder = Path(tmp) / f"cache-{r}"
-            options = {"appearance_model": model, "num_threads": threads}
-            for label, times, cache in (("off", off, False), ("first", first, folder),
-                                        ("second", second, folder)):
-                agent = make_agent("unitrack", feature_cache=cache, **options)
-                total, stage = _play(agent, sequences)
+            (o, o_stage), (f, f_stage) = _play(
+                [make_agent("unitrack", feature_cache=False, **options),
+                 make_agent("unitrack", feature_cache=folder, **options)], sequences)
+            warm = make_agent("unitrack", feature_cache=folder, **options)
+            ((w, w_stage),) = _play([warm], sequences)
+            assert warm.model.cache.stats.hits == frames, warm.model.cache.stats
+            for label, times, total, stage in (("off", off, o, o_stage),
+                                               ("first", first, f, f_stage),
+                                               ("second", second, w, w_stage)):
                 times.append(total)
                 stages[label].append(stage)
-            warm = agent
-            assert warm.model.cache.stats.hits == frames, warm.model.cache.stats
-            print(f"  repeat {r}: off {off[-1]:.2f} s, first {first[-1]:.2f} s, "
-                  f"second {second[-1]:.3f} s", flush=True)
+            print(f"  repeat {r}: off {o:.2f} s, first {f:.2f} s (in lockstep), "
+                  f"second {w:.3f} s", flush=True)
     overhead = statistics.median(f / o for f, o in zip(first, off, strict=True))
     speedup = statistics.median(f / s for f, s in zip(first, second, strict=True))
     print(f"[runs] unitrack agent on the MOT17 clips ({frames} frames, 1080p and 640x480, "
-          f"{threads} thread(s)), median of {repeats} side-by-side repeats: cache off "
+          f"{threads} thread(s)), medians of {repeats} repeats: cache off "
           f"{1e3 * statistics.median(off) / frames:.0f} ms/frame, first run "
           f"{1e3 * statistics.median(first) / frames:.0f} ms/frame, second run "
           f"{1e3 * statistics.median(second) / frames:.1f} ms/frame")
@@ -158,11 +171,13 @@ def runs(threads: int, repeats: int) -> None:
     stage = {k: 1e3 * statistics.median(v) / frames for k, v in stages.items()}
     stage_speedup = statistics.median(
         f / s for f, s in zip(stages["first"], stages["second"], strict=True))
+    added = statistics.median(
+        (f - o) / frames for f, o in zip(stages["first"], stages["off"], strict=True))
     print(f"[runs] feature stage alone (letterbox + backbone, or hash + read): off "
-          f"{stage['off']:.0f} ms/frame, first {stage['first']:.0f} ms/frame, second "
-          f"{stage['second']:.1f} ms/frame ({stage_speedup:.0f}x); the rest of a warm frame "
-          f"is association: {1e3 * statistics.median(second) / frames - stage['second']:.1f} "
-          "ms/frame")
+          f"{stage['off']:.0f} ms/frame, first {stage['first']:.0f} ms/frame (+{1e3 * added:.1f} "
+          f"ms: hash + write), second {stage['second']:.1f} ms/frame ({stage_speedup:.0f}x "
+          f"faster); the rest of a warm frame is association: "
+          f"{1e3 * statistics.median(second) / frames - stage['second']:.1f} ms/frame")
 
 
 def _same(a: object, b: object) -> bool:
