@@ -35,7 +35,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "cache", help="inspect, prune or clear the feature cache",
         description="The on-disk feature cache of the UniTrack heads (on by default).")
-    sub = parser.add_subparsers(dest="cache_command", required=True)
+    sub = parser.add_subparsers(dest="cache_command", required=True, metavar="ACTION",
+                                help="info, prune or clear")
     info = sub.add_parser("info", parents=[common],
                           help="location, cap, size per model, entries, recent hit rates")
     info.add_argument("--runs", type=int, default=10, help="recent runs to show (default 10)")
