@@ -118,7 +118,7 @@ def _print_info(cache: Any, console: Console, runs: int) -> None:
                       "`unitrack cache prune` removes old ones)")
     if info["models"]:
         table = Table(title="entries per model identity")
-        for column in ("model", "weights", "input", "entries", "size", "last used"):
+        for column in ("model", "weights", "input HxW", "entries", "size", "last used"):
             table.add_column(column, justify="right" if column in ("entries", "size") else "left")
         for ns in info["models"]:
             arch, weights = _model_label(ns)

@@ -567,3 +567,14 @@ def test_engines_that_round_differently_never_share_entries(tmp_path: Path) -> N
     other_key = CachedAppearanceModel(model, tmp_path).key((8, 8), KEY.content)
     cache = FeatureCache(tmp_path)
     assert cache.path(torch_key) != cache.path(other_key)
+
+
+def test_an_injected_model_without_identity_runs_uncached() -> None:
+    class Plain:  # duck-typed: features() and stride, nothing to key a cache by
+        stride = 8
+
+        def features(self, images):
+            return torch.zeros((1, 4, 8, 8))
+
+    plain = Plain()
+    assert make_agent("unitrack", appearance_model=plain).model is plain
