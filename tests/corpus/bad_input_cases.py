@@ -495,6 +495,46 @@ def _pickle_payload(path: Path) -> None:
     path.write_bytes(pickle.dumps({"state_dict": _Payload()}))
 
 
+# ---------------------------------------------------------------- more openers
+def kitti_png(change: Callable[[Path], None]) -> Callable[[Path], None]:
+    """A KITTI MOTS case read from png annotations: ``change`` breaks ``instances/SYN-01``."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("mots", "KITTI-MOTS"), scratch / "KITTI-MOTS")
+        (root / "instances_txt" / "SYN-01.txt").unlink()  # the png folder is read instead
+        change(root / "instances" / "SYN-01")
+        open_env("UniTrack/MOTS-v0", root, "SYN-01", benchmark="KITTI-MOTS")
+    return run
+
+
+def _png16(folder: Path, value: int, dtype: Any = np.uint16) -> None:
+    import cv2
+
+    first = sorted(folder.iterdir())[0]
+    image = cv2.imread(str(first), cv2.IMREAD_UNCHANGED)
+    first.unlink()
+    image = image.astype(dtype)
+    image[:4, :4] = value
+    cv2.imwrite(str(first), image)
+
+
+def pose_detections(change: Callable[[Any], Any]) -> Callable[[Path], None]:
+    """A PoseTrack case: ``change`` edits the pose detections of ``900002_synthetic_val``."""
+    def run(scratch: Path) -> None:
+        root = clone(synthetic("posetrack", "PoseTrack2018"), scratch / "PoseTrack")
+        edit_json(root / "detections" / "val" / f"{POSE_SEQ}.json", change)
+        open_env("UniTrack/PoseTrack-v0", root, POSE_SEQ,
+                 detections=str(root / "detections" / "val"))
+    return run
+
+
+def _mot_custom_detections(scratch: Path) -> None:
+    folder = scratch / "my-detections"
+    folder.mkdir()
+    write(folder / "SYN-02.txt", "1,-1,5,5,20,40,0.9\n")
+    open_env("UniTrack/MOT17-v0", synthetic("motchallenge", "MOT17"), MOT_SEQ,
+             detections=str(folder))
+
+
 # ---------------------------------------------------------------------------- CLI
 class CLIFailed(ValueError):
     """The command exited with a non-zero status; the message is ``exit N: <its output>``."""
@@ -669,6 +709,8 @@ CASES: tuple[Case, ...] = (
     _c("MOT-root-without-split", "root= without train/",
        lambda scratch: open_env("UniTrack/MOT17-v0", scratch, "SYN-01"),
        "split folder missing", "train/"),
+    _c("MOT-custom-detections-missing", "detections= a folder without the sequence's file",
+       _mot_custom_detections, "SYN-01", "no detection file for sequence 'SYN-01'"),
     # --------------------------------------------------------------------- MOTS
     _c("MOTS-gt-rle-sum", "a gt RLE whose run lengths do not sum to H*W",
        mots(_at(GT, lambda c: c.replace(c.split()[5], c.split()[5][:-2] + "0", 1))),
@@ -705,6 +747,12 @@ CASES: tuple[Case, ...] = (
        lambda scratch: open_env("UniTrack/MOTS-v0", synthetic("mots", "MOTS20"), MOTS_SEQ,
                                 detections=str(scratch)),
        "SYN-01.txt", "detection file not found", "detections='gt'"),
+    _c("MOTS-kitti-png-8bit", "KITTI MOTS: an 8-bit png annotation",
+       kitti_png(lambda folder: _png16(folder, 7, np.uint8)), "000000.png",
+       "expected a 16-bit single-channel png"),
+    _c("MOTS-kitti-png-class-5", "KITTI MOTS: a png object id 5005 (class 5)",
+       kitti_png(lambda folder: _png16(folder, 5005)), "000000.png",
+       "object id 5005 has class 5"),
     # ---------------------------------------------------------------------- VIS
     _c("VIS-json-syntax", "train.json cut in the middle",
        vis(lambda root: truncate(root / "train.json")), "train.json", "not valid JSON"),
@@ -737,6 +785,10 @@ CASES: tuple[Case, ...] = (
     _c("VIS-unknown-category", "an annotation of category 9",
        vis(lambda root: edit_json(root / "train.json", lambda d: d["annotations"][0].__setitem__(
            "category_id", 9))), "annotations[0].category_id", "unknown category 9"),
+    _c("VIS-detections-score-nan", "a detection (results format) with score NaN",
+       vis(lambda root: edit_json(root / "detections" / "train.json",
+                                  lambda d: d[0].__setitem__("score", float("nan")))),
+       "detections/train.json", "[0].score", "not finite"),
     _c("VIS-detections-missing", "detections= a file that does not exist",
        lambda scratch: open_env("UniTrack/VIS-v0", synthetic("youtube_vis", "YouTube-VIS-2019"),
                                 "syn-01", detections=str(scratch / "none.json")),
@@ -790,6 +842,12 @@ CASES: tuple[Case, ...] = (
     _c("PoseTrack-ignore-regions-number", "ignore_regions_x is a number",
        posetrack(lambda d: d["images"][0].update(ignore_regions_x=5, ignore_regions_y=5)),
        "images[0].ignore_regions_x", "must be a list of polygons"),
+    _c("PoseTrack-detections-score-string", "pose detections with a score 'high'",
+       pose_detections(lambda d: d["annotations"][0].__setitem__("score", "high")),
+       f"detections/val/{POSE_SEQ}.json", "annotations[0].score", "must be a finite number"),
+    _c("PoseTrack-detections-keypoints-null", "pose detections with keypoints null",
+       pose_detections(lambda d: d["annotations"][0].__setitem__("keypoints", None)),
+       "annotations[0].keypoints", "must be a list of 51 numbers", "got NoneType null"),
     # ---------------------------------------------------------------------- OTB
     _c("OTB-first-box-nan", "the first ground-truth box is NaN",
        otb(_at("groundtruth_rect.txt", set_line(1, "NaN,NaN,NaN,NaN"))),

@@ -49,7 +49,7 @@ def test_docs_page_lists_every_case_with_its_message():
     assert page.is_file(), "docs/bad-inputs.md missing: run python scripts/make_bad_input_docs.py"
     rows = DOCS.parse_rows(page.read_text())
     stale = "docs/bad-inputs.md is stale: run python scripts/make_bad_input_docs.py"
-    assert list(rows) == [case.id for case in CORPUS.CASES], stale
+    assert sorted(rows) == sorted(case.id for case in CORPUS.CASES), stale
     for case in CORPUS.CASES:
         cells = rows[case.id]
         assert cells[:4] == DOCS.row_key(case), f"{stale} ({case.id})"

@@ -280,6 +280,10 @@ def _parse_person(path: Path, k: int, entry: Any) -> PoseTrackPerson:
     _require(path, isinstance(entry, dict), "must be an object", where)
     for key in ("image_id", "keypoints"):
         _require(path, key in entry, f"missing '{key}'", f"{where}.{key}")
+    _require(path, isinstance(entry["keypoints"], list),
+             f"must be a list of {3 * NUM_KEYPOINTS} numbers (17 x (x, y, v)), got "
+             f"{type(entry['keypoints']).__name__} {json.dumps(entry['keypoints'])[:60]}",
+             f"{where}.keypoints")
     try:
         flat = np.asarray(entry["keypoints"], dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
