@@ -269,16 +269,26 @@ def _play_here(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, todo: lis
                                                          dict[str, str]]:
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
-    for name in todo:
-        bar.start_sequence(name)
-        try:
-            record, _ = play_episode(env, agent_obj, name, on_frame=bar.advance)
-        except (ValueError, KeyError, OSError, RuntimeError) as exc:
-            failures[name] = SequenceFailure.describe(exc)
-            continue
-        record.inputs = inputs[name]
-        save_episode(out, env, record)
-        records[name] = record
+    player = env
+    try:
+        for name in todo:
+            bar.start_sequence(name)
+            try:
+                record, _ = play_episode(player, agent_obj, name, on_frame=bar.advance)
+            except (ValueError, KeyError, OSError, RuntimeError) as exc:
+                failures[name] = SequenceFailure.describe(exc)
+                # A reset that raised leaves Gymnasium's checker wrapper without its first
+                # observation; the next episode gets a fresh environment.
+                if player is not env:
+                    player.close()
+                player = spec.make_env()
+                continue
+            record.inputs = inputs[name]
+            save_episode(out, player, record)
+            records[name] = record
+    finally:
+        if player is not env:
+            player.close()
     return records, failures
 
 

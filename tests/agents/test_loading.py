@@ -53,7 +53,8 @@ def test_module_reference_from_the_current_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     monkeypatch.delitem(sys.modules, "cwd_trackers", raising=False)
     cls = agent_class("cwd_trackers:FileTracker")
-    assert cls.__module__ == "cwd_trackers" and portable_reference(cls) == "cwd_trackers:FileTracker"
+    assert cls.__module__ == "cwd_trackers"
+    assert portable_reference(cls) == "cwd_trackers:FileTracker"
 
 
 @pytest.mark.parametrize(("spec", "message"), [

@@ -34,17 +34,19 @@ def _corrupt_first_frame(root: Path, sequence: str) -> Path:
     return frame
 
 
-@pytest.mark.parametrize("workers", [1, 2])
-def test_a_corrupt_frame_fails_its_sequence_only(tmp_path, mot16, workers, capsys):
-    frame = _corrupt_first_frame(mot16, "SYN-02")
+@pytest.mark.parametrize(("workers", "bad", "good"), [(1, "SYN-01", "SYN-02"),
+                                                      (1, "SYN-02", "SYN-01"),
+                                                      (2, "SYN-02", "SYN-01")])
+def test_a_corrupt_frame_fails_its_sequence_only(tmp_path, mot16, workers, bad, good, capsys):
+    frame = _corrupt_first_frame(mot16, bad)
     out = tmp_path / "run"
     with pytest.raises(RunFailed) as failed:
         run(ENV, "iou", out=out, env_kwargs={"root": str(mot16)}, workers=workers,
             progress=False)
-    assert list(failed.value.failures) == ["SYN-02"]
-    assert str(frame) in failed.value.failures["SYN-02"]
-    assert (out / "sequences" / "SYN-01.json").is_file()
-    assert not (out / "sequences" / "SYN-02.json").exists()
+    assert list(failed.value.failures) == [bad]
+    assert str(frame) in failed.value.failures[bad]
+    assert (out / "sequences" / f"{good}.json").is_file()
+    assert not (out / "sequences" / f"{bad}.json").exists()
     code = main(["evaluate", "--env", ENV, "--root", str(mot16), "--agent", "iou", "--out",
                  str(out), "--workers", str(workers), "--quiet"])
     err = capsys.readouterr().err
