@@ -6,14 +6,18 @@ Parts (run all, or pick with --parts):
   association  one association step at 30 tracks x 30 detections with RSM vs one backbone pass
                at 1088x608 (goal >= 10x faster)
   cache        second run with the feature cache vs the first (goal >= 20x faster)
-  accuracy     HOTA / IDF1 / MOTA / IDSW of iou vs unitrack (rsm/cf/gf/gpf, motion on/off) with
-               the offline default and random weights, on the synthetic set, PETS09-S2L1 and
-               the MOT17 clips (the backbone runs once per weights thanks to the feature cache)
-  peers        roboflow `trackers` SORT and ByteTrack on the same detections (run in a separate
-               virtual environment: `trackers` needs opencv-python, which must not enter ours),
-               accuracy on PETS09-S2L1 and time per frame at 30 detections, vs iou and unitrack
+  accuracy     (slow) HOTA / IDF1 / MOTA / IDSW / DetA / AssA of iou, roboflow SORT and ByteTrack
+               (run in a separate virtual environment: `trackers` needs opencv-python, which
+               must not enter ours) and unitrack (defaults, paper_settings, rsm/cf/gf/gpf with
+               motion on/off, random weights without motion) on PETS09-S2L1, the hard
+               synthetic scenes (unitrack_env.datasets.synthetic.hard_mot), the MOT17 clips
+               and the default synthetic MOT16 set; then per-stage diagnostics per sequence.
+               Each sequence's detections and box features are recorded once per weights and
+               replayed through the association engine (benchmarks/_mot_replay.py).
+  peers        time per frame of roboflow SORT / ByteTrack and iou at 30 detections
 
 Usage: python benchmarks/mot_agent.py [--parts stages,association,...] [--threads 2]
+       python benchmarks/mot_agent.py --parts accuracy [--work DIR] [--input-size 544 304]
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -35,10 +40,15 @@ import torch
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel, letterbox
+from unitrack_env.agents.heads.association import UniTrackConfig
 from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
+from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motchallenge
 from unitrack_env.evaluation.runner import run
 from unitrack_env.frames import read_rgb
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _mot_replay import diagnose, record, replay, score  # noqa: E402  (benchmark helper)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"
@@ -191,12 +201,29 @@ def cache(threads: int) -> None:
           "(goal >= 20x)")
 
 
-def _datasets() -> list[tuple[str, str, dict]]:
-    sets = [("synthetic MOT16", "UniTrack/MOT16-v0", {})]
+@dataclass(frozen=True)
+class DataSet:
+    """One accuracy data set: an environment id and its keyword arguments."""
+
+    label: str
+    env_id: str
+    env_kwargs: dict
+    score_scale: float = 1.0  # detection scores / this = [0, 1] (peers, new-track score)
+
+
+def _datasets(work: Path) -> list[DataSet]:
+    sets = []
     if (SHARED / "MOT15").is_dir():
-        sets.append(("PETS09-S2L1", "UniTrack/MOT15-v0", {"root": str(SHARED / "MOT15")}))
+        sets.append(DataSet("PETS09-S2L1", "UniTrack/MOT15-v0", {"root": str(SHARED / "MOT15")},
+                            PETS_SCORE_SCALE))
+    hard = work / "hard-mot17"
+    if not (hard / "train" / HARD_SPEC.sequences[-1].sequence.name / "det").is_dir():
+        print(f"[accuracy] writing the hard synthetic scenes to {hard} (one-off)...", flush=True)
+        write_hard_motchallenge(hard, "MOT17")
+    sets.append(DataSet("hard synthetic", "UniTrack/MOT17-v0", {"root": str(hard)}))
     if (SHARED / "MOT17").is_dir():
-        sets.append(("MOT17 clips", "UniTrack/MOT17-v0", {"root": str(SHARED / "MOT17")}))
+        sets.append(DataSet("MOT17 clips", "UniTrack/MOT17-v0", {"root": str(SHARED / "MOT17")}))
+    sets.append(DataSet("synthetic MOT16", "UniTrack/MOT16-v0", {}))
     return sets
 
 
@@ -205,33 +232,133 @@ def _agent_kwargs(env_id: str) -> dict:
     return {"new_track_score": 0.5 * PETS_SCORE_SCALE} if env_id.endswith("MOT15-v0") else {}
 
 
-def accuracy(threads: int) -> None:
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for label, env_id, env_kwargs in _datasets():
-            report = run(env_id, "iou", out=Path(tmp) / f"iou-{env_id[9:]}", progress=False,
-                         env_kwargs=env_kwargs)
-            rows.append((label, "iou", "-", report.combined))
-            for weights in ("imagenet-lite0", "random"):
-                for similarity in ("rsm", "cf", "gf", "gpf"):
-                    for motion in (True, False):
-                        kwargs = {"weights": weights, "similarity": similarity,
-                                  "use_motion": motion, "num_threads": threads,
-                                  "feature_cache": str(Path(tmp) / "features"),
-                                  **_agent_kwargs(env_id)}
-                        out = Path(tmp) / f"{env_id[9:]}-{weights}-{similarity}-{motion}"
-                        report = run(env_id, "unitrack", out=out, progress=False,
-                                     env_kwargs=env_kwargs, agent_kwargs=kwargs)
-                        config = f"{similarity}{'' if motion else ' w/o motion'}"
-                        rows.append((label, f"unitrack {config}", weights, report.combined))
-                        print(f"  {label:16s} {config:18s} {weights:15s} "
-                              f"HOTA {100 * report.combined['HOTA']:5.1f}", flush=True)
+#: Metrics of the accuracy table (TrackEval names).
+TABLE_METRICS = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA")
+
+
+def _combined(scores: dict[str, dict]) -> dict[str, float]:
+    from unitrack_env.metrics.motchallenge import SequenceScore, combine_sequence_scores
+
+    return dict(combine_sequence_scores(
+        {k: v if isinstance(v, SequenceScore) else SequenceScore(v) for k, v in scores.items()}))
+
+
+def _peer_scores(data: DataSet, recordings: list, tmp: Path) -> dict[str, dict[str, float]]:
+    """roboflow SORT and ByteTrack on the same public detections (scores scaled to [0, 1])."""
+    from unitrack_env.metrics.motchallenge import score_sequence
+
+    python = _peer_python()
+    script = REPO / "benchmarks" / "_peer_roboflow.py"
+    out: dict[str, dict[str, float]] = {}
+    for name in ("sort", "bytetrack"):
+        per_seq = {}
+        for rec in recordings:
+            det = np.loadtxt(rec.seq_dir / "det" / "det.txt", delimiter=",", ndmin=2)
+            det[:, 6] = np.clip(det[:, 6] / data.score_scale, 0, 1)
+            scaled = tmp / f"{rec.name}-det.txt"
+            np.savetxt(scaled, det, delimiter=",", fmt="%.4f")
+            result = tmp / f"{rec.name}-{name}.txt"
+            subprocess.run([str(python), str(script), name, str(scaled), str(len(rec)),
+                            str(rec.frame_rate), str(result)], check=True, capture_output=True)
+            per_seq[rec.name] = score_sequence(rec.seq_dir, result, benchmark=rec.benchmark,
+                                               seq_length=len(rec))
+        out[f"roboflow {name}"] = _combined(per_seq)
+    return out
+
+
+def _replay_scores(recordings: list, config, similarity) -> tuple[dict, dict]:
+    per_seq, diags = {}, {}
+    for rec in recordings:
+        result = replay(rec, config, similarity)
+        per_seq[rec.name] = score(rec, result)
+        diags[rec.name] = diagnose(rec, result)
+    return _combined(per_seq), diags
+
+
+def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int] | None = None,
+             random_weights: bool = True, peers_too: bool = True, data: str = "",
+             all_variants: bool = False) -> None:
+    """The issue-11 accuracy table and per-stage diagnostics on every long sequence.
+
+    Every sequence is recorded once per appearance model (detections + box features, see
+    ``benchmarks/_mot_replay.py``); each unitrack variant replays the recording through the
+    association engine, which is what the agent does after its feature step. One run of the
+    agent at its defaults through the evaluation runner (on the MOT17 clips, the cheapest)
+    checks that the replay gives the agent's numbers.
+    """
+    torch.set_num_threads(threads)
+    work = Path(work or Path(tempfile.gettempdir()) / "unitrack-mot-accuracy")
+    work.mkdir(parents=True, exist_ok=True)
+    rows: list[tuple[str, str, dict]] = []
+    diag_rows: list[tuple[str, str, str, dict]] = []
+    chosen = [d for d in _datasets(work)
+              if not data or any(part.strip().lower() in d.label.lower()
+                                 for part in data.split(","))]
+    for data_set in chosen:
+        data = data_set
+        label = data.label
+        report = run(data.env_id, "iou", out=work / "runs" / f"iou-{label}", progress=False,
+                     overwrite=True, env_kwargs={**data.env_kwargs, "decode_frames": False})
+        rows.append((label, "iou", report.combined))
+        weights_list = ("imagenet-lite0", "random") if random_weights else ("imagenet-lite0",)
+        for weights in weights_list:
+            kwargs = {"weights": weights, "num_threads": threads,
+                      "feature_cache": str(work / "features"), **_agent_kwargs(data.env_id)}
+            if input_size is not None:
+                kwargs["input_size"] = tuple(input_size)
+            record_kwargs = {k: v for k, v in kwargs.items() if k != "new_track_score"}
+            recordings = record(data.env_id, data.env_kwargs, record_kwargs, work / "recordings")
+            if weights == "imagenet-lite0" and peers_too:
+                with tempfile.TemporaryDirectory() as tmp:
+                    for name, m in _peer_scores(data, recordings, Path(tmp)).items():
+                        rows.append((label, name, m))
+            variants = [("defaults", {}), ("paper_settings", {"paper_settings": True})]
+            variants += [(f"{sim}{'' if motion else ' w/o motion'}",
+                          {"similarity": sim, "use_motion": motion})
+                         for sim in ("rsm", "cf", "gf", "gpf") for motion in (True, False)
+                         if all_variants or not motion]
+            variants += [("paper_settings w/o motion",
+                          {"paper_settings": True, "use_motion": False})]
+            if weights == "random":
+                variants = [(n, o) for n, o in variants if "w/o motion" in n]
+            for name, options in variants:
+                config = UniTrackConfig(**{**kwargs, **options})
+                m, diags = _replay_scores(recordings, config.association_config("mot"),
+                                          config.similarity)
+                tag = "" if weights == "imagenet-lite0" else f" [{weights}]"
+                rows.append((label, f"unitrack {name}{tag}", m))
+                if name in ("defaults", "paper_settings") and weights == "imagenet-lite0":
+                    for seq, d in diags.items():
+                        diag_rows.append((label, seq, name, d))
+                print(f"  {label:16s} unitrack {name}{tag:10s} HOTA {100 * m['HOTA']:5.1f} "
+                      f"IDF1 {100 * m['IDF1']:5.1f}", flush=True)
+            if weights == "imagenet-lite0" and label == "MOT17 clips":
+                agent_kwargs = {**kwargs, "feature_cache": str(work / "features")}
+                report = run(data.env_id, "unitrack", out=work / "runs" / f"unitrack-{label}",
+                             progress=False, overwrite=True, env_kwargs=data.env_kwargs,
+                             agent_kwargs=agent_kwargs)
+                replayed = next(m for lab, n, m in rows
+                                if lab == label and n == "unitrack defaults")
+                print(f"  {label:16s} agent through the runner: HOTA "
+                      f"{100 * report.combined['HOTA']:.2f} (replay "
+                      f"{100 * replayed['HOTA']:.2f})", flush=True)
     print("\n[accuracy] combined metrics per data set (percent; IDSW count)")
-    print("| data | agent | weights | HOTA | IDF1 | MOTA | IDSW |")
-    print("|---|---|---|---|---|---|---|")
-    for label, agent, weights, m in rows:
-        print(f"| {label} | {agent} | {weights} | {100 * m['HOTA']:.1f} | {100 * m['IDF1']:.1f} "
-              f"| {100 * m['MOTA']:.1f} | {m['IDSW']:.0f} |")
+    print("| data | agent | " + " | ".join(TABLE_METRICS) + " |")
+    print("|---|---|" + "---|" * len(TABLE_METRICS))
+    for label, agent, m in rows:
+        cells = " | ".join(f"{m[k]:.0f}" if k == "IDSW" else f"{100 * m[k]:.1f}"
+                           for k in TABLE_METRICS)
+        print(f"| {label} | {agent} | {cells} |")
+    print("\n[diagnostics] per sequence (see benchmarks/_mot_replay.py:diagnose)")
+    keys = ("true_dets", "false_dets", "reported_true", "reported_false", "box_shift",
+            "stage1", "stage2", "tentative", "births", "reid", "reid_wrong", "switch_matches",
+            "sim_true", "sim_false", "sim_true_p10", "sim_false_p90", "sim_overlap")
+    print("| data | sequence | setting | " + " | ".join(keys) + " |")
+    print("|---|---|---|" + "---|" * len(keys))
+    for label, seq, name, d in diag_rows:
+        cells = " | ".join(f"{d[k]:.3f}" if isinstance(d[k], float) else f"{d[k]}"
+                           for k in keys)
+        print(f"| {label} | {seq} | {name} | {cells} |")
 
 
 def _peer_python() -> Path:
@@ -257,42 +384,20 @@ def _dense_det_file(path: Path, frames: int = 300, n: int = 30) -> None:
 
 
 def peers(threads: int) -> None:
-    from unitrack_env.metrics.motchallenge import score_sequence
-
+    """Time per frame of the roboflow peers and of iou at 30 detections (accuracy: see
+    the accuracy part, which scores the peers on every data set)."""
     python = _peer_python()
     script = REPO / "benchmarks" / "_peer_roboflow.py"
-    seq = SHARED / "MOT15" / "train" / "PETS09-S2L1"
-    rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        det = np.loadtxt(seq / "det" / "det.txt", delimiter=",")
-        det[:, 6] = np.clip(det[:, 6] / PETS_SCORE_SCALE, 0, 1)
-        scaled = Path(tmp) / "det.txt"
-        np.savetxt(scaled, det, delimiter=",", fmt="%.4f")
         dense = Path(tmp) / "dense.txt"
         _dense_det_file(dense)
         for name in ("sort", "bytetrack"):
-            out = Path(tmp) / f"{name}.txt"
-            subprocess.run([str(python), str(script), name, str(scaled), "400", "7", str(out)],
-                           check=True, capture_output=True, text=True)
-            metrics = score_sequence(seq, out, benchmark="MOT15")
             timing = subprocess.run(
                 [str(python), str(script), name, str(dense), "300", "30",
                  str(Path(tmp) / "dense-out.txt")], check=True, capture_output=True, text=True)
             ms = json.loads(timing.stdout.strip().splitlines()[-1])["ms_per_frame"]
-            rows.append((f"roboflow {name}", metrics, ms))
-        for agent, kwargs in (("iou", {}), ("unitrack", {"num_threads": threads,
-                                                         **_agent_kwargs("MOT15-v0")})):
-            report = run("UniTrack/MOT15-v0", agent, out=Path(tmp) / agent, progress=False,
-                         env_kwargs={"root": str(SHARED / "MOT15")}, agent_kwargs=kwargs)
-            rows.append((agent, report.combined, _agent_ms_at_30(agent) if agent == "iou"
-                         else float("nan")))
-    print("\n[peers] PETS09-S2L1 frames 1-400, public detections, TrackEval; time per frame of "
-          "the tracker alone at 30 detections (unitrack: see [stages]/[association])")
-    print("| tracker | HOTA | IDF1 | MOTA | IDSW | ms/frame @30 dets |")
-    print("|---|---|---|---|---|---|")
-    for name, m, ms in rows:
-        print(f"| {name} | {100 * m['HOTA']:.1f} | {100 * m['IDF1']:.1f} | {100 * m['MOTA']:.1f} "
-              f"| {m['IDSW']:.0f} | {ms:.2f} |")
+            print(f"[peers] roboflow {name}: {ms:.2f} ms/frame at 30 detections")
+    print(f"[peers] iou: {_agent_ms_at_30('iou'):.2f} ms/frame at 30 detections")
 
 
 def _agent_ms_at_30(name: str) -> float:
@@ -324,12 +429,30 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--parts", default=",".join(PARTS))
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--work", type=Path, default=None,
+                        help="accuracy: folder for recordings, features and the hard scenes "
+                             "(default: a folder in the temp dir, reused across runs)")
+    parser.add_argument("--input-size", type=int, nargs=2, default=None,
+                        metavar=("W", "H"), help="accuracy: network input (default 1088 608)")
+    parser.add_argument("--no-random", action="store_true",
+                        help="accuracy: skip the random-weights rows")
+    parser.add_argument("--no-peers", action="store_true",
+                        help="accuracy: skip the roboflow peers")
+    parser.add_argument("--data", default="",
+                        help="accuracy: only the data sets whose label contains one of these "
+                             "comma-separated words (pets, hard, mot17, mot16)")
+    parser.add_argument("--all-variants", action="store_true",
+                        help="accuracy: also cf/gf/gpf with motion")
     args = parser.parse_args()
     for part in args.parts.split(","):
         if part in {"stages", "cache", "peers"} and not SHARED.is_dir():
             print(f"[{part}] skipped: {SHARED} not found")
             continue
-        PARTS[part](args.threads)
+        if part == "accuracy":
+            accuracy(args.threads, args.work, args.input_size, not args.no_random,
+                     not args.no_peers, args.data, args.all_variants)
+        else:
+            PARTS[part](args.threads)
 
 
 if __name__ == "__main__":

@@ -13,8 +13,20 @@ on boxes (UniTrack paper, section 2.4 and appendix C.1):
 4. Associate with :class:`~unitrack_env.agents.primitives.association.Associator` (two-stage:
    appearance similarity fused with Kalman motion, then IoU; track life cycle) using the chosen
    similarity (RSM by default; CF, GF and GPF are the paper's baselines).
-5. Act with the confirmed tracks matched in this frame (MOT output filter: area > 200 and
-   w/h <= 1.6).
+5. Act with the confirmed tracks matched in this frame, each with the box of the detection
+   it matched (MOT output filter: area > 200 and w/h <= 1.6).
+
+Defaults on MOT are the paper's setting plus four measured departures, each a field of
+:class:`~unitrack_env.agents.primitives.association.AssociationConfig` documented with its
+paper value in :data:`~unitrack_env.agents.primitives.association.MOT_ASSOCIATION`: the
+matched detection's box is reported (code: the Kalman state); an appearance match must beat
+every other acceptable pair of its track and detection by ``ambiguity_margin = 0.1`` in
+cost, else the IoU stage decides (paper: no check); a tentative track is confirmed at
+IoU > 0.5 (paper: 0.8); lost tracks take part in the IoU stage (as in the paper's
+Algorithm 1; the authors' code leaves them out). ``paper_settings=True`` reproduces the
+paper's setting exactly::
+
+    make_agent("unitrack", paper_settings=True)
 
 Frames with no detections skip the backbone entirely (the authors' code crashed on them).
 Frame sizes may change between episodes: each frame is letterboxed on its own.

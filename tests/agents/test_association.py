@@ -282,3 +282,57 @@ def test_appearance_keeps_ids_where_iou_only_swaps(use_motion: bool) -> None:
     # IoU-only follows the constant-velocity prediction through the bounce: ids swap.
     assert iou_ids[0] == {0: 1, 1: 2}
     assert iou_ids[-1] == {0: 2, 1: 1}
+
+
+# ---------------------------------------------------------------------- issue 11 knobs
+def test_reported_box_is_the_detection_by_default_in_mot_but_filtered_in_the_paper() -> None:
+    from unitrack_env.agents.primitives.association import MOT_ASSOCIATION
+
+    paper = Associator(dot_similarity)
+    assert paper.config.report_filtered_box  # authors' code: the Kalman state
+    mot = Associator(dot_similarity, AssociationConfig(**MOT_ASSOCIATION))
+    for x in (0.0, 3.0, 7.0, 8.0):  # uneven motion: the filter lags the detections
+        det = [box(x)]
+        out_paper = paper.step(np.array(det), np.ones(1), [RED])
+        out_mot = mot.step(np.array(det), np.ones(1), [RED])
+    assert out_mot[0].box.tolist() == box(8.0)
+    assert out_paper[0].box.tolist() != box(8.0)
+
+
+def test_step_record_lists_stages_births_and_similarities() -> None:
+    assoc = Associator(dot_similarity)
+    step(assoc, [box(0), box(100)], [RED, GREEN])
+    assert [b[1] for b in assoc.last_step.births] == [0, 1]
+    step(assoc, [box(1), box(101)], [RED, GREEN])
+    record = assoc.last_step
+    assert sorted((m[1], m[2], m[3]) for m in record.matches) == [
+        (0, "appearance", False), (1, "appearance", False)]
+    assert len(record.similarities) == 2
+    np.testing.assert_allclose(sorted(r.tolist() for r in record.similarities.values()),
+                               [[0.0, 1.0], [1.0, 0.0]])
+
+
+def test_reid_threshold_keeps_a_weakly_similar_lost_track_lost() -> None:
+    half = np.array([np.sqrt(0.5), np.sqrt(0.5), 0.0])  # cosine 0.71 with RED: cost 0.29
+    for threshold, refound in ((None, True), (0.2, False)):
+        assoc = Associator(dot_similarity, AssociationConfig(reid_threshold=threshold),
+                           frame_rate=10.0)
+        step(assoc, [box(0)], [RED])
+        step(assoc, [], [])  # lost
+        ids = step(assoc, [box(0)], [half])
+        assert (ids == {0: 1}) is refound, threshold
+
+
+def test_ambiguity_margin_leaves_look_alikes_to_the_iou_stage() -> None:
+    # Two identical-looking people: appearance cannot tell which is which, the IoU stage can.
+    cfg = AssociationConfig(use_motion=False, ambiguity_margin=0.05)
+    assoc = Associator(dot_similarity, cfg)
+    step(assoc, [box(0), box(60)], [RED, RED])
+    step(assoc, [box(2), box(58)], [RED, RED])
+    stages = {m[2] for m in assoc.last_step.matches}
+    assert stages == {"iou"}
+    # Without the margin the appearance stage takes them (ties broken arbitrarily).
+    plain = Associator(dot_similarity, AssociationConfig(use_motion=False))
+    step(plain, [box(0), box(60)], [RED, RED])
+    step(plain, [box(2), box(58)], [RED, RED])
+    assert {m[2] for m in plain.last_step.matches} == {"appearance"}
