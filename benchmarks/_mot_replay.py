@@ -34,7 +34,7 @@ from unitrack_env.agents.primitives.association import (
 )
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
 from unitrack_env.geometry import box_iou
-from unitrack_env.metrics.motchallenge import score_sequence
+from unitrack_env.metrics.motchallenge import SequenceScore, score_sequence
 from unitrack_env.spaces import unpack_detections
 
 #: Recording format version (bump when the layout changes).
@@ -181,10 +181,10 @@ def replay(rec: Recording, config: AssociationConfig, similarity: Any = "rsm",
     return Replay(np.array(rows, np.float64).reshape(-1, 10), records, outputs)
 
 
-def score(rec: Recording, result: Replay) -> dict[str, float]:
-    """TrackEval metrics of a replay (HOTA, IDF1, MOTA, ... as fractions)."""
-    return dict(score_sequence(rec.seq_dir, result.rows, benchmark=rec.benchmark,
-                               seq_length=len(rec)))
+def score(rec: Recording, result: Replay) -> SequenceScore:
+    """TrackEval metrics of a replay (a mapping: HOTA, IDF1, MOTA, ... as fractions)."""
+    return score_sequence(rec.seq_dir, result.rows, benchmark=rec.benchmark,
+                          seq_length=len(rec))
 
 
 # ---------------------------------------------------------------------------- diagnostics

@@ -236,11 +236,11 @@ def _agent_kwargs(env_id: str) -> dict:
 TABLE_METRICS = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA")
 
 
-def _combined(scores: dict[str, dict]) -> dict[str, float]:
-    from unitrack_env.metrics.motchallenge import SequenceScore, combine_sequence_scores
+def _combined(scores: dict) -> dict[str, float]:
+    """TrackEval's combination of per-sequence scores (``SequenceScore`` values)."""
+    from unitrack_env.metrics.motchallenge import combine_sequence_scores
 
-    return dict(combine_sequence_scores(
-        {k: v if isinstance(v, SequenceScore) else SequenceScore(v) for k, v in scores.items()}))
+    return dict(combine_sequence_scores(scores))
 
 
 def _peer_scores(data: DataSet, recordings: list, tmp: Path) -> dict[str, dict[str, float]]:
