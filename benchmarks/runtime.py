@@ -3,7 +3,7 @@
 Usage (from the repository root; OpenVINO / ONNX Runtime rows need the extras)::
 
     .venv/bin/python benchmarks/runtime.py --parts backbone,propagation,heads,memory \
-        --threads 2 --before 585a175
+        --threads 2 --before f786a63
 
 Every comparison is measured side by side in one run: the candidates take turns (round
 robin, ``--repeats`` rounds) and each row reports the fastest round (min) and the median, so
@@ -58,8 +58,8 @@ from unitrack_env.agents.primitives.label_propagation import normalize_features
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / ".." / "shared" / "data"
-BEFORE = "585a175"
-"""Revision whose label and box propagation are the "before" (the issue's baseline)."""
+BEFORE = "f786a63"
+"""Revision whose label and box propagation are the "before": the tree before issue 13."""
 
 
 @dataclass
