@@ -51,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _mot_replay import diagnose, record, replay, score  # noqa: E402  (benchmark helper)
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO / ".." / "shared" / "data"
+SHARED = (REPO / ".." / "shared" / "data").resolve()
 #: PETS09-S2L1 detection scores are 0-100+; trackers built for [0, 1] scores get them / 100.
 PETS_SCORE_SCALE = 100.0
 
