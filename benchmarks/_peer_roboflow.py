@@ -1,6 +1,6 @@
 """Run one roboflow `trackers` tracker on MOTChallenge public detections (peer benchmark).
 
-Executed by benchmarks/peer_comparison.py inside a separate virtual environment that has the
+Executed by benchmarks/mot_agent.py (accuracy, peers) inside a separate virtual environment with the
 PyPI package `trackers` (it requires opencv-python, which must not enter unitrack-env's own
 environment). Reads det.txt with plain numpy, writes a MOTChallenge result file, and prints
 a JSON line with the time per frame.
