@@ -10,7 +10,8 @@ Public API:
 * Checkpoints: :class:`LoadReport`, :class:`KeyRemap`, :data:`DEFAULT_REMAPS`,
   :class:`CheckpointError`, :func:`load_checkpoint`.
 * Weights table: :data:`DEFAULT_WEIGHT_LOADERS`, :class:`WeightsSource`.
-* Cache: :class:`FeatureCache`, :class:`CacheKey`, :class:`CachedAppearanceModel`.
+* Cache (content-addressed, bounded, on by default): :class:`FeatureCache`, :class:`CacheKey`,
+  :class:`CachedAppearanceModel`, :func:`content_key`, :func:`track_cache_run`.
 * Architectures: :class:`ResNet`, :class:`EfficientNetLite0`.
 """
 
@@ -29,9 +30,13 @@ from unitrack_env.agents.appearance.efficientnet_lite import EfficientNetLite0
 from unitrack_env.agents.appearance.feature_cache import (
     CachedAppearanceModel,
     CacheKey,
+    CacheStats,
     FeatureCache,
     FeatureCacheWarning,
-    image_fingerprint,
+    content_key,
+    default_cache_dir,
+    resolve_cache,
+    track_cache_run,
 )
 from unitrack_env.agents.appearance.model import (
     ARCHITECTURES,
@@ -63,6 +68,7 @@ __all__ = [
     "MOT_INPUT_SIZE",
     "AppearanceModel",
     "CacheKey",
+    "CacheStats",
     "CachedAppearanceModel",
     "CheckpointError",
     "EfficientNetLite0",
@@ -74,11 +80,14 @@ __all__ = [
     "ModelIdentity",
     "ResNet",
     "WeightsSource",
+    "content_key",
+    "default_cache_dir",
     "infer_resnet_arch",
-    "image_fingerprint",
     "letterbox",
     "letterbox_layout",
     "torch_threads",
     "load_checkpoint",
+    "resolve_cache",
+    "track_cache_run",
     "weights_digest",
 ]

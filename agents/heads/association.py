@@ -77,11 +77,13 @@ from unitrack_env.agents.appearance import (
     AppearanceModel,
     CachedAppearanceModel,
     Letterbox,
-    image_fingerprint,
+    content_key,
     letterbox,
     letterbox_layout,
+    resolve_cache,
     torch_threads,
 )
+from unitrack_env.agents.appearance.model import LETTERBOX_PAD_VALUE
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.primitives.association import (
     MOT_ASSOCIATION,
@@ -227,7 +229,15 @@ class UniTrackConfig:
         input_size: ``(width, height)`` of the letterboxed network input (JDE: 1088 x 608).
         roi_size: ``(rows, columns)`` of the RoIAlign grid of a box.
         roi_sampling_ratio: Bilinear samples per RoIAlign bin and axis (boxes and masks).
-        feature_cache: Directory of an on-disk feature cache (None: no cache).
+        feature_cache: The on-disk feature cache
+            (:mod:`~unitrack_env.agents.appearance.feature_cache`): True (default) the user
+            cache folder (``$UNITRACK_FEATURE_CACHE``; ``off`` there turns the default off),
+            a folder, or False / None for none. Entries are addressed by model, input size
+            and frame content, so any sequence, data set or head with the same frames shares
+            them; the stored float16 values are used warm or cold alike.
+        feature_cache_size: Cap of the cache folder, bytes or text such as ``"10GiB"`` (least
+            recently used entries are evicted); None: ``$UNITRACK_FEATURE_CACHE_MAX`` or
+            10 GiB.
         min_score: Ignore detections scored below this (None: keep all). Detection scores
             are benchmark-specific (MOT17 FRCNN in [0, 1], MOT15 unbounded).
         new_track_score: Least score of a detection that starts a track (authors' code 0.5).
@@ -264,7 +274,8 @@ class UniTrackConfig:
     input_size: tuple[int, int] = MOT_INPUT_SIZE
     roi_size: tuple[int, int] = ROI_OUTPUT_SIZE
     roi_sampling_ratio: int = 2
-    feature_cache: str | os.PathLike[str] | None = None
+    feature_cache: str | os.PathLike[str] | bool | None = True
+    feature_cache_size: int | str | None = None
     min_score: float | None = None
     new_track_score: float = 0.5
     output_filter: bool | None = None
@@ -395,8 +406,11 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
             num_threads=cfg.num_threads,
         )
         self.appearance = base
+        # (an injected model without an identity cannot be keyed: it runs uncached)
+        cache = resolve_cache(cfg.feature_cache, max_size=cfg.feature_cache_size) \
+            if hasattr(base, "identity") else None
         self.model: AppearanceModel | CachedAppearanceModel = (
-            CachedAppearanceModel(base, cfg.feature_cache) if cfg.feature_cache else base
+            CachedAppearanceModel(base, cache) if cache is not None else base
         )
         self.task = cfg.task or "mot"
         self.associator: Associator[Any] | CategoryGatedAssociator[Any] = self._engine(self.task)
@@ -447,6 +461,13 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         self._sequence = str(info.get("sequence", ""))
         # act() numbers frames from the reset frame (the benchmark's index, usually 1).
         self._frame_index = int(info.get("frame_index", 1)) - 1
+        if isinstance(self.model, CachedAppearanceModel):
+            self.model.flush_stats()  # the previous episodes' hit counts, for `unitrack cache`
+
+    def close(self) -> None:
+        """Record the feature cache's hit counts (read by ``unitrack cache info``)."""
+        if isinstance(self.model, CachedAppearanceModel):
+            self.model.flush_stats()
 
     def act(self, observation: dict[str, Any]) -> dict[str, Any]:
         """Track one frame; return the action in the environment's format."""
@@ -541,27 +562,19 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
     def feature_map(self, frame: np.ndarray) -> tuple[torch.Tensor, Letterbox]:
         """Letterbox ``frame`` and return its ``(1, C, h, w)`` feature map and the letterbox.
 
-        With the feature cache, entries are keyed by the original frame's fingerprint, so a
-        hit needs only the letterbox geometry (no resize).
+        With the feature cache, entries are keyed by a hash of the original frame (and the
+        letterbox), so a hit needs only the letterbox geometry (no resize).
         """
         size = tuple(self.config.input_size)
         if not isinstance(self.model, CachedAppearanceModel):
             boxed = letterbox(np.ascontiguousarray(frame), size)
             return self.model.features(boxed.image), boxed
-        if not self._sequence:
-            raise ValueError(
-                "the feature cache needs the sequence name: call reset(observation, info) "
-                "with the environment's info (it holds 'sequence') before act()"
-            )
-        fingerprint = image_fingerprint(frame)
-        fmap = self.model.lookup((size[1], size[0]), self._sequence, self._frame_index,
-                                 fingerprint)
+        key = content_key(frame, f"letterbox {size[0]}x{size[1]} pad {LETTERBOX_PAD_VALUE}")
+        fmap = self.model.lookup((size[1], size[0]), key)
         if fmap is not None:
             return fmap, letterbox_layout(frame.shape[0], frame.shape[1], size)
         boxed = letterbox(np.ascontiguousarray(frame), size)
-        fmap = self.model.features(boxed.image, sequence=self._sequence,
-                                   frames=self._frame_index, fingerprints=[fingerprint])
-        return fmap, boxed
+        return self.model.features(boxed.image, keys=[key]), boxed
 
     def box_features(self, frame: np.ndarray, boxes_xywh: np.ndarray) -> list[torch.Tensor]:
         """L2-normalised location features ``(rows * cols, C)`` of each box of one frame.
