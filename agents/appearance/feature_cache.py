@@ -240,11 +240,6 @@ def content_key(image: np.ndarray, transform: str = "") -> str:
     return digest.hexdigest()[: 2 * CONTENT_DIGEST_BYTES]
 
 
-def image_fingerprint(image: np.ndarray) -> str:
-    """Former name of :func:`content_key` (kept so that older callers still import)."""
-    return content_key(image)
-
-
 @dataclass(frozen=True)
 class CacheKey:
     """Identity of one cached feature map.
