@@ -8,10 +8,12 @@ traceback. Finished sequences are always kept: run the same command again to res
 from __future__ import annotations
 
 import argparse
+import contextlib
 import difflib
+import os
 import sys
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +35,13 @@ EXAMPLES = {
     "score": """examples:
   unitrack score --env UniTrack/MOT17-v0 --root data/MOT17 --results runs/mot17/data
   unitrack score --benchmark MOT17 --gt data/MOT17/train --results runs/mot17/data --format csv
+""",
+    "scorecard": """examples:
+  unitrack scorecard --model imagenet-lite0 --model random --data ../shared/data --out runs/sc
+  unitrack scorecard --model moco_v2.pth,arch=resnet50,layer=layer3,label=MoCo-v2 \
+      --model imagenet-lite0 --tasks sot,vos,mot --workers 2 --out runs/sc
+  unitrack scorecard --backend ray --address auto --model imagenet-lite0 --out runs/sc
+  unitrack scorecard --compare runs/a/scorecard.json runs/b/scorecard.json --out runs/both
 """,
     "render": """examples:
   unitrack render --env UniTrack/MOT16-v0 --agent iou --sequence SYN-01 --out syn01.mp4
@@ -85,6 +94,28 @@ def _agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return parse_options(agent_class(args.agent), args.agent_arg or [], agent=args.agent)
 
 
+@contextlib.contextmanager
+def _feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
+        Callable[[], str | None]]:
+    """Count the feature-cache hits of a run, for agents that have a feature cache option.
+
+    Yields a function that returns the summary line once the run is over (None without a
+    cache: other agents do not pay for importing the appearance stack).
+    """
+    from unitrack_env.agents import agent_class
+    from unitrack_env.agents.options import agent_options
+
+    if "feature_cache" not in agent_options(agent_class(agent)):
+        yield lambda: None
+        return
+    from unitrack_env.agents.appearance import track_cache_run
+
+    folder = agent_kwargs.get("feature_cache")
+    root = folder if isinstance(folder, (str, os.PathLike)) else None
+    with track_cache_run(root) as cache_run:
+        yield cache_run.summary
+
+
 def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
                    task: str, fmt: str, fps: dict | None = None) -> None:
     from unitrack_env.evaluation.tables import metrics_csv, metrics_json, metrics_table
@@ -109,12 +140,15 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
 
     env_kwargs = _env_kwargs(args)
     agent_kwargs = _agent_kwargs(args)
-    report = run(args.env, args.agent, out=args.out, env_kwargs=env_kwargs,
-                 agent_kwargs=agent_kwargs,
-                 sequences=args.sequences.split(",") if args.sequences else None,
-                 workers=args.workers, overwrite=args.overwrite,
-                 progress=not args.quiet and args.format == "table")
+    with _feature_cache_report(args.agent, agent_kwargs) as cache_summary:
+        report = run(args.env, args.agent, out=args.out, env_kwargs=env_kwargs,
+                     agent_kwargs=agent_kwargs,
+                     sequences=args.sequences.split(",") if args.sequences else None,
+                     workers=args.workers, overwrite=args.overwrite,
+                     progress=not args.quiet and args.format == "table")
     log = console if args.format == "table" else _console(stderr=True)
+    if cache_summary():
+        log.print(cache_summary(), markup=False)
     if report.skipped:
         log.print(f"resumed: kept {len(report.skipped)} finished sequence(s): "
                   f"{', '.join(report.skipped)}", markup=False)
@@ -179,6 +213,58 @@ def _cmd_render(args: argparse.Namespace, console: Console) -> int:
                             fps=args.fps)
     console.print(f"wrote {frames} frames to {args.out}", markup=False)
     return 0
+
+
+def _cmd_scorecard(args: argparse.Namespace, console: Console) -> int:
+    from unitrack_env.evaluation import scorecard as sc
+
+    out = Path(args.out)
+    if args.compare:
+        card = sc.merge_cards([Path(p) for p in args.compare])
+        files = sc.write_outputs(out, card, radar_scale=args.radar_scale)
+    else:
+        if not args.model:
+            raise ValueError("give --model (one or more), or --compare earlier scorecards")
+        models = [sc.ModelSpec.parse(text) for text in args.model]
+        tasks = args.tasks.split(",") if args.tasks else None
+        data = args.data or os.environ.get("UNITRACK_DATA")
+        with _cell_progress(enabled=not args.quiet) as progress:
+            card = sc.scorecard(models, out=out, tasks=tasks, data=data, backend=args.backend,
+                                workers=args.workers, address=args.address,
+                                motion=args.motion, radar_scale=args.radar_scale,
+                                on_progress=progress)
+        files = sorted(out.glob("scorecard.*"))
+    console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)
+    console.print("wrote " + ", ".join(str(f) for f in files), markup=False, soft_wrap=True)
+    return 0
+
+
+@contextlib.contextmanager
+def _cell_progress(enabled: bool) -> Iterator[Callable[[int, int, Any], None]]:
+    """A progress bar over scorecard cells: done / all, ETA, the cell that just finished."""
+    if not enabled:
+        yield lambda done, total, cell: None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    with Progress(TextColumn("cells"), BarColumn(bar_width=20), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                  TextColumn("{task.description}", overflow="ellipsis"),
+                  console=_console(stderr=True)) as progress:
+        task = progress.add_task("", total=None)
+
+        def update(done: int, total: int, cell: Any) -> None:
+            progress.update(task, completed=done, total=total,
+                            description="" if cell is None else cell.label[-48:])
+
+        yield update
 
 
 def _cmd_list(args: argparse.Namespace, console: Console) -> int:
@@ -292,6 +378,31 @@ def _add_commands(sub: Any) -> None:
     rd.add_argument("--fps", type=float, default=None,
                     help="video frame rate (default: the sequence's)")
     rd.set_defaults(func=_cmd_render)
+
+    card = command("scorecard", "play every task's UniTrack head with each appearance model "
+                   "and draw the paper's table and radar chart")
+    card.add_argument("--model", action="append", metavar="WEIGHTS[,arch=A][,layer=L][,label=N]",
+                      help="an appearance model (a row): imagenet-lite0, random, or a "
+                      "checkpoint file, with options (repeatable)")
+    card.add_argument("--data", help="folder holding benchmark folders (MOT17/, DAVIS/, ...; "
+                      "default: $UNITRACK_DATA); tasks without one use synthetic data, marked")
+    card.add_argument("--tasks", help="comma-separated subset of: sot, vos, mot, mots, "
+                      "posetrack, pose-prop, vis (default: all)")
+    card.add_argument("--out", required=True, help="output folder (finished cells are reused)")
+    card.add_argument("--backend", choices=("pool", "ray"), default="pool",
+                      help="where cells run: local processes (default) or Ray")
+    card.add_argument("--workers", type=int, default=1,
+                      help="pool processes, or the CPUs of a local Ray (default: 1)")
+    card.add_argument("--address", help="Ray cluster to join: auto or ray://host:port "
+                      "(default: start a local Ray)")
+    card.add_argument("--motion", action="store_true", help="keep motion cues in the "
+                      "association heads (the paper's Table 2 drops them)")
+    card.add_argument("--radar-scale", choices=("rank", "value"), default="rank",
+                      help="radar axes: rank among the models (the paper's) or the value")
+    card.add_argument("--compare", nargs="+", metavar="SCORECARD_JSON",
+                      help="redraw earlier scorecard.json files together (plays nothing)")
+    card.add_argument("--quiet", action="store_true", help="no progress bar")
+    card.set_defaults(func=_cmd_scorecard)
 
     command("list", "list environments and agents").set_defaults(func=_cmd_list)
     command("doctor", "check that this environment can run and score every task (exit "

@@ -16,16 +16,20 @@ SHARED_DATA = (REPO / ".." / "shared" / "data").resolve()
 def _hermetic_environment(tmp_path_factory: pytest.TempPathFactory):
     """Generate synthetic data into a per-session cache; ignore a user's UNITRACK_DATA.
 
-    The feature cache (on by default) goes to a per-session folder too, never the user's.
+    The feature cache (on by default) and the compiled-runtime cache go to per-session
+    folders too, never the user's; a user's UNITRACK_RUNTIME does not change the results.
     """
     keys = ("UNITRACK_CACHE", "UNITRACK_DATA", "UNITRACK_FEATURE_CACHE",
-            "UNITRACK_FEATURE_CACHE_MAX", "UNITRACK_FEATURE_CACHE_RUN")
+            "UNITRACK_FEATURE_CACHE_MAX", "UNITRACK_FEATURE_CACHE_RUN", "UNITRACK_RUNTIME",
+            "UNITRACK_RUNTIME_CACHE")
     saved = {k: os.environ.get(k) for k in keys}
     os.environ["UNITRACK_CACHE"] = str(tmp_path_factory.mktemp("unitrack-cache"))
     os.environ["UNITRACK_FEATURE_CACHE"] = str(tmp_path_factory.mktemp("feature-cache"))
     os.environ.pop("UNITRACK_FEATURE_CACHE_MAX", None)
     os.environ.pop("UNITRACK_FEATURE_CACHE_RUN", None)
     os.environ.pop("UNITRACK_DATA", None)
+    os.environ.pop("UNITRACK_RUNTIME", None)  # torch, the reference, unless a test says
+    os.environ["UNITRACK_RUNTIME_CACHE"] = str(tmp_path_factory.mktemp("runtime-cache"))
     yield
     for key, value in saved.items():
         if value is None:

@@ -1,0 +1,116 @@
+"""Where independent pieces of work run: a local process pool, or a Ray cluster.
+
+A backend is a context manager that yields ``run(fn, items)``: it calls ``fn(item,
+threads)`` for every item somewhere and yields ``(item, result)`` pairs as they finish, a
+result being ``fn``'s return value or the exception it raised (one failure never stops the
+others). Results come back through the backend itself (pipes for the pool, Ray's object
+store for Ray), so workers on other machines need no shared file system.
+
+* ``pool``: ``workers`` spawned processes on this machine, each with ``cpu_count // workers``
+  torch threads; they watch their parent and ignore Ctrl-C (see
+  :mod:`unitrack_env.evaluation.workers`).
+* ``ray``: one Ray task per item declaring ``num_cpus=1`` (and ``num_gpus``), one torch
+  thread each; ``address=None`` starts a local Ray with ``workers`` CPUs, ``"auto"`` or
+  ``"ray://host:port"`` joins a running cluster. Needs the ``ray`` extra.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from typing import Any
+
+Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]]
+
+
+@contextlib.contextmanager
+def pool_backend(workers: int = 1) -> Iterator[Runner]:
+    """Local worker processes (``workers`` <= 1: in this process)."""
+    from unitrack_env.evaluation.workers import _init_worker
+
+    workers = max(1, int(workers))
+    threads = max(1, (os.cpu_count() or 1) // workers)
+
+    if workers == 1:
+        def run_here(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+            for item in items:
+                try:
+                    yield item, fn(item, threads)
+                except Exception as exc:  # reported with the item, the others go on
+                    yield item, exc
+
+        yield run_here
+        return
+
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
+                               initializer=_init_worker, initargs=(os.getpid(), threads))
+
+    def run_pool(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+        futures = {pool.submit(fn, item, threads): item for item in items}
+        for future in as_completed(futures):
+            try:
+                yield futures[future], future.result()
+            except Exception as exc:
+                yield futures[future], exc
+
+    try:
+        yield run_pool
+    except BaseException:
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.terminate()
+        raise
+    pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def ray_backend(workers: int = 1, address: str | None = None,
+                gpus: float = 0.0) -> Iterator[Runner]:
+    """Ray tasks on a local Ray (``address`` None) or a running cluster."""
+    try:
+        import ray
+    except ImportError:
+        raise ImportError("--backend ray needs Ray: pip install 'unitrack-env[ray]'") from None
+    started = not ray.is_initialized()
+    if started:
+        if address is None:
+            ray.init(num_cpus=max(1, int(workers)), include_dashboard=False,
+                     log_to_driver=False, configure_logging=False)
+        else:
+            ray.init(address=address, log_to_driver=False, configure_logging=False)
+
+    def run_ray(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+        remote = ray.remote(num_cpus=1, num_gpus=gpus, max_retries=0)(fn)
+        pending = {remote.remote(item, 1): item for item in items}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            for ref in ready:
+                item = pending.pop(ref)
+                try:
+                    yield item, ray.get(ref)
+                except ray.exceptions.RayTaskError as exc:
+                    yield item, exc.as_instanceof_cause()
+                except Exception as exc:
+                    yield item, exc
+
+    try:
+        yield run_ray
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def make_backend(name: str, *, workers: int = 1, address: str | None = None,
+                 gpus: float = 0.0) -> contextlib.AbstractContextManager[Runner]:
+    """The backend called ``name`` (``pool`` or ``ray``)."""
+    if name == "pool":
+        if address is not None:
+            raise ValueError("--address goes with --backend ray")
+        return pool_backend(workers)
+    if name == "ray":
+        return ray_backend(workers, address, gpus)
+    raise ValueError(f"unknown backend '{name}'; valid: pool, ray")

@@ -1,0 +1,117 @@
+"""The radar chart of a scorecard (the UniTrack paper's Figure 1), as PNG and SVG.
+
+One axis per task, labelled with its metric; one polygon per appearance model; the
+appearance-free baselines as a grey dashed polygon (the paper draws its reference model the
+same way). Axis scales:
+
+* ``rank`` (the paper's: "a higher rank corresponds to a vertex nearer to the outer
+  circle"): on every axis the polygons are ranked, the best at radius 1, the worst at 1/n;
+  ties share a rank.
+* ``value``: the metric itself (all axis metrics are fractions in [0, 1]).
+
+Axes whose task ran on synthetic data say so in their label, and their vertices are drawn
+hollow, so that no one mistakes them for benchmark numbers. Needs matplotlib (the ``plots``
+extra); without it no chart is drawn and :func:`draw_radar` says so.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+#: Label suffix per data source.
+SOURCE_NOTES = {"benchmark": "", "fixture": "\n(fixture)", "synthetic": "\n[synthetic data]"}
+
+
+def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+    """(task, head, metric, label) of every radar axis."""
+    from unitrack_env.evaluation.scorecard import TASKS
+
+    out = []
+    for task in card["tasks"]:
+        spec = TASKS[task]
+        head, metric = spec.axis
+        several = len(spec.heads) > 1
+        name = f"{metric} ({head})" if several else metric
+        label = f"{spec.title}\n{name}{SOURCE_NOTES[card['sources'][task]['kind']]}"
+        out.append((task, head, metric, label))
+    return out
+
+
+def radii(card: dict[str, Any], scale: str = "rank") -> dict[str, list[float | None]]:
+    """Each polygon's radius on each axis (None: no value)."""
+    from unitrack_env.evaluation.scorecard_report import polygon_values
+
+    values = polygon_values(card, axes(card))
+    if scale == "value":
+        return values
+    if scale != "rank":
+        raise ValueError(f"radar scale must be 'rank' or 'value', not '{scale}'")
+    names = list(values)
+    out: dict[str, list[float | None]] = {name: [] for name in names}
+    for i in range(len(axes(card))):
+        column = {n: values[n][i] for n in names if values[n][i] is not None}
+        for name in names:
+            mine = values[name][i]
+            if mine is None:
+                out[name].append(None)
+                continue
+            rank = 1 + sum(other > mine for other in column.values())
+            out[name].append(1 - (rank - 1) / len(names))
+    return out
+
+
+def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list[Path]:
+    """Write ``<stem>.png`` and ``<stem>.svg``; return the files written ([] without matplotlib)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        warnings.warn("no radar chart: matplotlib is missing (pip install "
+                      "'unitrack-env[plots]')", stacklevel=2)
+        return []
+    from unitrack_env.evaluation.scorecard import BASELINE
+
+    spokes = axes(card)
+    data = radii(card, scale)
+    angles = [2 * math.pi * i / len(spokes) for i in range(len(spokes))]
+    figure, ax = plt.subplots(figsize=(6.4, 6.4), subplot_kw={"projection": "polar"})
+    ax.set_theta_offset(math.pi / 2)  # first task at the top, the others clockwise
+    ax.set_theta_direction(-1)
+    colors = plt.get_cmap("tab10")
+    for index, (name, values) in enumerate(data.items()):
+        radius = [0.0 if v is None else v for v in values]
+        baseline = name == BASELINE
+        style = {"color": "0.5", "linestyle": "--", "linewidth": 1.2} if baseline else {
+            "color": colors(index % 10), "linewidth": 2}
+        ax.plot([*angles, angles[0]], [*radius, radius[0]], label=name, **style)
+        if not baseline:
+            ax.fill([*angles, angles[0]], [*radius, radius[0]], alpha=0.08,
+                    color=style["color"])
+        for angle, r, (task, *_rest) in zip(angles, radius, spokes, strict=True):
+            hollow = card["sources"][task]["kind"] == "synthetic"
+            ax.plot([angle], [r], marker="o", markersize=5, color=style["color"],
+                    markerfacecolor="white" if hollow else style["color"])
+    ax.set_xticks(angles)
+    ax.set_xticklabels([label for *_rest, label in spokes], fontsize=9)
+    ax.tick_params(axis="x", pad=12)
+    ax.set_ylim(0, 1.0)
+    ax.set_yticks([0.25, 0.5, 0.75, 1.0])
+    ax.set_yticklabels([] if scale == "rank" else ["25", "50", "75", "100"], fontsize=7)
+    title = "rank per task (outer = better)" if scale == "rank" else "metric value (%)"
+    ax.set_title(f"Tracking scorecard: {title}", pad=24, fontsize=11)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2, fontsize=8,
+              frameon=False)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    written = []
+    for suffix in (".png", ".svg"):
+        path = stem.with_suffix(suffix)
+        figure.savefig(path, dpi=150, bbox_inches="tight",
+                       metadata={"Date": None} if suffix == ".svg" else None)
+        written.append(path)
+    plt.close(figure)
+    return written

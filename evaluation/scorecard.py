@@ -1,0 +1,410 @@
+"""The paper's question in one command: how well does a representation track, on every task?
+
+``unitrack scorecard`` plays every task's UniTrack head with one shared appearance model per
+row (one row per ``--model``), plus each task's appearance-free baseline as a reference row,
+over every sequence of the data it finds, and reports the metrics of the UniTrack paper's
+Table 2 (and a radar chart, :mod:`unitrack_env.evaluation.radar`).
+
+The work is split into cells, one per (model, task, head, sequence). A cell is played by
+:func:`play_cell` in a worker (a local process pool, or a Ray task on a cluster: the
+:mod:`~unitrack_env.evaluation.backends`), which returns the sequence's result files and
+record as bytes; the driver writes them into ``<out>/cells/<model>/<task>/<head>/`` (the
+runner's layout), so a finished cell is kept when the run is interrupted, and results from
+other machines reach the driver through the backend, not a shared file system. The driver
+then lets :func:`~unitrack_env.evaluation.runner.run` score each (model, task, head) folder:
+it reuses every cell whose inputs and files are unchanged, so the numbers are exactly those of
+``unitrack evaluate`` with the same arguments.
+
+As in the paper's Table 2 protocol, the association heads run without motion cues
+(``use_motion=False``: "motion cues are discarded to better highlight distinctions between
+different representations"); ``motion=True`` keeps them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import unitrack_env
+from unitrack_env.io import atomic_write_bytes, atomic_write_text
+
+
+@dataclass(frozen=True)
+class Head:
+    """One head (or baseline) of a task and the metrics the scorecard reports for it."""
+
+    agent: str
+    label: str
+    metrics: tuple[str, ...]
+    appearance: bool = True
+    association: bool = False
+
+
+@dataclass(frozen=True)
+class Task:
+    """A task of the scorecard: its environments (first with data wins), heads and axis."""
+
+    name: str
+    title: str
+    env_ids: tuple[str, ...]
+    heads: tuple[Head, ...]
+    baseline: Head
+    axis: tuple[str, str]  # (head label, metric) drawn on the radar chart
+    lower_is_better: frozenset[str] = frozenset()
+
+
+def _assoc(metrics: tuple[str, ...]) -> Head:
+    return Head("unitrack", "UniTrack", metrics, association=True)
+
+
+def _iou(metrics: tuple[str, ...]) -> Head:
+    return Head("iou", "IoU baseline", metrics, appearance=False)
+
+
+#: The tasks in the paper's Table 2 order, then the appendix tasks.
+TASKS: dict[str, Task] = {task.name: task for task in (
+    Task("sot", "SOT", ("UniTrack/OTB-v0",),
+         (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
+          Head("unitrack-dcf", "DCF", ("AUC", "Precision@20px"))),
+         Head("repeat-box", "repeat-box", ("AUC", "Precision@20px"), appearance=False),
+         ("XCorr", "AUC")),
+    Task("vos", "VOS", ("UniTrack/DAVIS-v0",),
+         (Head("unitrack-vos", "UniTrack", ("J-Mean", "J&F-Mean", "F-Mean")),),
+         Head("repeat-mask", "repeat-mask", ("J-Mean", "J&F-Mean", "F-Mean"), appearance=False),
+         ("UniTrack", "J-Mean")),
+    Task("mot", "MOT", ("UniTrack/MOT16-v0", "UniTrack/MOT17-v0", "UniTrack/MOT20-v0",
+                        "UniTrack/MOT15-v0"),
+         (_assoc(("IDF1", "HOTA", "MOTA", "IDSW")),), _iou(("IDF1", "HOTA", "MOTA", "IDSW")),
+         ("UniTrack", "IDF1"), frozenset({"IDSW"})),
+    Task("mots", "MOTS", ("UniTrack/MOTS-v0",), (_assoc(("IDF1", "HOTA", "sMOTSA")),),
+         _iou(("IDF1", "HOTA", "sMOTSA")), ("UniTrack", "IDF1")),
+    Task("posetrack", "PoseTrack", ("UniTrack/PoseTrack-v0",),
+         (_assoc(("IDF1", "MOTA", "IDSW")),), _iou(("IDF1", "MOTA", "IDSW")),
+         ("UniTrack", "IDF1"), frozenset({"IDSW"})),
+    Task("pose-prop", "Pose prop.", ("UniTrack/JHMDB-v0",),
+         (Head("unitrack-pose", "UniTrack", ("PCK@0.1", "PCK@0.2")),),
+         Head("repeat-pose", "repeat-pose", ("PCK@0.1", "PCK@0.2"), appearance=False),
+         ("UniTrack", "PCK@0.1")),
+    Task("vis", "VIS", ("UniTrack/VIS-v0",), (_assoc(("AP", "AP50")),), _iou(("AP", "AP50")),
+         ("UniTrack", "AP")),
+)}
+#: Row label of the appearance-free baselines.
+BASELINE = "baseline (no appearance)"
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One appearance model (a scorecard row): ``weights[,arch=..][,layer=..][,label=..]``."""
+
+    weights: str
+    arch: str | None = None
+    layer: str | None = None
+    label: str = ""
+
+    @classmethod
+    def parse(cls, text: str) -> ModelSpec:
+        """Read ``imagenet-lite0``, ``random,arch=resnet18`` or ``moco.pth,layer=layer3``."""
+        weights, *options = [part.strip() for part in text.split(",")]
+        values: dict[str, str] = {}
+        for option in options:
+            key, sep, value = option.partition("=")
+            if not sep or key not in ("arch", "layer", "label"):
+                raise ValueError(f"--model '{text}': options are arch=, layer= and label= "
+                                 f"(comma-separated after the weights); got '{option}'")
+            values[key] = value
+        if not weights:
+            raise ValueError(f"--model '{text}' names no weights")
+        return cls(weights, values.get("arch"), values.get("layer"), values.get("label", ""))
+
+    @property
+    def name(self) -> str:
+        """The row label: ``label=``, or the weights (a file's stem) with arch and layer."""
+        if self.label:
+            return self.label
+        base = Path(self.weights).stem if os.sep in self.weights or "." in self.weights \
+            else self.weights
+        return "+".join(part for part in (base, self.arch, self.layer) if part)
+
+    def agent_kwargs(self) -> dict[str, Any]:
+        """The appearance options every UniTrack head takes."""
+        kwargs: dict[str, Any] = {"weights": self.weights}
+        if self.arch:
+            kwargs["arch"] = self.arch
+        if self.layer:
+            kwargs["layer"] = self.layer
+        return kwargs
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a task's data came from: ``benchmark``, ``fixture`` or ``synthetic``."""
+
+    kind: str
+    root: str | None = None
+    env_id: str = ""
+
+
+def data_source(data: Path | None, task: Task) -> Source:
+    """The first environment of ``task`` whose folder is in ``data``, else synthetic data.
+
+    A folder counts as a ``fixture`` (real data, but a small sample, as in ``../shared``)
+    when its data folder's ``README.md`` starts with a heading that says so; otherwise as the
+    ``benchmark``.
+    """
+    if data is not None:
+        for env_id in task.env_ids:
+            folder = unitrack_env.variant(env_id).folder
+            if folder and (data / folder).is_dir():
+                readme = data / "README.md"
+                head = readme.read_text(errors="replace").lstrip()[:200] if readme.is_file() \
+                    else ""
+                kind = "fixture" if head.startswith("#") and "fixture" in head.split("\n")[
+                    0].lower() else "benchmark"
+                return Source(kind, str((data / folder).resolve()), env_id)
+    return Source("synthetic", None, task.env_ids[0])
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One (model, task, head, sequence): the unit of work a backend schedules."""
+
+    model: str
+    task: str
+    head: str
+    agent: str
+    env_id: str
+    sequence: str
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    agent_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def folder(self) -> Path:
+        """The cell's run folder below ``<out>/cells``."""
+        return Path(_safe(self.model)) / self.task / _safe(self.head)
+
+    @property
+    def label(self) -> str:
+        """Short description for progress displays."""
+        return f"{self.model} / {self.task} {self.head} / {self.sequence}"
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name)
+
+
+def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *,
+         motion: bool = False) -> tuple[list[Cell], dict[str, Source]]:
+    """Every cell of the scorecard, and each task's data source."""
+    import gymnasium as gym
+
+    cells: list[Cell] = []
+    sources: dict[str, Source] = {}
+    for name in tasks:
+        task = TASKS[name]
+        source = sources[name] = data_source(data, task)
+        env_kwargs = {"root": source.root} if source.root else {}
+        env = gym.make(source.env_id, **env_kwargs)
+        try:
+            base = env.unwrapped
+            sequences = [s for s in base.sequence_names if base.has_ground_truth(s)]
+        finally:
+            env.close()
+        rows = [(m.name, m.agent_kwargs()) for m in models]
+        for head in (*task.heads, task.baseline):
+            for model, appearance in (rows if head.appearance else [(BASELINE, {})]):
+                kwargs = dict(appearance)
+                if head.association and not motion:
+                    kwargs["use_motion"] = False
+                cells += [Cell(model, name, head.label, head.agent, source.env_id, sequence,
+                               env_kwargs, kwargs) for sequence in sequences]
+    return cells, sources
+
+
+def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
+    """Play one cell in a scratch folder; return its files (as bytes) and its metrics.
+
+    Runs where the backend puts it (another process or machine); nothing is written to the
+    driver's output folder from here.
+    """
+    from unitrack_env.evaluation.runner import run
+
+    if threads:
+        import torch
+
+        torch.set_num_threads(threads)
+    with tempfile.TemporaryDirectory(prefix="unitrack-cell-") as scratch:
+        out = Path(scratch)
+        report = run(cell.env_id, cell.agent, out=out, env_kwargs=cell.env_kwargs,
+                     agent_kwargs=cell.agent_kwargs, sequences=[cell.sequence], progress=False)
+        # The scratch folder holds this one sequence: every result file and its record.
+        files = {str(path.relative_to(out)): path.read_bytes()
+                 for sub in ("data", "sequences") for path in (out / sub).rglob("*")
+                 if path.is_file()}
+        metrics = report.scores.per_sequence.get(cell.sequence, {}) if report.scores else {}
+    return {"files": files, "metrics": metrics}
+
+
+def store_cell(out: Path, cell: Cell, payload: dict[str, Any]) -> None:
+    """Write a played cell's files into its run folder (data first, the record last)."""
+    folder = out / "cells" / cell.folder
+    files = payload["files"]
+    for relative in sorted(files, key=lambda name: name.startswith("sequences")):
+        atomic_write_bytes(folder / relative, files[relative])
+
+
+def cell_done(out: Path, cell: Cell) -> bool:
+    """Whether the cell's record is in the output folder."""
+    return (out / "cells" / cell.folder / "sequences" / f"{cell.sequence}.json").is_file()
+
+
+def _finite(value: Any) -> float | None:
+    return float(value) if isinstance(value, (int, float)) and math.isfinite(value) else None
+
+
+def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
+    """Score every (model, task, head) folder with the runner; the scorecard's content."""
+    from unitrack_env.evaluation.runner import run
+
+    groups: dict[tuple[str, str, str], list[Cell]] = {}
+    for cell in cells:
+        groups.setdefault((cell.model, cell.task, cell.head), []).append(cell)
+    rows = []
+    for (model, task, head), members in groups.items():
+        first = members[0]
+        report = run(first.env_id, first.agent, out=out / "cells" / first.folder,
+                     env_kwargs=first.env_kwargs, agent_kwargs=first.agent_kwargs,
+                     sequences=[c.sequence for c in members], progress=False)
+        scores = report.scores
+        rows.append({
+            "model": model, "task": task, "head": head, "agent": first.agent,
+            "env_id": first.env_id, "agent_kwargs": first.agent_kwargs,
+            "source": asdict(sources[task]),
+            "combined": {k: _finite(v) for k, v in (scores.combined if scores else {}).items()},
+            "per_sequence": {s: {k: _finite(v) for k, v in m.items()}
+                             for s, m in (scores.per_sequence if scores else {}).items()},
+        })
+    return {"version": 1, "unitrack_env": unitrack_env.__version__,
+            "models": sorted({c.model for c in cells if c.model != BASELINE},
+                             key=[c.model for c in cells].index),
+            "tasks": list(dict.fromkeys(c.task for c in cells)),
+            "sources": {task: asdict(source) for task, source in sources.items()},
+            "rows": rows}
+
+
+def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank") -> list[Path]:
+    """``scorecard.json``, ``.csv``, ``.md`` and (with matplotlib) the radar chart PNG/SVG."""
+    from unitrack_env.evaluation.scorecard_report import markdown_table, rows_csv
+
+    atomic_write_text(out / "scorecard.json", json.dumps(card, indent=2, allow_nan=False))
+    atomic_write_text(out / "scorecard.csv", rows_csv(card))
+    atomic_write_text(out / "scorecard.md", markdown_table(card))
+    written = [out / "scorecard.json", out / "scorecard.csv", out / "scorecard.md"]
+    from unitrack_env.evaluation.radar import draw_radar
+
+    written += draw_radar(card, out / "scorecard", scale=radar_scale)
+    return written
+
+
+def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
+              tasks: Sequence[str] | None = None, data: str | os.PathLike | None = None,
+              backend: str = "pool", workers: int = 1, address: str | None = None,
+              motion: bool = False, radar_scale: str = "rank",
+              on_progress: Callable[[int, int, Cell | None], None] | None = None,
+              ) -> dict[str, Any]:
+    """Play, store and score every cell; write the outputs; return the scorecard.
+
+    Args:
+        models: the appearance models (rows).
+        out: output folder; rerunning with the same folder reuses finished cells.
+        tasks: task names (default: all of :data:`TASKS`).
+        data: a folder holding benchmark folders (``MOT17/``, ``DAVIS/``...); tasks without
+            one use the embedded synthetic data (marked as such everywhere).
+        backend: ``"pool"`` (local processes) or ``"ray"``.
+        workers: processes of the pool (Ray uses the cluster's CPUs).
+        address: Ray cluster address (``auto``, ``ray://host:port``; None: a local Ray).
+        motion: keep motion cues in the association heads (the paper's Table 2 drops them).
+        radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
+        on_progress: called with (cells done, cells in all, the cell just finished).
+    """
+    from unitrack_env.evaluation.backends import make_backend
+
+    names = list(tasks) if tasks else list(TASKS)
+    unknown = [t for t in names if t not in TASKS]
+    if unknown:
+        raise ValueError(f"unknown tasks {unknown}; valid: {', '.join(TASKS)}")
+    if not models:
+        raise ValueError("give at least one --model (e.g. imagenet-lite0)")
+    labels = [m.name for m in models]
+    if len(set(labels)) != len(labels):
+        raise ValueError(f"two models have the same label {labels}; add label= to one")
+    out = Path(out)
+    data_path = Path(data).expanduser() if data is not None else None
+    if data_path is not None and not data_path.is_dir():
+        raise ValueError(f"--data {data} is not a folder")
+    cells, sources = plan(models, names, data_path, motion=motion)
+    todo = [c for c in cells if not cell_done(out, c)]
+    done = len(cells) - len(todo)
+    if on_progress is not None:
+        on_progress(done, len(cells), None)
+    failures: dict[str, str] = {}
+    with make_backend(backend, workers=workers, address=address) as run_cells:
+        for cell, payload in run_cells(play_cell, todo):
+            if isinstance(payload, BaseException):
+                from unitrack_env.evaluation.workers import SequenceFailure
+
+                failures[cell.label] = SequenceFailure.describe(payload)
+            else:
+                store_cell(out, cell, payload)
+                done += 1
+            if on_progress is not None:
+                on_progress(done, len(cells), cell)
+    if failures:
+        from unitrack_env.evaluation.runner import RunFailed
+
+        raise RunFailed(failures, out)
+    card = combine(out, cells, sources)
+    write_outputs(out, card, radar_scale=radar_scale)
+    return card
+
+
+def merge_cards(paths: Sequence[Path]) -> dict[str, Any]:
+    """Several ``scorecard.json`` files as one scorecard (for ``--compare``).
+
+    Models keep their labels, prefixed with their folder's name where two files use the same
+    label; the baselines and the data sources are the first file's. A task whose data source
+    differs between the files is refused: its numbers would not be comparable.
+    """
+    cards = []
+    for path in paths:
+        try:
+            cards.append((path, json.loads(Path(path).read_text())))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable scorecard.json ({exc})") from None
+    first = cards[0][1]
+    merged: dict[str, Any] = {**first, "models": [], "rows": [],
+                              "compared": [str(p) for p in paths]}
+    labels = [m for _, card in cards for m in card["models"]]
+    for path, card in cards:
+        for task, source in card["sources"].items():
+            known = merged["sources"].setdefault(task, source)
+            if (known["kind"], known["root"]) != (source["kind"], source["root"]):
+                raise ValueError(f"{path}: task {task} was scored on {source['kind']} data "
+                                 f"({source['root']}), the first scorecard on {known['kind']} "
+                                 f"({known['root']}); their numbers are not comparable")
+        rename = {m: f"{Path(path).parent.name}/{m}" if labels.count(m) > 1 else m
+                  for m in card["models"]}
+        merged["models"] += list(rename.values())
+        for row in card["rows"]:
+            if row["model"] == BASELINE:
+                if card is first:
+                    merged["rows"].append(row)
+                continue
+            merged["rows"].append({**row, "model": rename[row["model"]]})
+        merged["tasks"] += [t for t in card["tasks"] if t not in merged["tasks"]]
+    return merged

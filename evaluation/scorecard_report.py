@@ -1,0 +1,128 @@
+"""Scorecard tables: Markdown laid out like the UniTrack paper's Table 2, and CSV.
+
+Table 2 has one row per representation and, per task, its metric columns (SOT: AUC of the
+XCorr and DCF heads; VOS: J-mean; MOT and MOTS: IDF1, HOTA; PoseTrack: IDF1, IDs). Here
+every task's headline metrics are shown the same way, in percent (counts as integers), the
+best model of each column in bold, the appearance-free baselines in a last row. A task
+played on the embedded synthetic data has its header marked with a dagger and a footnote,
+so that no one mistakes its numbers for benchmark results; fixtures (small real samples) are
+marked too.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Any
+
+from unitrack_env.evaluation.tables import COUNT_METRICS
+
+#: Header marks of the data sources.
+MARKS = {"benchmark": "", "fixture": "*", "synthetic": "†"}
+
+
+def columns(card: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """(task, head, metric) of every column, in the scorecard's task order."""
+    from unitrack_env.evaluation.scorecard import TASKS
+
+    out = []
+    for task in card["tasks"]:
+        spec = TASKS[task]
+        for head in spec.heads:
+            for metric in head.metrics:
+                out.append((task, head.label, metric))
+    return out
+
+
+def value(card: dict[str, Any], model: str, task: str, head: str, metric: str) -> float | None:
+    """The combined metric of one row, or None."""
+    from unitrack_env.evaluation.scorecard import BASELINE, TASKS
+
+    if model == BASELINE:
+        head = TASKS[task].baseline.label
+    for row in card["rows"]:
+        if (row["model"], row["task"], row["head"]) == (model, task, head):
+            return row["combined"].get(metric)
+    return None
+
+
+def _cell(metric: str, number: float | None) -> str:
+    if number is None:
+        return "-"
+    return f"{number:.0f}" if metric in COUNT_METRICS else f"{100 * number:.1f}"
+
+
+def _lower_is_better(task: str, metric: str) -> bool:
+    from unitrack_env.evaluation.scorecard import TASKS
+
+    return metric in TASKS[task].lower_is_better
+
+
+def markdown_table(card: dict[str, Any]) -> str:
+    """The scorecard as a Markdown table (one row per model, then the baselines)."""
+    from unitrack_env.evaluation.scorecard import BASELINE, TASKS
+
+    cols = columns(card)
+    rows = [*card["models"], BASELINE]
+    head = ["Representation"]
+    for task, label, metric in cols:
+        arrow = "↓" if _lower_is_better(task, metric) else "↑"
+        several = len(TASKS[task].heads) > 1
+        name = f"{metric} ({label})" if several else metric
+        mark = MARKS[card["sources"][task]["kind"]]
+        head.append(f"{TASKS[task].title}{mark} {name} {arrow}")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    best: dict[int, float] = {}
+    for i, (task, label, metric) in enumerate(cols):
+        numbers = [v for m in card["models"] if (v := value(card, m, task, label, metric))
+                   is not None]
+        if numbers:
+            best[i] = min(numbers) if _lower_is_better(task, metric) else max(numbers)
+    for model in rows:
+        cells = [model if model != BASELINE else f"*{model}*"]
+        for i, (task, label, metric) in enumerate(cols):
+            number = value(card, model, task, label, metric)
+            text = _cell(metric, number)
+            if model != BASELINE and number is not None and number == best.get(i) \
+                    and len(card["models"]) > 1:
+                text = f"**{text}**"
+            cells.append(text)
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    for task in card["tasks"]:
+        source = card["sources"][task]
+        where = source["root"] or "the embedded synthetic data (not benchmark numbers)"
+        mark = MARKS[source["kind"]]
+        lines.append(f"- {TASKS[task].title}{mark}: {source['env_id']}, {source['kind']}: {where}")
+    lines.append("")
+    lines.append("† synthetic data: a self-test, not a benchmark result. * fixture: real "
+                 "data, but a small sample of the benchmark.")
+    lines.append("Association heads without motion cues, as in the paper's Table 2, unless "
+                 "the scorecard was made with --motion.")
+    return "\n".join(lines) + "\n"
+
+
+def rows_csv(card: dict[str, Any]) -> str:
+    """One CSV row per (model, task, head, sequence or COMBINED) with every metric."""
+    metrics = sorted({k for row in card["rows"] for k in row["combined"]})
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["model", "task", "head", "sequence", "source", "root", *metrics])
+    for row in card["rows"]:
+        source = row["source"]
+        entries = [*row["per_sequence"].items(), ("COMBINED", row["combined"])]
+        for sequence, values in entries:
+            writer.writerow([row["model"], row["task"], row["head"], sequence, source["kind"],
+                             source["root"] or "", *(
+                                 "" if values.get(m) is None else repr(values[m])
+                                 for m in metrics)])
+    return buffer.getvalue()
+
+
+def polygon_values(card: dict[str, Any],
+                   spokes: list[tuple[str, str, str, str]]) -> dict[str, list[float | None]]:
+    """Each model's (and the baselines') value on each radar axis ``(task, head, metric, _)``."""
+    from unitrack_env.evaluation.scorecard import BASELINE
+
+    return {model: [value(card, model, task, head, metric) for task, head, metric, _ in spokes]
+            for model in [*card["models"], BASELINE]}
