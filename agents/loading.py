@@ -55,6 +55,11 @@ def _load_file(path: Path) -> Any:
     spec = importlib.util.spec_from_file_location(name, resolved)
     if spec is None or spec.loader is None:
         raise ImportError(f"cannot load {resolved} as a Python module")
+    return _execute(name, spec)
+
+
+def _execute(name: str, spec: importlib.machinery.ModuleSpec) -> Any:
+    """Create, register and run the module ``name`` from ``spec`` (unregistered on failure)."""
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
@@ -81,13 +86,7 @@ def _import_module(name: str) -> Any:
         spec = importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
         if spec is None or spec.loader is None:
             raise
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[top] = module
-        try:
-            spec.loader.exec_module(module)
-        except BaseException:
-            del sys.modules[top]
-            raise
+        _execute(top, spec)
         return importlib.import_module(name)
 
 

@@ -19,8 +19,7 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from multiprocessing import get_context
+from concurrent.futures import as_completed
 from typing import Any
 
 Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]]
@@ -29,7 +28,7 @@ Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]
 @contextlib.contextmanager
 def pool_backend(workers: int = 1) -> Iterator[Runner]:
     """Local worker processes (``workers`` <= 1: in this process)."""
-    from unitrack_env.evaluation.workers import _init_worker
+    from unitrack_env.evaluation.workers import worker_pool
 
     workers = max(1, int(workers))
     threads = max(1, (os.cpu_count() or 1) // workers)
@@ -45,26 +44,16 @@ def pool_backend(workers: int = 1) -> Iterator[Runner]:
         yield run_here
         return
 
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                               initializer=_init_worker, initargs=(os.getpid(), threads))
+    with worker_pool(workers, threads) as pool:
+        def run_pool(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+            futures = {pool.submit(fn, item, threads): item for item in items}
+            for future in as_completed(futures):
+                try:
+                    yield futures[future], future.result()
+                except Exception as exc:
+                    yield futures[future], exc
 
-    def run_pool(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
-        futures = {pool.submit(fn, item, threads): item for item in items}
-        for future in as_completed(futures):
-            try:
-                yield futures[future], future.result()
-            except Exception as exc:
-                yield futures[future], exc
-
-    try:
         yield run_pool
-    except BaseException:
-        processes = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.terminate()
-        raise
-    pool.shutdown(wait=True)
 
 
 @contextlib.contextmanager

@@ -10,10 +10,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
@@ -85,6 +87,26 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any
             env.close()
 
 
+@contextlib.contextmanager
+def worker_pool(workers: int, threads: int) -> Iterator[ProcessPoolExecutor]:
+    """Spawned worker processes that die with this one; stopped at once on an exception.
+
+    On Ctrl-C (or any failure in the block) pending work is cancelled and running workers
+    are terminated; what they finished before was already kept by the caller.
+    """
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
+                               initializer=_init_worker, initargs=(os.getpid(), threads))
+    try:
+        yield pool
+    except BaseException:
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.terminate()
+        raise
+    pool.shutdown(wait=True)
+
+
 def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str],
                     lengths: dict[str, int], workers: int,
                     bar: Any) -> tuple[dict[str, Any], dict[str, str]]:
@@ -94,9 +116,7 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     threads = max(1, (os.cpu_count() or 1) // workers)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                               initializer=_init_worker, initargs=(os.getpid(), threads))
-    try:
+    with worker_pool(workers, threads) as pool:
         futures = {pool.submit(_play_one, spec, str(out), s, inputs[s]): s for s in todo}
         for future in as_completed(futures):
             name = futures[future]
@@ -110,11 +130,4 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str
                 bar.advance(lengths[name])
             else:
                 failures[name] = payload
-    except BaseException:  # Ctrl-C or a failure here: stop the workers, keep what finished
-        processes = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.terminate()
-        raise
-    pool.shutdown(wait=True)
     return records, failures
