@@ -130,16 +130,18 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path):
     """The acceptance command; the docs page shows its table and chart."""
     out = tmp_path / "sc"
     assert main(["scorecard", "--model", "imagenet-lite0", "--model", "random", "--data",
-                 str(shared_data), "--out", str(out), "--quiet"]) == 0
+                 str(shared_data), "--out", str(out), "--workers", "2", "--quiet"]) == 0
     card = json.loads((out / "scorecard.json").read_text())
     assert card["tasks"] == list(sc.TASKS)
     assert {card["sources"][t]["kind"] for t in ("sot", "vos", "mot", "posetrack",
                                                  "pose-prop")} == {"fixture"}
     assert card["sources"]["mots"]["kind"] == card["sources"]["vis"]["kind"] == "synthetic"
     assert (out / "scorecard.png").stat().st_size > 10_000
-    # per-task evaluate on one sequence each agrees to 1e-9
+    # per-task evaluate agrees to 1e-9: every baseline, and the heads on their short clips
+    # (test_scorecard_outputs_and_values_equal_evaluate covers a whole head the same way)
     for row in card["rows"]:
-        if row["model"] != "imagenet-lite0":
+        cheap = row["model"] == sc.BASELINE or row["task"] in ("mot", "posetrack", "pose-prop")
+        if not cheap or row["model"] == "random":
             continue
         sequence = min(row["per_sequence"])
         env_kwargs = {"root": row["source"]["root"]} if row["source"]["root"] else {}
