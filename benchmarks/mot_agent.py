@@ -68,7 +68,7 @@ def _median_time(fn, repeats: int) -> float:
 def stages(threads: int) -> None:
     root = SHARED / "MOT17"
     env = gym.make("UniTrack/MOT17-v0", root=root)
-    agent = make_agent("unitrack", num_threads=threads)
+    agent = make_agent("unitrack", num_threads=threads, feature_cache=False)  # time the backbone
     model = agent.appearance
     base = env.unwrapped
     paths = [base.dataset.split_dir / n / "img1" / f"{t:06d}.jpg"
