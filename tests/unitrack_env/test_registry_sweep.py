@@ -127,3 +127,20 @@ def test_registered_data_folder_is_the_one_the_env_reads(env_id, tmp_path, monke
     with pytest.raises(DataRootNotFound) as missing:
         gym.make(env_id)
     assert missing.value.path == tmp_path / unitrack_env.variant(env_id).folder
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_reset_info_names_task_and_capacities(env_id):
+    """Agents read their task and size limits from the reset info instead of sniffing keys."""
+    env = gym.make(env_id)
+    try:
+        _, info = env.reset(seed=0)
+        assert info["task"] == unitrack_env.task_of(env_id)
+        base = env.unwrapped
+        expected = {k: getattr(base, k) for k in ("max_tracks", "max_detections", "max_people")
+                    if hasattr(base, k)}
+        assert info["capacities"] == expected
+        if "max_tracks" in expected:
+            assert base.action_space["ids"].shape[0] == expected["max_tracks"]
+    finally:
+        env.close()

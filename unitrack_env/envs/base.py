@@ -87,6 +87,16 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
     #: when it is made (:func:`unitrack_env.dependencies.require`).
     requires: ClassVar[tuple[str, ...]] = ()
 
+    #: The task family this environment poses (``"mot"``, ``"vos"``, ...; see
+    #: :func:`unitrack_env.task_of`), set by the ``task=`` class keyword. Reset infos carry it
+    #: as ``info["task"]``, with the action capacities as ``info["capacities"]``.
+    task: ClassVar[str] = ""
+
+    def __init_subclass__(cls, task: str | None = None, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if task is not None:
+            cls.task = task
+
     def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
         for module in self.requires:
             require(module, f"{type(self).__name__} (official scoring)")
@@ -164,7 +174,13 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
         """Start an episode on one sequence (see the class docstring)."""
         super().reset(seed=seed)
         name = self._choose_sequence(seed, options)
-        return self._start_episode(name)
+        observation, info = self._start_episode(name)
+        return observation, {**info, "task": self.task, "capacities": self.capacities()}
+
+    def capacities(self) -> dict[str, int]:
+        """The environment's size limits (its ``max_*`` settings, e.g. ``max_tracks``)."""
+        return {key: value for key, value in sorted(vars(self).items())
+                if key.startswith("max_") and isinstance(value, int)}
 
     def _start_episode(self, name: str) -> tuple[Any, dict[str, Any]]:
         raise NotImplementedError

@@ -149,7 +149,7 @@ def scores_from_frames(
     )
 
 
-class DAVISEnv(SequenceEnv[VOSSequence]):
+class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
     """Semi-supervised video object segmentation by mask propagation on DAVIS-2017 data.
 
     ## Description

@@ -90,7 +90,7 @@ def pose_mat_bytes(keypoints: np.ndarray) -> bytes:
     return joint_positions_mat(keypoints)
 
 
-class JHMDBEnv(SequenceEnv[PoseSequence]):
+class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
     """Pose propagation: follow one person's 15 joints through a JHMDB video.
 
     ## Description

@@ -34,7 +34,7 @@ DEFAULT_MAX_TRACKS = 512
 DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 
 
-class MOTChallengeEnv(SequenceEnv[MOTSequence]):
+class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
     """Multi-object tracking by association on a MOTChallenge-layout data set.
 
     ## Description

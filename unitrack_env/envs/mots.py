@@ -39,7 +39,7 @@ DEFAULT_SPLITS = {"MOTS20": "train", "KITTI-MOTS": "training"}
 DATA_FOLDERS = {"MOTS20": "MOTS20", "KITTI-MOTS": "KITTI-MOTS"}
 
 
-class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
+class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
     """Multi-object tracking and segmentation by associating detection masks.
 
     ## Description

@@ -87,7 +87,7 @@ def validate_box(action: Any) -> np.ndarray:
     return box
 
 
-class OTBEnv(SequenceEnv[SOTSequence]):
+class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
     """Single object tracking by box propagation on an OTB-2015-layout data set.
 
     ## Description

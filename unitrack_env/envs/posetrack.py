@@ -53,7 +53,7 @@ ORACLE = "oracle"
 _LIMBS = tuple((a - 1, b - 1) for a, b in POSETRACK_SKELETON)
 
 
-class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
+class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
     """Multi-person pose tracking by association on PoseTrack 2018 data.
 
     ## Description

@@ -38,7 +38,7 @@ DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 BENCHMARK = "YouTube-VIS-2019"
 
 
-class VISEnv(SequenceEnv[VisVideo]):
+class VISEnv(SequenceEnv[VisVideo], task="vis"):
     """Video instance segmentation by associating per-frame detection masks.
 
     ## Description
