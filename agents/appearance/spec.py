@@ -1,0 +1,53 @@
+"""What names an appearance model: one dataclass that every head's config extends.
+
+Four heads used to repeat ``weights/arch/layer/device/num_threads/runtime``; they now inherit
+these fields from :class:`AppearanceSpec`, so the options a user passes
+(``--agent-arg weights=...``) stay flat while the model is built in one place
+(:meth:`AppearanceSpec.build`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from unitrack_env.agents.appearance.model import AppearanceModel
+
+
+@dataclass(frozen=True)
+class AppearanceSpec:
+    """The appearance model of a head.
+
+    Attributes:
+        weights: ``"imagenet-lite0"`` (default, offline), ``"random"``, a named weights
+            source, or a checkpoint path.
+        arch: Backbone architecture (None: the weights' own).
+        layer: Output layer(s) (None: the architecture's default stride-8 layer).
+        remap: Checkpoint key remapping (``"auto"``: detect the layout).
+        device: Torch device.
+        num_threads: Torch threads while the agent acts (None: torch's setting).
+        runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` (fastest
+            installed) or None (``$UNITRACK_RUNTIME``, default torch).
+    """
+
+    weights: str = "imagenet-lite0"
+    arch: str | None = None
+    layer: str | None = None
+    remap: str = "auto"
+    device: str = "cpu"
+    num_threads: int | None = None
+    runtime: str | None = None
+
+    def appearance(self) -> AppearanceSpec:
+        """This config's appearance fields alone (a plain :class:`AppearanceSpec`)."""
+        return AppearanceSpec(**{f.name: getattr(self, f.name) for f in fields(AppearanceSpec)})
+
+    def build(self, **extra: Any) -> AppearanceModel:
+        """The :class:`AppearanceModel` this spec names (``extra``: further model options)."""
+        from unitrack_env.agents.appearance.model import AppearanceModel
+
+        spec = self.appearance()
+        return AppearanceModel(spec.weights, arch=spec.arch, layer=spec.layer, remap=spec.remap,
+                               device=spec.device, num_threads=spec.num_threads,
+                               runtime=spec.runtime, **extra)
