@@ -2,7 +2,11 @@
 
 Gymnasium 1.x has no plugin auto-discovery, so ``import unitrack_env`` registers these ids
 (or use ``gym.make("unitrack_env:UniTrack/MOT16-v0")``, which imports the package first).
-Each row is one id: ``(name, entry point, default keyword arguments, short description)``.
+Each row is one id: ``(name, entry point, default keyword arguments, task)``, the data folder
+and its benchmark (``scoring``: the ``module:Class`` of its
+:class:`~unitrack_env.benchmarks.base.Benchmark`, which writes, reads and scores results).
+Adding a task is one env module, one benchmark module and one row; a project outside this
+package adds its row with :func:`register_variant`.
 """
 
 from __future__ import annotations
@@ -27,6 +31,9 @@ class Variant:
     version: int = 0
     #: The folder name under ``$UNITRACK_DATA`` that the id reads (None: ``root=`` only).
     folder: str | None = None
+    #: The id's benchmark, ``"module:Class"`` of a :class:`unitrack_env.benchmarks.Benchmark`
+    #: (built from the env's keyword arguments by :func:`unitrack_env.benchmarks.benchmark_for`).
+    scoring: str = ""
 
     @property
     def env_id(self) -> str:
@@ -35,49 +42,83 @@ class Variant:
 
 
 _MOT = "unitrack_env.envs.motchallenge:MOTChallengeEnv"
+_B = "unitrack_env.benchmarks."
+_MOT_SCORING = _B + "motchallenge:MOTChallengeBenchmark"
 
 VARIANTS: tuple[Variant, ...] = (
-    Variant("MOT15", _MOT, {"benchmark": "MOT15"}, "mot", folder="MOT15"),
-    Variant("MOT16", _MOT, {"benchmark": "MOT16"}, "mot", folder="MOT16"),
-    Variant("MOT17", _MOT, {"benchmark": "MOT17"}, "mot", folder="MOT17"),
-    Variant("MOT20", _MOT, {"benchmark": "MOT20"}, "mot", folder="MOT20"),
+    Variant("MOT15", _MOT, {"benchmark": "MOT15"}, "mot", folder="MOT15", scoring=_MOT_SCORING),
+    Variant("MOT16", _MOT, {"benchmark": "MOT16"}, "mot", folder="MOT16", scoring=_MOT_SCORING),
+    Variant("MOT17", _MOT, {"benchmark": "MOT17"}, "mot", folder="MOT17", scoring=_MOT_SCORING),
+    Variant("MOT20", _MOT, {"benchmark": "MOT20"}, "mot", folder="MOT20", scoring=_MOT_SCORING),
     # Custom data in the MOTChallenge layout; pass root= and the benchmark= rule set.
-    Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, "mot"),
-    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot", folder="OTB"),
-    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos", folder="DAVIS"),
+    Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, "mot", scoring=_MOT_SCORING),
+    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot", folder="OTB",
+            scoring=_B + "otb:OTBBenchmark"),
+    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos", folder="DAVIS",
+            scoring=_B + "davis:DAVISBenchmark"),
     Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"}, "mots",
-            folder="MOTS20"),
-    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, "vis", folder="YouTube-VIS-2019"),
-    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, "pose-prop", folder="JHMDB"),
+            folder="MOTS20", scoring=_B + "mots:MOTSBenchmark"),
+    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, "vis", folder="YouTube-VIS-2019",
+            scoring=_B + "vis:VISBenchmark"),
+    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, "pose-prop", folder="JHMDB",
+            scoring=_B + "jhmdb:JHMDBBenchmark"),
     Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {}, "posetrack",
-            folder="PoseTrack2018"),
+            folder="PoseTrack2018", scoring=_B + "posetrack:PoseTrackBenchmark"),
 )
+
+#: Rows added at run time by :func:`register_variant` (a user's own tasks).
+_ADDED: list[Variant] = []
+
+
+def variants() -> tuple[Variant, ...]:
+    """Every registered row: the built-in :data:`VARIANTS`, then those added at run time."""
+    return (*VARIANTS, *_ADDED)
+
+
+def register_variant(row: Variant) -> None:
+    """Add a row to the table and register its id with Gymnasium (idempotent per id).
+
+    This is how a project adds its own task without editing this package: one env class,
+    one benchmark class (``scoring``) and this call.
+
+    Raises:
+        ValueError: another row already has this id.
+    """
+    for known in variants():
+        if known.env_id == row.env_id:
+            if known == row:
+                return
+            raise ValueError(f"'{row.env_id}' is already registered (entry point "
+                             f"{known.entry_point}); choose another name or version")
+    _ADDED.append(row)
+    _register(row)
+
+
+def _register(row: Variant) -> None:
+    if row.env_id not in gym.registry:
+        gym.register(id=row.env_id, entry_point=row.entry_point, kwargs=dict(row.kwargs),
+                     disable_env_checker=False)
 
 
 def register_all() -> None:
     """Register every variant (idempotent)."""
-    for variant in VARIANTS:
-        if variant.env_id not in gym.registry:
-            gym.register(id=variant.env_id, entry_point=variant.entry_point,
-                         kwargs=dict(variant.kwargs), disable_env_checker=False)
+    for row in variants():
+        _register(row)
 
 
 def env_ids(task: str | None = None) -> list[str]:
     """Return the registered ids, optionally only those of one task (e.g. ``"mot"``)."""
-    return [v.env_id for v in VARIANTS if task is None or v.task == task]
+    return [v.env_id for v in variants() if task is None or v.task == task]
 
 
 def task_of(env_id: str) -> str:
     """Return the task family of a registered id (``"mot"``, ...)."""
-    for variant in VARIANTS:
-        if variant.env_id == env_id:
-            return variant.task
-    raise KeyError(f"'{env_id}' is not a unitrack id; registered: {', '.join(env_ids())}")
+    return variant(env_id).task
 
 
 def variant(env_id: str) -> Variant:
     """The registration row of ``env_id``."""
-    for row in VARIANTS:
+    for row in variants():
         if row.env_id == env_id:
             return row
     raise KeyError(f"'{env_id}' is not a unitrack id; registered: {', '.join(env_ids())}")

@@ -1,0 +1,118 @@
+"""What every benchmark shares: ground truth, the official result format, folder scoring.
+
+A benchmark is the evaluation half of a task (TrackEval's split of data set, metric and
+evaluator): it knows which sequences a data set root holds and which can be scored, writes and
+reads one sequence's results in the task's official file format, scores a folder of such
+files with the official metrics, and names the result columns that tables show. It never
+plays an episode and never builds an environment, so a folder can be scored on its own.
+
+The data contract: ``results`` is what an environment records for one sequence (for MOT,
+the ``(k, 10)`` MOTChallenge rows of ``episode_results()``; for DAVIS, one label map per
+frame; ...). Each subclass states its form in its class docstring.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from abc import ABC, abstractmethod
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from unitrack_env.metrics.report import ScoreReport
+
+
+def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
+              **synthetic_kwargs: Any) -> tuple[Path, bool]:
+    """The data set folder to read and whether it is the embedded synthetic default.
+
+    ``root`` wins, then ``$UNITRACK_DATA/<folder>``; otherwise the synthetic data set is
+    built (once, cached) by :func:`unitrack_env.datasets.synthetic.ensure_synthetic` with
+    ``synthetic_args`` and ``synthetic_kwargs``, as the environments do.
+    """
+    # Imported here: the environments import benchmarks, not the other way round at load time.
+    from unitrack_env.envs.base import resolve_root
+
+    path = resolve_root(root, folder)
+    if path is not None:
+        return path, False
+    from unitrack_env.datasets.synthetic import ensure_synthetic
+
+    return Path(ensure_synthetic(*synthetic_args, **synthetic_kwargs)), True
+
+
+def rounded_digest(rows: np.ndarray) -> str:
+    """SHA-256 of an array rounded to 1e-3 (the digest of numeric results)."""
+    return hashlib.sha256(np.ascontiguousarray(np.round(rows, 3)).tobytes()).hexdigest()
+
+
+def text_digest(text: str) -> str:
+    """SHA-256 of a result text (the digest of results whose official form is text)."""
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+class Benchmark(ABC):
+    """One task's evaluation: ground-truth facts, official result files, folder scoring.
+
+    Subclasses set :attr:`task` and :attr:`columns` and implement the abstract methods;
+    :meth:`from_kwargs` builds one from an environment's keyword arguments (``root``,
+    ``split``, the rule set, ...; arguments that only concern playing are ignored).
+
+    Attributes:
+        dataset: the data set reader whose ground truth is scored against.
+    """
+
+    #: The task family (``"mot"``, ``"vos"``, ...), as in the registration table.
+    task: ClassVar[str] = ""
+    #: Result columns of tables (the metrics' official names), most important first.
+    columns: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, dataset: Any) -> None:
+        self.dataset = dataset
+
+    @classmethod
+    @abstractmethod
+    def from_kwargs(cls, **env_kwargs: Any) -> Benchmark:
+        """Build the benchmark of an environment made with ``env_kwargs``."""
+
+    @property
+    @abstractmethod
+    def name(self) -> str:
+        """The rule set scored, as score reports name it (``"MOT17"``, ``"DAVIS-2017"``)."""
+
+    @property
+    def sequence_names(self) -> list[str]:
+        """Every sequence of the data set's split."""
+        return list(self.dataset.sequence_names)
+
+    def scorable(self, sequences: Iterable[str] | None = None) -> list[str]:
+        """The sequences (default: all) that have ground truth to score against."""
+        names = self.sequence_names if sequences is None else list(sequences)
+        return [name for name in names if self.has_ground_truth(name)]
+
+    @abstractmethod
+    def sequence_length(self, name: str) -> int:
+        """Number of frames (episode steps) of sequence ``name``, without loading it."""
+
+    @abstractmethod
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` can be scored."""
+
+    @abstractmethod
+    def write(self, folder: str | os.PathLike, sequence: str, results: Any) -> None:
+        """Write one sequence's results below ``folder`` in the official format, atomically."""
+
+    @abstractmethod
+    def read(self, folder: str | os.PathLike, sequence: str) -> Any:
+        """Read one sequence's result file(s) back from ``folder``."""
+
+    @abstractmethod
+    def digest(self, results: Any) -> str:
+        """A stable SHA-256 digest of one sequence's results (the recorded actions)."""
+
+    @abstractmethod
+    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+        """Score the result files of ``sequences`` in ``folder`` with the official metrics."""

@@ -1,0 +1,100 @@
+"""The MOTChallenge benchmark (MOT15, MOT16, MOT17, MOT20): TrackEval's HOTA, CLEAR, Identity."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
+from unitrack_env.datasets.motchallenge import MOTChallengeDataset, read_seqinfo
+from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.report import ScoreReport
+
+#: printf formats of the result columns (MOTChallenge files use 2 decimals; keep 3).
+RESULT_FORMAT = ("%d", "%d", "%.3f", "%.3f", "%.3f", "%.3f", "%g", "%d", "%d", "%d")
+
+
+def format_mot_results(rows: np.ndarray) -> str:
+    """Format result rows ``frame, id, x, y, w, h, conf, -1, -1, -1`` as MOTChallenge text."""
+    lines = [",".join(fmt % value for fmt, value in zip(RESULT_FORMAT, row, strict=True))
+             for row in np.asarray(rows).reshape(-1, 10)]
+    return "\n".join(lines) + ("\n" if lines else "")
+
+
+def result_rows(frame: int, ids: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """One frame's tracks as result rows ``frame, id, x, y, w, h, 1, -1, -1, -1``."""
+    rows = np.empty((len(ids), 10))
+    rows[:, 0] = frame
+    rows[:, 1] = ids
+    rows[:, 2:6] = boxes
+    rows[:, 6] = 1.0
+    rows[:, 7:] = -1.0
+    return rows
+
+
+class MOTChallengeBenchmark(Benchmark):
+    """MOTChallenge scoring under one rule set (``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``).
+
+    ``results`` of one sequence: the ``(k, 10)`` rows ``frame, id, x, y, w, h, conf, -1, -1,
+    -1`` (see :func:`result_rows`), written as ``<folder>/<sequence>.txt``.
+    """
+
+    task = "mot"
+    columns = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA", "MOTP", "CLR_FP", "CLR_FN",
+               "MT", "ML")
+
+    def __init__(self, dataset: MOTChallengeDataset) -> None:
+        super().__init__(dataset)
+
+    @classmethod
+    def from_kwargs(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
+                    split: str = "train", detections: str | os.PathLike = "public",
+                    **_: Any) -> MOTChallengeBenchmark:
+        """The benchmark of ``MOTChallengeEnv(benchmark=, root=, split=, detections=)``."""
+        path, _synthetic = data_root(root, benchmark, benchmark)
+        return cls(MOTChallengeDataset(path, benchmark, split, detections))
+
+    @property
+    def name(self) -> str:
+        """The rule set (``"MOT17"``, ...)."""
+        return self.dataset.benchmark
+
+    def sequence_length(self, name: str) -> int:
+        """Number of frames of ``name`` (reads only its seqinfo.ini)."""
+        return read_seqinfo(self.dataset.split_dir / name).length
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether ``name`` has a ``gt/gt.txt``."""
+        return self.dataset.has_ground_truth(name)
+
+    def write(self, folder: str | os.PathLike, sequence: str, results: np.ndarray) -> None:
+        """Write ``<folder>/<sequence>.txt`` in the official MOTChallenge result format."""
+        atomic_write_text(Path(folder) / f"{sequence}.txt", format_mot_results(results))
+
+    def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
+        """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows."""
+        from unitrack_env.metrics.motchallenge import read_result_file
+
+        return read_result_file(Path(folder) / f"{sequence}.txt")
+
+    def digest(self, results: np.ndarray) -> str:
+        """SHA-256 of the rows rounded to 1e-3."""
+        return rounded_digest(results)
+
+    def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
+        """TrackEval's metrics of one sequence's rows (it must have ground truth)."""
+        from unitrack_env.metrics.motchallenge import score_sequence
+
+        score = score_sequence(self.dataset.split_dir / sequence, results,
+                               benchmark=self.name, seq_length=self.sequence_length(sequence))
+        return dict(score.summary)
+
+    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
+        from unitrack_env.metrics.motchallenge import score_folder
+
+        return score_folder(self.dataset.split_dir, folder, benchmark=self.name,
+                            sequences=sequences)

@@ -1,0 +1,122 @@
+"""The OTB-2015 benchmark: success AUC and precision at 20 pixels (the OTB toolkit's rules)."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
+from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
+from unitrack_env.errors import DataFormatError
+from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.report import COMBINED, ScoreReport
+from unitrack_env.metrics.sot import aggregate_sot, evaluate_sot_sequence
+
+#: Folder of the OTB data under ``$UNITRACK_DATA``.
+BENCHMARK_FOLDER = "OTB"
+#: Name of the rule set in score reports.
+BENCHMARK = "OTB-2015"
+
+
+def format_box_value(value: float) -> str:
+    """A box number as its shortest float32 decimal (how OTB result files write it)."""
+    return np.format_float_positional(np.float32(value), unique=True, trim="-")
+
+
+def format_otb_results(boxes: np.ndarray) -> str:
+    """Format ``(T, 4)`` boxes as an OTB result file: ``x,y,w,h`` per line, one per frame."""
+    lines = [",".join(format_box_value(v) for v in row) for row in np.asarray(boxes).reshape(-1, 4)]
+    return "\n".join(lines) + ("\n" if lines else "")
+
+
+class OTBBenchmark(Benchmark):
+    """OTB-2015 one-pass evaluation: success AUC, precision@20px, average overlap.
+
+    ``results`` of one sequence: the ``(frames, 4)`` boxes ``x, y, w, h`` (the first frame
+    included), written as ``<folder>/<sequence>.txt`` with one ``x,y,w,h`` line per frame.
+    """
+
+    task = "sot"
+    columns = ("AUC", "Precision@20px", "AverageOverlap")
+
+    def __init__(self, dataset: OTBDataset) -> None:
+        super().__init__(dataset)
+        self._loaded: dict[str, SOTSequence] = {}
+
+    @classmethod
+    def from_kwargs(cls, root: str | os.PathLike | None = None, **_: Any) -> OTBBenchmark:
+        """The benchmark of ``OTBEnv(root=)``."""
+        path, _synthetic = data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
+        return cls(OTBDataset(path))
+
+    @property
+    def name(self) -> str:
+        """``"OTB-2015"``."""
+        return BENCHMARK
+
+    def load(self, name: str) -> SOTSequence:
+        """Read a sequence once (the reader's warning about trimmed copies appears once)."""
+        sequence = self._loaded.get(name)
+        if sequence is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("always")
+                sequence = self.dataset.load(name)
+            self._loaded[name] = sequence
+        return sequence
+
+    def sequence_length(self, name: str) -> int:
+        """Number of frames (steps) of sequence ``name`` (its ground-truth rows)."""
+        return self.load(name).num_frames
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether sequence ``name`` has boxes after the first frame."""
+        return self.load(name).has_ground_truth
+
+    def write(self, folder: str | os.PathLike, sequence: str, results: np.ndarray) -> None:
+        """Write ``<folder>/<sequence>.txt``: one ``x,y,w,h`` line per frame, atomically."""
+        atomic_write_text(Path(folder) / f"{sequence}.txt", format_otb_results(results))
+
+    def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
+        """Read ``<folder>/<sequence>.txt`` and check it has one box per frame.
+
+        Raises:
+            DataFormatError: the file is missing, malformed, or has a different number of
+                rows than the sequence has frames.
+        """
+        loaded = self.load(self.dataset.resolve(sequence))
+        path = Path(folder) / f"{loaded.name}.txt"
+        if not path.is_file():
+            raise DataFormatError(path, f"no result file for sequence '{loaded.name}'")
+        boxes = read_box_file(path)
+        if len(boxes) != loaded.num_frames:
+            raise DataFormatError(
+                path, f"has {len(boxes)} boxes but '{loaded.name}' has "
+                f"{loaded.num_frames} frames (one line per frame, the first included)",
+            )
+        return boxes
+
+    def digest(self, results: np.ndarray) -> str:
+        """SHA-256 of the boxes rounded to 1e-3."""
+        return rounded_digest(results)
+
+    def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
+        """The OTB metrics of one sequence's boxes."""
+        return evaluate_sot_sequence(results, self.load(sequence).boxes).as_dict()
+
+    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+        """Score ``<folder>/<sequence>.txt`` result files with the OTB toolkit's rules."""
+        per_sequence, scores = {}, {}
+        for name in sequences:
+            sequence = self.load(self.dataset.resolve(name))
+            scores[sequence.name] = evaluate_sot_sequence(self.read(folder, sequence.name),
+                                                          sequence.boxes)
+            per_sequence[sequence.name] = scores[sequence.name].as_dict()
+        combined: dict[str, float] = {}
+        if scores:
+            scores[COMBINED] = aggregate_sot(list(scores.values()))
+            combined = scores[COMBINED].as_dict()
+        return ScoreReport(BENCHMARK, per_sequence, combined, scores)

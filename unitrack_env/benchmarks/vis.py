@@ -1,0 +1,88 @@
+"""The YouTube-VIS 2019 benchmark: track mAP (AP, AP50, AP75, AR)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from unitrack_env.benchmarks.base import Benchmark, data_root, text_digest
+from unitrack_env.datasets.youtube_vis import (
+    VisTrack,
+    YouTubeVISDataset,
+    format_results,
+    parse_vis_results,
+)
+from unitrack_env.errors import DataFormatError
+from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.report import ScoreReport
+
+#: Name of the rule set in score reports (and the data folder under ``$UNITRACK_DATA``).
+BENCHMARK = "YouTube-VIS-2019"
+
+
+class VISBenchmark(Benchmark):
+    """YouTube-VIS track mAP, per video and combined.
+
+    ``results`` of one video: its tracks as :class:`~unitrack_env.datasets.youtube_vis.VisTrack`
+    entries, written as ``<folder>/<video>.json`` (this video's entries of the official
+    results JSON; :func:`unitrack_env.metrics.vis.merge_result_files` joins them).
+    """
+
+    task = "vis"
+    columns = ("AP", "AP50", "AP75", "AR")
+
+    @classmethod
+    def from_kwargs(cls, root: str | os.PathLike | None = None, split: str = "train",
+                    detections: str | os.PathLike = "public",
+                    annotation_file: str | os.PathLike | None = None,
+                    **_: Any) -> VISBenchmark:
+        """The benchmark of ``VISEnv(root=, split=, annotation_file=)``."""
+        path, _synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
+        return cls(YouTubeVISDataset(path, split, detections, annotation_file))
+
+    @property
+    def name(self) -> str:
+        """``"YouTube-VIS-2019"``."""
+        return BENCHMARK
+
+    def sequence_length(self, name: str) -> int:
+        """Number of frames of video ``name``."""
+        return self.dataset.video(name).length
+
+    def has_ground_truth(self, name: str) -> bool:
+        """Whether the split has annotations."""
+        return self.dataset.has_annotations
+
+    def write(self, folder: str | os.PathLike, sequence: str, results: list[VisTrack]) -> None:
+        """Write ``<folder>/<video>.json``: this video's entries of the results JSON."""
+        atomic_write_text(Path(folder) / f"{sequence}.json", format_results(results))
+
+    def read(self, folder: str | os.PathLike, sequence: str) -> list[VisTrack]:
+        """Read ``<folder>/<video>.json`` back as tracks of that video."""
+        video = self.dataset.video(sequence)
+        path = Path(folder) / f"{video.name}.json"
+        if not path.is_file():
+            raise DataFormatError(path, f"result file for video '{video.name}' is missing")
+        return parse_vis_results(path, {video.id: video})
+
+    def digest(self, results: list[VisTrack]) -> str:
+        """SHA-256 of the video's results JSON."""
+        return text_digest(format_results(results))
+
+    def score_sequence(self, sequence: str, results: list[VisTrack]) -> dict[str, float]:
+        """Track mAP of one video's tracks (the split must have annotations)."""
+        from unitrack_env.metrics.vis import score_videos
+
+        video = self.dataset.video(sequence)
+        return score_videos(self.dataset.data, results, [video]).per_sequence[video.name]
+
+    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+        """Track mAP of ``<folder>/<video>.json`` files, per video and combined."""
+        from unitrack_env.metrics.vis import score_videos
+
+        videos = [self.dataset.video(name) for name in dict.fromkeys(sequences)]
+        results: list[VisTrack] = []
+        for video in videos:
+            results += self.read(folder, video.name)
+        return score_videos(self.dataset.data, results, videos, source=Path(folder))
