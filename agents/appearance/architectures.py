@@ -1,0 +1,115 @@
+"""The backbones an appearance model can build, their output layers and hypercolumns.
+
+:func:`build_network` makes the ``nn.Module`` of an architecture (:data:`ARCHITECTURES`) run
+at stride 8 up to its output layer(s); :func:`split_layers` reads a ``layer`` option (one
+layer, or a hypercolumn such as ``"stage3+stage5"``) and :func:`combine_layers` joins the
+per-layer maps of a hypercolumn.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from unitrack_env.agents.appearance.efficientnet_lite import LITE0_LAYERS, EfficientNetLite0
+from unitrack_env.agents.appearance.resnet import RESNET_SPECS, ResNet
+
+FEATURE_STRIDE: int = 8
+"""Stride of every feature map this model produces (UniTrack's r = 8)."""
+
+EFFICIENTNET_LITE0: str = "efficientnet-lite0"
+"""Architecture name of the default backbone."""
+
+ARCHITECTURES: tuple[str, ...] = (EFFICIENTNET_LITE0, *RESNET_SPECS)
+"""Architectures :class:`AppearanceModel` can build."""
+
+DEFAULT_LAYERS: Mapping[str, str] = MappingProxyType(
+    {EFFICIENTNET_LITE0: "stage5", **{name: "layer3" for name in RESNET_SPECS}}
+)
+"""Default output layer per architecture.
+
+ResNet: layer3, as in the paper. EfficientNet-Lite0: stage5 (112 channels) with the stride
+of stage4 set to 1, the paper's own construction (as for ResNet's layer3) applied to this
+network. Measured here with the ImageNet weights and the ``unitrack-vos`` head (DAVIS J-mean,
+official rules, blackswan / dog): stage3 (native stride 8, 40 channels) 0.925 / 0.523,
+stage4 0.888 / 0.659, stage5 0.905 / 0.854, stage6 0.790 / 0.741; the hypercolumn
+``"stage3+stage5"`` 0.924 / 0.854, but it loses OTB Human3 with ``unitrack-dcf`` (AUC 0.21
+vs 0.71), so it is an option, not the default. MOT17 ground-truth boxes (frame 1 vs last,
+four sequences) all matched by RSM at every stage, mean margin to the best wrong match
+0.575 (stage5) vs 0.543 (stage3). Cost on 2 CPU threads at 1088 x 608: ~0.25 s (stage5) vs
+~0.14 s (stage3), about ResNet-18 layer3's ~0.20 s. Use ``layer="stage3"`` for the fastest
+features."""
+
+LAYER_SEPARATOR: str = "+"
+"""Joins several layers into one hypercolumn output, e.g. ``"stage3+stage5"``."""
+
+NORM_EPS: float = 1e-12
+"""Guards the L2 normalisation of hypercolumn parts against all-zero feature vectors."""
+
+
+def split_layers(layer: str) -> tuple[str, ...]:
+    """The layers of a ``layer`` option: ``"stage5"`` -> one, ``"stage3+stage5"`` -> two.
+
+    Several layers make a *hypercolumn* (Hariharan et al., CVPR 2015): every stride-8 map is
+    L2-normalised along channels, scaled by ``1/sqrt(n)`` and the maps are concatenated, so
+    each location's vector has unit norm and the dot product of two such vectors is the mean
+    of the per-layer cosine similarities. The network runs once, to the deepest layer.
+    """
+    parts = tuple(part.strip() for part in str(layer).split(LAYER_SEPARATOR))
+    if not all(parts) or len(set(parts)) != len(parts):
+        raise ValueError(f"layer {layer!r}: give one layer or distinct layers joined by "
+                         f"{LAYER_SEPARATOR!r}, e.g. 'stage3+stage5'")
+    return parts
+
+
+def combine_layers(maps: list[torch.Tensor]) -> torch.Tensor:
+    """One layer's map as is; several as a hypercolumn (see :func:`split_layers`)."""
+    if len(maps) == 1:
+        return maps[0]
+    scale = 1.0 / math.sqrt(len(maps))  # unit vectors per layer, equal weights, unit norm
+    return torch.cat([F.normalize(m, dim=1, eps=NORM_EPS) * scale for m in maps], 1)
+
+
+def build_network(arch: str, layers: tuple[str, ...], seed: int) -> nn.Module:
+    """The randomly initialised network of ``arch`` whose ``layers`` all have stride 8.
+
+    Args:
+        arch: One of :data:`ARCHITECTURES`.
+        layers: The output layers (see :func:`split_layers`).
+        seed: Seed of the initialisation (the global torch RNG is left untouched).
+
+    Raises:
+        ValueError: An unknown layer, or one whose stride is not :data:`FEATURE_STRIDE`.
+    """
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        if arch == EFFICIENTNET_LITE0:
+            for layer in layers:
+                if layer not in LITE0_LAYERS:
+                    raise ValueError(
+                        f"unknown {arch} layer {layer!r}; valid: {LITE0_LAYERS}")
+            # Later stages run at stride 8 (first-block strides set to 1) when asked for.
+            stride8 = any(EfficientNetLite0.stride_of(layer, stride8=False)
+                          != FEATURE_STRIDE for layer in layers)
+            module: nn.Module = EfficientNetLite0(stride8=stride8)
+        else:
+            module = ResNet(arch, stride8=True)
+    for layer in layers:
+        if module.layer_stride(layer) != FEATURE_STRIDE:
+            raise ValueError(
+                f"layer {layer!r} of {arch} has stride {module.layer_stride(layer)}, but "
+                f"the appearance model must produce stride-{FEATURE_STRIDE} maps; choose "
+                "a later layer"
+            )
+    return module
+
+
+def required_prefixes(module: nn.Module, layers: tuple[str, ...]) -> tuple[str, ...]:
+    """Module prefixes the output ``layers`` depend on (what a checkpoint must cover)."""
+    return tuple(dict.fromkeys(
+        p for name in layers for p in module.required_prefixes(name)))
