@@ -1,0 +1,247 @@
+"""Variable-size array spaces: frames, mask stacks and label maps.
+
+Why a custom :class:`Image` space instead of a fixed ``Box``: tracking benchmarks mix frame
+sizes (MOT17 has 1920x1080 and 640x480 sequences). Resizing would change the benchmark's
+geometry and padding every frame to the largest size would waste memory and time, so a
+frame keeps its native size and the space bounds it instead. :class:`MaskStack` and
+:class:`LabelMap` do the same for masks of the frame's size.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+
+class Image(spaces.Space[np.ndarray]):
+    """A ``uint8`` image of shape ``(H, W, channels)`` whose size may vary between episodes.
+
+    Args:
+        max_height: largest accepted height.
+        max_width: largest accepted width.
+        channels: number of channels (3 for RGB).
+        seed: seed of the space's own random generator (used by :meth:`sample`).
+    """
+
+    def __init__(
+        self, max_height: int, max_width: int, channels: int = 3, seed: int | None = None
+    ) -> None:
+        if max_height < 1 or max_width < 1 or channels < 1:
+            raise ValueError("Image space bounds must be positive")
+        self.max_height = int(max_height)
+        self.max_width = int(max_width)
+        self.channels = int(channels)
+        super().__init__(shape=None, dtype=np.uint8, seed=seed)
+
+    @property
+    def is_np_flattenable(self) -> bool:
+        """Images of varying size cannot be flattened to one fixed vector."""
+        return False
+
+    def sample(self, mask: Any = None, probability: Any = None) -> np.ndarray:
+        """Return a random image of random size within the bounds."""
+        if mask is not None or probability is not None:
+            raise NotImplementedError("Image.sample does not support masks")
+        height = int(self.np_random.integers(1, min(self.max_height, 64) + 1))
+        width = int(self.np_random.integers(1, min(self.max_width, 64) + 1))
+        return self.np_random.integers(0, 256, (height, width, self.channels), dtype=np.uint8)
+
+    def contains(self, x: Any) -> bool:
+        """Whether ``x`` is a ``uint8`` image within the bounds."""
+        return (
+            isinstance(x, np.ndarray)
+            and x.dtype == np.uint8
+            and x.ndim == 3
+            and x.shape[2] == self.channels
+            and 1 <= x.shape[0] <= self.max_height
+            and 1 <= x.shape[1] <= self.max_width
+        )
+
+    def __repr__(self) -> str:
+        return (f"Image(max_height={self.max_height}, max_width={self.max_width}, "
+                f"channels={self.channels})")
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, Image)
+            and other.max_height == self.max_height
+            and other.max_width == self.max_width
+            and other.channels == self.channels
+        )
+
+    def to_jsonable(self, sample_n: Sequence[np.ndarray]) -> list:
+        """Convert a batch of images to lists."""
+        return [image.tolist() for image in sample_n]
+
+    def from_jsonable(self, sample_n: Sequence[Any]) -> list[np.ndarray]:
+        """Convert lists back to images."""
+        return [np.asarray(image, dtype=np.uint8) for image in sample_n]
+
+
+
+class MaskStack(spaces.Space[np.ndarray]):
+    """A ``bool`` stack of ``n`` binary masks of shape ``(n, H, W)``, ``n`` and size variable.
+
+    Why a stack and not a label map: video instance segmentation detections may overlap (a
+    label map cannot hold two masks on one pixel), and one representation for every mask task
+    keeps agents simple (``masks[i]`` is detection ``i``). Why not padding to
+    ``(max_detections, H, W)``: at 1080p that is 2 MB per padded slot per frame. The count
+    is bounded by ``max_count`` and the size by ``max_height`` x ``max_width``; the masks have
+    the frame's size, which varies between sequences (as :class:`Image` does).
+
+    Args:
+        max_count: largest number of masks.
+        max_height: largest mask height.
+        max_width: largest mask width.
+        seed: seed of the space's random generator (used by :meth:`sample`).
+    """
+
+    def __init__(
+        self, max_count: int, max_height: int, max_width: int, seed: int | None = None
+    ) -> None:
+        if max_count < 0 or max_height < 1 or max_width < 1:
+            raise ValueError("MaskStack bounds must be positive (max_count >= 0)")
+        self.max_count = int(max_count)
+        self.max_height = int(max_height)
+        self.max_width = int(max_width)
+        super().__init__(shape=None, dtype=np.bool_, seed=seed)
+
+    @property
+    def is_np_flattenable(self) -> bool:
+        """Stacks of varying size cannot be flattened to one fixed vector."""
+        return False
+
+    def sample(self, mask: Any = None, probability: Any = None) -> np.ndarray:
+        """Return random masks: a random count (at most 3) of a random size within the bounds."""
+        if mask is not None or probability is not None:
+            raise NotImplementedError("MaskStack.sample does not support masks")
+        count = int(self.np_random.integers(0, min(self.max_count, 3) + 1))
+        height = int(self.np_random.integers(1, min(self.max_height, 32) + 1))
+        width = int(self.np_random.integers(1, min(self.max_width, 32) + 1))
+        return self.np_random.integers(0, 2, (count, height, width)).astype(bool)
+
+    def contains(self, x: Any) -> bool:
+        """Whether ``x`` is a ``bool`` array ``(n, H, W)`` within the bounds."""
+        return (
+            isinstance(x, np.ndarray)
+            and x.dtype == np.bool_
+            and x.ndim == 3
+            and 0 <= x.shape[0] <= self.max_count
+            and 1 <= x.shape[1] <= self.max_height
+            and 1 <= x.shape[2] <= self.max_width
+        )
+
+    def __repr__(self) -> str:
+        return (f"MaskStack(max_count={self.max_count}, max_height={self.max_height}, "
+                f"max_width={self.max_width})")
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, MaskStack)
+            and other.max_count == self.max_count
+            and other.max_height == self.max_height
+            and other.max_width == self.max_width
+        )
+
+    def to_jsonable(self, sample_n: Sequence[np.ndarray]) -> list:
+        """Convert a batch of mask stacks to lists."""
+        return [masks.tolist() for masks in sample_n]
+
+    def from_jsonable(self, sample_n: Sequence[Any]) -> list[np.ndarray]:
+        """Convert lists back to mask stacks."""
+        return [np.asarray(masks, dtype=bool) for masks in sample_n]
+
+
+class LabelMap(spaces.Space[np.ndarray]):
+    """A ``uint8`` label map of shape ``(H, W)`` whose size may vary between episodes.
+
+    The 2-D counterpart of :class:`Image` for segmentation masks whose pixel values are
+    labels (0 = background, ``k`` = object ``k``; DAVIS adds 255 = void).
+
+    Sampling: a label map of size ``(H, W)`` is only a valid action for a frame of that
+    size, so an environment calls :meth:`narrow` at every reset with the current frame
+    size and the labels allowed in this episode; :meth:`sample` then draws valid actions.
+    Before any :meth:`narrow`, it draws a small map of random size. :meth:`contains` and
+    equality depend only on the bounds.
+
+    Args:
+        max_height: largest accepted height.
+        max_width: largest accepted width.
+        max_label: largest accepted label (at most 255).
+        seed: seed of the space's own random generator (used by :meth:`sample`).
+    """
+
+    def __init__(
+        self, max_height: int, max_width: int, max_label: int = 255, seed: int | None = None
+    ) -> None:
+        if max_height < 1 or max_width < 1:
+            raise ValueError("LabelMap space bounds must be positive")
+        if not 0 <= max_label <= 255:
+            raise ValueError(f"max_label must lie in 0..255 (uint8); got {max_label}")
+        self.max_height = int(max_height)
+        self.max_width = int(max_width)
+        self.max_label = int(max_label)
+        self._sample_shape: tuple[int, int] | None = None
+        self._sample_labels: np.ndarray | None = None
+        super().__init__(shape=None, dtype=np.uint8, seed=seed)
+
+    @property
+    def is_np_flattenable(self) -> bool:
+        """Maps of varying size cannot be flattened to one fixed vector."""
+        return False
+
+    def narrow(self, height: int, width: int, labels: Sequence[int]) -> None:
+        """Make :meth:`sample` draw ``(height, width)`` maps with values from ``labels``."""
+        values = np.asarray(sorted({int(v) for v in labels}), dtype=np.uint8)
+        if len(values) == 0 or int(values.max()) > self.max_label:
+            raise ValueError(f"labels must be a non-empty subset of 0..{self.max_label}")
+        if not (1 <= height <= self.max_height and 1 <= width <= self.max_width):
+            raise ValueError(f"size {height}x{width} exceeds the space's bounds")
+        self._sample_shape = (int(height), int(width))
+        self._sample_labels = values
+
+    def sample(self, mask: Any = None, probability: Any = None) -> np.ndarray:
+        """Return a random label map (of the narrowed size and labels, see the class doc)."""
+        if mask is not None or probability is not None:
+            raise NotImplementedError("LabelMap.sample does not support masks")
+        if self._sample_shape is None or self._sample_labels is None:
+            height = int(self.np_random.integers(1, min(self.max_height, 64) + 1))
+            width = int(self.np_random.integers(1, min(self.max_width, 64) + 1))
+            return self.np_random.integers(0, self.max_label + 1, (height, width), dtype=np.uint8)
+        index = self.np_random.integers(0, len(self._sample_labels), self._sample_shape)
+        return self._sample_labels[index]
+
+    def contains(self, x: Any) -> bool:
+        """Whether ``x`` is a 2-D ``uint8`` map within the size and label bounds."""
+        return (
+            isinstance(x, np.ndarray)
+            and x.dtype == np.uint8
+            and x.ndim == 2
+            and 1 <= x.shape[0] <= self.max_height
+            and 1 <= x.shape[1] <= self.max_width
+            and (x.size == 0 or int(x.max()) <= self.max_label)
+        )
+
+    def __repr__(self) -> str:
+        return (f"LabelMap(max_height={self.max_height}, max_width={self.max_width}, "
+                f"max_label={self.max_label})")
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, LabelMap)
+            and other.max_height == self.max_height
+            and other.max_width == self.max_width
+            and other.max_label == self.max_label
+        )
+
+    def to_jsonable(self, sample_n: Sequence[np.ndarray]) -> list:
+        """Convert a batch of label maps to lists."""
+        return [labels.tolist() for labels in sample_n]
+
+    def from_jsonable(self, sample_n: Sequence[Any]) -> list[np.ndarray]:
+        """Convert lists back to label maps."""
+        return [np.asarray(labels, dtype=np.uint8) for labels in sample_n]
+

@@ -1,0 +1,102 @@
+"""Bounds of the action and observation spaces, and the checks every action shares.
+
+Ids, counts and coordinates are checked the same way for boxes, masks and poses; each task
+family's module (:mod:`.boxes`, :mod:`.masks`, :mod:`.poses`) builds on these.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.errors import InvalidActionError
+
+#: infinities and make ``check_env`` warn).
+FLOAT_MAX = float(np.finfo(np.float32).max)
+#: Bound of box coordinates in pixels (generous: boxes may extend past the frame).
+COORD_MAX = 1e5
+#: Largest track id of the action spaces. Official result files store ids as numbers that
+#: are read back as floats (MOTChallenge txt) or JSON numbers; int32 ids survive every one
+#: of them exactly (float64 holds integers only up to 2**53).
+ID_MAX = int(np.iinfo(np.int32).max)
+
+
+def action_count(action: dict[str, Any], key: str) -> int:
+    """The action's ``key`` count (``num_tracks``) as an int; refuse non-integers."""
+    value = action[key]
+    if isinstance(value, (bool, np.bool_)):
+        raise InvalidActionError(f"action['{key}'] must be an integer, got {value!r}")
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)) and float(value).is_integer():
+        return int(value)
+    raise InvalidActionError(
+        f"action['{key}'] must be an integer (the space is Discrete), got {value!r}")
+
+
+def _number(value: Any) -> str:
+    """An id as the user wrote it: exact for integers, short for huge floats."""
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    return f"{float(value):.0f}" if abs(float(value)) < 1e16 else f"{float(value):g}"
+
+
+def checked_ids(ids: np.ndarray, k: int, *, low: int = 1) -> np.ndarray:
+    """The first ``k`` ids as int64 after checking integer values in ``low..ID_MAX``."""
+    ids = ids[:k]
+    if not np.issubdtype(ids.dtype, np.integer):
+        if ids.size and not (np.issubdtype(ids.dtype, np.floating)
+                             and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids))):
+            raise InvalidActionError(f"action['ids'] must be integers, got dtype {ids.dtype}")
+    if ids.size and (ids.max() > ID_MAX):
+        raise InvalidActionError(
+            f"track id {_number(ids.max())} is above {ID_MAX}, the largest id of the action "
+            "space (ids must survive the official result files, which store them as floats)")
+    if ids.size and ids.min() < low:
+        what = "track ids must be >= 1" + (" (0 = not reported)" if low == 0 else "")
+        raise InvalidActionError(f"{what}, got {_number(ids.min())}")
+    return ids.astype(np.int64)
+
+
+
+def track_count(
+    action: dict[str, Any], num_ids: int, num_values: int, noun: str, max_tracks: int | None
+) -> int:
+    """The number ``k`` of tracks a padded or unpadded track action reports.
+
+    ``num_ids`` and ``num_values`` are the lengths of the action's ``ids`` and of its
+    per-track values (``noun``: ``"boxes"`` or ``"poses"``); ``num_tracks``, when given,
+    must fit both, and ``k`` must fit ``max_tracks``.
+    """
+    if "num_tracks" in action:
+        k = action_count(action, "num_tracks")
+        if not 0 <= k <= min(num_ids, num_values):
+            raise InvalidActionError(
+                f"num_tracks={k} but the arrays hold {num_ids} ids and {num_values} {noun}"
+            )
+    else:
+        k = num_ids
+        if num_values != k:
+            raise InvalidActionError(f"{k} ids but {num_values} {noun}")
+    if max_tracks is not None and k > max_tracks:
+        raise InvalidActionError(f"{k} tracks exceed max_tracks={max_tracks}")
+    return k
+
+
+def refuse_duplicate_ids(ids: np.ndarray) -> None:
+    """Raise when a track id appears twice in one frame's action."""
+    if len(ids) != len(np.unique(ids)):
+        values, counts = np.unique(ids, return_counts=True)
+        raise InvalidActionError(f"duplicate track ids in one frame: {values[counts > 1].tolist()}")
+
+
+def check_capacity(k: int, max_tracks: int) -> None:
+    """Raise when ``k`` tracks do not fit the action capacity ``max_tracks``."""
+    if k > max_tracks:
+        raise InvalidActionError(
+            f"{k} tracks exceed the action capacity max_tracks={max_tracks}; "
+            "raise max_tracks when making the environment"
+        )
