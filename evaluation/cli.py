@@ -171,17 +171,13 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
 
     sequences = args.sequences.split(",") if args.sequences else None
     if args.env:
-        import gymnasium as gym
-
         import unitrack_env
+        from unitrack_env.benchmarks import benchmark_for
 
-        env = gym.make(_check_env_id(args.env), **_env_kwargs(args))
-        try:
-            base = env.unwrapped
-            names = sequences or [n for n in base.sequence_names if base.has_ground_truth(n)]
-            report = base.score_folder(Path(args.results), names)
-        finally:
-            env.close()
+        env_kwargs = _env_kwargs(args)
+        bench = benchmark_for(_check_env_id(args.env), **env_kwargs)
+        names = sequences or bench.scorable(env_kwargs.get("sequences"))
+        report = bench.score_folder(Path(args.results), names)
         task = unitrack_env.task_of(args.env)
     elif args.benchmark and args.gt:
         from unitrack_env.metrics.motchallenge import score_folder
@@ -215,69 +211,17 @@ def _cmd_render(args: argparse.Namespace, console: Console) -> int:
     return 0
 
 
-def _cmd_scorecard(args: argparse.Namespace, console: Console) -> int:
-    from unitrack_env.evaluation import scorecard as sc
-
-    out = Path(args.out)
-    if args.compare:
-        card = sc.merge_cards([Path(p) for p in args.compare])
-        files = sc.write_outputs(out, card, radar_scale=args.radar_scale)
-    else:
-        if not args.model:
-            raise ValueError("give --model (one or more), or --compare earlier scorecards")
-        models = [sc.ModelSpec.parse(text) for text in args.model]
-        tasks = args.tasks.split(",") if args.tasks else None
-        data = args.data or os.environ.get("UNITRACK_DATA")
-        with _cell_progress(enabled=not args.quiet) as progress:
-            card = sc.scorecard(models, out=out, tasks=tasks, data=data, backend=args.backend,
-                                workers=args.workers, address=args.address,
-                                motion=args.motion, radar_scale=args.radar_scale,
-                                on_progress=progress)
-        files = sorted(out.glob("scorecard.*"))
-    console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)
-    console.print("wrote " + ", ".join(str(f) for f in files), markup=False, soft_wrap=True)
-    return 0
-
-
-@contextlib.contextmanager
-def _cell_progress(enabled: bool) -> Iterator[Callable[[int, int, Any], None]]:
-    """A progress bar over scorecard cells: done / all, ETA, the cell that just finished."""
-    if not enabled:
-        yield lambda done, total, cell: None
-        return
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    with Progress(TextColumn("cells"), BarColumn(bar_width=20), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                  TextColumn("{task.description}", overflow="ellipsis"),
-                  console=_console(stderr=True)) as progress:
-        task = progress.add_task("", total=None)
-
-        def update(done: int, total: int, cell: Any) -> None:
-            progress.update(task, completed=done, total=total,
-                            description="" if cell is None else cell.label[-48:])
-
-        yield update
-
-
 def _cmd_list(args: argparse.Namespace, console: Console) -> int:
     from rich.table import Table
 
-    import unitrack_env
     from unitrack_env.agents import agent_class, available_agents
     from unitrack_env.agents.loading import entry_point_agents
+    from unitrack_env.registration import variants
 
     envs = Table(title="environments", title_justify="left")
     envs.add_column("id", no_wrap=True)
     envs.add_column("task")
-    for variant in unitrack_env.VARIANTS:
+    for variant in variants():
         envs.add_row(variant.env_id, variant.task)
     console.print(envs)
     plugins = entry_point_agents()
@@ -335,13 +279,7 @@ def _format_option(p: argparse.ArgumentParser) -> None:
                    help="how to print the metrics (default: a table fitted to the terminal)")
 
 
-def _add_commands(sub: Any) -> None:
-    def command(name: str, help_text: str) -> argparse.ArgumentParser:
-        return sub.add_parser(name, help=help_text, description=help_text,
-                              epilog=EXAMPLES.get(name),
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
-
-    ev = command("evaluate", "run an agent on every sequence of an environment and score it")
+def _add_evaluate(ev: argparse.ArgumentParser) -> None:
     _env_options(ev)
     ev.add_argument("--out", required=True, help="output folder: results in the official "
                     "format, per-sequence records, metrics.json (an existing run is resumed)")
@@ -354,7 +292,8 @@ def _add_commands(sub: Any) -> None:
     _format_option(ev)
     ev.set_defaults(func=_cmd_evaluate)
 
-    sc = command("score", "score a folder of result files in the official format")
+
+def _add_score(sc: argparse.ArgumentParser) -> None:
     sc.add_argument("--env", help="environment id whose data and metrics to use")
     sc.add_argument("--root", help="benchmark folder (with --env; default: synthetic data)")
     sc.add_argument("--split", help="split folder (with --env)")
@@ -369,7 +308,8 @@ def _add_commands(sub: Any) -> None:
     _format_option(sc)
     sc.set_defaults(func=_cmd_score)
 
-    rd = command("render", "write a video of an agent's tracks on one sequence")
+
+def _add_render(rd: argparse.ArgumentParser) -> None:
     _env_options(rd)
     rd.add_argument("--sequence", required=True,
                     help="the sequence to play (its name in the data set, e.g. MOT17-04-FRCNN)")
@@ -379,31 +319,21 @@ def _add_commands(sub: Any) -> None:
                     help="video frame rate (default: the sequence's)")
     rd.set_defaults(func=_cmd_render)
 
-    card = command("scorecard", "play every task's UniTrack head with each appearance model "
-                   "and draw the paper's table and radar chart")
-    card.add_argument("--model", action="append", metavar="WEIGHTS[,arch=A][,layer=L][,label=N]",
-                      help="an appearance model (a row): imagenet-lite0, random, or a "
-                      "checkpoint file, with options (repeatable)")
-    card.add_argument("--data", help="folder holding benchmark folders (MOT17/, DAVIS/, ...; "
-                      "default: $UNITRACK_DATA); tasks without one use synthetic data, marked")
-    card.add_argument("--tasks", help="comma-separated subset of: sot, vos, mot, mots, "
-                      "posetrack, pose-prop, vis (default: all)")
-    card.add_argument("--out", required=True, help="output folder (finished cells are reused)")
-    card.add_argument("--backend", choices=("pool", "ray"), default="pool",
-                      help="where cells run: local processes (default) or Ray")
-    card.add_argument("--workers", type=int, default=1,
-                      help="pool processes, or the CPUs of a local Ray (default: 1)")
-    card.add_argument("--address", help="Ray cluster to join: auto or ray://host:port "
-                      "(default: start a local Ray)")
-    card.add_argument("--motion", action="store_true", help="keep motion cues in the "
-                      "association heads (the paper's Table 2 drops them)")
-    card.add_argument("--radar-scale", choices=("rank", "value"), default="rank",
-                      help="radar axes: rank among the models (the paper's) or the value")
-    card.add_argument("--compare", nargs="+", metavar="SCORECARD_JSON",
-                      help="redraw earlier scorecard.json files together (plays nothing)")
-    card.add_argument("--quiet", action="store_true", help="no progress bar")
-    card.set_defaults(func=_cmd_scorecard)
 
+def _add_commands(sub: Any) -> None:
+    from unitrack_env.evaluation.cli_scorecard import add_options as add_scorecard_options
+
+    def command(name: str, help_text: str) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=help_text, description=help_text,
+                              epilog=EXAMPLES.get(name),
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+
+    _add_evaluate(command("evaluate", "run an agent on every sequence of an environment and "
+                          "score it"))
+    _add_score(command("score", "score a folder of result files in the official format"))
+    _add_render(command("render", "write a video of an agent's tracks on one sequence"))
+    add_scorecard_options(command("scorecard", "play every task's UniTrack head with each "
+                                  "appearance model and draw the paper's table and radar chart"))
     command("list", "list environments and agents").set_defaults(func=_cmd_list)
     command("doctor", "check that this environment can run and score every task (exit "
             "status 1 on a problem, with the fix)").set_defaults(func=_cmd_doctor)

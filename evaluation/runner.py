@@ -6,20 +6,22 @@ Output folder layout (TrackEval's tracker layout, so the folder can be scored ag
     <out>/run.json                 what was run (env id and arguments, agent and its import
                                    reference, agent arguments)
     <out>/data/...                 results in the task's official format (MOT:
-                                   ``<sequence>.txt``), written atomically by the env
+                                   ``<sequence>.txt``), written atomically by the benchmark
     <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, action digest,
                                    fingerprint of the inputs, digest of the result files
     <out>/metrics.json             per-sequence and combined official metrics
 
-The runner knows no task: it relies on the environment's results contract
-(:class:`unitrack_env.envs.base.SequenceEnv`). A sequence counts as finished once its record
-exists; the record is written after the results, and every file is written with
-write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and never loses a
-finished sequence. Running again with the same ``out`` resumes: a finished sequence is kept
-only when its inputs (data files, agent and options) still have the recorded fingerprint and
-its result files still have the recorded digest; otherwise it is played again and the report
-says why. A sequence that fails (bad data, an agent error) does not stop the others; the run
-then raises :class:`RunFailed` naming each failure, after keeping every finished sequence.
+The runner knows no task: the environment plays, and the id's benchmark
+(:class:`unitrack_env.benchmarks.Benchmark`, named by the registration table) writes the
+results, knows which sequences can be scored and scores the folder. A sequence counts as
+finished once its record exists; the record is written after the results, and every file is
+written with write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and
+never loses a finished sequence. Running again with the same ``out`` resumes: a finished
+sequence is kept only when its inputs (data files, agent and options) still have the
+recorded fingerprint and its result files still have the recorded digest; otherwise it is
+played again and the report says why. A sequence that fails (bad data, an agent error) does
+not stop the others; the run then raises :class:`RunFailed` naming each failure, after
+keeping every finished sequence.
 """
 
 from __future__ import annotations
@@ -28,8 +30,7 @@ import json
 import math
 import os
 import shutil
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,8 @@ import unitrack_env
 from unitrack_env.agents.base import agent_class
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
+from unitrack_env.benchmarks import Benchmark, benchmark_for
+from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
 from unitrack_env.evaluation.identity import RunIdentity, result_digest
 from unitrack_env.evaluation.workers import SequenceFailure, play_in_workers
 from unitrack_env.io import atomic_write_text
@@ -93,33 +96,9 @@ class RunSpec:
         unitrack_env.register_all()
         return gym.make(self.env_id, **self.env_kwargs)
 
-
-@dataclass
-class SequenceRecord:
-    """What one finished episode left behind."""
-
-    sequence: str
-    frames: int
-    seconds: float
-    digest: str
-    episode_return: float
-    inputs: str = ""
-    results: str = ""
-
-    @property
-    def fps(self) -> float:
-        """Frames per second of the whole episode (env + agent)."""
-        return self.frames / self.seconds if self.seconds > 0 else float("inf")
-
-    def to_json(self) -> dict[str, Any]:
-        """The stored form (with the FPS for readers)."""
-        return asdict(self) | {"fps": self.fps}
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> SequenceRecord:
-        """Read a stored record (unknown keys ignored)."""
-        names = cls.__dataclass_fields__
-        return cls(**{key: value for key, value in data.items() if key in names})
+    def make_benchmark(self) -> Benchmark:
+        """Build the id's benchmark (writes, scores) for the same environment arguments."""
+        return benchmark_for(self.env_id, **self.env_kwargs)
 
 
 @dataclass
@@ -149,51 +128,12 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-def play_episode(
-    env: gym.Env,
-    agent: Any,
-    sequence: str,
-    *,
-    on_frame: Callable[[], None] | None = None,
-    on_reset: Callable[[dict[str, Any]], None] | None = None,
-) -> tuple[SequenceRecord, dict[str, Any]]:
-    """Play one sequence; return its record and the final info (results stay in the env).
-
-    The one episode loop of the project: the runner, video rendering and the regression
-    helpers all play through it. ``on_reset`` gets the reset info; ``on_frame`` is called
-    after every step.
-    """
-    start = time.perf_counter()
-    observation, info = env.reset(options={"sequence": sequence})
-    if on_reset is not None:
-        on_reset(info)
-    agent.reset(observation, info)
-    frames, total = 0, 0.0
-    terminated = truncated = False
-    while not (terminated or truncated):
-        try:
-            action = agent.act(observation)
-        except Exception as exc:
-            raise RuntimeError(
-                f"agent '{getattr(agent, 'name', '') or type(agent).__name__}' failed on "
-                f"sequence '{sequence}', frame {info.get('frame_index')}: "
-                f"{type(exc).__name__}: {exc}"
-            ) from exc
-        observation, reward, terminated, truncated, info = env.step(action)
-        total += float(reward)
-        frames += 1
-        if on_frame is not None:
-            on_frame()
-    seconds = time.perf_counter() - start
-    record = SequenceRecord(sequence, frames, seconds, env.unwrapped.episode_digest(), total)
-    return record, info
-
-
-def save_episode(out: Path, env: gym.Env, record: SequenceRecord) -> None:
+def save_episode(out: Path, env: gym.Env, record: SequenceRecord,
+                 benchmark: Benchmark) -> None:
     """Write the finished episode's results, then its record (the record marks it done)."""
     base = env.unwrapped
     try:
-        base.write_episode(out / "data")
+        benchmark.write(out / "data", record.sequence, recorded_results(env))
         record.results = result_digest(out / "data", record.sequence, base.sequence_names)
         atomic_write_text(out / "sequences" / f"{record.sequence}.json",
                           json.dumps(record.to_json(), indent=2))
@@ -264,9 +204,9 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
         raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
 
 
-def _play_here(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, todo: list[str],
-               inputs: dict[str, str], bar: Any) -> tuple[dict[str, SequenceRecord],
-                                                         dict[str, str]]:
+def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
+               todo: list[str], inputs: dict[str, str], bar: Any
+               ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     player = env
@@ -274,7 +214,8 @@ def _play_here(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, todo: lis
         for name in todo:
             bar.start_sequence(name)
             try:
-                record, _ = play_episode(player, agent_obj, name, on_frame=bar.advance)
+                record, _ = play_episode(player, agent_obj, name, benchmark=bench,
+                                         on_frame=bar.advance)
             except (ValueError, KeyError, OSError, RuntimeError) as exc:
                 failures[name] = SequenceFailure.describe(exc)
                 # A reset that raised leaves Gymnasium's checker wrapper without its first
@@ -284,7 +225,7 @@ def _play_here(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, todo: lis
                 player = spec.make_env()
                 continue
             record.inputs = inputs[name]
-            save_episode(out, player, record)
+            save_episode(out, player, record, bench)
             records[name] = record
     finally:
         if player is not env:
@@ -292,10 +233,10 @@ def _play_here(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, todo: lis
     return records, failures
 
 
-def _score_and_write(out: Path, spec: RunSpec, base: Any, names: list[str],
+def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str],
                      records: dict[str, SequenceRecord]) -> ScoreReport | None:
-    with_gt = [n for n in names if base.has_ground_truth(n)]
-    scores = base.score_folder(out / "data", with_gt) if with_gt else None
+    with_gt = bench.scorable(names)
+    scores = bench.score_folder(out / "data", with_gt) if with_gt else None
     payload: dict[str, Any] = {
         "env_id": spec.env_id,
         "agent": spec.agent,
@@ -353,6 +294,7 @@ def run(
         base = env.unwrapped
         names = base._select_sequences(list(sequences) if sequences is not None else None,
                                        list(base.sequence_names), env_id)
+        bench = spec.make_benchmark()
         agent_obj = cls(**agent_kwargs)
     except BaseException:
         env.close()
@@ -361,33 +303,35 @@ def run(
     inputs = {n: identity.sequence_fingerprint(base.sequence_inputs(n)) for n in names}
     try:
         _prepare_out(out, spec, overwrite)
-        report = _run_prepared(spec, env, agent_obj, out, names, inputs, workers, progress)
+        report = _run_prepared(spec, env, bench, agent_obj, out, names, inputs, workers,
+                               progress)
     finally:
         agent_obj.close()
         env.close()
     return report
 
 
-def _run_prepared(spec: RunSpec, env: gym.Env, agent_obj: Any, out: Path, names: list[str],
-                  inputs: dict[str, str], workers: int, progress: bool) -> RunReport:
+def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
+                  names: list[str], inputs: dict[str, str], workers: int,
+                  progress: bool) -> RunReport:
     base = env.unwrapped
     finished = [n for n in names if _record_path(out, n).is_file()]
     replayed = {n: why for n in finished
                 if (why := _stale_reason(out, base, n, inputs[n])) is not None}
     skipped = [n for n in finished if n not in replayed]
     todo = [n for n in names if n not in skipped]
-    lengths = {s: base.sequence_length(s) for s in todo}
+    lengths = {s: bench.sequence_length(s) for s in todo}
 
     from unitrack_env.evaluation.progress import RunProgress
 
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:
         if workers <= 1 or len(todo) <= 1:
-            records, failures = _play_here(spec, env, agent_obj, out, todo, inputs, bar)
+            records, failures = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar)
         else:
             records, failures = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
     if failures:
         raise RunFailed(failures, out)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
-    scores = _score_and_write(out, spec, base, names, records)
+    scores = _score_and_write(out, spec, bench, names, records)
     return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed)

@@ -11,21 +11,12 @@ import csv
 import io
 import json
 from collections.abc import Mapping
+from typing import Any
 
 from rich.table import Table
 
-#: Columns of the results table per task (the metrics' official names), most important first.
-TASK_COLUMNS: dict[str, tuple[str, ...]] = {
-    "mot": ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA", "MOTP", "CLR_FP", "CLR_FN",
-            "MT", "ML"),
-    "mots": ("HOTA", "sMOTSA", "IDF1", "IDSW", "DetA", "AssA", "MOTSA", "MOTSP", "CLR_FP",
-             "CLR_FN"),
-    "vis": ("AP", "AP50", "AP75", "AR"),
-    "posetrack": ("MOTA", "IDF1", "IDSW", "MOTP", "Precision", "Recall"),
-    "sot": ("AUC", "Precision@20px", "AverageOverlap"),
-    "vos": ("J&F-Mean", "J-Mean", "F-Mean", "J-Recall", "F-Recall", "J-Decay", "F-Decay"),
-    "pose-prop": ("PCK@0.1", "PCK@0.2"),
-}
+from unitrack_env.registration import variants
+
 #: Metrics that are counts (printed as integers, not percentages).
 COUNT_METRICS = frozenset({"IDSW", "CLR_FP", "CLR_FN", "CLR_TP", "MT", "ML", "PT", "Frag"})
 #: Columns shown for a task the table does not know: the first metrics found.
@@ -36,11 +27,28 @@ _COLUMN_OVERHEAD = 3
 Rows = Mapping[str, Mapping[str, float]]
 
 
+def __getattr__(name: str) -> Any:
+    # TASK_COLUMNS (before the benchmarks named their columns): derived, read-only use.
+    if name == "TASK_COLUMNS":
+        return task_column_table()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def task_column_table() -> dict[str, tuple[str, ...]]:
+    """Every registered task's result columns, from its benchmark, most important first."""
+    from unitrack_env.benchmarks import task_columns
+
+    return {task: task_columns(task) for task in dict.fromkeys(v.task for v in variants())}
+
+
 def table_columns(task: str, rows: list[Mapping[str, float]]) -> list[str]:
     """The task's columns that occur in ``rows`` (or the first metrics, for unknown tasks)."""
-    present = {key for row in rows for key in row}
-    if task in TASK_COLUMNS:
-        return [name for name in TASK_COLUMNS[task] if name in present]
+    from unitrack_env.benchmarks import task_columns
+
+    present = {name for row in rows for name in row}
+    columns = task_columns(task)
+    if columns:
+        return [name for name in columns if name in present]
     seen: list[str] = []
     for row in rows:
         seen += [key for key in row if key not in seen]

@@ -104,7 +104,7 @@ def render_episode(
 
     import unitrack_env
     from unitrack_env.agents import make_agent
-    from unitrack_env.evaluation.runner import play_episode
+    from unitrack_env.evaluation.episode import play_episode
 
     out = check_video_path(out)
     unitrack_env.register_all()

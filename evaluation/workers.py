@@ -66,15 +66,17 @@ def _init_worker(parent: int, threads: int) -> None:
 
 def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any]:
     """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``."""
-    from unitrack_env.evaluation.runner import OutputError, play_episode, save_episode
+    from unitrack_env.evaluation.episode import play_episode
+    from unitrack_env.evaluation.runner import OutputError, save_episode
 
     env = agent = None
     try:
         env = spec.make_env()
         agent = spec.make_agent()
-        record, _ = play_episode(env, agent, sequence)
+        bench = spec.make_benchmark()
+        record, _ = play_episode(env, agent, sequence, benchmark=bench)
         record.inputs = inputs
-        save_episode(Path(out), env, record)
+        save_episode(Path(out), env, record, bench)
         return "ok", record.to_json()
     except OutputError:
         raise
@@ -111,7 +113,7 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str
                     lengths: dict[str, int], workers: int,
                     bar: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """Play ``todo`` in ``workers`` processes; return (records, failures) by sequence."""
-    from unitrack_env.evaluation.runner import SequenceRecord
+    from unitrack_env.evaluation.episode import SequenceRecord
 
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}

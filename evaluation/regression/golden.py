@@ -14,7 +14,8 @@ import gymnasium as gym
 
 import unitrack_env
 from unitrack_env.agents import make_agent
-from unitrack_env.evaluation.runner import play_episode
+from unitrack_env.benchmarks import benchmark_for
+from unitrack_env.evaluation.episode import play_episode
 from unitrack_env.io import atomic_write_text
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
@@ -63,14 +64,19 @@ def record_episode(
     env_kwargs: dict[str, Any] | None = None,
     agent_kwargs: dict[str, Any] | None = None,
 ) -> EpisodeRecord:
-    """Play one episode and return its record (metrics from the env's final ``info``)."""
+    """Play one episode and return its record.
+
+    The metrics are the env's final ``info``; the action digest is the id's benchmark's digest
+    of the recorded results.
+    """
     unitrack_env.register_all()
     env_kwargs = dict(env_kwargs or {})
     agent_kwargs = dict(agent_kwargs or {})
     env = gym.make(env_id, **env_kwargs)
     tracker = make_agent(agent, **agent_kwargs)
     try:
-        record, info = play_episode(env, tracker, sequence)
+        bench = benchmark_for(env_id, **env_kwargs)
+        record, info = play_episode(env, tracker, sequence, benchmark=bench)
     finally:
         tracker.close()
         env.close()

@@ -99,7 +99,7 @@ def test_read_only_out_is_one_clear_line(tmp_path, capsys):  # pragma: no cover 
 def test_a_full_disk_keeps_finished_sequences(tmp_path, monkeypatch):
     import errno
 
-    import unitrack_env.envs.motchallenge as mot
+    import unitrack_env.benchmarks.motchallenge as mot
 
     out = tmp_path / "run"
     written = []

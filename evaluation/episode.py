@@ -1,0 +1,93 @@
+"""The one episode loop of the project, and the record of a played episode.
+
+The runner, video rendering and the regression helpers all play through :func:`play_episode`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import gymnasium as gym
+
+from unitrack_env.benchmarks import Benchmark
+
+
+@dataclass
+class SequenceRecord:
+    """What one finished episode left behind."""
+
+    sequence: str
+    frames: int
+    seconds: float
+    digest: str
+    episode_return: float
+    inputs: str = ""
+    results: str = ""
+
+    @property
+    def fps(self) -> float:
+        """Frames per second of the whole episode (env + agent)."""
+        return self.frames / self.seconds if self.seconds > 0 else float("inf")
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form (with the FPS for readers)."""
+        return asdict(self) | {"fps": self.fps}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> SequenceRecord:
+        """Read a stored record (unknown keys ignored)."""
+        names = cls.__dataclass_fields__
+        return cls(**{key: value for key, value in data.items() if key in names})
+
+
+def recorded_results(env: gym.Env) -> Any:
+    """What the environment recorded in its episode, in its benchmark's ``results`` form."""
+    base = env.unwrapped
+    if hasattr(base, "episode_results"):
+        return base.episode_results()
+    return base.episode_predictions()
+
+
+def play_episode(
+    env: gym.Env,
+    agent: Any,
+    sequence: str,
+    *,
+    benchmark: Benchmark | None = None,
+    on_frame: Callable[[], None] | None = None,
+    on_reset: Callable[[dict[str, Any]], None] | None = None,
+) -> tuple[SequenceRecord, dict[str, Any]]:
+    """Play one sequence; return its record and the final info (results stay in the env).
+
+    The record's digest is ``benchmark``'s digest of the recorded results (without a
+    benchmark, the environment's own). ``on_reset`` gets the reset info; ``on_frame`` is
+    called after every step.
+    """
+    start = time.perf_counter()
+    observation, info = env.reset(options={"sequence": sequence})
+    if on_reset is not None:
+        on_reset(info)
+    agent.reset(observation, info)
+    frames, total = 0, 0.0
+    terminated = truncated = False
+    while not (terminated or truncated):
+        try:
+            action = agent.act(observation)
+        except Exception as exc:
+            raise RuntimeError(
+                f"agent '{getattr(agent, 'name', '') or type(agent).__name__}' failed on "
+                f"sequence '{sequence}', frame {info.get('frame_index')}: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+        observation, reward, terminated, truncated, info = env.step(action)
+        total += float(reward)
+        frames += 1
+        if on_frame is not None:
+            on_frame()
+    seconds = time.perf_counter() - start
+    digest = (benchmark.digest(recorded_results(env)) if benchmark is not None
+              else env.unwrapped.episode_digest())
+    return SequenceRecord(sequence, frames, seconds, digest, total), info
