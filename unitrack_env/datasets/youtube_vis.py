@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.datasets.mots import check_rle
+from unitrack_env.datasets.rle import check_rle
 from unitrack_env.errors import DataFormatError
 
 #: Splits of the 2019 release.

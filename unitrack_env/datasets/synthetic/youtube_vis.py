@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.mots import encode_masks
+from unitrack_env.datasets.rle import encode_masks
 from unitrack_env.datasets.synthetic.motchallenge import SequenceSpec
 from unitrack_env.datasets.synthetic.mots import MaskNoise, simulate_frame
 from unitrack_env.datasets.synthetic.scene import ObjectRole, SceneConfig, render_scene
