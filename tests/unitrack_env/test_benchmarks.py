@@ -47,13 +47,14 @@ def _same(a: dict, b: dict) -> None:
             assert math.isnan(b[key])
 
 
-def _play(env, agent, name: str) -> None:
+def _play(env, agent, name: str) -> dict:
     observation, info = env.reset(options={"sequence": name})
     agent.reset(observation, info)
     done = False
     while not done:
         observation, _, terminated, truncated, info = env.step(agent.act(observation))
         done = terminated or truncated
+    return info
 
 
 @pytest.mark.parametrize("env_id", ALL_IDS)
@@ -69,9 +70,11 @@ def test_benchmark_writes_and_scores_like_the_env(env_id, tmp_path):
         for name in names:
             assert bench.sequence_length(name) == env.sequence_length(name)
             assert bench.has_ground_truth(name) == env.has_ground_truth(name)
-            _play(env, agent, name)
+            info = _play(env, agent, name)
             env.write_episode(tmp_path / "env")
             results = _results(env)
+            if hasattr(bench, "score_sequence") and "metrics" in info:
+                _same(bench.score_sequence(name, results), info["metrics"])
             bench.write(tmp_path / "bench", name, results)
             assert bench.digest(results) == env.episode_digest()
             assert bench.read(tmp_path / "bench", name) is not None
