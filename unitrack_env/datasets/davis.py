@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.datasets.otb import read_image_size
+from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.io import atomic_write_bytes
 

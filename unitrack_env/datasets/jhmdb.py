@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.datasets.otb import read_image_size
+from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.spaces import COORD_MAX
 

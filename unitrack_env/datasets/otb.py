@@ -42,20 +42,36 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from unitrack_env.datasets.lasot import GOT10kDataset, LaSOTDataset
+from unitrack_env.datasets.sot import (
+    BOX_FIELDS,
+    IMAGE_EXTENSIONS,
+    SOTSequence,
+    numbered_images,
+    read_box_file,
+    read_image_size,
+    select_frames,
+)
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
-IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".bmp")
-"""Frame file extensions recognised in image folders."""
+__all__ = [
+    "IMAGE_EXTENSIONS",
+    "OTB_GT_PATTERN",
+    "GOT10kDataset",
+    "LaSOTDataset",
+    "OTBDataset",
+    "OTBSequenceSpec",
+    "SOTSequence",
+    "canonical_otb_name",
+    "read_box_file",
+    "read_image_size",
+]
+
 
 OTB_GT_PATTERN = re.compile(r"^groundtruth_rect(?:\.(\d+))?\.txt$")
 """``groundtruth_rect.txt`` or ``groundtruth_rect.<k>.txt`` (target ``k`` of the folder)."""
-
-_SEPARATORS = re.compile(r"[,\s]+")
-_BOX_FIELDS = ("x", "y", "w", "h")
-
 
 @dataclass(frozen=True)
 class OTBSequenceSpec:
@@ -128,118 +144,6 @@ def canonical_otb_name(name: str) -> str:
     return re.sub(r"[_\-](\d+)$", r".\1", name) if re.search(r"[_\-]\d+$", name) else name
 
 
-@dataclass(frozen=True)
-class SOTSequence:
-    """One single-object sequence: frames and the target's boxes.
-
-    Attributes:
-        name: sequence name (OTB: ``Jogging.1``; LaSOT: ``airplane-1``).
-        frame_paths: image file of every frame, in order.
-        frame_numbers: the benchmark's own number of every frame (from the file names).
-        boxes: ``(num_frames, 4)`` float64 ``(x, y, w, h)`` as written in the file (1-based
-            pixels). Rows with NaN have no annotation (GOT-10k test frames after the first,
-            LaSOT/UAV "NaN" rows); OTB marks an absent target with a non-positive box.
-        image_size: ``(width, height)`` of the first frame.
-        absent: ``(num_frames,)`` bool where the benchmark flags the target as not visible
-            (LaSOT full occlusion or out of view, GOT-10k ``absence.label``); all False for OTB.
-        benchmark: ``"OTB"``, ``"LaSOT"`` or ``"GOT-10k"``.
-    """
-
-    name: str
-    frame_paths: tuple[Path, ...]
-    frame_numbers: tuple[int, ...]
-    boxes: np.ndarray
-    image_size: tuple[int, int]
-    absent: np.ndarray
-    benchmark: str
-
-    def __post_init__(self) -> None:
-        n = len(self.frame_paths)
-        if self.boxes.shape != (n, 4) or self.absent.shape != (n,) or len(
-            self.frame_numbers) != n:
-            raise ValueError(f"{self.name}: frames, boxes and flags disagree in length")
-        self.boxes.setflags(write=False)
-        self.absent.setflags(write=False)
-
-    @property
-    def num_frames(self) -> int:
-        """Number of frames of the sequence."""
-        return len(self.frame_paths)
-
-    @property
-    def init_box(self) -> np.ndarray:
-        """The target's box in the first frame (what a tracker is given)."""
-        return self.boxes[0]
-
-    @property
-    def has_ground_truth(self) -> bool:
-        """Whether frames after the first are annotated (False on GOT-10k test)."""
-        return bool(np.isfinite(self.boxes[1:]).any()) if self.num_frames > 1 else True
-
-
-def read_image_size(path: str | Path) -> tuple[int, int]:
-    """Return ``(width, height)`` of an image file.
-
-    Raises:
-        DataFormatError: the file is missing or not a decodable image.
-    """
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DataFormatError(path, "missing or not a readable image")
-    return int(image.shape[1]), int(image.shape[0])
-
-
-def read_box_file(path: str | Path, *, allow_nan: bool = True) -> np.ndarray:
-    """Read an ``x,y,w,h`` box file with comma, tab or space separators (any mix).
-
-    Args:
-        path: the ground-truth file.
-        allow_nan: accept ``NaN`` entries (LaSOT/UAV write them for unannotated frames).
-
-    Returns:
-        ``(n, 4)`` float64, one row per non-empty line.
-
-    Raises:
-        DataFormatError: a line does not hold exactly four numbers, or a blank line is
-            followed by more data (it would shift every later frame).
-    """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as err:
-        raise DataFormatError(path, f"cannot read box file ({err})") from err
-    rows: list[list[float]] = []
-    blank_at: int | None = None
-    for number, line in enumerate(text.splitlines(), start=1):
-        content = line.strip().strip(",")
-        if not content:
-            blank_at = blank_at or number
-            continue
-        if blank_at is not None:
-            raise DataFormatError(path, "blank line inside the box list", line=blank_at)
-        parts = _SEPARATORS.split(content)
-        if len(parts) != 4:
-            raise DataFormatError(
-                path, f"expected 4 numbers x,y,w,h, found {len(parts)}: {content!r}", line=number
-            )
-        values = []
-        for field_name, part in zip(_BOX_FIELDS, parts, strict=True):
-            try:
-                value = float(part)
-            except ValueError:
-                raise DataFormatError(
-                    path, f"not a number: {part!r}", line=number, field=field_name
-                ) from None
-            if np.isinf(value) or (np.isnan(value) and not allow_nan):
-                raise DataFormatError(path, f"invalid value {part!r}", line=number,
-                                      field=field_name)
-            values.append(value)
-        rows.append(values)
-    if not rows:
-        raise DataFormatError(path, "contains no boxes")
-    return np.asarray(rows, dtype=np.float64)
-
-
 def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
     """Refuse ground truth the episode cannot start from or score (rows from ``first`` on).
 
@@ -261,50 +165,7 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
         i, col = (int(v) for v in np.argwhere(outside)[0])
         raise DataFormatError(
             path, f"{rows[i, col]:g} is outside the observation bounds [-{COORD_MAX:g}, "
-                  f"{COORD_MAX:g}] pixels", line=first + i + 1, field=_BOX_FIELDS[col])
-
-
-def _read_flags(path: Path, expected: int) -> np.ndarray:
-    """Read 0/1 flags written one per line or comma-separated on one line."""
-    try:
-        tokens = [t for t in _SEPARATORS.split(path.read_text(encoding="utf-8-sig")) if t]
-    except OSError as err:
-        raise DataFormatError(path, f"cannot read flag file ({err})") from err
-    if len(tokens) != expected:
-        raise DataFormatError(path, f"has {len(tokens)} flags, expected {expected} (one per frame)")
-    try:
-        values = np.array([int(float(t)) for t in tokens])
-    except ValueError as err:
-        raise DataFormatError(path, f"flags must be 0 or 1 ({err})") from None
-    if not np.isin(values, (0, 1)).all():
-        raise DataFormatError(path, "flags must be 0 or 1")
-    return values.astype(bool)
-
-
-def _numbered_images(folder: Path) -> dict[int, Path]:
-    """Map the integer stem of every image in ``folder`` to its path."""
-    if not folder.is_dir():
-        raise DataFormatError(folder, "image folder missing")
-    images: dict[int, Path] = {}
-    for p in folder.iterdir():
-        if p.suffix.lower() in IMAGE_EXTENSIONS and p.stem.isdigit():
-            images.setdefault(int(p.stem), p)
-    if not images:
-        kinds = ", ".join(IMAGE_EXTENSIONS)
-        raise DataFormatError(folder, f"contains no numbered images ({kinds})")
-    return images
-
-
-def _select_frames(folder: Path, numbers: range) -> tuple[Path, ...]:
-    images = _numbered_images(folder)
-    missing = [n for n in numbers if n not in images]
-    if missing:
-        raise DataFormatError(
-            folder / f"{missing[0]:04d}.jpg",
-            f"missing frame {missing[0]} ({len(missing)} of frames {numbers.start}-"
-            f"{numbers.stop - 1} missing)",
-        )
-    return tuple(images[n] for n in numbers)
+                  f"{COORD_MAX:g}] pixels", line=first + i + 1, field=BOX_FIELDS[col])
 
 
 class OTBDataset:
@@ -398,13 +259,13 @@ class OTBDataset:
         else:
             folder, gt_path = spec
             boxes = read_box_file(gt_path)
-            first, omit = min(_numbered_images(folder / "img")), 0
+            first, omit = min(numbered_images(folder / "img")), 0
         if len(boxes) <= omit:
             raise DataFormatError(gt_path, f"needs more than {omit} rows")
         _check_boxes(gt_path, boxes, omit)
         boxes = boxes[omit:]
         numbers = range(first + omit, first + omit + len(boxes))
-        frames = _select_frames(folder / "img", numbers)
+        frames = select_frames(folder / "img", numbers)
         return SOTSequence(
             name=name,
             frame_paths=frames,
@@ -415,112 +276,3 @@ class OTBDataset:
             benchmark="OTB",
         )
 
-
-class LaSOTDataset:
-    """LaSOT: ``<root>/<class>/<class>-<n>/{img/*.jpg, groundtruth.txt, ...}``.
-
-    ``absent`` = ``full_occlusion.txt`` OR ``out_of_view.txt`` (pytracking's
-    ``target_visible`` is its negation). Frames are the sorted ``img/`` images, which must
-    number exactly as many as the ground-truth rows.
-
-    Args:
-        root: the LaSOT folder holding the class folders.
-        split_file: optional text file listing sequence names one per line (e.g. the
-            official ``testing_set.txt``); without it every sequence found is listed.
-    """
-
-    def __init__(self, root: str | Path, split_file: str | Path | None = None) -> None:
-        self.root = Path(root)
-        if not self.root.is_dir():
-            raise DataFormatError(self.root, "LaSOT root folder missing")
-        found = {
-            seq.name: seq
-            for cls in sorted(self.root.iterdir()) if cls.is_dir()
-            for seq in sorted(cls.iterdir()) if (seq / "groundtruth.txt").is_file()
-        }
-        if split_file is not None:
-            wanted = [s.strip() for s in Path(split_file).read_text().splitlines() if s.strip()]
-            missing = [s for s in wanted if s not in found]
-            if missing:
-                raise DataFormatError(split_file, f"lists sequences not under {self.root}: "
-                                      f"{', '.join(missing[:5])}")
-            found = {s: found[s] for s in wanted}
-        if not found:
-            raise DataFormatError(self.root, "no <class>/<sequence>/groundtruth.txt found")
-        self._dirs = found
-        self.sequence_names: list[str] = list(found)
-
-    def __len__(self) -> int:
-        return len(self.sequence_names)
-
-    def load(self, name: str) -> SOTSequence:
-        """Read one sequence."""
-        if name not in self._dirs:
-            raise UnknownSequenceError(f"no LaSOT sequence '{name}' in {self.root}")
-        seq = self._dirs[name]
-        boxes = read_box_file(seq / "groundtruth.txt")
-        images = _numbered_images(seq / "img")
-        numbers = sorted(images)
-        if len(numbers) != len(boxes):
-            raise DataFormatError(
-                seq / "groundtruth.txt",
-                f"has {len(boxes)} rows but img/ holds {len(numbers)} frames",
-            )
-        absent = np.zeros(len(boxes), dtype=bool)
-        for flag_file in ("full_occlusion.txt", "out_of_view.txt"):
-            if (seq / flag_file).is_file():
-                absent |= _read_flags(seq / flag_file, len(boxes))
-        frames = tuple(images[n] for n in numbers)
-        return SOTSequence(name, frames, tuple(numbers), boxes, read_image_size(frames[0]),
-                           absent, "LaSOT")
-
-
-class GOT10kDataset:
-    """GOT-10k: ``<root>/<split>/<seq>/{*.jpg, groundtruth.txt, absence.label}``.
-
-    On the test split ``groundtruth.txt`` holds only the first frame's box; the other rows
-    are NaN and :attr:`SOTSequence.has_ground_truth` is False.
-
-    Args:
-        root: the GOT-10k folder holding ``train/``, ``val/``, ``test/``.
-        split: sub-folder to read.
-    """
-
-    def __init__(self, root: str | Path, split: str = "val") -> None:
-        self.split_dir = Path(root) / split
-        if not self.split_dir.is_dir():
-            raise DataFormatError(self.split_dir, "GOT-10k split folder missing")
-        listing = self.split_dir / "list.txt"
-        if listing.is_file():
-            names = [s.strip() for s in listing.read_text().splitlines() if s.strip()]
-        else:
-            names = sorted(p.name for p in self.split_dir.iterdir()
-                           if (p / "groundtruth.txt").is_file())
-        if not names:
-            raise DataFormatError(self.split_dir, "no <seq>/groundtruth.txt found")
-        self.sequence_names: list[str] = names
-
-    def __len__(self) -> int:
-        return len(self.sequence_names)
-
-    def load(self, name: str) -> SOTSequence:
-        """Read one sequence."""
-        if name not in self.sequence_names:
-            raise UnknownSequenceError(f"no GOT-10k sequence '{name}' in {self.split_dir}")
-        seq = self.split_dir / name
-        images = _numbered_images(seq)
-        numbers = sorted(images)
-        boxes = read_box_file(seq / "groundtruth.txt")
-        if len(boxes) == 1 and len(numbers) > 1:  # test split: first frame only
-            boxes = np.vstack([boxes, np.full((len(numbers) - 1, 4), np.nan)])
-        if len(boxes) != len(numbers):
-            raise DataFormatError(
-                seq / "groundtruth.txt",
-                f"has {len(boxes)} rows but the folder holds {len(numbers)} frames",
-            )
-        absent = np.zeros(len(numbers), dtype=bool)
-        if (seq / "absence.label").is_file():
-            absent = _read_flags(seq / "absence.label", len(numbers))
-        frames = tuple(images[n] for n in numbers)
-        return SOTSequence(name, frames, tuple(numbers), boxes, read_image_size(frames[0]),
-                           absent, "GOT-10k")

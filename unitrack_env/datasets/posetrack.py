@@ -231,7 +231,7 @@ class PoseTrackDataset:
         if "width" in first.extra and "height" in first.extra:
             size = (int(first.extra["width"]), int(first.extra["height"]))
         else:
-            from unitrack_env.datasets.otb import read_image_size
+            from unitrack_env.datasets.sot import read_image_size
 
             size = read_image_size(paths[0])
         return PoseTrackSequence(name, self.split, images, paths, video, size, annotation)
