@@ -8,11 +8,14 @@ these fields from :class:`AppearanceSpec`, so the options a user passes
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
     from unitrack_env.agents.appearance.model import AppearanceModel
+
+SpecT = TypeVar("SpecT", bound="AppearanceSpec")
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,19 @@ class AppearanceSpec:
     device: str = "cpu"
     num_threads: int | None = None
     runtime: str | None = None
+
+    @classmethod
+    def from_options(cls: type[SpecT], agent: str, options: Mapping[str, Any]) -> SpecT:
+        """The config ``cls(**options)`` of the agent named ``agent``.
+
+        Raises:
+            TypeError: An unknown option; the message names the agent and the valid options.
+        """
+        try:
+            return cls(**options)
+        except TypeError as exc:
+            valid = ", ".join(f.name for f in fields(cls))
+            raise TypeError(f"{agent}: {exc}; valid options: {valid}") from None
 
     def appearance(self) -> AppearanceSpec:
         """This config's appearance fields alone (a plain :class:`AppearanceSpec`)."""

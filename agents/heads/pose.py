@@ -30,14 +30,14 @@ correspondence).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import AppearanceModel, torch_threads
+from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.vos import build_model, make_propagation_config
 from unitrack_env.agents.primitives.label_propagation import LabelPropagator
@@ -59,18 +59,13 @@ MIN_PEAK: float = 1e-3
 
 
 @dataclass(frozen=True)
-class UniTrackPoseConfig:
+class UniTrackPoseConfig(AppearanceSpec):
     """Options of the ``unitrack-pose`` agent.
 
+    The appearance model's fields (``weights``, ``arch``, ``layer``, ``remap``, ``device``,
+    ``num_threads``, ``runtime``) come from :class:`AppearanceSpec`.
+
     Attributes:
-        weights: Appearance-model weights (``"imagenet-lite0"`` default, offline; ``"random"``;
-            a checkpoint path, ...).
-        arch: Backbone architecture (None: the weights' own).
-        layer: Output layer (None: the architecture's default stride-8 layer).
-        device: Torch device.
-        num_threads: Torch threads while the agent acts (None: torch's setting).
-        runtime: Appearance-model runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``,
-            ``"auto"`` (fastest installed) or None (``$UNITRACK_RUNTIME``, default torch).
         input_size: ``(width, height)`` the frames are resized to (None: native size).
         sigma_eta: ``eta`` of ``sigma = max(eta * s_body, min_sigma)``.
         min_sigma: Least sigma (feature pixels).
@@ -79,12 +74,6 @@ class UniTrackPoseConfig:
         propagation: Fields of :class:`LabelPropagationConfig` to override.
     """
 
-    weights: str = "imagenet-lite0"
-    arch: str | None = None
-    layer: str | None = None
-    device: str = "cpu"
-    num_threads: int | None = None
-    runtime: str | None = None
     input_size: tuple[int, int] | None = POSE_INPUT_SIZE
     sigma_eta: float = SIGMA_ETA
     min_sigma: float = MIN_SIGMA
@@ -155,11 +144,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
 
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
-        try:
-            self.config = UniTrackPoseConfig(**options)
-        except TypeError as exc:
-            valid = ", ".join(f.name for f in fields(UniTrackPoseConfig))
-            raise TypeError(f"unitrack-pose: {exc}; valid options: {valid}") from None
+        self.config = UniTrackPoseConfig.from_options("unitrack-pose", options)
         self.model = build_model(self.config, appearance_model)
         self.propagator = LabelPropagator(make_propagation_config(self.config.propagation))
         self.sigma = self.config.min_sigma

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import AppearanceModel, torch_threads
+from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.vos import build_model
 from unitrack_env.agents.primitives.box_propagation import (
@@ -34,29 +34,18 @@ OTB_PIXEL_ORIGIN: float = 1.0
 
 
 @dataclass(frozen=True)
-class UniTrackSOTConfig:
+class UniTrackSOTConfig(AppearanceSpec):
     """Options of the ``unitrack-xcorr`` / ``unitrack-dcf`` agents.
 
+    The appearance model's fields (``weights``, ``arch``, ``layer``, ``remap``, ``device``,
+    ``num_threads``, ``runtime``) come from :class:`AppearanceSpec`.
+
     Attributes:
-        weights: Appearance-model weights (``"imagenet-lite0"`` default, offline;
-            ``"random"``; a checkpoint path, ...).
-        arch: Backbone architecture (None: the weights' own).
-        layer: Output layer (None: the architecture's default stride-8 layer).
-        device: Torch device.
-        num_threads: Torch threads while the agent acts (None: torch's setting).
-        runtime: Appearance-model runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``,
-            ``"auto"`` (fastest installed) or None (``$UNITRACK_RUNTIME``, default torch).
         pixel_origin: Coordinate of the first pixel in the boxes (OTB: 1).
         propagation: Fields of :class:`BoxPropagationConfig` to override (crop_size,
             context, scale_step, dcf_lambda, ...; ``method`` is set by the agent).
     """
 
-    weights: str = "imagenet-lite0"
-    arch: str | None = None
-    layer: str | None = None
-    device: str = "cpu"
-    num_threads: int | None = None
-    runtime: str | None = None
     pixel_origin: float = OTB_PIXEL_ORIGIN
     propagation: dict[str, Any] | None = None
 
@@ -70,11 +59,7 @@ class _UniTrackSOTAgent(Agent):
 
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
-        try:
-            self.config = UniTrackSOTConfig(**options)
-        except TypeError as exc:
-            valid = ", ".join(f.name for f in fields(UniTrackSOTConfig))
-            raise TypeError(f"{self.name}: {exc}; valid options: {valid}") from None
+        self.config = UniTrackSOTConfig.from_options(self.name, options)
         overrides = dict(self.config.propagation or {})
         overrides["method"] = self.method
         try:

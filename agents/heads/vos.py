@@ -26,7 +26,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance import AppearanceModel, torch_threads
+from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
 
@@ -35,30 +35,20 @@ VOID_LABEL: int = 255
 
 
 @dataclass(frozen=True)
-class UniTrackVOSConfig:
+class UniTrackVOSConfig(AppearanceSpec):
     """Options of the ``unitrack-vos`` agent.
 
+    The appearance model's fields (``weights``, ``arch``, ``layer``, ``remap``, ``device``,
+    ``num_threads``, ``runtime``) come from :class:`AppearanceSpec`
+    (``weights="random"`` is the paper's random-init baseline).
+
     Attributes:
-        weights: Appearance-model weights (``"imagenet-lite0"`` default, offline; ``"random"``
-            is the paper's random-init baseline; a checkpoint path, ...).
-        arch: Backbone architecture (None: the weights' own).
-        layer: Output layer (None: the architecture's default stride-8 layer).
-        device: Torch device.
-        num_threads: Torch threads while the agent acts (None: torch's setting).
-        runtime: Appearance-model runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``,
-            ``"auto"`` (fastest installed) or None (``$UNITRACK_RUNTIME``, default torch).
         propagation: Fields of :class:`LabelPropagationConfig` to override (memory_size,
             radius, topk, temperature, ...).
         antialias: Antialias the bilinear downsampling of the first frame's labels to the
             feature grid (averages each cell's pixels instead of sampling 2 x 2 of them).
     """
 
-    weights: str = "imagenet-lite0"
-    arch: str | None = None
-    layer: str | None = None
-    device: str = "cpu"
-    num_threads: int | None = None
-    runtime: str | None = None
     propagation: dict[str, Any] | None = None
     antialias: bool = True
 
@@ -76,16 +66,9 @@ def make_propagation_config(options: dict[str, Any] | None) -> LabelPropagationC
         raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
 
 
-def build_model(config: Any, model: AppearanceModel | None) -> AppearanceModel:
-    """The shared model if given, else one built from ``config``'s model options.
-
-    Those are ``weights``, ``arch``, ``layer``, ``device``, ``num_threads`` and ``runtime``.
-    """
-    if model is not None:
-        return model
-    return AppearanceModel(config.weights, arch=config.arch, layer=config.layer,
-                           device=config.device, runtime=getattr(config, "runtime", None),
-                           num_threads=config.num_threads)
+def build_model(config: AppearanceSpec, model: AppearanceModel | None) -> AppearanceModel:
+    """The shared model if given, else the one ``config``'s appearance fields name."""
+    return model if model is not None else config.build()
 
 
 def labels_to_onehot(labels: np.ndarray, object_ids: tuple[int, ...]) -> torch.Tensor:
@@ -119,11 +102,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
 
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
-        try:
-            self.config = UniTrackVOSConfig(**options)
-        except TypeError as exc:
-            valid = ", ".join(f.name for f in fields(UniTrackVOSConfig))
-            raise TypeError(f"unitrack-vos: {exc}; valid options: {valid}") from None
+        self.config = UniTrackVOSConfig.from_options("unitrack-vos", options)
         self.model = build_model(self.config, appearance_model)
         self.propagator = LabelPropagator(self.config.propagation_config())
         self.object_ids: tuple[int, ...] = ()
