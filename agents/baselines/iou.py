@@ -118,10 +118,7 @@ class IoUAgent(Agent, name="iou", tasks=("mot", "mots", "vis", "posetrack")):
     @property
     def max_tracks(self) -> int:
         """Action capacity of box and pose tracks."""
-        if self._max_tracks is not None:
-            return int(self._max_tracks)
-        capacity = self.adapter.capacities.get("max_tracks")
-        return int(capacity) if capacity else default_max_tracks(self.task)
+        return self.adapter.max_tracks
 
     def _start(self, task: str, info: dict[str, Any], frame_rate: float) -> None:
         """Set up the adapter and the tracker of ``task`` for a new episode."""

@@ -92,6 +92,11 @@ class ObservationAdapter(abc.ABC):
         self.task = task
         self.capacities = dict(capacities or {})
 
+    @property
+    def max_tracks(self) -> int:
+        """Action capacity of box and pose tracks (else: the environments' default)."""
+        return int(self.capacities.get("max_tracks") or default_max_tracks(self.task))
+
     @abc.abstractmethod
     def detections(self, observation: Mapping[str, Any]) -> Detections:
         """The frame's ``num_detections`` (or ``num_people``) detections."""
@@ -108,16 +113,10 @@ class ObservationAdapter(abc.ABC):
 class BoxAdapter(ObservationAdapter):
     """MOT boxes: ``boxes``/``scores``/``num_detections`` in; ``ids``/``boxes`` out.
 
-    ``max_tracks`` is the action capacity (``capacities["max_tracks"]``, else the MOT
-    environments' default).
+    The action is padded to :attr:`max_tracks`.
     """
 
     kind = "boxes"
-
-    @property
-    def max_tracks(self) -> int:
-        """Action capacity."""
-        return int(self.capacities.get("max_tracks") or default_max_tracks(self.task))
 
     def detections(self, observation: Mapping[str, Any]) -> Detections:
         """The frame's detection boxes and scores."""
@@ -164,16 +163,10 @@ class MaskAdapter(ObservationAdapter):
 class PoseAdapter(ObservationAdapter):
     """PoseTrack poses: ``keypoints``/``scores``/``num_people`` in; ids and poses out.
 
-    The reported poses are the matched observed poses; ``max_tracks`` is the action capacity
-    (``capacities["max_tracks"]``, else the PoseTrack environment's default).
+    The reported poses are the matched observed poses, padded to :attr:`max_tracks`.
     """
 
     kind = "poses"
-
-    @property
-    def max_tracks(self) -> int:
-        """Action capacity."""
-        return int(self.capacities.get("max_tracks") or default_max_tracks(self.task))
 
     def detections(self, observation: Mapping[str, Any]) -> Detections:
         """The frame's poses and their scores."""

@@ -1,0 +1,111 @@
+"""Object features of one frame for the ``unitrack`` association agent.
+
+The frame is letterboxed to the network input and run through the appearance model once
+(a stride-8 feature map, served by the feature cache when one is on); then
+
+* a box is RoIAlign-pooled into a tall ``roi_size`` grid (default 10 x 4, 40 locations);
+* a mask (or a pose drawn as a mask) gives its in-mask feature cells, a variable-size set
+  capped at ``max_area`` locations by rescaling
+  (:func:`~unitrack_env.agents.primitives.mask_features.mask_location_features`).
+
+Every location feature is L2-normalised.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from unitrack_env.agents.appearance import (
+    AppearanceModel,
+    CachedAppearanceModel,
+    Letterbox,
+    content_key,
+    letterbox,
+    letterbox_layout,
+)
+from unitrack_env.agents.appearance.model import LETTERBOX_PAD_VALUE
+from unitrack_env.agents.primitives.mask_features import LocalMask, mask_location_features
+from unitrack_env.agents.primitives.roi_align import roi_align
+from unitrack_env.agents.primitives.similarity import ObjectFeatures
+from unitrack_env.geometry import xywh_to_xyxy
+
+
+class RegionFeatures:
+    """Box and mask features of a frame from one appearance model.
+
+    Args:
+        model: The appearance model, possibly wrapped by the feature cache.
+        stride: The model's feature stride.
+        input_size: ``(width, height)`` of the letterboxed network input.
+        roi_size: ``(rows, columns)`` of the RoIAlign grid of a box.
+        sampling_ratio: Bilinear samples per RoIAlign bin and axis (boxes and masks).
+        pixel_origin: Coordinate of the first pixel in box observations (MOTChallenge: 1).
+    """
+
+    def __init__(self, model: AppearanceModel | CachedAppearanceModel, stride: int, *,
+                 input_size: tuple[int, int], roi_size: tuple[int, int], sampling_ratio: int,
+                 pixel_origin: float) -> None:
+        self.model = model
+        self.stride = stride
+        self.input_size = tuple(input_size)
+        self.roi_size = tuple(roi_size)
+        self.sampling_ratio = sampling_ratio
+        self.pixel_origin = pixel_origin
+
+    def feature_map(self, frame: np.ndarray) -> tuple[torch.Tensor, Letterbox]:
+        """Letterbox ``frame`` and return its ``(1, C, h, w)`` feature map and the letterbox.
+
+        With the feature cache, entries are keyed by a hash of the original frame (and the
+        letterbox), so a hit needs only the letterbox geometry (no resize).
+        """
+        size = self.input_size
+        if not isinstance(self.model, CachedAppearanceModel):
+            boxed = letterbox(np.ascontiguousarray(frame), size)
+            return self.model.features(boxed.image), boxed
+        key = content_key(frame, f"letterbox {size[0]}x{size[1]} pad {LETTERBOX_PAD_VALUE}")
+        fmap = self.model.lookup((size[1], size[0]), key)
+        if fmap is not None:
+            return fmap, letterbox_layout(frame.shape[0], frame.shape[1], size)
+        boxed = letterbox(np.ascontiguousarray(frame), size)
+        return self.model.features(boxed.image, keys=[key]), boxed
+
+    def boxes(self, frame: np.ndarray, boxes_xywh: np.ndarray) -> list[torch.Tensor]:
+        """L2-normalised location features ``(rows * cols, C)`` of each box of one frame.
+
+        Args:
+            frame: uint8 RGB ``(H, W, 3)`` frame.
+            boxes_xywh: ``(n, 4)`` boxes in the observation's coordinates.
+        """
+        fmap, boxed = self.feature_map(frame)
+        xyxy = xywh_to_xyxy(boxes_xywh) - self.pixel_origin
+        rois = torch.as_tensor(boxed.boxes_to_features(xyxy, self.stride), dtype=fmap.dtype)
+        pooled = roi_align(
+            fmap, rois, self.roi_size, spatial_scale=1.0, sampling_ratio=self.sampling_ratio,
+        )  # (n, C, rows, cols)
+        locations = pooled.flatten(2).transpose(1, 2)  # (n, rows * cols, C), row-major
+        locations = F.normalize(locations, dim=2)
+        return list(locations.unbind(0))
+
+    def masks(self, frame: np.ndarray, masks: Sequence[LocalMask],
+              max_area: int | None) -> list[ObjectFeatures]:
+        """In-mask location features of each (non-empty) mask of one frame.
+
+        Args:
+            frame: uint8 RGB ``(H, W, 3)`` frame.
+            masks: Masks in the frame's pixels (drawn poses included).
+            max_area: Most location features per mask (None: no cap).
+
+        Returns:
+            One ``ObjectFeatures`` per mask: ``(s_i, C)`` L2-normalised features, at most
+            ``max_area`` of them, with their feature-cell positions.
+        """
+        fmap, boxed = self.feature_map(frame)
+        stride = self.stride
+        return mask_location_features(
+            fmap, masks, lambda b: boxed.boxes_to_features(b, stride),
+            max_area=max_area, sampling_ratio=self.sampling_ratio,
+        )
