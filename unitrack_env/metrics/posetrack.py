@@ -47,295 +47,58 @@ we return fractions. poseval's MOTP with py-motmetrics >= 1.2 also sums the dist
 unmatched candidate pairs (``events['D']`` then holds RAW rows); we keep its original meaning,
 the matched distances.
 """
-
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
-from types import MappingProxyType
+from dataclasses import dataclass
 
-import cv2
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from unitrack_env.datasets.posetrack import (
-    POSETRACK_KEYPOINTS,
-    PoseTrackPerson,
     PoseTrackVideo,
 )
-
-POSEVAL_JOINTS: tuple[str, ...] = (
-    "right_ankle", "right_knee", "right_hip", "left_hip", "left_knee", "left_ankle",
-    "right_wrist", "right_elbow", "right_shoulder", "left_shoulder", "left_elbow",
-    "left_wrist", "head_bottom", "nose", "head_top",
+from unitrack_env.metrics.posetrack_frames import (
+    BODY_PARTS,
+    DIST_THRESHOLD,
+    DUMMY_GT_ID,
+    DUMMY_PRED_ID,
+    HEAD_SIZE_FACTOR,
+    KEYPOINT_OF_JOINT,
+    NUM_JOINTS,
+    POSEVAL_DROPS_LAST_FRAME,
+    POSEVAL_JOINTS,
+    PoseFrame,
+    head_sizes,
+    joint_distances,
+    remove_ignored,
 )
-"""poseval's 15 joints in its ``Joint`` order (``head_bottom`` is poseval's ``neck``)."""
+from unitrack_env.metrics.posetrack_joint import ClearAccumulator, JointFrameCounts
 
-NUM_JOINTS: int = len(POSEVAL_JOINTS)
-
-#: Column of each poseval joint in the 17 PoseTrack keypoints.
-KEYPOINT_OF_JOINT: tuple[int, ...] = tuple(POSETRACK_KEYPOINTS.index(n) for n in POSEVAL_JOINTS)
-
-#: poseval's body-part columns (``getCum``): joints averaged into each printed column.
-BODY_PARTS: MappingProxyType[str, tuple[str, ...]] = MappingProxyType({
-    "Head": ("head_top", "head_bottom", "nose"),
-    "Shou": ("right_shoulder", "left_shoulder"),
-    "Elb": ("right_elbow", "left_elbow"),
-    "Wri": ("right_wrist", "left_wrist"),
-    "Hip": ("right_hip", "left_hip"),
-    "Knee": ("right_knee", "left_knee"),
-    "Ankl": ("right_ankle", "left_ankle"),
-})
-
-#: Match threshold on the head-normalised distance (poseval's ``distThresh``).
-DIST_THRESHOLD: float = 0.5
-#: Head size = this factor x the diagonal of the head box (poseval's ``getHeadSize``).
-HEAD_SIZE_FACTOR: float = 0.6
-#: poseval leaves out the last evaluated frame of every sequence (``imgidxs[:-1]``).
-POSEVAL_DROPS_LAST_FRAME: bool = True
-#: Ids of poseval's dummy miss / false positive in frames without GT or predictions.
-DUMMY_GT_ID: int = -(2**62)
-DUMMY_PRED_ID: int = -(2**62)
+__all__ = [
+    "BODY_PARTS",
+    "DIST_THRESHOLD",
+    "DUMMY_GT_ID",
+    "DUMMY_PRED_ID",
+    "HEAD_SIZE_FACTOR",
+    "KEYPOINT_OF_JOINT",
+    "NUM_JOINTS",
+    "POSEVAL_DROPS_LAST_FRAME",
+    "POSEVAL_JOINTS",
+    "ClearAccumulator",
+    "FrameCounts",
+    "JointFrameCounts",
+    "PoseFrame",
+    "PosevalSequence",
+    "SequenceCounts",
+    "evaluate_video",
+    "evaluated_frames",
+    "head_sizes",
+    "joint_distances",
+    "remove_ignored",
+    "summarise",
+]
 
 
-# --------------------------------------------------------------------------- frames
-@dataclass(frozen=True)
-class PoseFrame:
-    """The persons of one frame, reduced to poseval's 15 joints.
-
-    Attributes:
-        ids: ``(n,)`` int64 track ids.
-        xy: ``(n, 15, 2)`` float64 joint coordinates.
-        present: ``(n, 15)`` bool, joints that exist.
-        head_size: ``(n,)`` float64 PCKh reference (ground truth only; NaN if unknown).
-    """
-
-    ids: np.ndarray
-    xy: np.ndarray
-    present: np.ndarray
-    head_size: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.ids)
-
-    @classmethod
-    def empty(cls) -> PoseFrame:
-        """A frame without persons."""
-        return cls(np.zeros(0, np.int64), np.zeros((0, NUM_JOINTS, 2)),
-                   np.zeros((0, NUM_JOINTS), bool), np.zeros(0))
-
-    @classmethod
-    def from_keypoints(
-        cls,
-        ids: Sequence[int] | np.ndarray,
-        keypoints: np.ndarray,
-        bbox_head: np.ndarray | None = None,
-    ) -> PoseFrame:
-        """Build a frame from ``(n, 17, 3)`` PoseTrack keypoints.
-
-        Args:
-            ids: track id of each person.
-            keypoints: ``(n, 17, 3)`` ``(x, y, v)``; ``(0, 0, 0)`` is an absent keypoint.
-            bbox_head: optional ``(n, 4)`` head boxes ``(x, y, w, h)`` (ground truth).
-        """
-        kp = np.asarray(keypoints, dtype=np.float64).reshape(-1, len(POSETRACK_KEYPOINTS), 3)
-        ids_arr = np.asarray(ids, dtype=np.int64).reshape(-1)
-        if len(ids_arr) != len(kp):
-            raise ValueError(f"{len(ids_arr)} ids but {len(kp)} poses")
-        cols = list(KEYPOINT_OF_JOINT)
-        xy = kp[:, cols, :2].copy()
-        present = ~np.all(kp[:, cols, :] == 0.0, axis=2)
-        return cls(ids_arr, xy, present, head_sizes(bbox_head, len(kp)))
-
-    @classmethod
-    def from_people(cls, people: Sequence[PoseTrackPerson], *, dummy_id: int = -1) -> PoseFrame:
-        """Build a frame from parsed persons (missing track ids become ``dummy_id``)."""
-        if not people:
-            return cls.empty()
-        ids = [p.track_id if p.track_id is not None else dummy_id for p in people]
-        keypoints = np.stack([p.keypoints for p in people])
-        heads = np.array([p.bbox_head if p.bbox_head is not None else (np.nan,) * 4
-                          for p in people], dtype=np.float64)
-        return cls.from_keypoints(ids, keypoints, heads)
-
-    def subset(self, keep: np.ndarray) -> PoseFrame:
-        """The persons selected by a boolean or index array."""
-        return PoseFrame(self.ids[keep], self.xy[keep], self.present[keep], self.head_size[keep])
-
-
-def head_sizes(bbox_head: np.ndarray | None, count: int) -> np.ndarray:
-    """Return ``0.6 x`` the head-box diagonal of each person (NaN without a head box)."""
-    if bbox_head is None:
-        return np.full(count, np.nan)
-    boxes = np.asarray(bbox_head, dtype=np.float64).reshape(-1, 4)
-    return HEAD_SIZE_FACTOR * np.hypot(boxes[:, 2], boxes[:, 3])
-
-
-def remove_ignored(frame: PoseFrame, regions: Sequence[np.ndarray]) -> PoseFrame:
-    """Drop joints strictly inside any ignore polygon, then persons left without joints.
-
-    Mirrors poseval's ``removeIgnoredPointsRects``, which runs only on frames that have
-    ignore regions: a person with no joint left (or none to begin with) is removed.
-    Polygons with fewer than 3 vertices contain nothing.
-    """
-    if not regions:
-        return frame
-    polygons = [np.asarray(p, np.float32).reshape(-1, 2) for p in regions]
-    polygons = [p for p in polygons if len(p) >= 3]
-    present = frame.present.copy()
-    for poly in polygons:
-        contour = poly.reshape(-1, 1, 2)
-        for n, j in zip(*np.nonzero(present), strict=True):
-            x, y = frame.xy[n, j]
-            if cv2.pointPolygonTest(contour, (float(x), float(y)), False) > 0:
-                present[n, j] = False
-    keep = present.any(axis=1)
-    return PoseFrame(frame.ids[keep], frame.xy[keep], present[keep], frame.head_size[keep])
-
-
-def joint_distances(gt: PoseFrame, pred: PoseFrame) -> np.ndarray:
-    """Return ``(len(gt), len(pred), 15)`` head-normalised joint distances.
-
-    Entries are ``inf`` where the joint is missing on either side.
-    """
-    diff = gt.xy[:, None] - pred.xy[None, :]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dist = np.hypot(diff[..., 0], diff[..., 1]) / gt.head_size[:, None, None]
-    both = gt.present[:, None, :] & pred.present[None, :, :]
-    return np.where(both, dist, np.inf)
-
-
-# --------------------------------------------------------------------------- one joint
-def _assignment(costs: np.ndarray) -> list[tuple[int, int]]:
-    """Minimum-cost assignment ignoring non-finite entries (py-motmetrics' scipy path).
-
-    Non-finite costs are replaced by ``2 r c + 1`` (``c`` = largest finite magnitude + 1,
-    ``r`` = the smaller side), a cost that no optimal solution pays unless forced, and such
-    pairs are dropped from the result.
-    """
-    if costs.size == 0:
-        return []
-    valid = np.isfinite(costs)
-    if not valid.any():
-        return []
-    finite = costs.copy()
-    if not valid.all():
-        c = np.abs(costs[valid]).max() + 1.0
-        finite = np.where(valid, costs, 2.0 * min(costs.shape) * c + 1.0)
-    rows, cols = linear_sum_assignment(finite)
-    return [(int(i), int(j)) for i, j in zip(rows, cols, strict=True) if valid[i, j]]
-
-
-@dataclass(frozen=True)
-class JointFrameCounts:
-    """CLEAR events of one joint in one frame."""
-
-    matches: int
-    switches: int
-    misses: int
-    false_positives: int
-    distance: float
-
-    @property
-    def detections(self) -> int:
-        """``matches + switches`` (py-motmetrics' ``num_detections``)."""
-        return self.matches + self.switches
-
-
-@dataclass
-class ClearAccumulator:
-    """py-motmetrics' ``MOTAccumulator`` event rules for one joint of one sequence.
-
-    Keeps the CLEAR totals and the per-identity frame counts IDF1 needs; all state is on the
-    instance.
-    """
-
-    matches: int = 0
-    switches: int = 0
-    misses: int = 0
-    false_positives: int = 0
-    distance: float = 0.0
-    last_match: dict[int, int] = field(default_factory=dict)
-    candidate_frames: Counter = field(default_factory=Counter)
-
-    def update(self, oids: np.ndarray, hids: np.ndarray, dist: np.ndarray) -> JointFrameCounts:
-        """Add one frame: ``dist`` is ``(len(oids), len(hids))`` with NaN for non-candidates."""
-        oids = np.asarray(oids, dtype=np.int64).reshape(-1)
-        hids = np.asarray(hids, dtype=np.int64).reshape(-1)
-        d = np.asarray(dist, dtype=np.float64).reshape(len(oids), len(hids)).copy()
-        pairs = {(int(oids[i]), int(hids[j])) for i, j in zip(*np.nonzero(np.isfinite(d)),
-                                                               strict=True)}
-        self.candidate_frames.update(pairs)
-        o_done = np.zeros(len(oids), bool)
-        h_done = np.zeros(len(hids), bool)
-        matches = switches = 0
-        total = 0.0
-        if len(oids) and len(hids):
-            for i, o in enumerate(oids.tolist()):  # 1. keep last frame's partner if a candidate
-                if o not in self.last_match:
-                    continue
-                js = np.nonzero(~h_done & (hids == self.last_match[o]))[0]
-                if len(js) and np.isfinite(d[i, js[0]]):
-                    o_done[i] = h_done[js[0]] = True
-                    matches += 1
-                    total += d[i, js[0]]
-            d[o_done, :] = np.nan
-            d[:, h_done] = np.nan
-            for i, j in _assignment(d):  # 2. assign the rest
-                o, h = int(oids[i]), int(hids[j])
-                if o in self.last_match and self.last_match[o] != h:
-                    switches += 1
-                else:
-                    matches += 1
-                total += d[i, j]
-                o_done[i] = h_done[j] = True
-                self.last_match[o] = h
-        frame = JointFrameCounts(matches, switches, int((~o_done).sum()), int((~h_done).sum()),
-                                 float(total))
-        self.matches += frame.matches
-        self.switches += frame.switches
-        self.misses += frame.misses
-        self.false_positives += frame.false_positives
-        self.distance += frame.distance
-        return frame
-
-    @property
-    def objects(self) -> int:
-        """Ground-truth occurrences (``num_objects``)."""
-        return self.matches + self.switches + self.misses
-
-    @property
-    def predictions(self) -> int:
-        """Hypothesis occurrences (``num_predictions``)."""
-        return self.matches + self.switches + self.false_positives
-
-    def idtp(self) -> int:
-        """Identity true positives of the best one-to-one id mapping (py-motmetrics ``idtp``).
-
-        py-motmetrics minimises ``IDFP + IDFN`` over mappings between ground-truth and
-        hypothesis ids; with per-pair candidate frame counts ``c(o, h)`` that is the same as
-        maximising ``sum c(o, h)`` over the mapped pairs.
-        """
-        if not self.candidate_frames:
-            return 0
-        oids = sorted({o for o, _ in self.candidate_frames})
-        hids = sorted({h for _, h in self.candidate_frames})
-        weight = np.zeros((len(oids), len(hids)))
-        o_index = {o: i for i, o in enumerate(oids)}
-        h_index = {h: j for j, h in enumerate(hids)}
-        for (o, h), count in self.candidate_frames.items():
-            weight[o_index[o], h_index[h]] = count
-        rows, cols = linear_sum_assignment(weight, maximize=True)
-        return int(weight[rows, cols].sum())
-
-    def idf1(self) -> float:
-        """``2 IDTP / (objects + predictions)`` (NaN when both are 0, as 0/0 in numpy)."""
-        denominator = self.objects + self.predictions
-        return 2.0 * self.idtp() / denominator if denominator else float("nan")
-
-
-# --------------------------------------------------------------------------- sequences
 @dataclass(frozen=True)
 class FrameCounts:
     """Per-joint CLEAR events of one frame (each field ``(15,)`` int)."""
