@@ -16,9 +16,9 @@ from __future__ import annotations
 import hashlib
 import os
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -42,6 +42,10 @@ def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
     from unitrack_env.datasets.synthetic import ensure_synthetic
 
     return Path(ensure_synthetic(*synthetic_args, **synthetic_kwargs)), True
+
+
+#: A sequence record type of a data set reader.
+SequenceT = TypeVar("SequenceT")
 
 
 def rounded_digest(rows: np.ndarray) -> str:
@@ -72,6 +76,13 @@ class Benchmark(ABC):
 
     def __init__(self, dataset: Any) -> None:
         self.dataset = dataset
+        self._loaded: dict[str, Any] = {}
+
+    def _load_once(self, name: str, read: Callable[[str], SequenceT]) -> SequenceT:
+        """Sequence ``name`` as ``read`` returns it, read on the first call only."""
+        if name not in self._loaded:
+            self._loaded[name] = read(name)
+        return self._loaded[name]
 
     @classmethod
     @abstractmethod

@@ -36,10 +36,6 @@ class DAVISBenchmark(Benchmark):
     task = "vos"
     columns = ("J&F-Mean", "J-Mean", "F-Mean", "J-Recall", "F-Recall", "J-Decay", "F-Decay")
 
-    def __init__(self, dataset: DAVISDataset) -> None:
-        super().__init__(dataset)
-        self._loaded: dict[str, VOSSequence] = {}
-
     @classmethod
     def from_kwargs(cls, root: str | os.PathLike | None = None, split: str | None = "val",
                     resolution: str = "480p", year: str = "2017",
@@ -55,11 +51,7 @@ class DAVISBenchmark(Benchmark):
 
     def load(self, name: str) -> VOSSequence:
         """Sequence ``name`` of the data set (read once)."""
-        sequence = self._loaded.get(name)
-        if sequence is None:
-            sequence = self.dataset.load(name)
-            self._loaded[name] = sequence
-        return sequence
+        return self._load_once(name, self.dataset.load)
 
     def sequence_length(self, name: str) -> int:
         """Number of frames (steps) of sequence ``name``."""

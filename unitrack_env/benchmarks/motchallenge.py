@@ -46,9 +46,6 @@ class MOTChallengeBenchmark(Benchmark):
     columns = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA", "MOTP", "CLR_FP", "CLR_FN",
                "MT", "ML")
 
-    def __init__(self, dataset: MOTChallengeDataset) -> None:
-        super().__init__(dataset)
-
     @classmethod
     def from_kwargs(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
                     split: str = "train", detections: str | os.PathLike = "public",

@@ -43,10 +43,6 @@ class OTBBenchmark(Benchmark):
     task = "sot"
     columns = ("AUC", "Precision@20px", "AverageOverlap")
 
-    def __init__(self, dataset: OTBDataset) -> None:
-        super().__init__(dataset)
-        self._loaded: dict[str, SOTSequence] = {}
-
     @classmethod
     def from_kwargs(cls, root: str | os.PathLike | None = None, **_: Any) -> OTBBenchmark:
         """The benchmark of ``OTBEnv(root=)``."""
@@ -60,13 +56,12 @@ class OTBBenchmark(Benchmark):
 
     def load(self, name: str) -> SOTSequence:
         """Read a sequence once (the reader's warning about trimmed copies appears once)."""
-        sequence = self._loaded.get(name)
-        if sequence is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("always")
-                sequence = self.dataset.load(name)
-            self._loaded[name] = sequence
-        return sequence
+        return self._load_once(name, self._read_sequence)
+
+    def _read_sequence(self, name: str) -> SOTSequence:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            return self.dataset.load(name)
 
     def sequence_length(self, name: str) -> int:
         """Number of frames (steps) of sequence ``name`` (its ground-truth rows)."""
