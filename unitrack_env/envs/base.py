@@ -3,15 +3,18 @@
 An episode is one video sequence. ``reset(options={"sequence": name})`` picks a sequence;
 without it the environment walks the split's sequences in order (or in a seeded shuffle with
 ``shuffle=True``). Passing ``seed`` restarts that walk, so the same seed gives the same
-episode. Subclasses provide the data set, the observations and the scoring.
+episode. :class:`SequenceEnv` owns the episode loop (``reset`` and ``step``); a task
+environment supplies its data set, observations, recording and scoring through a few hooks.
 """
 
 from __future__ import annotations
 
+import abc
+import hashlib
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import Any, ClassVar, Generic, TypedDict, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -55,26 +58,59 @@ def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path 
     return None
 
 
+
 #: The sequence type of an environment (``MOTSequence``, ``VOSSequence``, ...).
 SequenceT = TypeVar("SequenceT")
 
 
-class SequenceEnv(gym.Env, Generic[SequenceT]):
-    """Base class: sequence selection, seeding, episode bookkeeping and the render guard.
+class EpisodeOptions(TypedDict, total=False):
+    """The keyword arguments every environment takes besides its data set's own.
 
-    Subclasses set :attr:`sequence_names` in ``__init__`` and implement
-    :meth:`_start_episode` (which sets ``_sequence``), :meth:`_draw` (the ``rgb_array``
-    picture of the current state), plus the results contract that ``evaluation`` relies on for every
-    task: :meth:`sequence_length`, :meth:`has_ground_truth`, :meth:`episode_digest`,
-    :meth:`write_episode` (official result format) and :meth:`score_folder` (official
-    metrics of a folder of such results).
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; saves the decode time).
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: None or ``"rgb_array"``.
+    """
+
+    decode_frames: bool
+    prefetch: bool
+    shuffle: bool
+    render_mode: str | None
+
+
+class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
+    """Base class: the episode loop over the sequences of a data set (a template method).
+
+    :meth:`reset` picks a sequence (see the module docstring), closes the previous frame
+    decoder, asks :meth:`_load` to read and check it, opens the new frame decoder and
+    returns the first observation (:meth:`_observe`). :meth:`step` refuses a finished
+    episode, lets :meth:`_record` check, record and score the action, and either moves the
+    cursor to the next frame or ends the episode: the last observation again (fresh
+    arrays), ``info["metrics"]`` (:meth:`episode_metrics`) when the sequence has ground
+    truth, and the frame decoder closed. Every info has ``sequence`` and ``frame_index``
+    (plus :meth:`_frame_info`'s extras and the step's record); the reset info adds
+    :meth:`_load`'s extras, ``task`` and ``capacities``.
+
+    The cursor :attr:`_t` is the key of the current frame: it runs over ``_first_step()
+    .. _first_step() + _length() - 1`` (0-based unless the environment numbers its frames
+    otherwise) and is what :meth:`_observe`, :meth:`_record` and :meth:`_frame_path` get.
+
+    A task environment sets :attr:`sequence_names` (and its spaces) in ``__init__`` and
+    implements the episode hooks :meth:`_load`, :meth:`_observe`, :meth:`_record`,
+    :meth:`episode_metrics` and :meth:`_draw` (the ``rgb_array`` picture), overrides
+    :meth:`_length`, :meth:`_frame_path` and :meth:`_frame_size` unless its sequences list
+    their frames as ``frame_paths`` with an ``image_size``, plus the results contract that
+    ``evaluation`` relies on for every task: :meth:`sequence_length`,
+    :meth:`has_ground_truth`, :meth:`episode_digest`, :meth:`write_episode` (official result
+    format) and :meth:`score_folder` (official metrics of a folder of such results).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
 
     sequence_names: list[str]
 
-    #: Frame decoder of the current episode (subclasses set it; :meth:`close` stops it).
+    #: Frame decoder of the current episode (opened by :meth:`reset`; :meth:`close` stops it).
     _frames: FramePrefetcher | None = None
     #: Whether the data set is the embedded synthetic default (set by :meth:`_data_root`).
     synthetic: bool = False
@@ -92,12 +128,18 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
     #: as ``info["task"]``, with the action capacities as ``info["capacities"]``.
     task: ClassVar[str] = ""
 
+    #: What states the frame size that decoded frames are checked against (named in the
+    #: error of a frame of another size).
+    frame_size_source: ClassVar[str] = "the sequence's first frame"
+
     def __init_subclass__(cls, task: str | None = None, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         if task is not None:
             cls.task = task
 
-    def __init__(self, *, shuffle: bool = False, render_mode: str | None = None) -> None:
+    def __init__(self, max_frame_size: tuple[int, int] | None = None, *,
+                 decode_frames: bool = True, prefetch: bool = True, shuffle: bool = False,
+                 render_mode: str | None = None) -> None:
         for module in self.requires:
             require(module, f"{type(self).__name__} (official scoring)")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -109,6 +151,18 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
         self.shuffle = shuffle
         self._order: list[str] | None = None
         self._cursor = 0
+        if max_frame_size is not None:
+            self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        self.decode_frames = decode_frames
+        self.prefetch = prefetch
+        self._sequence = None
+        self._frames = None
+        self._t = 0
+        self._stop = 0
+        self._done = True
+        self._has_gt = False
+        self._frame: np.ndarray | None = None
+        self._observation: dict[str, Any] = {}
 
     def _data_root(
         self, root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
@@ -168,22 +222,105 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
         self._cursor += 1
         return name
 
+    # ------------------------------------------------------------------ episode loop
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         """Start an episode on one sequence (see the class docstring)."""
         super().reset(seed=seed)
         name = self._choose_sequence(seed, options)
-        observation, info = self._start_episode(name)
+        if self._frames is not None:
+            self._frames.close()
+        self._done = True
+        extras = self._load(name)
+        self._has_gt = bool(extras["has_ground_truth"])
+        first = self._first_step()
+        self._stop = first + self._length()
+        self._frames = self._open_frames(self._frame_path, range(first, self._stop),
+                                         prefetch=self.prefetch)
+        self._t = first
+        self._done = False
+        observation = self._observation = self._observe(first)
+        info = self._step_info(first) | extras
         return observation, {**info, "task": self.task, "capacities": self.capacities()}
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Record the agent's answer for the current frame, score it, and move on."""
+        if self._done or self._sequence is None:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        t = self._t
+        reward, extra = self._record(action, t)
+        if t + 1 >= self._stop:
+            self._done = True
+            observation = {key: self._fresh(value) if isinstance(value, np.ndarray) else value
+                           for key, value in self._observation.items()}
+            info = self._step_info(t) | extra
+            if self._has_gt:
+                info["metrics"] = self.episode_metrics()
+            if self._frames is not None:
+                self._frames.close()
+            return observation, reward, True, False, info
+        self._t = t + 1
+        observation = self._observation = self._observe(self._t)
+        return observation, reward, False, False, self._step_info(self._t) | extra
+
+    def _step_info(self, t: int) -> dict[str, Any]:
+        return {"sequence": self._sequence.name, **self._frame_info(t)}
+
+    def _frame_info(self, t: int) -> dict[str, Any]:
+        """The info keys that name frame ``t``: ``frame_index`` (default: ``t``) and extras."""
+        return {"frame_index": t}
+
+    def _first_step(self) -> int:
+        """The cursor of the first frame (default 0; e.g. 1 for 1-based frame numbers)."""
+        return 0
+
+    @abc.abstractmethod
+    def _load(self, name: str) -> dict[str, Any]:
+        """Read and check sequence ``name``, set :attr:`_sequence` and clear the recording.
+
+        Returns:
+            The reset-info extras (``seq_length``, ``frame_rate``, ...); they must hold
+            ``has_ground_truth``, which decides whether the episode ends with metrics.
+        """
+
+    # The next three hooks read a sequence that lists its frames as ``frame_paths`` (one
+    # file per step) with ``image_size`` = ``(width, height)``, as the DAVIS, OTB, JHMDB
+    # and PoseTrack readers do; environments whose sequences differ override them.
+    def _length(self) -> int:
+        """The number of frames (steps) of the current episode."""
+        return len(self._sequence.frame_paths)
+
+    def _frame_path(self, t: int) -> Path:
+        """The image file of frame ``t`` of the current episode."""
+        return self._sequence.frame_paths[t]
+
+    def _frame_size(self) -> tuple[int, int]:
+        """The ``(width, height)`` the current sequence's frames must have."""
+        return self._sequence.image_size
+
+    @abc.abstractmethod
+    def _observe(self, t: int) -> dict[str, Any]:
+        """The observation of frame ``t`` (read its image with :meth:`_read_frame`)."""
+
+    @abc.abstractmethod
+    def _record(self, action: Any, t: int) -> tuple[float, dict[str, Any]]:
+        """Check the action for frame ``t``, record it and score it.
+
+        Raises ``InvalidActionError`` before anything is recorded.
+
+        Returns:
+            The step's reward and the info keys it adds (e.g. ``{"clear": ...}``).
+        """
+
+    @abc.abstractmethod
+    def episode_metrics(self) -> dict[str, float]:
+        """The official metrics of the recorded episode (needs ground truth)."""
 
     def capacities(self) -> dict[str, int]:
         """The environment's size limits (its ``max_*`` settings, e.g. ``max_tracks``)."""
         return {key: value for key, value in sorted(vars(self).items())
                 if key.startswith("max_") and isinstance(value, int)}
-
-    def _start_episode(self, name: str) -> tuple[Any, dict[str, Any]]:
-        raise NotImplementedError
 
     @property
     def sequence(self) -> SequenceT | None:
@@ -198,8 +335,19 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
             raise RuntimeError("call reset() before render()")
         return self._draw()
 
+    @abc.abstractmethod
     def _draw(self) -> np.ndarray:
-        raise NotImplementedError
+        """The ``rgb_array`` picture of the current state."""
+
+    # ------------------------------------------------------------------ frames
+    def _check_frame_size(self, name: str, width: int, height: int, *, axes: bool = True,
+                          hint: str = "max_frame_size") -> None:
+        """Refuse a sequence whose frames exceed ``max_frame_size`` (height, width)."""
+        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
+            raise ValueError(
+                f"{name}: frames are {width}x{height}, larger than max_frame_size="
+                f"{self.max_frame_size}{' (height, width)' if axes else ''}; pass a larger {hint}"
+            )
 
     def _open_frames(self, path_of: Callable[[int], Path], keys: Iterable[int], *,
                      prefetch: bool) -> FramePrefetcher:
@@ -214,22 +362,25 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
             frames.check(keys)
         return frames
 
-    def _decode(self, key: int, *, next_key: int | None, size: tuple[int, int],
-                path: str | Path, source: str) -> np.ndarray:
-        """Frame ``key`` of the prefetcher (a 1x1 black placeholder without decoding).
+    def _read_frame(self, t: int) -> np.ndarray:
+        """Decode frame ``t`` of the episode (kept as :attr:`_frame`), scheduling the next.
 
-        Schedules ``next_key`` (None: the last frame) and checks the decoded size against
-        ``size`` = ``(width, height)``, the size that ``source`` states (named in the error,
-        e.g. ``"seqinfo.ini"``), raising :class:`DataFormatError` naming ``path``.
+        Without decoding, a 1x1 black placeholder. The decoded size is checked against
+        :meth:`_frame_size`, the size that :attr:`frame_size_source` states, raising
+        :class:`DataFormatError` naming the file.
         """
         if not self.decode_frames:
-            return np.zeros((1, 1, 3), dtype=np.uint8)
-        image = self._frames.get(key)
-        if next_key is not None:
-            self._frames.schedule(next_key)
+            self._frame = np.zeros((1, 1, 3), dtype=np.uint8)
+            return self._frame
+        image = self._frames.get(t)
+        if t + 1 < self._stop:
+            self._frames.schedule(t + 1)
+        size = self._frame_size()
         if image.shape[1::-1] != tuple(size):
-            raise DataFormatError(path, f"image is {image.shape[1]}x{image.shape[0]} but "
-                                        f"{source} says {size[0]}x{size[1]}")
+            raise DataFormatError(self._frame_path(t), f"image is {image.shape[1]}x"
+                                  f"{image.shape[0]} but {self.frame_size_source} says "
+                                  f"{size[0]}x{size[1]}")
+        self._frame = image
         return image
 
     # ----------------------------------------------------------- results contract
@@ -248,30 +399,40 @@ class SequenceEnv(gym.Env, Generic[SequenceT]):
         names = getattr(dataset, "sequence_names", self.sequence_names)
         return sequence_files(Path(root), name, names)
 
+    @abc.abstractmethod
     def sequence_length(self, name: str) -> int:
         """Number of frames (steps) of sequence ``name``, without loading it."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def has_ground_truth(self, name: str) -> bool:
         """Whether sequence ``name`` can be scored."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def episode_digest(self) -> str:
         """A stable digest of the actions recorded in the current episode."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def write_episode(self, folder: Path) -> None:
         """Write the current (finished) episode's results in the official format.
 
         Writes must be atomic (``unitrack_env.io``) so an interrupted run never leaves half a
         result behind.
         """
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
         """Score results written by :meth:`write_episode` with the official metrics."""
-        raise NotImplementedError
+
+    def _require_episode(self, played: bool = True) -> None:
+        """Refuse to write results before an episode was played (``played``: it was)."""
+        if self._sequence is None or not played:
+            raise RuntimeError("no episode to write; call reset() and play it first")
 
     @staticmethod
     def _fresh(array: np.ndarray) -> np.ndarray:
         return np.array(array, copy=True)
+
+    @staticmethod
+    def _rows_digest(rows: np.ndarray) -> str:
+        """SHA-256 of an array of results rounded to 1e-3 (ids, boxes, joints, ...)."""
+        return hashlib.sha256(np.ascontiguousarray(np.round(rows, 3)).tobytes()).hexdigest()

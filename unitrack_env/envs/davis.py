@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import hashlib
 import os
-from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cv2
 import numpy as np
 from gymnasium import spaces
 
@@ -20,9 +18,8 @@ from unitrack_env.datasets.davis import (
     read_label_png,
     write_davis_result,
 )
-from unitrack_env.envs.base import SequenceEnv
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.metrics.vos import (
     VOSScores,
@@ -31,7 +28,13 @@ from unitrack_env.metrics.vos import (
     evaluate_vos_sequence,
     frame_scores,
 )
-from unitrack_env.render import id_colour
+
+# Drawing lives in unitrack_env.render; the old names stay importable from here.
+from unitrack_env.render import OVERLAY_ALPHA as OVERLAY_ALPHA
+from unitrack_env.render import overlay_labels
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 #: Folder of the DAVIS data under ``$UNITRACK_DATA``.
 BENCHMARK_FOLDER = "DAVIS"
@@ -43,12 +46,6 @@ MAX_OBJECTS = 254
 DEFAULT_MAX_FRAME_SIZE = (2160, 4096)
 #: DAVIS videos run at 24 frames per second.
 DAVIS_FRAME_RATE = 24.0
-#: Opacity of the mask overlay in renderings.
-OVERLAY_ALPHA = 0.5
-
-
-def _frame_path(paths: tuple[Path, ...], index: int) -> Path:
-    return paths[index]
 
 
 def validate_labels(action: Any, shape: tuple[int, int], object_ids: tuple[int, ...]
@@ -92,35 +89,6 @@ def validate_labels(action: Any, shape: tuple[int, int], object_ids: tuple[int, 
             f"(background) and {list(object_ids)}{hint}"
         )
     return labels
-
-
-def overlay_labels(frame: np.ndarray, labels: np.ndarray, alpha: float = OVERLAY_ALPHA
-                   ) -> np.ndarray:
-    """Draw every object of ``labels`` on ``frame``: a translucent fill and an outline.
-
-    Object ``k`` gets the id colour :func:`unitrack_env.render.id_colour` ``(k)`` (bright and
-    well spread, like the tracks of the association environments); void pixels are skipped.
-    When ``frame`` does not match the labels' size (e.g. ``decode_frames=False``), the
-    objects are drawn on a black canvas.
-    """
-    if frame.shape[:2] != labels.shape:
-        frame = np.zeros((*labels.shape, 3), dtype=np.uint8)
-    canvas = frame.astype(np.float32)
-    thickness = max(1, round(max(labels.shape) / 400))
-    outlines = []
-    for label in np.unique(labels):
-        if label in (0, DAVIS_VOID_LABEL):
-            continue
-        mask = labels == label
-        colour = np.asarray(id_colour(int(label)), dtype=np.float32)
-        canvas[mask] = (1.0 - alpha) * canvas[mask] + alpha * colour
-        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL,
-                                       cv2.CHAIN_APPROX_SIMPLE)
-        outlines.append((contours, id_colour(int(label))))
-    out = np.clip(np.round(canvas), 0, 255).astype(np.uint8)
-    for contours, colour in outlines:
-        cv2.drawContours(out, contours, -1, colour, thickness, lineType=cv2.LINE_AA)
-    return out
 
 
 def scores_from_frames(
@@ -247,20 +215,14 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         resolution: str = "480p",
         year: str = "2017",
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         data_root = self._data_root(root, BENCHMARK_FOLDER, BENCHMARK, "davis")
         self.dataset = DAVISDataset(data_root, split, resolution, year)
         self.sequence_names = self._select_sequences(
             sequences, self.dataset.sequence_names, f"split {split!r} of {data_root}"
         )
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         self.observation_space = spaces.Dict({
             "frame": ut_spaces.Image(*self.max_frame_size),
             "init_labels": ut_spaces.LabelMap(*self.max_frame_size, max_label=255),
@@ -271,20 +233,15 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         )
 
         self._loaded: dict[str, VOSSequence] = {}
-        self._sequence: VOSSequence | None = None
         self._init_labels: np.ndarray | None = None
-        self._frames: FramePrefetcher | None = None
-        self._t = 0
-        self._done = True
         self._results: list[np.ndarray] = []
         self._j: list[np.ndarray] = []
         self._f: list[np.ndarray] = []
-        self._frame: np.ndarray | None = None
         self._render_frame: np.ndarray | None = None
         self._render_labels: np.ndarray | None = None
 
     # ------------------------------------------------------------------ data
-    def _load(self, name: str) -> VOSSequence:
+    def _read(self, name: str) -> VOSSequence:
         sequence = self._loaded.get(name)
         if sequence is None:
             sequence = self.dataset.load(name)
@@ -296,97 +253,52 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         width, height = self._sequence.image_size
         return height, width
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
-        sequence = self._load(name)
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
+        sequence = self._read(name)
         width, height = sequence.image_size
-        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
-            raise ValueError(
-                f"{name}: frames are {width}x{height}, larger than max_frame_size="
-                f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
-            )
+        self._check_frame_size(name, width, height)
         if max(sequence.object_ids) > MAX_OBJECTS:  # pragma: no cover - 255 is void
             raise DataFormatError(sequence.annotation_paths[0], "object label above 254")
         self._sequence = sequence
         self._init_labels = sequence.read_annotation(0)
         self._init_labels.setflags(write=False)
         self.action_space.narrow(height, width, (0, *sequence.object_ids))
-        self._frames = self._open_frames(partial(_frame_path, sequence.frame_paths),
-                                         range(sequence.num_frames), prefetch=self.prefetch)
-        self._t = 0
-        self._done = False
         self._results, self._j, self._f = [], [], []
         self._render_labels = None
-        observation = self._observe(0)
-        return observation, self._info(reset=True)
+        return dict(seq_length=sequence.num_frames, frame_rate=DAVIS_FRAME_RATE,
+                    image_size=self._shape, benchmark=BENCHMARK,
+                    has_ground_truth=sequence.has_ground_truth,
+                    object_ids=sequence.object_ids, synthetic=self.synthetic)
 
     def _observe(self, t: int) -> dict[str, Any]:
-        sequence = self._sequence
-        image = self._decode(t, next_key=t + 1 if t + 1 < sequence.num_frames else None,
-                             size=sequence.image_size, path=sequence.frame_paths[t],
-                             source="the sequence's first frame")
-        self._frame = image
-        return self._observation(image)
-
-    def _observation(self, image: np.ndarray) -> dict[str, Any]:
         return {
-            "frame": image,
+            "frame": self._read_frame(t),
             "init_labels": self._init_labels.copy(),
             "num_objects": len(self._sequence.object_ids),
         }
 
-    def _frame_index(self, t: int) -> int:
+    def _frame_info(self, t: int) -> dict[str, Any]:
         stem = self._sequence.frame_names[t]
-        return int(stem) if stem.isdigit() else t
+        return {"frame_index": int(stem) if stem.isdigit() else t}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
+    def _record(self, action: Any, t: int) -> tuple[float, dict[str, Any]]:
+        """Record frame ``t``'s label map; score J on the frames DAVIS evaluates."""
         sequence = self._sequence
-        out: dict[str, Any] = {"sequence": sequence.name, "frame_index": self._frame_index(self._t)}
-        if reset:
-            out.update(
-                seq_length=sequence.num_frames,
-                frame_rate=DAVIS_FRAME_RATE,
-                image_size=self._shape,
-                benchmark=BENCHMARK,
-                has_ground_truth=sequence.has_ground_truth,
-                object_ids=sequence.object_ids,
-                synthetic=self.synthetic,
-            )
-        return out
-
-    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the label map of the current frame, score it, and move to the next frame."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
-        sequence, t = self._sequence, self._t
         labels = validate_labels(action, self._shape, sequence.object_ids)
         self._results.append(labels)
-        reward = 0.0
-        info_extra: dict[str, Any] = {}
-        if sequence.annotation_paths[t] is not None:
-            gt = sequence.read_annotation(t)
-            scored = sequence.has_ground_truth and 0 < t < sequence.num_frames - 1
-            j, f = frame_scores(gt, labels, sequence.object_ids, with_f=scored)
-            if scored:
-                self._j.append(j)
-                self._f.append(f)
-                reward = float(j.mean())
-            info_extra["j"] = j
         self._render_frame, self._render_labels = self._frame, labels
-        if t + 1 >= sequence.num_frames:
-            self._done = True
-            observation = self._observation(self._fresh(self._frame))
-            info = self._info() | info_extra
-            if sequence.has_ground_truth:
-                info["metrics"] = self.episode_metrics()
-            if self._frames is not None:
-                self._frames.close()
-            return observation, reward, True, False, info
-        self._t = t + 1
-        observation = self._observe(self._t)
-        return observation, reward, False, False, self._info() | info_extra
+        if sequence.annotation_paths[t] is None:
+            return 0.0, {}
+        gt = sequence.read_annotation(t)
+        scored = sequence.has_ground_truth and 0 < t < sequence.num_frames - 1
+        j, f = frame_scores(gt, labels, sequence.object_ids, with_f=scored)
+        reward = 0.0
+        if scored:
+            self._j.append(j)
+            self._f.append(f)
+            reward = float(j.mean())
+        return reward, {"j": j}
 
     # ------------------------------------------------------------------ results
     def episode_results(self) -> list[np.ndarray]:
@@ -423,19 +335,18 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
 
     def sequence_length(self, name: str) -> int:
         """Return the number of frames (steps) of sequence ``name``."""
-        return self._load(name).num_frames
+        return self._read(name).num_frames
 
     def has_ground_truth(self, name: str) -> bool:
         """Whether every frame of sequence ``name`` is annotated (train/val, not test-dev)."""
-        return self._load(name).has_ground_truth
+        return self._read(name).has_ground_truth
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<seq>/<frame>.png`` palette PNGs (the official result format).
 
         Every file is written atomically.
         """
-        if self._sequence is None or not self._results:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode(played=bool(self._results))
         for t, labels in enumerate(self._results):
             write_davis_result(folder, self._sequence, t, labels)
 
@@ -452,7 +363,7 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         per_sequence: dict[str, dict[str, float]] = {}
         scores: dict[str, VOSScores] = {}
         for name in sequences:
-            sequence = self._load(name)
+            sequence = self._read(name)
             gt = sequence.read_annotations()
             predictions = [np.zeros_like(gt[0]) for _ in range(sequence.num_frames)]
             for t in range(1, sequence.num_frames - 1):

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import colorsys
-import hashlib
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cv2
 import numpy as np
 from gymnasium import spaces
 
@@ -20,9 +17,8 @@ from unitrack_env.datasets.jhmdb import (
     PoseSequence,
     read_joint_positions,
 )
-from unitrack_env.envs.base import SequenceEnv
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_bytes
 from unitrack_env.metrics.pose import (
     NORMALISERS,
@@ -33,54 +29,19 @@ from unitrack_env.metrics.pose import (
 )
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
+# Drawing lives in unitrack_env.render; the old names stay importable from here.
+from unitrack_env.render import draw_skeleton
+from unitrack_env.render import joint_colours as joint_colours
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
 #: Default bound of the frame space (height, width): 4K (JHMDB frames are 320x240).
 DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 #: PCK threshold of the per-step reward.
 REWARD_ALPHA = 0.1
 #: File name of a video's results, inside ``<folder>/<action>/<video>/`` (JHMDB's own).
 RESULT_FILE = "joint_positions.mat"
-
-
-def joint_colours(count: int) -> list[tuple[int, int, int]]:
-    """Return ``count`` well-spread RGB colours (one per joint)."""
-    return [tuple(int(255 * c) for c in colorsys.hsv_to_rgb(i / max(count, 1), 0.9, 1.0))
-            for i in range(count)]  # type: ignore[misc]
-
-
-def draw_skeleton(
-    canvas: np.ndarray,
-    points: np.ndarray,
-    limbs: tuple[tuple[int, int], ...],
-    *,
-    present: np.ndarray | None = None,
-    colour: tuple[int, int, int] | None = None,
-    joint_colours_: list[tuple[int, int, int]] | None = None,
-) -> None:
-    """Draw one skeleton in place: limbs (0-based joint pairs) and joint dots.
-
-    Args:
-        canvas: ``uint8`` RGB image, modified in place.
-        points: ``(J, 2)`` 0-based ``(x, y)``.
-        limbs: joint index pairs to connect.
-        present: ``(J,)`` bool of joints to draw (default: all finite).
-        colour: one colour for the whole skeleton (e.g. its track id's).
-        joint_colours_: a colour per joint (used when ``colour`` is None).
-    """
-    pts = np.asarray(points, dtype=np.float64)
-    ok = np.all(np.isfinite(pts), axis=1) & np.all(np.abs(pts) < 1e5, axis=1)
-    if present is not None:
-        ok &= np.asarray(present, bool)
-    size = max(canvas.shape[:2])
-    thickness = max(1, round(size / 400))
-    radius = max(2, round(size / 250))
-    ints = np.round(np.where(ok[:, None], pts, 0)).astype(int)
-    colours = joint_colours_ or joint_colours(len(pts))
-    for a, b in limbs:
-        if ok[a] and ok[b]:
-            c = colour or colours[b]
-            cv2.line(canvas, tuple(ints[a]), tuple(ints[b]), c, thickness, cv2.LINE_AA)
-    for j in np.nonzero(ok)[0]:
-        cv2.circle(canvas, tuple(ints[j]), radius, colour or colours[j], -1, cv2.LINE_AA)
 
 
 def pose_mat_bytes(keypoints: np.ndarray) -> bytes:
@@ -162,6 +123,8 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
     - v0: initial version.
     """
 
+    frame_size_source = "the video's first frame"
+
     def __init__(
         self,
         root: str | os.PathLike | None = None,
@@ -172,12 +135,9 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         normaliser: str = "box_diagonal",
         thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS,
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         if normaliser not in NORMALISERS:
             raise ValueError(f"normaliser must be one of {NORMALISERS}; got {normaliser!r}")
         data_root = self._data_root(root, "JHMDB", "JHMDB", kind="jhmdb")
@@ -187,82 +147,42 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         )
         self.normaliser = normaliser
         self.thresholds = tuple(float(t) for t in thresholds)
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         joints = spaces.Box(-ut_spaces.COORD_MAX, ut_spaces.COORD_MAX, (NUM_JOINTS, 2),
                             np.float32)
         self.observation_space = spaces.Dict(
             {"frame": ut_spaces.Image(*self.max_frame_size), "init_keypoints": joints})
         self.action_space = spaces.Box(-ut_spaces.COORD_MAX, ut_spaces.COORD_MAX,
                                        (NUM_JOINTS, 2), np.float32)
-        self._sequence: PoseSequence | None = None
-        self._frames: FramePrefetcher | None = None
-        self._t = 0
-        self._done = True
         self._predictions: list[np.ndarray] = []
-        self._frame: np.ndarray | None = None
         self._render_pose: np.ndarray | None = None
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
         sequence = self.dataset.load(name)
         width, height = sequence.image_size
-        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
-            raise ValueError(f"{name}: frames are {width}x{height}, larger than max_frame_size="
-                             f"{self.max_frame_size}; pass a larger max_frame_size")
+        self._check_frame_size(name, width, height, axes=False)
         self._sequence = sequence
-        self._frames = self._open_frames(sequence.frame_paths.__getitem__,
-                                         range(len(sequence.frame_paths)), prefetch=self.prefetch)
-        self._t = 0
-        self._done = False
         self._predictions = []
         self._render_pose = None
-        return self._observe(0), self._info(reset=True)
+        return dict(seq_length=sequence.num_frames, frame_rate=30, image_size=(height, width),
+                    synthetic=self.synthetic, has_ground_truth=True)
 
     def _observe(self, t: int) -> dict[str, Any]:
-        seq = self._sequence
-        image = self._decode(t, next_key=t + 1 if t + 1 < seq.num_frames else None,
-                             size=seq.image_size, path=seq.frame_paths[t],
-                             source="the video's first frame")
-        self._frame = image
-        return {"frame": image, "init_keypoints": seq.init_keypoints.astype(np.float32)}
+        image = self._read_frame(t)
+        return {"frame": image, "init_keypoints": self._sequence.init_keypoints.astype(np.float32)}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        seq = self._sequence
-        out: dict[str, Any] = {"sequence": seq.name, "frame_index": self._t + 1}
-        if reset:
-            out.update(seq_length=seq.num_frames, frame_rate=30,
-                       image_size=(seq.image_size[1], seq.image_size[0]),
-                       synthetic=self.synthetic, has_ground_truth=True)
-        return out
+    def _frame_info(self, t: int) -> dict[str, Any]:
+        return {"frame_index": t + 1}
 
-    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the predicted joints of the current frame, score them, move on."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+    def _record(self, action: Any, t: int) -> tuple[float, dict[str, Any]]:
+        """Record frame ``t``'s joints; the reward is PCK@0.1 (frame 1 is not scored)."""
         pred = _validate_joints(action)
-        t = self._t
         self._predictions.append(pred)
         self._render_pose = pred
-        info_extra: dict[str, Any] = {}
-        reward = 0.0
-        if t > 0:
-            reward = frame_pck(pred, self._sequence.keypoints[t], REWARD_ALPHA, self.normaliser)
-            info_extra["pck"] = reward
-        if t + 1 >= self._sequence.num_frames:
-            self._done = True
-            observation = {"frame": self._fresh(self._frame),
-                           "init_keypoints": self._sequence.init_keypoints.astype(np.float32)}
-            info = self._info() | info_extra
-            info["metrics"] = self.episode_metrics()
-            if self._frames is not None:
-                self._frames.close()
-            return observation, reward, True, False, info
-        self._t = t + 1
-        return self._observe(self._t), reward, False, False, self._info() | info_extra
+        if t == 0:
+            return 0.0, {}
+        reward = frame_pck(pred, self._sequence.keypoints[t], REWARD_ALPHA, self.normaliser)
+        return reward, {"pck": reward}
 
     # ------------------------------------------------------------------ results
     def episode_predictions(self) -> np.ndarray:
@@ -281,8 +201,7 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
 
     def episode_digest(self) -> str:
         """Return a SHA-256 digest of the recorded joints (rounded to 1e-3 px)."""
-        rows = np.round(self.episode_predictions(), 3)
-        return hashlib.sha256(np.ascontiguousarray(rows).tobytes()).hexdigest()
+        return self._rows_digest(self.episode_predictions())
 
     def sequence_length(self, name: str) -> int:
         """Return the number of annotated frames of ``name`` (reads only its ``.mat``)."""
@@ -294,8 +213,7 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<action>/<video>/joint_positions.mat`` (``pos_img``, 1-based)."""
-        if self._sequence is None:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode()
         atomic_write_bytes(Path(folder) / self._sequence.name / RESULT_FILE,
                            pose_mat_bytes(self.episode_predictions()))
 
@@ -328,7 +246,6 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         pose = self._render_pose if self._render_pose is not None else self._sequence.keypoints[0]
         draw_skeleton(canvas, pose, JHMDB_SKELETON)
         return canvas
-
 
 
 def _validate_joints(action: Any) -> np.ndarray:

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -18,13 +17,15 @@ from unitrack_env.datasets.motchallenge import (
     MOTSequence,
     read_seqinfo,
 )
-from unitrack_env.envs.base import SequenceEnv
-from unitrack_env.frames import FramePrefetcher
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.clear_stream import StreamingClear
 from unitrack_env.metrics.mot_preprocess import preprocess_frame
 from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.render import draw_boxes
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 #: Default capacity of the padded detection arrays (MOT20 public detections reach ~250).
 DEFAULT_MAX_DETECTIONS = 512
@@ -100,10 +101,13 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
     - ``split``: sub-folder to read (``"train"`` or ``"test"``).
     - ``sequences``: restrict to these sequence names (default: all of the split).
     - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
-    - ``min_score``: drop detections whose score is below this value.
+    - ``min_score``: drop detections whose score is below this value (the
+      :class:`unitrack_env.wrappers.DetectionScoreFilter` wrapper does the same for any
+      association environment and is the way forward).
     - ``max_detections``, ``max_tracks``, ``max_frame_size``: space capacities.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).
+    - ``prefetch``: decode the next frame on a background thread.
     - ``shuffle``: visit sequences in a seeded random order.
     - ``render_mode``: ``"rgb_array"`` draws id-coloured track boxes on the frame.
 
@@ -112,6 +116,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
     """
 
     requires = ("trackeval",)
+    frame_size_source = "seqinfo.ini"
 
     def __init__(
         self,
@@ -124,12 +129,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         max_detections: int = DEFAULT_MAX_DETECTIONS,
         max_tracks: int = DEFAULT_MAX_TRACKS,
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         if benchmark not in BENCHMARKS:
             raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
         self.benchmark = benchmark
@@ -141,36 +143,22 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         self.min_score = min_score
         self.max_detections = int(max_detections)
         self.max_tracks = int(max_tracks)
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         self.observation_space = ut_spaces.detection_observation_space(
             self.max_detections, self.max_frame_size
         )
         self.action_space: spaces.Dict = ut_spaces.track_action_space(self.max_tracks)
 
-        self._sequence: MOTSequence | None = None
         self._detections: Annotations | None = None
-        self._frames: FramePrefetcher | None = None
-        self._t = 0
-        self._done = True
         self._clear = StreamingClear()
         self._results: list[np.ndarray] = []
-        self._frame: np.ndarray | None = None
         self._render_tracks: tuple[np.ndarray, np.ndarray] | None = None
         self._render_frame: np.ndarray | None = None
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
         sequence = self.dataset.load(name, check_frames=self.decode_frames)
         info = sequence.info
-        if info.height > self.max_frame_size[0] or info.width > self.max_frame_size[1]:
-            raise ValueError(
-                f"{name}: frames are {info.width}x{info.height}, larger than max_frame_size="
-                f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
-            )
+        self._check_frame_size(name, info.width, info.height)
         detections = sequence.detections
         if self.min_score is not None:
             detections = detections.filter(detections.scores >= self.min_score)
@@ -182,24 +170,29 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
             )
         self._sequence = sequence
         self._detections = detections
-        self._frames = self._open_frames(info.frame_path, range(1, info.length + 1),
-                                         prefetch=self.prefetch)
-        self._t = 1
-        self._done = False
         self._clear.reset()
         self._results = []
         self._render_tracks = None
-        observation = self._observe(1)
-        return observation, self._info(reset=True)
+        return dict(seq_length=info.length, frame_rate=info.frame_rate,
+                    image_size=(info.height, info.width), benchmark=self.benchmark,
+                    has_ground_truth=sequence.ground_truth is not None,
+                    synthetic=self.synthetic)
 
-    def _observe(self, frame: int) -> dict[str, Any]:
-        assert self._sequence is not None and self._detections is not None
-        info = self._sequence.info
-        image = self._decode(frame, next_key=frame + 1 if frame < info.length else None,
-                             size=(info.width, info.height), path=info.frame_path(frame),
-                             source="seqinfo.ini")
-        self._frame = image
-        rows = self._detections.rows(frame)
+    def _first_step(self) -> int:
+        return 1  # MOTChallenge frames are numbered from 1
+
+    def _length(self) -> int:
+        return self._sequence.info.length
+
+    def _frame_path(self, t: int) -> Path:
+        return self._sequence.info.frame_path(t)
+
+    def _frame_size(self) -> tuple[int, int]:
+        return self._sequence.info.width, self._sequence.info.height
+
+    def _observe(self, t: int) -> dict[str, Any]:
+        image = self._read_frame(t)
+        rows = self._detections.rows(t)
         n = rows.stop - rows.start
         boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
         scores = np.zeros(self.max_detections, dtype=np.float32)
@@ -207,61 +200,14 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         scores[:n] = self._detections.scores[rows]
         return {"frame": image, "boxes": boxes, "scores": scores, "num_detections": n}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        info = self._sequence.info
-        out: dict[str, Any] = {"sequence": self._sequence.name, "frame_index": self._t}
-        if reset:
-            out.update(
-                seq_length=info.length,
-                frame_rate=info.frame_rate,
-                image_size=(info.height, info.width),
-                benchmark=self.benchmark,
-                has_ground_truth=self._sequence.ground_truth is not None,
-                synthetic=self.synthetic,
-            )
-        return out
-
-    def step(
-        self, action: dict[str, Any]
-    ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the tracks of the current frame, score them, and move to the next frame."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+    def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
+        """Record the tracks of frame ``t`` and score them (``info["clear"]``)."""
         ids, boxes = ut_spaces.unpack_tracks(action, self.max_tracks)
-        t = self._t
         self._results.append(_result_rows(t, ids, boxes))
-        reward, clear = self._score_frame(t, ids, boxes)
         self._render_frame, self._render_tracks = self._frame, (ids, boxes)
-        info_extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
-        if t >= self._sequence.info.length:
-            self._done = True
-            observation = {k: self._fresh(v) if isinstance(v, np.ndarray) else v
-                           for k, v in self._last_observation().items()}
-            info = self._info() | info_extra
-            if self._sequence.ground_truth is not None:
-                info["metrics"] = self.episode_metrics()
-            if self._frames is not None:
-                self._frames.close()
-            return observation, reward, True, False, info
-        self._t = t + 1
-        observation = self._observe(self._t)
-        return observation, reward, False, False, self._info() | info_extra
-
-    def _last_observation(self) -> dict[str, Any]:
-        rows = self._detections.rows(self._t)
-        n = rows.stop - rows.start
-        boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
-        scores = np.zeros(self.max_detections, dtype=np.float32)
-        boxes[:n] = self._detections.boxes[rows]
-        scores[:n] = self._detections.scores[rows]
-        return {"frame": self._frame, "boxes": boxes, "scores": scores, "num_detections": n}
-
-    def _score_frame(
-        self, t: int, ids: np.ndarray, boxes: np.ndarray
-    ) -> tuple[float, dict[str, int] | None]:
         gt = self._sequence.ground_truth
         if gt is None:
-            return 0.0, None
+            return 0.0, {}
         rows = gt.rows(t)
         frame = preprocess_frame(
             gt.ids[rows], gt.boxes[rows], gt.classes[rows], gt.scores[rows].astype(np.int64),
@@ -271,7 +217,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
             frame.gt_ids, frame.gt_boxes, frame.tracker_ids, frame.tracker_boxes, iou=frame.iou
         )
         clear = {"tp": counts.tp, "fp": counts.fp, "fn": counts.fn, "idsw": counts.idsw}
-        return float(counts.tp - counts.fp - counts.idsw), clear
+        return float(counts.tp - counts.fp - counts.idsw), {"clear": clear}
 
     # ------------------------------------------------------------------ results
     def episode_results(self) -> np.ndarray:
@@ -286,8 +232,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
 
     def episode_digest(self) -> str:
         """Return a SHA-256 digest of the recorded tracks (ids and boxes rounded to 1e-3)."""
-        rows = np.round(self.episode_results(), 3)
-        return hashlib.sha256(np.ascontiguousarray(rows).tobytes()).hexdigest()
+        return self._rows_digest(self.episode_results())
 
     def episode_metrics(self) -> dict[str, float]:
         """Score the recorded tracks of the current sequence with TrackEval.
@@ -317,8 +262,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<sequence>.txt`` in the official MOTChallenge result format."""
-        if self._sequence is None:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode()
         atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
                           format_mot_results(self.episode_results()))
 
@@ -341,7 +285,6 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
             return draw_boxes(self._frame, self._detections.boxes[rows])
         ids, boxes = self._render_tracks
         return draw_boxes(self._render_frame, boxes, ids)
-
 
 
 #: printf formats of the result columns (MOTChallenge files use 2 decimals; keep 3).

@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -22,12 +22,17 @@ from unitrack_env.datasets.mots import (
     format_instances_txt,
     resolve_overlaps,
 )
-from unitrack_env.envs.base import SequenceEnv
-from unitrack_env.frames import FramePrefetcher
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mots import MaskClearStream
 from unitrack_env.metrics.report import ScoreReport
-from unitrack_env.render import DETECTION_COLOUR, draw_boxes, id_colour
+
+# Drawing lives in unitrack_env.render; the old names stay importable from here.
+from unitrack_env.render import MASK_ALPHA as MASK_ALPHA
+from unitrack_env.render import draw_masks
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
@@ -113,9 +118,11 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
       ``"gt"`` (ground-truth masks as detections) or a folder of ``<seq>.txt`` files, in the
       MOTS txt format with an optional 7th score field.
     - ``object_class``: ``"pedestrian"`` or (KITTI) ``"car"``: the class tracked and scored.
-    - ``min_score``: drop detections scored below this.
+    - ``min_score``: drop detections scored below this (or wrap the environment in
+      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
     - ``max_detections``, ``max_frame_size``: space capacities.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
+    - ``prefetch``: decode the next frame on a background thread.
     - ``shuffle``: visit sequences in a seeded random order.
     - ``render_mode``: ``"rgb_array"`` draws id-coloured masks and boxes.
 
@@ -136,12 +143,9 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         min_score: float | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         if benchmark not in BENCHMARKS:
             raise ValueError(f"unknown benchmark '{benchmark}'; valid: {list(BENCHMARKS)}")
         valid = ["pedestrian"] if benchmark == "MOTS20" else list(CLASS_IDS)
@@ -159,32 +163,21 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         )
         self.min_score = min_score
         self.max_detections = int(max_detections)
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         self.observation_space = ut_spaces.mask_observation_space(
             self.max_detections, self.max_frame_size)
         self.action_space: spaces.Dict = ut_spaces.mask_id_action_space(self.max_detections)
 
-        self._sequence: MOTSSequenceInfo | None = None
         self._gt: MaskAnnotations | None = None
         self._dets: MaskAnnotations | None = None
-        self._frames: FramePrefetcher | None = None
-        self._k = 0
-        self._done = True
         self._clear = MaskClearStream()
         self._results: list[tuple[int, np.ndarray, list[bytes]]] = []
         self._current: dict[str, Any] = {}
         self._render_state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
         info = self.dataset.info(name)
-        if info.height > self.max_frame_size[0] or info.width > self.max_frame_size[1]:
-            raise ValueError(f"{name}: frames are {info.width}x{info.height}, larger than "
-                             f"max_frame_size={self.max_frame_size}; pass a larger one")
+        self._check_frame_size(name, info.width, info.height, axes=False, hint="one")
         dets = self.dataset.load_detections(name, self.class_id)
         if self.min_score is not None:
             dets = dets.select(dets.scores >= self.min_score)
@@ -202,25 +195,28 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         self._sequence = info
         self._gt = self.dataset.ground_truth(name)
         self._dets = dets
-        self._frames = self._open_frames(
-            info.frame_path, range(info.first_frame, info.first_frame + info.length),
-            prefetch=self.prefetch)
-        self._k = 0
-        self._done = False
         self._clear.reset()
         self._results = []
         self._render_state = None
-        return self._observe(), self._info(reset=True)
+        return dict(seq_length=info.length, frame_rate=info.frame_rate,
+                    image_size=(info.height, info.width), benchmark=self.benchmark,
+                    has_ground_truth=self._gt is not None, synthetic=self.synthetic)
 
-    @property
-    def _frame_number(self) -> int:
-        return self._sequence.first_frame + self._k
+    def _first_step(self) -> int:
+        return self._sequence.first_frame  # the benchmark's numbering: MOTS20 1, KITTI 0
 
-    def _observe(self) -> dict[str, Any]:
-        info, t = self._sequence, self._frame_number
-        image = self._decode(t, next_key=t + 1 if self._k + 1 < info.length else None,
-                             size=(info.width, info.height), path=info.frame_path(t),
-                             source="the sequence")
+    def _length(self) -> int:
+        return self._sequence.length
+
+    def _frame_path(self, t: int) -> Path:
+        return self._sequence.frame_path(t)
+
+    def _frame_size(self) -> tuple[int, int]:
+        return self._sequence.width, self._sequence.height
+
+    def _observe(self, t: int) -> dict[str, Any]:
+        info = self._sequence
+        image = self._read_frame(t)
         rows = self._dets.rows(t)
         masks = self._dets.decode(rows, info.height, info.width)
         scores = self._dets.scores[rows]
@@ -233,69 +229,31 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         padded_scores = np.zeros(self.max_detections, dtype=np.float32)
         boxes[:n] = ut_spaces.mask_boxes(masks)
         padded_scores[:n] = scores
-        self._current = {"image": image, "masks": masks, "counts": counts}
+        self._current = {"masks": masks, "counts": counts}
         return {"frame": image, "masks": masks, "boxes": boxes, "scores": padded_scores,
                 "num_detections": n}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        info = self._sequence
-        out: dict[str, Any] = {"sequence": info.name, "frame_index": self._frame_number}
-        if reset:
-            out.update(seq_length=info.length, frame_rate=info.frame_rate,
-                       image_size=(info.height, info.width), benchmark=self.benchmark,
-                       has_ground_truth=self._gt is not None, synthetic=self.synthetic)
-        return out
-
-    def step(self, action: dict[str, Any]
-             ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the ids given to this frame's masks, score them, and move on."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+    def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
+        """Record the ids given to frame ``t``'s masks and score them (``info["clear"]``)."""
         counts = self._current["counts"]
         ids = ut_spaces.unpack_mask_ids(action, len(counts), self.max_detections)
         reported = np.flatnonzero(ids > 0)
-        t = self._frame_number
-        self._results.append((t, ids[reported], [counts[i] for i in reported]))
-        reward, clear = self._score_frame(t, ids[reported], [counts[i] for i in reported])
+        reported_counts = [counts[i] for i in reported]
+        self._results.append((t, ids[reported], reported_counts))
         keep = ids > 0
-        self._render_state = (self._current["image"], self._current["masks"][keep], ids[keep])
-        extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
-        if self._k + 1 >= self._sequence.length:
-            self._done = True
-            observation = self._repeat_observation()
-            info = self._info() | extra
-            if self._gt is not None:
-                info["metrics"] = self.episode_metrics()
-            self._frames.close()
-            return observation, reward, True, False, info
-        self._k += 1
-        return self._observe(), reward, False, False, self._info() | extra
-
-    def _repeat_observation(self) -> dict[str, Any]:
-        masks = self._current["masks"]
-        n = len(masks)
-        boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
-        boxes[:n] = ut_spaces.mask_boxes(masks)
-        scores = np.zeros(self.max_detections, dtype=np.float32)
-        scores[:n] = self._dets.scores[self._dets.rows(self._frame_number)]
-        return {"frame": self._fresh(self._current["image"]), "masks": self._fresh(masks),
-                "boxes": boxes, "scores": scores, "num_detections": n}
-
-    def _score_frame(self, t: int, ids: np.ndarray, counts: list[bytes]
-                     ) -> tuple[float, dict[str, int] | None]:
+        self._render_state = (self._frame, self._current["masks"][keep], ids[keep])
         if self._gt is None:
-            return 0.0, None
+            return 0.0, {}
         info = self._sequence
         rows = self._gt.rows(t)
         cls = self._gt.classes[rows]
         gt_rows, ignore_rows = rows[cls == self.class_id], rows[cls == CLASS_IGNORE]
         size = [info.height, info.width]
-        counts_frame = self._clear.update(
+        frame = self._clear.update(
             self._gt.ids[gt_rows], self._gt.rles(gt_rows), self._gt.rles(ignore_rows),
-            ids, [{"size": size, "counts": c} for c in counts])
-        clear = {"tp": counts_frame.tp, "fp": counts_frame.fp, "fn": counts_frame.fn,
-                 "idsw": counts_frame.idsw}
-        return float(counts_frame.tp - counts_frame.fp - counts_frame.idsw), clear
+            ids[reported], [{"size": size, "counts": c} for c in reported_counts])
+        clear = {"tp": frame.tp, "fp": frame.fp, "fn": frame.fn, "idsw": frame.idsw}
+        return float(frame.tp - frame.fp - frame.idsw), {"clear": clear}
 
     # ------------------------------------------------------------------ results
     def episode_results(self) -> MaskAnnotations:
@@ -340,8 +298,7 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<sequence>.txt`` in the official MOTS txt result format."""
-        if self._sequence is None:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode()
         atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
                           format_instances_txt(self.episode_results()))
 
@@ -355,28 +312,5 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
     def _draw(self) -> np.ndarray:
         """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
         if self._render_state is None:
-            return draw_masks(self._current["image"], self._current["masks"])
+            return draw_masks(self._frame, self._current["masks"])
         return draw_masks(*self._render_state)
-
-
-
-#: Opacity of the mask overlay in renders.
-MASK_ALPHA = 0.55
-
-
-def draw_masks(frame: np.ndarray, masks: np.ndarray, ids: np.ndarray | None = None
-               ) -> np.ndarray:
-    """Overlay ``(n, H, W)`` masks on a copy of ``frame``.
-
-    With ``ids`` the masks are id-coloured and get labelled boxes, else they are grey. A frame
-    of another size (``decode_frames=False``) is replaced by a black canvas of the masks' size.
-    """
-    canvas = np.ascontiguousarray(frame).copy()
-    if len(masks) and canvas.shape[:2] != masks.shape[1:]:
-        canvas = np.zeros((*masks.shape[1:], 3), dtype=np.uint8)
-    for i, mask in enumerate(masks):
-        colour = np.asarray(id_colour(ids[i]) if ids is not None else DETECTION_COLOUR, float)
-        canvas[mask] = (canvas[mask] * (1 - MASK_ALPHA) + colour * MASK_ALPHA).astype(np.uint8)
-    if ids is not None and len(masks):
-        canvas = draw_boxes(canvas, ut_spaces.mask_boxes(masks), ids, one_based=False)
-    return canvas

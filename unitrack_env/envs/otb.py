@@ -2,25 +2,25 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 import warnings
-from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
 
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
-from unitrack_env.envs.base import SequenceEnv
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.metrics.sot import aggregate_sot, evaluate_sot_sequence, frame_iou
 from unitrack_env.render import draw_boxes
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 #: Folder of the OTB data under ``$UNITRACK_DATA``.
 BENCHMARK_FOLDER = "OTB"
@@ -32,10 +32,6 @@ DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 ACTION_COLOUR = (0, 255, 0)
 #: Colour of the initial box drawn before the first step (RGB).
 INIT_COLOUR = (255, 200, 0)
-
-
-def _frame_path(paths: tuple[Path, ...], index: int) -> Path:
-    return paths[index]
 
 
 def _canonical(box: np.ndarray) -> np.ndarray:
@@ -174,21 +170,15 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         root: str | os.PathLike | None = None,
         sequences: list[str] | tuple[str, ...] | None = None,
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         data_root = self._data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
         self.dataset = OTBDataset(data_root)
         if sequences is not None:
             self.sequence_names = [self.dataset.resolve(s) for s in sequences]
         else:
             self.sequence_names = list(self.dataset.sequence_names)
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         box_low = np.array([-ut_spaces.COORD_MAX, -ut_spaces.COORD_MAX, 0.0, 0.0], np.float32)
         box_high = np.float32(ut_spaces.COORD_MAX)
         self.observation_space = spaces.Dict({
@@ -198,18 +188,13 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         self.action_space = spaces.Box(box_low, box_high, (4,), np.float32)
 
         self._loaded: dict[str, SOTSequence] = {}
-        self._sequence: SOTSequence | None = None
-        self._frames: FramePrefetcher | None = None
-        self._t = 0
-        self._done = True
         self._results: list[np.ndarray] = []
         self._scored: np.ndarray | None = None
-        self._frame: np.ndarray | None = None
         self._render_frame: np.ndarray | None = None
         self._render_box: np.ndarray | None = None
 
     # ------------------------------------------------------------------ data
-    def _load(self, name: str) -> SOTSequence:
+    def _read(self, name: str) -> SOTSequence:
         """Read a sequence once (the reader's warning about trimmed copies appears once)."""
         sequence = self._loaded.get(name)
         if sequence is None:
@@ -228,11 +213,9 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
             suffix = ""
         return folder / f"groundtruth_rect{suffix}.txt"
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
-        sequence = self._load(name)
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
+        sequence = self._read(name)
         init = sequence.init_box
         if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):
             raise DataFormatError(
@@ -241,53 +224,27 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
                 line=1,
             )
         width, height = sequence.image_size
-        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
-            raise ValueError(
-                f"{name}: frames are {width}x{height}, larger than max_frame_size="
-                f"{self.max_frame_size} (height, width); pass a larger max_frame_size"
-            )
+        self._check_frame_size(name, width, height)
         self._sequence = sequence
-        self._frames = self._open_frames(partial(_frame_path, sequence.frame_paths),
-                                         range(len(sequence.frame_paths)), prefetch=self.prefetch)
-        self._t = 0
-        self._done = False
         self._results = []
         self._scored = None
         self._render_box = None
-        observation = self._observe(0)
-        return observation, self._info(reset=True)
+        return dict(seq_length=sequence.num_frames, frame_rate=30.0,
+                    image_size=(height, width), benchmark=BENCHMARK,
+                    has_ground_truth=sequence.has_ground_truth, synthetic=self.synthetic)
 
     def _observe(self, t: int) -> dict[str, Any]:
-        sequence = self._sequence
-        image = self._decode(t, next_key=t + 1 if t + 1 < sequence.num_frames else None,
-                             size=sequence.image_size, path=sequence.frame_paths[t],
-                             source="the sequence's first frame")
-        self._frame = image
-        return {"frame": image, "init_box": sequence.init_box.astype(np.float32)}
+        image = self._read_frame(t)
+        return {"frame": image, "init_box": self._sequence.init_box.astype(np.float32)}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        sequence = self._sequence
-        out: dict[str, Any] = {"sequence": sequence.name,
-                               "frame_index": sequence.frame_numbers[self._t]}
-        if reset:
-            out.update(
-                seq_length=sequence.num_frames,
-                frame_rate=30.0,
-                image_size=(sequence.image_size[1], sequence.image_size[0]),
-                benchmark=BENCHMARK,
-                has_ground_truth=sequence.has_ground_truth,
-                synthetic=self.synthetic,
-            )
-        return out
+    def _frame_info(self, t: int) -> dict[str, Any]:
+        return {"frame_index": self._sequence.frame_numbers[t]}
 
-    def step(self, action: Any) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the box of the current frame, score it, and move to the next frame."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+    def _record(self, action: Any, t: int) -> tuple[float, dict[str, Any]]:
+        """Record frame ``t``'s box; the reward is the IoU of the box the toolkit scores."""
         box = _canonical(validate_box(action))
-        sequence, t = self._sequence, self._t
         self._results.append(box)
-        gt = sequence.boxes[t]
+        gt = self._sequence.boxes[t]
         # The box the OTB toolkit scores (metrics.sot.repair_predictions, frame by frame).
         if t == 0:
             scored = gt.copy()
@@ -298,20 +255,7 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         self._scored = scored
         reward = frame_iou(scored, gt)
         self._render_frame, self._render_box = self._frame, box
-        info_extra = {"iou": reward}
-        if t + 1 >= sequence.num_frames:
-            self._done = True
-            observation = {"frame": self._fresh(self._frame),
-                           "init_box": sequence.init_box.astype(np.float32)}
-            info = self._info() | info_extra
-            if sequence.has_ground_truth:
-                info["metrics"] = self.episode_metrics()
-            if self._frames is not None:
-                self._frames.close()
-            return observation, reward, True, False, info
-        self._t = t + 1
-        observation = self._observe(self._t)
-        return observation, reward, False, False, self._info() | info_extra
+        return reward, {"iou": reward}
 
     # ------------------------------------------------------------------ results
     def episode_results(self) -> np.ndarray:
@@ -322,8 +266,7 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
 
     def episode_digest(self) -> str:
         """Return a SHA-256 digest of the recorded boxes (rounded to 1e-3)."""
-        rows = np.round(self.episode_results(), 3)
-        return hashlib.sha256(np.ascontiguousarray(rows).tobytes()).hexdigest()
+        return self._rows_digest(self.episode_results())
 
     def episode_metrics(self) -> dict[str, float]:
         """Score the recorded boxes of the finished episode with the OTB toolkit's rules.
@@ -338,16 +281,15 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
 
     def sequence_length(self, name: str) -> int:
         """Return the number of frames (steps) of sequence ``name`` (its ground truth rows)."""
-        return self._load(name).num_frames
+        return self._read(name).num_frames
 
     def has_ground_truth(self, name: str) -> bool:
         """Whether sequence ``name`` has boxes after the first frame."""
-        return self._load(name).has_ground_truth
+        return self._read(name).has_ground_truth
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<sequence>.txt``: one ``x,y,w,h`` line per frame, atomically."""
-        if self._sequence is None or not self._results:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode(played=bool(self._results))
         atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
                           format_otb_results(self.episode_results()))
 
@@ -360,7 +302,7 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         """
         per_sequence, scores = {}, {}
         for name in sequences:
-            sequence = self._load(self.dataset.resolve(name))
+            sequence = self._read(self.dataset.resolve(name))
             path = Path(folder) / f"{sequence.name}.txt"
             if not path.is_file():
                 raise DataFormatError(path, f"no result file for sequence '{sequence.name}'")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -22,10 +22,8 @@ from unitrack_env.datasets.posetrack import (
     read_posetrack_json,
     write_posetrack_json,
 )
-from unitrack_env.envs.base import SequenceEnv
-from unitrack_env.envs.jhmdb import draw_skeleton
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError
-from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.posetrack import (
     POSEVAL_DROPS_LAST_FRAME,
     PoseFrame,
@@ -35,7 +33,10 @@ from unitrack_env.metrics.posetrack import (
     summarise,
 )
 from unitrack_env.metrics.report import COMBINED, ScoreReport
-from unitrack_env.render import DETECTION_COLOUR, id_colour
+from unitrack_env.render import draw_poses
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 #: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).
 DEFAULT_MAX_PEOPLE = 100
@@ -141,11 +142,11 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
     - ``sequences``: restrict to these sequence names.
     - ``detections``: a folder of ``<sequence>.json`` pose detections, ``"oracle"``, or
       None (synthetic: its simulated detections; real: oracle, or none for test).
-    - ``min_score``: drop detected poses scored below this.
+    - ``min_score``: drop detected poses scored below this (or wrap the environment in
+      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
     - ``max_people``, ``max_tracks``, ``max_frame_size``: space capacities.
     - ``drop_last_frame``: leave out the last evaluated frame per sequence like poseval.
-    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
-    - ``shuffle``: visit sequences in a seeded random order.
+    - ``decode_frames``, ``prefetch``, ``shuffle``: as in the other environments.
     - ``render_mode``: ``"rgb_array"`` draws the tracked skeletons coloured by id.
 
     ## Version history
@@ -163,12 +164,9 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         max_tracks: int = DEFAULT_MAX_TRACKS,
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
         self.dataset = PoseTrackDataset(data_root, split)
         self.sequence_names = self._select_sequences(
@@ -178,10 +176,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         self.min_score = min_score
         self.max_people = int(max_people)
         self.max_tracks = int(max_tracks)
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
         self.drop_last_frame = bool(drop_last_frame)
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         self.observation_space = spaces.Dict({
             "frame": ut_spaces.Image(*self.max_frame_size),
             "keypoints": ut_spaces.keypoint_array_space(self.max_people, NUM_KEYPOINTS),
@@ -189,15 +184,10 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
             "num_people": spaces.Discrete(self.max_people + 1),
         })
         self.action_space = ut_spaces.pose_track_action_space(self.max_tracks, NUM_KEYPOINTS)
-        self._sequence: PoseTrackSequence | None = None
         self._poses: list[tuple[np.ndarray, np.ndarray]] = []
         self._evaluated: set[int] = set()
-        self._frames: FramePrefetcher | None = None
-        self._k = 0
-        self._done = True
         self._poseval = PosevalSequence()
         self._results: list[list[PoseTrackPerson]] = []
-        self._frame: np.ndarray | None = None
         self._render_tracks: tuple[np.ndarray, np.ndarray] | None = None
         self._render_frame: np.ndarray | None = None
 
@@ -219,15 +209,11 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
             raise DataFormatError(folder, "detections= is not a folder of <sequence>.json files")
         return "folder", folder
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
         sequence = self.dataset.load(name)
         width, height = sequence.image_size
-        if height > self.max_frame_size[0] or width > self.max_frame_size[1]:
-            raise ValueError(f"{name}: frames are {width}x{height}, larger than max_frame_size="
-                             f"{self.max_frame_size} (height, width); pass a larger one")
+        self._check_frame_size(name, width, height, hint="one")
         self._poses = self._load_poses(sequence)
         most = max((len(s) for s, _ in self._poses), default=0)
         if most > self.max_people:
@@ -237,14 +223,23 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         self._evaluated = (set(evaluated_frames(sequence.ground_truth,
                                                 drop_last_frame=self.drop_last_frame))
                            if sequence.ground_truth is not None else set())
-        self._frames = self._open_frames(sequence.frame_paths.__getitem__,
-                                         range(len(sequence.frame_paths)), prefetch=self.prefetch)
-        self._k = 0
-        self._done = False
         self._poseval = PosevalSequence()
         self._results = []
         self._render_tracks = None
-        return self._observe(0), self._info(reset=True)
+        first = sequence.images[0]
+        return dict(
+            seq_length=sequence.length, frame_rate=FRAME_RATE, image_size=(height, width),
+            nframes_declared=first.nframes if first.nframes is not None else sequence.length,
+            has_ground_truth=sequence.ground_truth is not None,
+            detections=self.detection_source,
+            oracle_detections=self.detection_source == ORACLE,
+            synthetic=self.synthetic,
+        )
+
+    @property
+    def _k(self) -> int:
+        """The current step (the cursor :attr:`_t`; kept for code that reads ``_k``)."""
+        return self._t
 
     def _load_poses(self, sequence: PoseTrackSequence) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per frame ``(scores (n,), keypoints (n, 17, 3))`` from the detection source."""
@@ -278,16 +273,9 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
             out.append(_stack(poses) if poses else empty)
         return out
 
-    def _observe(self, k: int) -> dict[str, Any]:
-        seq = self._sequence
-        image = self._decode(k, next_key=k + 1 if k + 1 < seq.length else None,
-                             size=seq.image_size, path=seq.frame_paths[k],
-                             source="the sequence's first frame")
-        self._frame = image
-        return self._pose_observation(k, image)
-
-    def _pose_observation(self, k: int, image: np.ndarray) -> dict[str, Any]:
-        scores, poses = self._poses[k]
+    def _observe(self, t: int) -> dict[str, Any]:
+        image = self._read_frame(t)
+        scores, poses = self._poses[t]
         n = len(scores)
         keypoints = np.zeros((self.max_people, NUM_KEYPOINTS, 3), dtype=np.float32)
         pose_scores = np.zeros(self.max_people, dtype=np.float32)
@@ -295,56 +283,32 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         pose_scores[:n] = scores
         return {"frame": image, "keypoints": keypoints, "scores": pose_scores, "num_people": n}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        seq = self._sequence
-        image = seq.images[self._k]
-        out: dict[str, Any] = {"sequence": seq.name, "frame_index": image.frame_index,
-                               "image_id": image.id, "is_labeled": bool(image.is_labeled)}
-        if reset:
-            out.update(
-                seq_length=seq.length, frame_rate=FRAME_RATE,
-                image_size=(seq.image_size[1], seq.image_size[0]),
-                nframes_declared=image.nframes if image.nframes is not None else seq.length,
-                has_ground_truth=seq.ground_truth is not None,
-                detections=self.detection_source,
-                oracle_detections=self.detection_source == ORACLE,
-                synthetic=self.synthetic,
-            )
-        return out
+    def _frame_info(self, t: int) -> dict[str, Any]:
+        image = self._sequence.images[t]
+        return {"frame_index": image.frame_index, "image_id": image.id,
+                "is_labeled": bool(image.is_labeled)}
 
-    def step(self, action: dict[str, Any]
-             ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the pose tracks of the current frame, score them, move to the next frame."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+    def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
+        """Record the pose tracks of frame ``t``; score the frames poseval evaluates."""
         ids, keypoints = ut_spaces.unpack_pose_tracks(action, self.max_tracks, NUM_KEYPOINTS)
-        k = self._k
-        image = self._sequence.images[k]
+        image = self._sequence.images[t]
         people = [_result_person(image.id, int(i), kp) for i, kp in zip(ids, keypoints,
                                                                           strict=True)]
         self._results.append(people)
         self._render_frame, self._render_tracks = self._frame, (ids, keypoints)
-        reward, info_extra = 0.0, {}
-        gt = self._sequence.ground_truth
-        if k in self._evaluated:
-            counts = self._poseval.update(PoseFrame.from_people(gt.people[k]),
-                                          PoseFrame.from_people(people), image.ignore_regions)
-            reward = float(counts.mota_numerator)
-            info_extra["clear"] = {"tp": int(counts.detections.sum()),
-                                   "fp": int(counts.false_positives.sum()),
-                                   "fn": int(counts.misses.sum()),
-                                   "idsw": int(counts.switches.sum())}
-        if k + 1 >= self._sequence.length:
-            self._done = True
-            observation = self._pose_observation(k, self._fresh(self._frame))
-            info = self._info() | info_extra
-            if gt is not None:
-                info["metrics"] = summarise([self._poseval.counts()])
-            if self._frames is not None:
-                self._frames.close()
-            return observation, reward, True, False, info
-        self._k = k + 1
-        return self._observe(self._k), reward, False, False, self._info() | info_extra
+        if t not in self._evaluated:
+            return 0.0, {}
+        counts = self._poseval.update(PoseFrame.from_people(self._sequence.ground_truth.people[t]),
+                                      PoseFrame.from_people(people), image.ignore_regions)
+        clear = {"tp": int(counts.detections.sum()), "fp": int(counts.false_positives.sum()),
+                 "fn": int(counts.misses.sum()), "idsw": int(counts.switches.sum())}
+        return float(counts.mota_numerator), {"clear": clear}
+
+    def episode_metrics(self) -> dict[str, float]:
+        """Poseval's metrics of the recorded episode (needs ground truth)."""
+        if self._sequence is None or self._sequence.ground_truth is None:
+            raise ValueError("this sequence has no ground truth to score against")
+        return summarise([self._poseval.counts()])
 
     # ------------------------------------------------------------------ results
     def episode_results(self) -> PoseTrackVideo:
@@ -373,8 +337,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<sequence>.json`` in the official PoseTrack 2018 result format."""
-        if self._sequence is None:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode()
         write_posetrack_json(Path(folder) / f"{self._sequence.name}.json", self.episode_results())
 
     def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
@@ -398,18 +361,9 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
     def _draw(self) -> np.ndarray:
         """Return the frame with the tracked skeletons coloured by id (detections at reset)."""
         if self._render_tracks is None:
-            canvas = np.ascontiguousarray(self._frame).copy()
-            for pose in self._poses[self._k][1]:
-                draw_skeleton(canvas, pose[:, :2], _LIMBS, present=pose[:, 2] > 0,
-                              colour=DETECTION_COLOUR)
-            return canvas
-        canvas = np.ascontiguousarray(self._render_frame).copy()
+            return draw_poses(self._frame, self._poses[self._t][1], _LIMBS)
         ids, keypoints = self._render_tracks
-        for track_id, pose in zip(ids, keypoints, strict=True):
-            draw_skeleton(canvas, pose[:, :2], _LIMBS, present=pose[:, 2] > 0,
-                          colour=id_colour(int(track_id)))
-        return canvas
-
+        return draw_poses(self._render_frame, keypoints, _LIMBS, ids)
 
 
 def _observed_pose(person: PoseTrackPerson, *, oracle: bool) -> tuple[float, np.ndarray]:

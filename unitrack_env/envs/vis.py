@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import os
 from collections import defaultdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -22,13 +21,15 @@ from unitrack_env.datasets.youtube_vis import (
     format_results,
     parse_vis_results,
 )
-from unitrack_env.envs.base import SequenceEnv
-from unitrack_env.envs.mots import draw_masks
+from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError
-from unitrack_env.frames import FramePrefetcher
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mots import MaskClearStream
 from unitrack_env.metrics.report import ScoreReport
+from unitrack_env.render import draw_masks
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
@@ -101,7 +102,8 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
     - ``sequences``: restrict to these videos (names).
     - ``detections``: ``"public"`` (``<root>/detections/<split>.json``), ``"gt"`` or a
       results-format JSON file.
-    - ``min_score``: drop detections scored below this.
+    - ``min_score``: drop detections scored below this (or wrap the environment in
+      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
     - ``max_detections``, ``max_frame_size``, ``decode_frames``, ``prefetch``, ``shuffle``,
       ``render_mode`` as in the other environments.
 
@@ -121,12 +123,9 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         min_score: float | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
         max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
-        decode_frames: bool = True,
-        prefetch: bool = True,
-        shuffle: bool = False,
-        render_mode: str | None = None,
+        **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        super().__init__(max_frame_size, **options)
         data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
         self.dataset = YouTubeVISDataset(data_root, split, detections, annotation_file)
         self.sequence_names = self._select_sequences(
@@ -135,33 +134,22 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         self.categories = dict(self.dataset.data.categories)
         self.min_score = min_score
         self.max_detections = int(max_detections)
-        self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
-        self.decode_frames = decode_frames
-        self.prefetch = prefetch
         self.observation_space = ut_spaces.mask_observation_space(
             self.max_detections, self.max_frame_size,
             num_classes=max(self.categories, default=1))
         self.action_space: spaces.Dict = ut_spaces.mask_id_action_space(self.max_detections)
 
-        self._sequence: VisVideo | None = None
         self._gt: list[VisTrack] | None = None
         self._dets: list[list[tuple[dict, int, float]]] = []
-        self._frames: FramePrefetcher | None = None
-        self._k = 0
-        self._done = True
         self._clear = MaskClearStream()
         self._tracks: dict[int, dict[int, tuple[dict, int, float]]] = {}
         self._current: dict[str, Any] = {}
         self._render_state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
-    # ------------------------------------------------------------------ episode control
-    def _start_episode(self, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-        if self._frames is not None:
-            self._frames.close()
+    # ------------------------------------------------------------------ episode hooks
+    def _load(self, name: str) -> dict[str, Any]:
         video = self.dataset.video(name)
-        if video.height > self.max_frame_size[0] or video.width > self.max_frame_size[1]:
-            raise ValueError(f"{name}: frames are {video.width}x{video.height}, larger than "
-                             f"max_frame_size={self.max_frame_size}; pass a larger one")
+        self._check_frame_size(name, video.width, video.height, axes=False, hint="one")
         per_frame: list[list[tuple[dict, int, float]]] = [[] for _ in range(video.length)]
         for det in self.dataset.detections_of(video):
             if self.min_score is not None and det.score < self.min_score:
@@ -176,26 +164,28 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         self._sequence = video
         self._gt = self.dataset.data.tracks_of(video.id) if self.dataset.has_annotations else None
         self._dets = per_frame
-        self._frames = self._open_frames(functools.partial(self.dataset.frame_path, video),
-                                         range(video.length), prefetch=self.prefetch)
-        self._k = 0
-        self._done = False
         self._clear.reset()
         self._tracks = {}
         self._render_state = None
-        return self._observe(), self._info(reset=True)
+        return dict(video_id=video.id, seq_length=video.length, frame_rate=FRAME_RATE,
+                    image_size=(video.height, video.width), benchmark=BENCHMARK,
+                    has_ground_truth=self._gt is not None, synthetic=self.synthetic)
 
-    def _observe(self) -> dict[str, Any]:
-        video, k = self._sequence, self._k
-        image = self._decode(k, next_key=k + 1 if k + 1 < video.length else None,
-                             size=(video.width, video.height),
-                             path=self.dataset.frame_path(video, k), source="the JSON")
-        dets = self._dets[k]
+    def _length(self) -> int:
+        return self._sequence.length
+
+    def _frame_path(self, t: int) -> Path:
+        return self.dataset.frame_path(self._sequence, t)
+
+    def _frame_size(self) -> tuple[int, int]:
+        return self._sequence.width, self._sequence.height
+
+    def _observe(self, t: int) -> dict[str, Any]:
+        video = self._sequence
+        image = self._read_frame(t)
+        dets = self._dets[t]
         masks = decode_masks([d[0]["counts"] for d in dets], video.height, video.width)
-        self._current = {"image": image, "masks": masks, "dets": dets}
-        return self._pack(image, masks, dets)
-
-    def _pack(self, image: np.ndarray, masks: np.ndarray, dets: list) -> dict[str, Any]:
+        self._current = {"masks": masks, "dets": dets}
         n = len(dets)
         boxes = np.zeros((self.max_detections, 4), dtype=np.float32)
         scores = np.zeros(self.max_detections, dtype=np.float32)
@@ -206,51 +196,24 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         return {"frame": image, "masks": masks, "boxes": boxes, "scores": scores,
                 "classes": classes, "num_detections": n}
 
-    def _info(self, *, reset: bool = False) -> dict[str, Any]:
-        video = self._sequence
-        out: dict[str, Any] = {"sequence": video.name, "frame_index": self._k}
-        if reset:
-            out.update(video_id=video.id, seq_length=video.length, frame_rate=FRAME_RATE,
-                       image_size=(video.height, video.width), benchmark=BENCHMARK,
-                       has_ground_truth=self._gt is not None, synthetic=self.synthetic)
-        return out
-
-    def step(self, action: dict[str, Any]
-             ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        """Record the ids given to this frame's detections, score them, and move on."""
-        if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+    def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
+        """Record the ids given to frame ``t``'s detections and score them, class-agnostic."""
         dets = self._current["dets"]
         ids = ut_spaces.unpack_mask_ids(action, len(dets), self.max_detections)
         reported = np.flatnonzero(ids > 0)
         for i in reported:
-            self._tracks.setdefault(int(ids[i]), {})[self._k] = dets[i]
-        reward, clear = self._score_frame(ids[reported], [dets[i][0] for i in reported])
+            self._tracks.setdefault(int(ids[i]), {})[t] = dets[i]
         keep = ids > 0
-        self._render_state = (self._current["image"], self._current["masks"][keep], ids[keep])
-        extra: dict[str, Any] = {"clear": clear} if clear is not None else {}
-        if self._k + 1 >= self._sequence.length:
-            self._done = True
-            observation = self._pack(self._fresh(self._current["image"]),
-                                     self._fresh(self._current["masks"]), dets)
-            info = self._info() | extra
-            if self._gt is not None:
-                info["metrics"] = self.episode_metrics()
-            self._frames.close()
-            return observation, reward, True, False, info
-        self._k += 1
-        return self._observe(), reward, False, False, self._info() | extra
-
-    def _score_frame(self, ids: np.ndarray, rles: list[dict]
-                     ) -> tuple[float, dict[str, int] | None]:
+        self._render_state = (self._frame, self._current["masks"][keep], ids[keep])
         if self._gt is None:
-            return 0.0, None
-        present = [(i, t.segmentations[self._k]) for i, t in enumerate(self._gt)
-                   if t.segmentations[self._k] is not None and not t.iscrowd]
+            return 0.0, {}
+        present = [(i, track.segmentations[t]) for i, track in enumerate(self._gt)
+                   if track.segmentations[t] is not None and not track.iscrowd]
         counts = self._clear.update(np.asarray([i for i, _ in present], np.int64),
-                                    [s for _, s in present], [], ids, rles)
+                                    [s for _, s in present], [], ids[reported],
+                                    [dets[i][0] for i in reported])
         clear = {"tp": counts.tp, "fp": counts.fp, "fn": counts.fn, "idsw": counts.idsw}
-        return float(counts.tp - counts.fp - counts.idsw), clear
+        return float(counts.tp - counts.fp - counts.idsw), {"clear": clear}
 
     # ------------------------------------------------------------------ results
     def episode_results(self) -> list[VisTrack]:
@@ -297,8 +260,7 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         ``unitrack_env.metrics.vis.merge_result_files(folder)`` concatenates them into the
         challenge's ``results.json``.
         """
-        if self._sequence is None:
-            raise RuntimeError("no episode to write; call reset() and play it first")
+        self._require_episode()
         atomic_write_text(Path(folder) / f"{self._sequence.name}.json",
                           format_results(self.episode_results()))
 
@@ -319,6 +281,6 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
     def _draw(self) -> np.ndarray:
         """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
         if self._render_state is None:
-            return draw_masks(self._current["image"], self._current["masks"])
+            return draw_masks(self._frame, self._current["masks"])
         return draw_masks(*self._render_state)
 
