@@ -1,12 +1,13 @@
 """Adding a task from a user's project: one env module, one benchmark module, one table row.
 
 A project folder outside this repository defines a toy point-tracking task (follow one point
-through noisy measurements of it): ``point_task/env.py`` (the environment, a
-``SequenceEnv``), ``point_task/benchmark.py`` (its :class:`~unitrack_env.benchmarks.Benchmark`:
-ground truth, result files, scoring, columns), the registration row in
-``point_task/__init__.py`` (:func:`unitrack_env.registration.register_variant`) and a
-trivial agent. Nothing in unitrack-env is edited; ``unitrack evaluate`` plays and scores the
-task, and ``unitrack score`` scores the written folder again to the same numbers.
+through noisy measurements of it): ``point_task/env.py`` (the environment: the episode
+template's hooks of a ``SequenceEnv``), ``point_task/benchmark.py`` (its
+:class:`~unitrack_env.benchmarks.Benchmark`: ground truth, result files, scoring, columns),
+the registration row in ``point_task/__init__.py``
+(:func:`unitrack_env.registration.register_variant`) and a trivial agent. Nothing in
+unitrack-env is edited; ``unitrack evaluate`` plays and scores the task, and ``unitrack
+score`` scores the written folder again to the same numbers.
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ BENCHMARK = '''
 """Point tracking's benchmark: ground truth, ``x,y`` result files, mean error, success."""
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +45,15 @@ import numpy as np
 from unitrack_env.benchmarks.base import Benchmark, rounded_digest
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import COMBINED, ScoreReport
+
+
+class PointSequence:
+    """One sequence: its name, true points and measured points, ``(frames, 2)`` each."""
+
+    def __init__(self, name, truth, measured):
+        self.name = name
+        self.truth = np.asarray(truth, dtype=np.float64)
+        self.measured = np.asarray(measured, dtype=np.float64)
 
 
 class PointData:
@@ -55,8 +64,8 @@ class PointData:
         self.sequences = json.loads((self.root / "points.json").read_text())
         self.sequence_names = sorted(self.sequences)
 
-    def points(self, name, kind):
-        return np.asarray(self.sequences[name][kind], dtype=np.float64)
+    def sequence(self, name):
+        return PointSequence(name, **self.sequences[name])
 
 
 def point_metrics(predicted, truth):
@@ -97,13 +106,13 @@ class PointBenchmark(Benchmark):
         return rounded_digest(results)
 
     def score_sequence(self, sequence, results):
-        return point_metrics(results, self.dataset.points(sequence, "truth"))
+        return point_metrics(results, self.dataset.sequence(sequence).truth)
 
     def score_folder(self, folder, sequences):
         per_sequence = {name: self.score_sequence(name, self.read(folder, name))
                         for name in sequences}
         predicted = np.concatenate([self.read(folder, name) for name in sequences])
-        truth = np.concatenate([self.dataset.points(name, "truth") for name in sequences])
+        truth = np.concatenate([self.dataset.sequence(name).truth for name in sequences])
         combined = point_metrics(predicted, truth)
         return ScoreReport(self.name, per_sequence, combined,
                            {**per_sequence, COMBINED: combined})
@@ -111,6 +120,8 @@ class PointBenchmark(Benchmark):
 
 ENV = '''
 """Point tracking: follow one point through noisy measurements of it."""
+
+from pathlib import Path
 
 import numpy as np
 from gymnasium import spaces
@@ -120,44 +131,63 @@ from unitrack_env.envs.base import SequenceEnv
 
 
 class PointEnv(SequenceEnv, task="point"):
-    """Observation: the frame's measured point; action: the point; reward: -error (px)."""
+    """Observation: the frame's measured ``point``; action: the point; reward: -error (px)."""
 
     def __init__(self, root=None, shuffle=False, render_mode=None):
-        super().__init__(shuffle=shuffle, render_mode=render_mode)
+        # No images: nothing to decode or prefetch.
+        super().__init__(decode_frames=False, prefetch=False, shuffle=shuffle,
+                         render_mode=render_mode)
         self.scoring = PointBenchmark.from_kwargs(root=root)
         self.sequence_names = self.scoring.sequence_names
-        self.observation_space = spaces.Box(-1e4, 1e4, (2,), np.float32)
+        self.observation_space = spaces.Dict(
+            {"point": spaces.Box(-1e4, 1e4, (2,), np.float32)})
         self.action_space = spaces.Box(-1e4, 1e4, (2,), np.float32)
         self._results = []
 
-    def _start_episode(self, name):
-        data = self.scoring.dataset
-        self._name, self._t, self._results = name, 0, []
-        self._truth = data.points(name, "truth")
-        self._measured = data.points(name, "measured").astype(np.float32)
-        info = {"sequence": name, "frame_index": 1, "seq_length": len(self._truth)}
-        return self._measured[0].copy(), info
+    # ----------------------------------------------------------- the episode hooks
+    def _load(self, name):
+        self._sequence = self.scoring.dataset.sequence(name)
+        self._results = []
+        return {"seq_length": self._length(), "has_ground_truth": True}
 
-    def step(self, action):
+    def _length(self):
+        return len(self._sequence.truth)
+
+    def _frame_path(self, t):
+        return Path(f"{self._sequence.name}-{t}")  # never read: decode_frames=False
+
+    def _observe(self, t):
+        return {"point": self._sequence.measured[t].astype(np.float32)}
+
+    def _record(self, action, t):
         point = np.asarray(action, dtype=np.float64).reshape(2)
         self._results.append(point)
-        reward = -float(np.linalg.norm(point - self._truth[self._t]))
-        self._t += 1
-        done = self._t >= len(self._truth)
-        info = {"sequence": self._name, "frame_index": self._t + 1}
-        if done:
-            info["metrics"] = self.scoring.score_sequence(self._name, self.episode_results())
-        observation = self._measured[min(self._t, len(self._truth) - 1)].copy()
-        return observation, reward, done, False, info
+        return -float(np.linalg.norm(point - self._sequence.truth[t])), {}
 
+    def episode_metrics(self):
+        return self.scoring.score_sequence(self._sequence.name, self.episode_results())
+
+    def _draw(self):
+        return np.zeros((8, 8, 3), dtype=np.uint8)
+
+    # ----------------------------------------------------------- results: the benchmark's
     def episode_results(self):
         return np.asarray(self._results, dtype=np.float64).reshape(-1, 2)
 
     def episode_digest(self):
         return self.scoring.digest(self.episode_results())
 
-    def _draw(self):
-        return np.zeros((8, 8, 3), dtype=np.uint8)
+    def write_episode(self, folder):
+        self.scoring.write(folder, self._sequence.name, self.episode_results())
+
+    def sequence_length(self, name):
+        return self.scoring.sequence_length(name)
+
+    def has_ground_truth(self, name):
+        return self.scoring.has_ground_truth(name)
+
+    def score_folder(self, folder, sequences):
+        return self.scoring.score_folder(folder, sequences)
 '''
 
 AGENT = '''
@@ -173,7 +203,7 @@ class EchoAgent(Agent):
         pass
 
     def act(self, observation):
-        return observation
+        return observation["point"]
 '''
 
 
