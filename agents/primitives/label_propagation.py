@@ -43,12 +43,19 @@ reference in the tests; :class:`LabelPropagator` is the fast stateful version th
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
+
+from unitrack_env.agents.primitives.label_search import (
+    LocalGeometry,
+    grid_positions,
+    merge_topk,
+    search_dense,
+    search_local,
+)
 
 MEMORY_SIZE: int = 6
 """``M``: frames in the memory bank, the first frame plus the ``M - 1`` latest (appendix B.2)."""
@@ -150,37 +157,6 @@ def _check_pair(features: torch.Tensor, labels: torch.Tensor) -> None:
         )
 
 
-def _grid(h: int, w: int, device: torch.device) -> torch.Tensor:
-    """``(h*w, 2)`` float (row, column) of every location, row-major."""
-    rows, cols = torch.meshgrid(
-        torch.arange(h, device=device, dtype=torch.float32),
-        torch.arange(w, device=device, dtype=torch.float32), indexing="ij",
-    )
-    return torch.stack([rows.reshape(-1), cols.reshape(-1)], dim=1)
-
-
-def _merge_topk(
-    values: list[torch.Tensor], labels: list[torch.Tensor], topk: int, temperature: float
-) -> torch.Tensor:
-    """Top-k over candidate groups, softmax over the kept ones, weighted labels.
-
-    Args:
-        values: Per group ``(Q, k_g)`` affinities (``-inf`` = not a candidate).
-        labels: Per group ``(Q, k_g, K)`` labels of those candidates.
-        topk: Candidates kept over all groups.
-        temperature: Softmax temperature.
-
-    Returns:
-        ``(Q, K)`` propagated labels.
-    """
-    value = torch.cat(values, dim=1)
-    label = torch.cat(labels, dim=1)
-    k = min(topk, value.shape[1])
-    best, index = value.topk(k, dim=1)
-    kept = torch.gather(label, 1, index.unsqueeze(-1).expand(-1, -1, label.shape[2]))
-    weights = torch.softmax(best / temperature, dim=1)  # -inf entries get weight 0
-    return torch.einsum("qk,qkc->qc", weights, kept)
-
 
 def propagate_dense(
     query: torch.Tensor,
@@ -210,7 +186,7 @@ def propagate_dense(
     """
     c, h, w = query.shape
     q = query.reshape(c, -1).t()
-    grid = _grid(h, w, query.device)
+    grid = grid_positions(h, w, query.device)
     distance = torch.cdist(grid, grid)
     values, labels = [], []
     for feats, lab, radius in zip(memory_features, memory_labels, radii, strict=True):
@@ -220,7 +196,7 @@ def propagate_dense(
             aff = aff.masked_fill(distance > radius, float("-inf"))
         values.append(aff)
         labels.append(lab.reshape(lab.shape[0], -1).t().unsqueeze(0).expand(h * w, -1, -1))
-    out = _merge_topk(values, labels, topk, temperature)
+    out = merge_topk(values, labels, topk, temperature)
     return out.t().reshape(-1, h, w)
 
 
@@ -247,7 +223,7 @@ class LabelPropagator:
         self._recent: deque[tuple[torch.Tensor, torch.Tensor]] = deque(
             maxlen=self.config.memory_size - 1
         )
-        self._geometry: _LocalGeometry | None = None
+        self._geometry: LocalGeometry | None = None
         self._ring_keys: torch.Tensor | None = None  # (slots, Hp * Wp, C), zero-padded
         self._ring_labels: torch.Tensor | None = None  # (slots, Hp * Wp, K)
         self._slots: deque[int] = deque()  # ring slots in use, oldest first
@@ -362,7 +338,7 @@ class LabelPropagator:
                     v, lab = self._search_local(query, h, w)
                     values.append(v)
                     labels.append(lab)
-            out = _merge_topk(values, labels, cfg.topk, cfg.temperature)
+            out = merge_topk(values, labels, cfg.topk, cfg.temperature)
         return out.t().reshape(num_labels, h, w).clone()
 
     def _search_first(self, q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int,
@@ -373,37 +349,18 @@ class LabelPropagator:
         self, q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int, w: int,
         radius: float | None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Top-k of every query over one whole memory frame, by blocks of queries."""
+        """Top-k of every query over one whole memory frame (:func:`search_dense`)."""
         cfg = self.config
-        size = h * w
-        keys = feats.reshape(feats.shape[0], -1)  # (C, S)
-        flat_labels = lbl.reshape(lbl.shape[0], -1).t()  # (S, K)
-        k = min(cfg.topk, size)
-        chunk = max(1, cfg.max_affinity_elements // size)
-        grid = _grid(h, w, q.device) if radius is not None else None
-        out_v = torch.empty(q.shape[0], k, device=q.device)
-        out_i = torch.empty(q.shape[0], k, dtype=torch.long, device=q.device)
-        aff = torch.empty(min(chunk, q.shape[0]), size, dtype=q.dtype, device=q.device)
-        for start in range(0, q.shape[0], chunk):
-            stop = min(q.shape[0], start + chunk)
-            block_aff = aff[:stop - start]
-            torch.mm(q[start:stop], keys, out=block_aff)
-            if grid is not None:
-                block_aff.masked_fill_(torch.cdist(grid[start:stop], grid) > radius,
-                                       float("-inf"))
-            best, index = block_aff.topk(k, dim=1)
-            out_v[start:stop] = best
-            out_i[start:stop] = index
-        return out_v, flat_labels[out_i]
+        return search_dense(q, feats, lbl, h, w, radius, cfg.topk, cfg.max_affinity_elements)
 
-    def _local_geometry(self, h: int, w: int, device: torch.device) -> _LocalGeometry:
+    def _local_geometry(self, h: int, w: int, device: torch.device) -> LocalGeometry:
         """The local search's layout for an ``h x w`` map (cached: one video, one size)."""
         cfg = self.config
         tile = max(1, min(cfg.tile_size, max(h, w)))
         key = (h, w, tile, float(cfg.radius or 0.0), str(device))
         if self._geometry is None or self._geometry.key != key:
-            self._geometry = _LocalGeometry.build(h, w, tile, float(cfg.radius or 0.0), device,
-                                                  key)
+            self._geometry = LocalGeometry.build(h, w, tile, float(cfg.radius or 0.0), device,
+                                                 key)
         return self._geometry
 
     def _search_local(self, query: torch.Tensor, h: int,
@@ -412,102 +369,6 @@ class LabelPropagator:
         if self._ring_keys is None or self._ring_labels is None:
             raise RuntimeError("the recent memory has no padded ring")  # never: _remember
         cfg = self.config
-        c = query.shape[0]
         geo = self._local_geometry(h, w, query.device)
-        tile, t2 = geo.tile, geo.tile * geo.tile
-        num_tiles, window = geo.key_index.shape
-        slots = torch.tensor(list(self._slots), device=query.device)
-        frames = len(slots)
-        candidates = frames * window
-        k = min(cfg.topk, candidates)
-        num_labels = self._ring_labels.shape[2]
-        # Queries by tile: (T, t^2, C) (zero-padded to whole tiles).
-        padded = F.pad(query, (0, geo.tiles_x * tile - w, 0, geo.tiles_y * tile - h))
-        q_tiles = padded.view(c, geo.tiles_y, tile, geo.tiles_x, tile).permute(
-            1, 3, 2, 4, 0).reshape(num_tiles, t2, c)
-        # Every tile's keys in every recent frame, as rows of the flattened ring.
-        ring_size = geo.padded_h * geo.padded_w
-        rows = (slots.view(1, -1, 1) * ring_size + geo.key_index.unsqueeze(1)).reshape(
-            num_tiles, candidates)  # (T, R * L), frame-major per tile
-        ring_keys = self._ring_keys.view(-1, c)
-        ring_labels = self._ring_labels.view(-1, num_labels)
-        per_block = max(1, cfg.max_affinity_elements // (t2 * candidates))
-        out_v = torch.empty(num_tiles, t2, k, device=query.device)
-        out_l = torch.empty(num_tiles, t2, k, num_labels, device=query.device)
-        for start in range(0, num_tiles, per_block):
-            stop = min(num_tiles, start + per_block)
-            n = stop - start
-            block_rows = rows[start:stop]
-            keys = ring_keys.index_select(0, block_rows.reshape(-1)).view(n, candidates, c)
-            aff = torch.bmm(q_tiles[start:stop], keys.transpose(1, 2))  # (n, t^2, R * L)
-            aff.view(n, t2, frames, window).masked_fill_(
-                geo.excluded[start:stop].unsqueeze(2), float("-inf"))
-            best, index = aff.topk(k, dim=2)  # (n, t^2, k)
-            chosen = torch.gather(block_rows.unsqueeze(1).expand(n, t2, candidates), 2, index)
-            out_v[start:stop] = best
-            out_l[start:stop] = ring_labels[chosen]
-        # Tiles back to the map: (T, t^2, ...) -> (h * w, ...).
-        tiles_hw = (geo.tiles_y, geo.tiles_x, tile, tile)
-        out_v = out_v.view(*tiles_hw, k).permute(0, 2, 1, 3, 4).reshape(
-            geo.tiles_y * tile, geo.tiles_x * tile, k)[:h, :w].reshape(h * w, k)
-        out_l = out_l.view(*tiles_hw, k, num_labels).permute(0, 2, 1, 3, 4, 5).reshape(
-            geo.tiles_y * tile, geo.tiles_x * tile, k, num_labels)[:h, :w].reshape(
-            h * w, k, num_labels)
-        return out_v, out_l
-
-
-@dataclass(frozen=True)
-class _LocalGeometry:
-    """Layout of the local search for one map size (see the module docstring).
-
-    Attributes:
-        key: What it was built for ``(h, w, tile, radius, device)``.
-        tile: Tile side.
-        pad: Zero padding of the ring's maps (``floor(radius)``) on every side.
-        tiles_y: Tile rows.
-        tiles_x: Tile columns.
-        padded_h: Rows of a padded ring map (``tiles_y * tile + 2 pad``).
-        padded_w: Columns of a padded ring map.
-        key_index: ``(T, L)`` long: per tile, the flat positions (in a padded map) of the keys
-            within the radius of at least one of its queries.
-        excluded: ``(T, t^2, L)`` bool: key out of the query's radius or off the map.
-    """
-
-    key: tuple[object, ...]
-    tile: int
-    pad: int
-    tiles_y: int
-    tiles_x: int
-    padded_h: int
-    padded_w: int
-    key_index: torch.Tensor
-    excluded: torch.Tensor
-
-    @classmethod
-    def build(cls, h: int, w: int, tile: int, radius: float, device: torch.device,
-              key: tuple[object, ...]) -> _LocalGeometry:
-        pad = int(math.floor(radius))
-        tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
-        padded_h, padded_w = tiles_y * tile + 2 * pad, tiles_x * tile + 2 * pad
-        win = tile + 2 * pad
-        # Window positions (relative to the tile's top-left query, minus pad) within the
-        # radius of the nearest query of the tile: the tile square grown by the radius.
-        oy, ox = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
-        oy, ox = oy.reshape(-1), ox.reshape(-1)
-        gap_y = torch.clamp(torch.maximum(pad - oy, oy - (pad + tile - 1)), min=0)
-        gap_x = torch.clamp(torch.maximum(pad - ox, ox - (pad + tile - 1)), min=0)
-        keep = (gap_y * gap_y + gap_x * gap_x).double() <= radius * radius
-        oy, ox = oy[keep], ox[keep]  # (L,)
-        ty = torch.arange(tiles_y).repeat_interleave(tiles_x)  # (T,) row-major tiles
-        tx = torch.arange(tiles_x).repeat(tiles_y)
-        rows = ty.view(-1, 1) * tile + oy.view(1, -1)  # (T, L) padded-map rows
-        cols = tx.view(-1, 1) * tile + ox.view(1, -1)
-        key_index = rows * padded_w + cols
-        qy, qx = torch.meshgrid(torch.arange(tile), torch.arange(tile), indexing="ij")
-        dy = oy.view(1, -1) - pad - qy.reshape(-1, 1)  # (t^2, L)
-        dx = ox.view(1, -1) - pad - qx.reshape(-1, 1)
-        outside = (dy * dy + dx * dx).double() > radius * radius
-        off_map = ((rows < pad) | (rows >= pad + h) | (cols < pad) | (cols >= pad + w))
-        excluded = outside.unsqueeze(0) | off_map.unsqueeze(1)  # (T, t^2, L)
-        return cls(key, tile, pad, tiles_y, tiles_x, padded_h, padded_w,
-                   key_index.to(device), excluded.to(device))
+        return search_local(query, geo, self._ring_keys, self._ring_labels, self._slots,
+                            cfg.topk, cfg.max_affinity_elements)
