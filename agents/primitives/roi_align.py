@@ -98,7 +98,7 @@ def roi_align(
         raise ValueError(
             f"feature_map must be (C, H, W) or (B, C, H, W); got {tuple(feature_map.shape)}"
         )
-    num_images, channels, height, width = fmap.shape
+    num_images, channels = fmap.shape[:2]
     pooled_h, pooled_w = (int(v) for v in output_size)
     if pooled_h < 1 or pooled_w < 1:
         raise ValueError(f"output_size must be positive, got {output_size}")
@@ -108,22 +108,42 @@ def roi_align(
         return fmap.new_zeros((0, channels, pooled_h, pooled_w), dtype=dtype)
     if rois.ndim != 2 or rois.shape[1] not in (4, 5):
         raise ValueError(f"boxes must be (n, 4) x1y1x2y2 or (n, 5); got {tuple(rois.shape)}")
+    rois, index = _split_batch_index(rois, batch_index, num_images)
+    return _pool(fmap.to(dtype), rois, index, (pooled_h, pooled_w), spatial_scale,
+                 sampling_ratio, aligned)
+
+
+def _split_batch_index(
+    rois: torch.Tensor, batch_index: torch.Tensor | Sequence[int] | None, num_images: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(n, 4)`` boxes and the image of each, from ``(n, 5)`` rows or ``batch_index``."""
     if rois.shape[1] == 5:
         if batch_index is not None:
             raise ValueError("give the batch index either as boxes[:, 0] or batch_index, not both")
         index = rois[:, 0].round().to(torch.long)
         rois = rois[:, 1:]
     elif batch_index is not None:
-        index = torch.as_tensor(batch_index, dtype=torch.long, device=fmap.device).view(-1)
+        index = torch.as_tensor(batch_index, dtype=torch.long, device=rois.device).view(-1)
         if index.numel() != rois.shape[0]:
             raise ValueError(f"batch_index has {index.numel()} entries for {rois.shape[0]} boxes")
     elif num_images == 1:
-        index = torch.zeros(rois.shape[0], dtype=torch.long, device=fmap.device)
+        index = torch.zeros(rois.shape[0], dtype=torch.long, device=rois.device)
     else:
         raise ValueError(f"feature_map holds {num_images} images: pass batch_index for the boxes")
     if index.numel() and (index.min() < 0 or index.max() >= num_images):
         raise ValueError(f"batch indices must be in [0, {num_images}); got {index.tolist()}")
+    return rois, index
 
+
+def _sampling_grid(
+    rois: torch.Tensor, pooled: tuple[int, int], spatial_scale: float, sampling_ratio: int,
+    aligned: bool,
+) -> tuple[torch.Tensor, ...]:
+    """Box origins and sizes in feature pixels, and the samples per bin of each box.
+
+    Returns:
+        ``(x1, y1, roi_w, roi_h, grid_h, grid_w)``, each ``(n,)``.
+    """
     offset = 0.5 if aligned else 0.0
     x1 = rois[:, 0] * spatial_scale - offset
     y1 = rois[:, 1] * spatial_scale - offset
@@ -136,8 +156,21 @@ def roi_align(
         grid_h = torch.full_like(roi_h, sampling_ratio, dtype=torch.long)
         grid_w = torch.full_like(roi_w, sampling_ratio, dtype=torch.long)
     else:
-        grid_h = torch.ceil(roi_h / pooled_h).to(torch.long).clamp(min=0)
-        grid_w = torch.ceil(roi_w / pooled_w).to(torch.long).clamp(min=0)
+        grid_h = torch.ceil(roi_h / pooled[0]).to(torch.long).clamp(min=0)
+        grid_w = torch.ceil(roi_w / pooled[1]).to(torch.long).clamp(min=0)
+    return x1, y1, roi_w, roi_h, grid_h, grid_w
+
+
+def _pool(
+    fmap: torch.Tensor, rois: torch.Tensor, index: torch.Tensor, pooled: tuple[int, int],
+    spatial_scale: float, sampling_ratio: int, aligned: bool,
+) -> torch.Tensor:
+    """Average the bilinear samples of every bin: ``(n, C, pooled_h, pooled_w)``."""
+    _, channels, height, width = fmap.shape
+    dtype = fmap.dtype
+    pooled_h, pooled_w = pooled
+    x1, y1, roi_w, roi_h, grid_h, grid_w = _sampling_grid(
+        rois, pooled, spatial_scale, sampling_ratio, aligned)
     max_gh = max(int(grid_h.max()), 1)
     max_gw = max(int(grid_w.max()), 1)
 
@@ -149,7 +182,7 @@ def roi_align(
     keep_y = (in_y & used_y.reshape(n, -1)).to(dtype)
     keep_x = (in_x & used_x.reshape(n, -1)).to(dtype)
 
-    values = fmap.to(dtype).permute(0, 2, 3, 1)  # (B, H, W, C)
+    values = fmap.permute(0, 2, 3, 1)  # (B, H, W, C)
     b = index.view(n, 1, 1)
 
     def corner(yi: torch.Tensor, xi: torch.Tensor) -> torch.Tensor:
@@ -163,6 +196,6 @@ def roi_align(
         + corner(y_high, x_low) * (wy_high * wx_low).unsqueeze(-1)
         + corner(y_high, x_high) * (wy_high * wx_high).unsqueeze(-1)
     )  # (n, PH*GH, PW*GW, C)
-    pooled = sampled.view(n, pooled_h, max_gh, pooled_w, max_gw, channels).sum(dim=(2, 4))
+    pooled_sum = sampled.view(n, pooled_h, max_gh, pooled_w, max_gw, channels).sum(dim=(2, 4))
     count = (grid_h * grid_w).clamp(min=1).to(dtype).view(n, 1, 1, 1)
-    return (pooled / count).permute(0, 3, 1, 2).contiguous()
+    return (pooled_sum / count).permute(0, 3, 1, 2).contiguous()

@@ -27,6 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.motchallenge_tables import (
+    DET_FIELDS,
+    GT_FIELDS,
+    MAX_GT_ID,
+    VALID_GT_CLASSES,
+    check_rows,
+    parse_table,
+)
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
 #: Benchmarks whose ground truth has the 9-column class/visibility layout.
@@ -35,10 +43,25 @@ CLASS_COLUMN_BENCHMARKS = frozenset({"MOT16", "MOT17", "MOT20"})
 BENCHMARKS = frozenset({"MOT15"}) | CLASS_COLUMN_BENCHMARKS
 #: Class id of pedestrians in MOT16/17/20 ground truth (the evaluated class).
 PEDESTRIAN_CLASS = 1
-
+#: Keys every ``seqinfo.ini`` needs.
 _SEQINFO_FIELDS = ("name", "imDir", "frameRate", "seqLength", "imWidth", "imHeight", "imExt")
-_DET_FIELDS = ("frame", "id", "x", "y", "w", "h", "score")
-_GT_FIELDS = ("frame", "id", "x", "y", "w", "h", "flag", "class", "visibility")
+
+__all__ = [
+    "BENCHMARKS",
+    "CLASS_COLUMN_BENCHMARKS",
+    "DET_FIELDS",
+    "GT_FIELDS",
+    "MAX_GT_ID",
+    "PEDESTRIAN_CLASS",
+    "VALID_GT_CLASSES",
+    "Annotations",
+    "MOTChallengeDataset",
+    "MOTSequence",
+    "SequenceInfo",
+    "read_detections",
+    "read_ground_truth",
+    "read_seqinfo",
+]
 
 
 @dataclass(frozen=True)
@@ -166,183 +189,6 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
     )
 
 
-def _parse_table(
-    path: Path, min_columns: int, field_names: tuple[str, ...], *, official: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
-    """Parse a comma-separated numeric table; on any problem find the exact line and field.
-
-    Args:
-        path: the file.
-        min_columns: columns every row needs.
-        field_names: names of the columns, for messages.
-        official: the file is also read by TrackEval (``gt.txt``): what TrackEval cannot
-            read (a byte-order mark, blank lines) is refused here, at open, rather than at
-            scoring after a whole episode. Otherwise a BOM is skipped and blank lines ignored.
-
-    Returns:
-        The table and the 1-based file line of each row (blank lines are skipped).
-    """
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataFormatError(path, "missing") from None
-    except OSError as exc:
-        raise DataFormatError(path, f"unreadable ({exc})") from None
-    if raw.startswith(b"\xef\xbb\xbf"):
-        if official:
-            raise DataFormatError(
-                path, "starts with a UTF-8 byte-order mark (BOM), which TrackEval, the official "
-                      "scorer, reads as part of the first number; save the file without a BOM",
-                line=1)
-        raw = raw[3:]
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise DataFormatError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})",
-                              line=line) from None
-    numbered = list(enumerate(text.splitlines(), start=1))
-    if official:
-        blank = [i for i, line in numbered if not line.strip()]
-        if blank:
-            lines_text = ", ".join(str(i) for i in blank[:5]) + (" ..." if len(blank) > 5 else "")
-            raise DataFormatError(
-                path, f"blank line(s) at line {lines_text}: TrackEval, the official scorer, "
-                      "cannot read a file with blank lines (it fails when scoring); delete them",
-                line=blank[0])
-    lines = [(i, line) for i, line in numbered if line.strip()]
-    if not lines:
-        return np.zeros((0, min_columns)), np.zeros(0, dtype=np.int64)
-    rows = []
-    for _, line in lines:
-        cells = line.split(",")
-        if len(cells) > 1 and not cells[-1].strip():
-            cells = cells[:-1]  # a trailing comma, as TrackEval accepts
-        rows.append(cells)
-    try:
-        table = np.array(rows, dtype=np.float64)
-    except ValueError:
-        table = None  # ragged rows or a bad value: locate it below
-    if table is not None and table.ndim == 2 and table.shape[1] >= min_columns:
-        bad = ~np.isfinite(table[:, :min_columns])
-        if not bad.any():
-            return table, np.array([lineno for lineno, _ in lines])
-        row, col = np.argwhere(bad)[0]
-        raise DataFormatError(
-            path, f"'{rows[row][col].strip()}' is not a finite number", line=lines[row][0],
-            field=field_names[col],
-        )
-    width = None
-    for (lineno, _), cells in zip(lines, rows, strict=True):
-        if len(cells) < min_columns:
-            raise DataFormatError(
-                path,
-                f"has {len(cells)} columns, expected at least {min_columns} "
-                f"({','.join(field_names[:min_columns])})",
-                line=lineno,
-            )
-        if width is not None and len(cells) != width:
-            raise DataFormatError(
-                path, f"has {len(cells)} columns where earlier lines have {width}", line=lineno
-            )
-        width = len(cells)
-        for col, cell in enumerate(cells):
-            try:
-                float(cell)
-            except ValueError:
-                raise DataFormatError(
-                    path,
-                    f"'{cell.strip()}' is not a number",
-                    line=lineno,
-                    field=field_names[col] if col < len(field_names) else f"column {col + 1}",
-                ) from None
-    raise DataFormatError(path, "could not be parsed as a numeric table")  # pragma: no cover
-
-
-#: Largest ground-truth id accepted: TrackEval allocates an array indexed by the largest id
-#: (8 bytes per id up to it), so larger ids exhaust memory at scoring.
-MAX_GT_ID = 2**24
-#: TrackEval's MOTChallenge class ids (MOT16/17/20 ``gt.txt`` column 8), 1..13.
-VALID_GT_CLASSES = frozenset(range(1, 14))
-
-
-def _check_rows(
-    path: Path, table: np.ndarray, lines: np.ndarray, length: int | None, kind: str,
-    *, has_class: bool = False,
-) -> None:
-    frames = table[:, 0]
-    bad = (frames != np.round(frames)) | (frames < 1)
-    if length is not None:
-        bad |= frames > length
-    if bad.any():
-        i = int(np.argmax(bad))
-        limit = f" (the sequence has {length} frames)" if length is not None else ""
-        raise DataFormatError(
-            path,
-            f"frame {table[i, 0]:g} is not a frame of the sequence{limit}",
-            line=int(lines[i]),
-            field="frame",
-        )
-    neg = (table[:, 4] < 0) | (table[:, 5] < 0)
-    if neg.any():
-        i = int(np.argmax(neg))
-        name = "w" if table[i, 4] < 0 else "h"
-        raise DataFormatError(
-            path, f"negative box size {table[i, 4 if name == 'w' else 5]:g}",
-            line=int(lines[i]), field=name,
-        )
-    if kind == "det":
-        from unitrack_env.spaces import COORD_MAX, FLOAT_MAX
-
-        outside = np.abs(table[:, 2:6]) > COORD_MAX
-        if outside.any():
-            i, col = (int(v) for v in np.argwhere(outside)[0])
-            raise DataFormatError(
-                path, f"{table[i, 2 + col]:g} is outside the observation bounds: box values "
-                      f"must lie in [-{COORD_MAX:g}, {COORD_MAX:g}] pixels",
-                line=int(lines[i]), field=_DET_FIELDS[2 + col])
-        too_big = np.abs(table[:, 6]) > FLOAT_MAX
-        if too_big.any():
-            i = int(np.argmax(too_big))
-            raise DataFormatError(path, f"score {table[i, 6]:g} does not fit a float32",
-                                  line=int(lines[i]), field="score")
-    if kind == "gt":
-        ids = table[:, 1]
-        bad_ids = ids != np.round(ids)
-        if bad_ids.any():
-            i = int(np.argmax(bad_ids))
-            raise DataFormatError(
-                path, f"id {ids[i]:g} is not an integer", line=int(lines[i]), field="id"
-            )
-        bad_ids = (ids < 0) | (ids > MAX_GT_ID)
-        if bad_ids.any():
-            i = int(np.argmax(bad_ids))
-            raise DataFormatError(
-                path, f"id {ids[i]:g} is outside 0..{MAX_GT_ID}: TrackEval indexes an array by "
-                      "ground-truth id (a negative id is scored as another object, a huge one "
-                      "exhausts memory); renumber the ids",
-                line=int(lines[i]), field="id")
-        key = np.stack([frames, ids], axis=1)
-        _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
-        if (counts > 1).any():
-            seen: dict[tuple[float, float], int] = {}
-            for i, pair in enumerate(map(tuple, key)):
-                if pair in seen:
-                    raise DataFormatError(
-                        path, f"id {pair[1]:g} appears twice in frame {pair[0]:g} (first on "
-                              f"line {int(lines[seen[pair]])}); TrackEval refuses a ground-truth "
-                              "id more than once per frame",
-                        line=int(lines[i]), field="id")
-                seen[pair] = i
-        if has_class:
-            classes = table[:, 7]
-            bad_cls = ~np.isin(classes, list(VALID_GT_CLASSES))
-            if bad_cls.any():
-                i = int(np.argmax(bad_cls))
-                raise DataFormatError(
-                    path, f"class {classes[i]:g} is not a MOTChallenge class id (1..13, "
-                          "TrackEval refuses others when scoring)",
-                    line=int(lines[i]), field="class")
 
 
 def _annotations(table: np.ndarray, ids: np.ndarray, scores: np.ndarray,
@@ -366,8 +212,8 @@ def read_detections(path: str | Path, length: int | None = None) -> Annotations:
         length: the sequence length; rows past it are reported as errors.
     """
     path = Path(path)
-    table, lines = _parse_table(path, 7, _DET_FIELDS)
-    _check_rows(path, table, lines, length, "det")
+    table, lines = parse_table(path, 7, DET_FIELDS)
+    check_rows(path, table, lines, length, "det")
     n = len(table)
     if not n:
         warnings.warn(f"{path}: contains no detections; every frame of the sequence will be "
@@ -385,8 +231,8 @@ def read_ground_truth(path: str | Path, benchmark: str, length: int | None = Non
     if benchmark not in BENCHMARKS:
         raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
     has_class = benchmark in CLASS_COLUMN_BENCHMARKS
-    table, lines = _parse_table(path, 9 if has_class else 7, _GT_FIELDS, official=True)
-    _check_rows(path, table, lines, length, "gt", has_class=has_class)
+    table, lines = parse_table(path, 9 if has_class else 7, GT_FIELDS, official=True)
+    check_rows(path, table, lines, length, "gt", has_class=has_class)
     n = len(table)
     classes = table[:, 7] if has_class else np.full(n, PEDESTRIAN_CLASS)
     visibility = table[:, 8] if has_class else np.ones(n)

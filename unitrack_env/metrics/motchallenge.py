@@ -63,6 +63,7 @@ __all__ = [
     "score_folder",
     "score_sequence",
     "trackeval_metrics",
+    "trackeval_sequence_data",
 ]
 
 #: Name of the tracker folder inside the temporary TrackEval layout.
@@ -115,6 +116,20 @@ def trackeval_metrics() -> list[Any]:
 
     quiet = {"PRINT_CONFIG": False}
     return [HOTA(), CLEAR(dict(quiet)), Identity(dict(quiet)), Count()]
+
+
+def trackeval_sequence_data(
+    dataset_class: Any, config: dict[str, Any], tracker: str, seq: str, cls: str,
+    captured: io.StringIO,
+) -> dict[str, Any]:
+    """TrackEval's preprocessed data of one sequence, with its printing kept in ``captured``.
+
+    The redirection is process-wide while it lasts: score in worker processes, not threads.
+    """
+    with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
+        dataset = dataset_class(config)
+        raw_data = dataset.get_raw_seq_data(tracker, seq)
+        return dataset.get_preprocessed_seq_data(raw_data, cls)
 
 
 def flatten_results(raw: dict[str, dict[str, Any]]) -> dict[str, float]:
@@ -240,10 +255,8 @@ def _run_trackeval(
             # TrackEval prints (and dumps tracebacks) on bad input; keep that out of the
             # caller's streams and put it in our error instead.  The redirection is
             # process-wide while it lasts: score in worker processes, not threads.
-            with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
-                dataset = MotChallenge2DBox(config)
-                raw_data = dataset.get_raw_seq_data(_TRACKER_NAME, seq)
-                data = dataset.get_preprocessed_seq_data(raw_data, _CLASS)
+            data = trackeval_sequence_data(MotChallenge2DBox, config, _TRACKER_NAME, seq, _CLASS,
+                                           captured)
         except TrackEvalException as exc:
             detail = captured.getvalue().strip().splitlines()
             hint = f" ({detail[-1]})" if detail else ""

@@ -24,7 +24,6 @@ sequence, ``tp - fp - idsw`` over ``tp + fn`` is TrackEval's MOTSA.
 
 from __future__ import annotations
 
-import contextlib
 import io
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -43,7 +42,12 @@ from unitrack_env.datasets.mots import (
 )
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.clear_stream import FrameClear, StreamingClear
-from unitrack_env.metrics.motchallenge import SequenceScore, flatten_results, trackeval_metrics
+from unitrack_env.metrics.motchallenge import (
+    SequenceScore,
+    flatten_results,
+    trackeval_metrics,
+    trackeval_sequence_data,
+)
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: TrackEval data set class of each benchmark.
@@ -149,10 +153,7 @@ def _run_trackeval(gt: MaskAnnotations, res: MaskAnnotations, benchmark: str, cl
         dataset_class = getattr(te_datasets, TRACKEVAL_DATASETS[benchmark])
         captured = io.StringIO()
         try:
-            with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
-                dataset = dataset_class(config)
-                raw_data = dataset.get_raw_seq_data(_TRACKER, seq)
-                data = dataset.get_preprocessed_seq_data(raw_data, cls)
+            data = trackeval_sequence_data(dataset_class, config, _TRACKER, seq, cls, captured)
         except TrackEvalException as exc:
             raise DataFormatError(source, f"TrackEval rejected the data: {exc}") from exc
         return {metric.get_name(): metric.eval_sequence(data) for metric in trackeval_metrics()}
