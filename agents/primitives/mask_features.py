@@ -219,6 +219,14 @@ def pose_to_mask(
     if not visible.any():
         return None
     width = max(width_ratio * body_size(kp, min_score), min_width)
+    return _draw_pose(kp, visible, width, limbs, polygons)
+
+
+def _draw_pose(
+    kp: np.ndarray, visible: np.ndarray, width: float, limbs: Sequence[tuple[int, int]],
+    polygons: Sequence[Sequence[int]],
+) -> LocalMask:
+    """Draw the visible limbs, polygons and joint discs of a pose; crop to the drawn pixels."""
     radius = width / 2.0
     pts = kp[visible, :2]
     x0 = int(math.floor(pts[:, 0].min() - radius)) - 1
@@ -324,31 +332,39 @@ def mask_location_features(
         for m in masks
     ])
     feat_boxes = np.asarray(to_features(boxes), dtype=np.float64).reshape(-1, 4)
-    out = []
-    for mask, fbox in zip(masks, feat_boxes, strict=True):
-        if mask.area == 0:
-            raise ValueError("empty mask: drop empty masks before computing features")
-        inside = mask_grid(mask, fbox, max_area, coverage_threshold)
-        rows, cols = inside.shape
-        # Pool from a crop of the map around the box (margin: the bilinear neighbours), so
-        # that RoIAlign does not touch (or pad) the whole map once per mask; same values.
-        height, width = fmap.shape[-2:]
-        cx1 = min(max(int(math.floor(fbox[0])) - CROP_MARGIN, 0), width - 1)
-        cy1 = min(max(int(math.floor(fbox[1])) - CROP_MARGIN, 0), height - 1)
-        cx2 = max(min(int(math.ceil(fbox[2])) + CROP_MARGIN, width), cx1 + 1)
-        cy2 = max(min(int(math.ceil(fbox[3])) + CROP_MARGIN, height), cy1 + 1)
-        crop = fmap[:, :, cy1:cy2, cx1:cx2]
-        roi = torch.as_tensor((fbox - (cx1, cy1, cx1, cy1))[None], dtype=fmap.dtype)
-        pooled = roi_align(crop, roi, (rows, cols), spatial_scale=1.0,
-                           sampling_ratio=sampling_ratio)[0]  # (C, rows, cols)
-        flat = pooled.flatten(1).T  # (rows * cols, C), row-major
-        index = torch.as_tensor(np.flatnonzero(inside.reshape(-1)))
-        features = flat[index]
-        if normalize:
-            features = F.normalize(features, dim=1)
-        r, c = np.divmod(index.numpy(), cols)
-        bin_h = (fbox[3] - fbox[1]) / rows
-        bin_w = (fbox[2] - fbox[0]) / cols
-        positions = np.stack([fbox[1] + (r + 0.5) * bin_h, fbox[0] + (c + 0.5) * bin_w], axis=1)
-        out.append(ObjectFeatures(features, torch.as_tensor(positions, dtype=torch.float64)))
-    return out
+    return [
+        _mask_features(fmap, mask, fbox, max_area, sampling_ratio, coverage_threshold, normalize)
+        for mask, fbox in zip(masks, feat_boxes, strict=True)
+    ]
+
+
+def _mask_features(
+    fmap: torch.Tensor, mask: LocalMask, fbox: np.ndarray, max_area: int | None,
+    sampling_ratio: int, coverage_threshold: float, normalize: bool,
+) -> ObjectFeatures:
+    """One mask's in-mask location features (see :func:`mask_location_features`)."""
+    if mask.area == 0:
+        raise ValueError("empty mask: drop empty masks before computing features")
+    inside = mask_grid(mask, fbox, max_area, coverage_threshold)
+    rows, cols = inside.shape
+    # Pool from a crop of the map around the box (margin: the bilinear neighbours), so
+    # that RoIAlign does not touch (or pad) the whole map once per mask; same values.
+    height, width = fmap.shape[-2:]
+    cx1 = min(max(int(math.floor(fbox[0])) - CROP_MARGIN, 0), width - 1)
+    cy1 = min(max(int(math.floor(fbox[1])) - CROP_MARGIN, 0), height - 1)
+    cx2 = max(min(int(math.ceil(fbox[2])) + CROP_MARGIN, width), cx1 + 1)
+    cy2 = max(min(int(math.ceil(fbox[3])) + CROP_MARGIN, height), cy1 + 1)
+    crop = fmap[:, :, cy1:cy2, cx1:cx2]
+    roi = torch.as_tensor((fbox - (cx1, cy1, cx1, cy1))[None], dtype=fmap.dtype)
+    pooled = roi_align(crop, roi, (rows, cols), spatial_scale=1.0,
+                       sampling_ratio=sampling_ratio)[0]  # (C, rows, cols)
+    flat = pooled.flatten(1).T  # (rows * cols, C), row-major
+    index = torch.as_tensor(np.flatnonzero(inside.reshape(-1)))
+    features = flat[index]
+    if normalize:
+        features = F.normalize(features, dim=1)
+    r, c = np.divmod(index.numpy(), cols)
+    bin_h = (fbox[3] - fbox[1]) / rows
+    bin_w = (fbox[2] - fbox[0]) / cols
+    positions = np.stack([fbox[1] + (r + 0.5) * bin_h, fbox[0] + (c + 0.5) * bin_w], axis=1)
+    return ObjectFeatures(features, torch.as_tensor(positions, dtype=torch.float64))
