@@ -232,67 +232,92 @@ def simulate_detections(
         Detections sorted by frame.
     """
     width, height = image_size
-    frames: list[int] = []
-    boxes: list[np.ndarray] = []
-    scores: list[float] = []
-    sources: list[int] = []
-
-    def add(t: int, box: np.ndarray, score: float, source: int) -> None:
-        box = _clip_box(box, width, height)
-        if box[2] < noise.min_size or box[3] < noise.min_size:
-            return
-        frames.append(t)
-        boxes.append(box)
-        scores.append(float(np.clip(score, noise.min_score, noise.max_score)))
-        sources.append(source)
-
+    out = _DetectionList(width, height, noise)
     for t, objects in enumerate(annotations):
         for obj in objects:
-            if obj.role not in DETECTABLE_ROLES:
-                continue
-            v = obj.visibility
-            p_miss = noise.miss_rate + noise.occlusion_miss_weight * (
-                1.0 - v) ** noise.occlusion_miss_power
-            draws = rng.standard_normal(5)  # always drawn: keeps the stream aligned
-            if rng.uniform() < p_miss:
-                continue
-            x, y, w, h = obj.box
-            spread = 2.0 - v
-            cx = x + w / 2 + draws[0] * noise.position_jitter * w * spread
-            cy = y + h / 2 + draws[1] * noise.position_jitter * h * spread
-            dw = w * np.exp(draws[2] * noise.size_jitter * spread)
-            dh = h * np.exp(draws[3] * noise.size_jitter * spread)
-            box = np.array([cx - dw / 2, cy - dh / 2, dw, dh])
-            iou = float(box_iou(_clip_box(box, width, height)[None], np.array([obj.box]))[0, 0])
-            score = (noise.score_base + noise.score_iou * iou + noise.score_visibility * v
-                     + noise.score_noise * draws[4])
-            add(t, box, score, obj.id)
+            if obj.role in DETECTABLE_ROLES:
+                out.add(t, *_true_detection(obj, noise, rng, width, height))
         for obj in objects:  # clutter: a shifted or partial box next to a visible person
             if obj.role not in DETECTABLE_ROLES or obj.visibility < noise.clutter_min_visibility:
                 continue
             if rng.uniform() >= noise.clutter_rate:
                 continue
-            x, y, w, h = obj.box
-            if rng.uniform() < 0.5:  # shifted sideways by about a width
-                shift = rng.choice([-1.0, 1.0]) * rng.uniform(0.6, 1.0) * w
-                box = np.array([x + shift, y + rng.uniform(-0.1, 0.1) * h, w, h])
-            else:  # the upper or lower part only
-                part = rng.uniform(0.3, 0.45)
-                top = y if rng.uniform() < 0.5 else y + (1 - part) * h
-                box = np.array([x, top, w, part * h])
-            add(t, box, float(rng.beta(*noise.false_positive_score)), -1)
+            out.add(t, _clutter_box(obj, rng), float(rng.beta(*noise.false_positive_score)), -1)
         for _ in range(rng.poisson(noise.false_positives_per_frame)):
             h = rng.uniform(*noise.false_positive_height_range)
             w = h * rng.uniform(*noise.false_positive_aspect_range)
             box = np.array([rng.uniform(-0.2 * w, width - 0.8 * w),
                             rng.uniform(-0.2 * h, height - 0.8 * h), w, h])
-            add(t, box, float(rng.beta(*noise.false_positive_score)), -1)
-    return Detections(
-        frames=np.asarray(frames, dtype=np.int64),
-        boxes=np.asarray(boxes, dtype=np.float64).reshape(-1, 4),
-        scores=np.asarray(scores, dtype=np.float64),
-        sources=np.asarray(sources, dtype=np.int64),
-    )
+            out.add(t, box, float(rng.beta(*noise.false_positive_score)), -1)
+    return out.build()
+
+
+class _DetectionList:
+    """Detections collected frame by frame: clipped to the image, too small ones dropped."""
+
+    def __init__(self, width: int, height: int, noise: DetectionNoise) -> None:
+        self.width, self.height, self.noise = width, height, noise
+        self.frames: list[int] = []
+        self.boxes: list[np.ndarray] = []
+        self.scores: list[float] = []
+        self.sources: list[int] = []
+
+    def add(self, t: int, box: np.ndarray | None, score: float, source: int) -> None:
+        """Keep a detection (``box`` None: the object was missed)."""
+        if box is None:
+            return
+        noise = self.noise
+        box = _clip_box(box, self.width, self.height)
+        if box[2] < noise.min_size or box[3] < noise.min_size:
+            return
+        self.frames.append(t)
+        self.boxes.append(box)
+        self.scores.append(float(np.clip(score, noise.min_score, noise.max_score)))
+        self.sources.append(source)
+
+    def build(self) -> Detections:
+        """The detections, in the order they were added."""
+        return Detections(
+            frames=np.asarray(self.frames, dtype=np.int64),
+            boxes=np.asarray(self.boxes, dtype=np.float64).reshape(-1, 4),
+            scores=np.asarray(self.scores, dtype=np.float64),
+            sources=np.asarray(self.sources, dtype=np.int64),
+        )
+
+
+def _true_detection(
+    obj: ObjectAnnotation, noise: DetectionNoise, rng: np.random.Generator, width: int,
+    height: int,
+) -> tuple[np.ndarray | None, float, int]:
+    """A jittered, scored detection of ``obj`` (box None when it is missed)."""
+    v = obj.visibility
+    p_miss = noise.miss_rate + noise.occlusion_miss_weight * (
+        1.0 - v) ** noise.occlusion_miss_power
+    draws = rng.standard_normal(5)  # always drawn: keeps the stream aligned
+    if rng.uniform() < p_miss:
+        return None, 0.0, obj.id
+    x, y, w, h = obj.box
+    spread = 2.0 - v
+    cx = x + w / 2 + draws[0] * noise.position_jitter * w * spread
+    cy = y + h / 2 + draws[1] * noise.position_jitter * h * spread
+    dw = w * np.exp(draws[2] * noise.size_jitter * spread)
+    dh = h * np.exp(draws[3] * noise.size_jitter * spread)
+    box = np.array([cx - dw / 2, cy - dh / 2, dw, dh])
+    iou = float(box_iou(_clip_box(box, width, height)[None], np.array([obj.box]))[0, 0])
+    score = (noise.score_base + noise.score_iou * iou + noise.score_visibility * v
+             + noise.score_noise * draws[4])
+    return box, score, obj.id
+
+
+def _clutter_box(obj: ObjectAnnotation, rng: np.random.Generator) -> np.ndarray:
+    """A false positive next to ``obj``: shifted sideways, or its upper or lower part only."""
+    x, y, w, h = obj.box
+    if rng.uniform() < 0.5:  # shifted sideways by about a width
+        shift = rng.choice([-1.0, 1.0]) * rng.uniform(0.6, 1.0) * w
+        return np.array([x + shift, y + rng.uniform(-0.1, 0.1) * h, w, h])
+    part = rng.uniform(0.3, 0.45)
+    top = y if rng.uniform() < 0.5 else y + (1 - part) * h
+    return np.array([x, top, w, part * h])
 
 
 def _seqinfo_text(spec: SequenceSpec) -> str:

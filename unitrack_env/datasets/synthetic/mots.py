@@ -167,7 +167,7 @@ def simulate_frame(frame, noise: MaskNoise, rng: np.random.Generator, *,
     imap = frame.instance_map
     shape = imap.shape
     gt_ids, gt_masks, ignore = [], [], None
-    masks, scores, classes, sources = [], [], [], []
+    dets = _MaskDetections()
     occluder_masks = []
     for obj in frame.objects:
         mask = imap == obj.id
@@ -186,47 +186,69 @@ def simulate_frame(frame, noise: MaskNoise, rng: np.random.Generator, *,
         amount = int(round((draws[1] * 2 - 1) * noise.max_morph))
         dx = int(round((draws[2] * 2 - 1) * noise.max_shift))
         dy = int(round((draws[3] * 2 - 1) * noise.max_shift))
-        det = _shift(_morph(mask, amount), dx, dy)
         score = noise.score_base + noise.score_visibility * obj.visibility + \
             noise.score_noise * (draws[4] * 2 - 1) * 1.7
-        masks.append(det)
-        scores.append(float(np.clip(score, 0.01, 0.999)))
-        classes.append(2 if draws[5] < class_noise else 1)
-        sources.append(obj.id)
+        dets.add(_shift(_morph(mask, amount), dx, dy), float(np.clip(score, 0.01, 0.999)),
+                 2 if draws[5] < class_noise else 1, obj.id)
     for obj_id, mask in occluder_masks:
         ignore = mask if ignore is None else ignore | mask
-        draws = rng.uniform(size=3)
-        if draws[0] < noise.occluder_false_positive_rate:  # a person-like false positive on it
-            ys, xs = np.nonzero(mask)
-            centre = (float(xs.mean()), float(ys.mean()))
-            masks.append(_blob(rng, shape, centre) & mask)
-            scores.append(float(rng.beta(*noise.false_positive_score)))
-            classes.append(1)
-            sources.append(-1)
-        if class_noise > 0 and draws[1] < 0.9:  # VIS: the occluder is an object of class 2
-            masks.append(_morph(mask, int(round(draws[2] * 2 - 1))))
-            scores.append(float(np.clip(0.6 + 0.3 * draws[2], 0.01, 0.999)))
-            classes.append(2)
-            sources.append(obj_id)
+        _occluder_detections(dets, obj_id, mask, noise, rng, class_noise)
     for _ in range(rng.poisson(noise.false_positives_per_frame)):
-        masks.append(_blob(rng, shape, None))
-        scores.append(float(rng.beta(*noise.false_positive_score)))
-        classes.append(int(rng.integers(1, 3)))
-        sources.append(-1)
-    det_masks = np.asarray(masks, dtype=bool).reshape(-1, *shape)
-    det_scores = np.asarray(scores, dtype=np.float64)
-    if resolve and len(det_masks):
-        det_masks = resolve_overlaps(det_masks, det_scores)
-    keep = det_masks.reshape(len(det_masks), -1).sum(axis=1) >= noise.min_pixels
-    return FrameMasks(
-        gt_ids=np.asarray(gt_ids, dtype=np.int64),
-        gt_masks=np.asarray(gt_masks, dtype=bool).reshape(-1, *shape),
-        ignore=ignore,
-        det_masks=det_masks[keep],
-        det_scores=det_scores[keep],
-        det_classes=np.asarray(classes, dtype=np.int64)[keep],
-        det_sources=np.asarray(sources, dtype=np.int64)[keep],
-    )
+        dets.add(_blob(rng, shape, None), float(rng.beta(*noise.false_positive_score)),
+                 int(rng.integers(1, 3)), -1)
+    return dets.frame_masks(gt_ids, gt_masks, ignore, shape, noise.min_pixels, resolve)
+
+
+def _occluder_detections(
+    dets: _MaskDetections, obj_id: int, mask: np.ndarray, noise: MaskNoise,
+    rng: np.random.Generator, class_noise: float,
+) -> None:
+    """Detections on an occluder: a person-like false positive, and (VIS) the object itself."""
+    draws = rng.uniform(size=3)
+    if draws[0] < noise.occluder_false_positive_rate:  # a person-like false positive on it
+        ys, xs = np.nonzero(mask)
+        centre = (float(xs.mean()), float(ys.mean()))
+        dets.add(_blob(rng, mask.shape, centre) & mask,
+                 float(rng.beta(*noise.false_positive_score)), 1, -1)
+    if class_noise > 0 and draws[1] < 0.9:  # VIS: the occluder is an object of class 2
+        dets.add(_morph(mask, int(round(draws[2] * 2 - 1))),
+                 float(np.clip(0.6 + 0.3 * draws[2], 0.01, 0.999)), 2, obj_id)
+
+
+class _MaskDetections:
+    """One frame's detections, collected in drawing order."""
+
+    def __init__(self) -> None:
+        self.masks: list[np.ndarray] = []
+        self.scores: list[float] = []
+        self.classes: list[int] = []
+        self.sources: list[int] = []
+
+    def add(self, mask: np.ndarray, score: float, cls: int, source: int) -> None:
+        """Append one detection."""
+        self.masks.append(mask)
+        self.scores.append(score)
+        self.classes.append(cls)
+        self.sources.append(source)
+
+    def frame_masks(self, gt_ids: list[int], gt_masks: list[np.ndarray],
+                    ignore: np.ndarray | None, shape: tuple[int, ...], min_pixels: int,
+                    resolve: bool) -> FrameMasks:
+        """The frame's :class:`FrameMasks`: overlaps resolved if asked, tiny masks dropped."""
+        det_masks = np.asarray(self.masks, dtype=bool).reshape(-1, *shape)
+        det_scores = np.asarray(self.scores, dtype=np.float64)
+        if resolve and len(det_masks):
+            det_masks = resolve_overlaps(det_masks, det_scores)
+        keep = det_masks.reshape(len(det_masks), -1).sum(axis=1) >= min_pixels
+        return FrameMasks(
+            gt_ids=np.asarray(gt_ids, dtype=np.int64),
+            gt_masks=np.asarray(gt_masks, dtype=bool).reshape(-1, *shape),
+            ignore=ignore,
+            det_masks=det_masks[keep],
+            det_scores=det_scores[keep],
+            det_classes=np.asarray(self.classes, dtype=np.int64)[keep],
+            det_sources=np.asarray(self.sources, dtype=np.int64)[keep],
+        )
 
 
 class _Rows:
