@@ -225,24 +225,9 @@ def preprocess_frame(
     if name == CLASSLESS_BENCHMARK:
         gt_kept = g_zero != 0
     else:
-        g_classes = _as_ids(gt_classes, "gt_classes")
-        if len(g_classes) != len(g_ids):
-            raise ValueError(f"gt_classes has {len(g_classes)} entries for {len(g_ids)} gt boxes")
-        invalid = np.setdiff1d(g_classes, np.array(list(MOT_CLASS_IDS.values())))
-        if invalid.size:
-            raise ValueError(
-                f"ground-truth class ids {invalid.tolist()} are not MOTChallenge classes "
-                f"(valid: 1..{max(MOT_CLASS_IDS.values())}); if this is a 2D MOT 2015 file "
-                f"without a class column, use benchmark='MOT15'"
-            )
+        g_classes = _checked_classes(gt_classes, len(g_ids))
         if len(g_ids) and len(t_ids):
-            scores = iou.copy()
-            scores[scores < MATCH_IOU_THRESHOLD - EPS] = 0.0
-            rows, cols = linear_sum_assignment(-scores)
-            matched = scores[rows, cols] > EPS
-            rows, cols = rows[matched], cols[matched]
-            on_distractor = np.isin(g_classes[rows], distractor_classes(name))
-            tracker_kept[cols[on_distractor]] = False
+            tracker_kept[_on_distractors(iou, g_classes, name)] = False
         gt_kept = (g_zero != 0) & (g_classes == PEDESTRIAN_CLASS)
 
     return PreprocessedFrame(
@@ -254,6 +239,32 @@ def preprocess_frame(
         gt_kept=gt_kept,
         tracker_kept=tracker_kept,
     )
+
+
+def _checked_classes(gt_classes: np.ndarray, count: int) -> np.ndarray:
+    """The ground-truth class ids, one per box, all MOTChallenge classes."""
+    g_classes = _as_ids(gt_classes, "gt_classes")
+    if len(g_classes) != count:
+        raise ValueError(f"gt_classes has {len(g_classes)} entries for {count} gt boxes")
+    invalid = np.setdiff1d(g_classes, np.array(list(MOT_CLASS_IDS.values())))
+    if invalid.size:
+        raise ValueError(
+            f"ground-truth class ids {invalid.tolist()} are not MOTChallenge classes "
+            f"(valid: 1..{max(MOT_CLASS_IDS.values())}); if this is a 2D MOT 2015 file "
+            f"without a class column, use benchmark='MOT15'"
+        )
+    return g_classes
+
+
+def _on_distractors(iou: np.ndarray, g_classes: np.ndarray, benchmark: str) -> np.ndarray:
+    """Columns of the tracker boxes matched (IoU >= 0.5, Hungarian) to distractor objects."""
+    scores = iou.copy()
+    scores[scores < MATCH_IOU_THRESHOLD - EPS] = 0.0
+    rows, cols = linear_sum_assignment(-scores)
+    matched = scores[rows, cols] > EPS
+    rows, cols = rows[matched], cols[matched]
+    on_distractor = np.isin(g_classes[rows], distractor_classes(benchmark))
+    return cols[on_distractor]
 
 
 def preprocess(gt: GtFrame, tracker: TrackerFrame, benchmark: str) -> PreprocessedFrame:
