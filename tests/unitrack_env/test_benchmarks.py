@@ -128,3 +128,16 @@ def test_benchmark_write_is_atomic(tmp_path, monkeypatch):
     assert (tmp_path / "SYN-01.txt").read_text() == "1,1,10.000,20.000,30.000,40.000,1,-1,-1,-1\n"
     assert [p.name for p in tmp_path.iterdir()] == ["SYN-01.txt"]
     np.testing.assert_array_equal(bench.read(tmp_path, "SYN-01")[:, :6], rows[:, :6])
+
+
+@pytest.mark.parametrize(("env_id", "kwargs", "message"), [
+    ("UniTrack/MOTChallenge-v0", {"benchmark": "MOT99"}, "unknown benchmark 'MOT99'"),
+    ("UniTrack/MOTS-v0", {"benchmark": "MOTS99"}, "unknown benchmark 'MOTS99'"),
+    ("UniTrack/MOTS-v0", {"object_class": "car"}, "not a MOTS20 class"),
+    ("UniTrack/JHMDB-v0", {"normaliser": "torso"}, "normaliser must be one of"),
+])
+def test_benchmark_refuses_what_the_env_refuses(env_id, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        benchmark_for(env_id, **kwargs)
+    with pytest.raises(ValueError, match=message):
+        gym.make(env_id, **kwargs)

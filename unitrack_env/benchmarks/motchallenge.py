@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
-from unitrack_env.datasets.motchallenge import MOTChallengeDataset, read_seqinfo
+from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import ScoreReport
 
@@ -51,6 +51,8 @@ class MOTChallengeBenchmark(Benchmark):
                     split: str = "train", detections: str | os.PathLike = "public",
                     **_: Any) -> MOTChallengeBenchmark:
         """The benchmark of ``MOTChallengeEnv(benchmark=, root=, split=, detections=)``."""
+        if benchmark not in BENCHMARKS:
+            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
         path, _synthetic = data_root(root, benchmark, benchmark)
         return cls(MOTChallengeDataset(path, benchmark, split, detections))
 

@@ -8,6 +8,8 @@ from typing import Any
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, text_digest
 from unitrack_env.datasets.mots import (
+    BENCHMARKS,
+    CLASS_IDS,
     MaskAnnotations,
     MOTSDataset,
     format_instances_txt,
@@ -36,6 +38,10 @@ class MOTSBenchmark(Benchmark):
 
     def __init__(self, dataset: MOTSDataset, object_class: str = "pedestrian") -> None:
         super().__init__(dataset)
+        valid = ["pedestrian"] if dataset.benchmark == "MOTS20" else list(CLASS_IDS)
+        if object_class not in valid:
+            raise ValueError(f"object_class={object_class!r} is not a {dataset.benchmark} "
+                             f"class; valid: {valid}")
         self.object_class = object_class
 
     @classmethod
@@ -43,6 +49,8 @@ class MOTSBenchmark(Benchmark):
                     split: str | None = None, detections: str | os.PathLike = "public",
                     object_class: str = "pedestrian", **_: Any) -> MOTSBenchmark:
         """The benchmark of ``MOTSEnv(benchmark=, root=, split=, object_class=)``."""
+        if benchmark not in BENCHMARKS:
+            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {list(BENCHMARKS)}")
         path, _synthetic = data_root(root, DATA_FOLDERS[benchmark], benchmark, kind="mots")
         dataset = MOTSDataset(path, benchmark, split or DEFAULT_SPLITS[benchmark], detections)
         return cls(dataset, object_class)
