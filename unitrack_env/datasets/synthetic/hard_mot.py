@@ -34,15 +34,9 @@ import cv2
 import numpy as np
 
 from unitrack_env.datasets.synthetic.motchallenge import (
-    _STREAM_DETECTIONS,
-    SPLITS_WITH_GROUND_TRUTH,
     DetectionNoise,
     SequenceSpec,
-    _det_lines,
-    _gt_lines,
-    _seqinfo_text,
-    _write_lines,
-    simulate_detections,
+    write_sequence,
 )
 from unitrack_env.datasets.synthetic.scene import (
     ObjectAnnotation,
@@ -226,18 +220,5 @@ def write_hard_motchallenge(root: str | Path, benchmark: str = "MOT17", *,
     params = [cv2.IMWRITE_JPEG_QUALITY, int(spec.jpeg_quality)]
     for hard in spec.sequences:
         seq = hard.sequence
-        seq_dir = root / seq.split / seq.name
-        (seq_dir / "img1").mkdir(parents=True, exist_ok=True)
-        annotations = []
-        for frame in render_hard_sequence(hard):
-            path = seq_dir / "img1" / f"{frame.index + 1:06d}.jpg"
-            if not cv2.imwrite(str(path), frame.image[:, :, ::-1], params):
-                raise OSError(f"{path}: cv2.imwrite failed to write the JPEG frame")
-            annotations.append(frame.objects)
-        (seq_dir / "seqinfo.ini").write_text(_seqinfo_text(seq), encoding="ascii")
-        if seq.split in SPLITS_WITH_GROUND_TRUTH:
-            _write_lines(seq_dir / "gt" / "gt.txt", _gt_lines(benchmark, annotations))
-        detections = simulate_detections(
-            annotations, (seq.scene.width, seq.scene.height), spec.detection_noise,
-            np.random.default_rng([seq.scene.seed, _STREAM_DETECTIONS]))
-        _write_lines(seq_dir / "det" / "det.txt", _det_lines(benchmark, detections))
+        write_sequence(root / seq.split / seq.name, seq, render_hard_sequence(hard), benchmark,
+                       spec.detection_noise, params)

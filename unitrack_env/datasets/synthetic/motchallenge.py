@@ -34,7 +34,7 @@ detector's unbounded scores.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -46,6 +46,7 @@ from unitrack_env.datasets.synthetic.scene import (
     ObjectAnnotation,
     ObjectRole,
     SceneConfig,
+    SyntheticFrame,
     render_scene,
 )
 from unitrack_env.geometry import box_iou
@@ -399,23 +400,39 @@ def write_motchallenge(
     root = Path(root)
     jpeg_params = [cv2.IMWRITE_JPEG_QUALITY, int(spec.jpeg_quality)]
     for seq in spec.sequences:
-        seq_dir = root / seq.split / seq.name
-        image_dir = seq_dir / "img1"
-        image_dir.mkdir(parents=True, exist_ok=True)
-        video = render_scene(seq.scene)
-        annotations: list[tuple[ObjectAnnotation, ...]] = []
-        for frame in video:
-            path = image_dir / f"{frame.index + 1:06d}.jpg"
-            if not cv2.imwrite(str(path), frame.image[:, :, ::-1], jpeg_params):
-                raise OSError(f"{path}: cv2.imwrite failed to write the JPEG frame")
-            annotations.append(frame.objects)
-        (seq_dir / "seqinfo.ini").write_text(_seqinfo_text(seq), encoding="ascii")
-        if seq.split in SPLITS_WITH_GROUND_TRUTH:
-            _write_lines(seq_dir / "gt" / "gt.txt", _gt_lines(benchmark, annotations))
-        detections = simulate_detections(
-            annotations,
-            (seq.scene.width, seq.scene.height),
-            spec.detection_noise,
-            np.random.default_rng([seq.scene.seed, _STREAM_DETECTIONS]),
-        )
-        _write_lines(seq_dir / "det" / "det.txt", _det_lines(benchmark, detections))
+        write_sequence(root / seq.split / seq.name, seq, render_scene(seq.scene), benchmark,
+                       spec.detection_noise, jpeg_params)
+
+
+def write_sequence(
+    seq_dir: Path, seq: SequenceSpec, frames: Iterable[SyntheticFrame], benchmark: str,
+    noise: DetectionNoise, jpeg_params: list[int],
+) -> None:
+    """Write one sequence's frames, ``seqinfo.ini``, ground truth and detections.
+
+    Args:
+        seq_dir: The sequence folder (``<root>/<split>/<name>``).
+        seq: What the sequence is (its scene seeds the detections).
+        frames: The rendered frames, in order.
+        benchmark: Decides the gt.txt columns and the detection score range.
+        noise: The simulated detector.
+        jpeg_params: cv2's JPEG parameters of the frames.
+    """
+    image_dir = seq_dir / "img1"
+    image_dir.mkdir(parents=True, exist_ok=True)
+    annotations: list[tuple[ObjectAnnotation, ...]] = []
+    for frame in frames:
+        path = image_dir / f"{frame.index + 1:06d}.jpg"
+        if not cv2.imwrite(str(path), frame.image[:, :, ::-1], jpeg_params):
+            raise OSError(f"{path}: cv2.imwrite failed to write the JPEG frame")
+        annotations.append(frame.objects)
+    (seq_dir / "seqinfo.ini").write_text(_seqinfo_text(seq), encoding="ascii")
+    if seq.split in SPLITS_WITH_GROUND_TRUTH:
+        _write_lines(seq_dir / "gt" / "gt.txt", _gt_lines(benchmark, annotations))
+    detections = simulate_detections(
+        annotations,
+        (seq.scene.width, seq.scene.height),
+        noise,
+        np.random.default_rng([seq.scene.seed, _STREAM_DETECTIONS]),
+    )
+    _write_lines(seq_dir / "det" / "det.txt", _det_lines(benchmark, detections))
