@@ -12,10 +12,11 @@ from unitrack_env.spaces.arrays import Image
 from unitrack_env.spaces.limits import (
     COORD_MAX,
     FLOAT_MAX,
-    check_capacity,
-    checked_ids,
+    checked_track_values,
+    pad_tracks,
     refuse_duplicate_ids,
-    track_count,
+    track_arrays,
+    valid_rows,
 )
 
 
@@ -63,18 +64,12 @@ def pack_tracks(ids: Any, boxes: Any, max_tracks: int) -> dict[str, Any]:
     k = len(ids_arr)
     if len(boxes_arr) != k:
         raise InvalidActionError(f"{k} ids but {len(boxes_arr)} boxes")
-    check_capacity(k, max_tracks)
-    out_ids = np.zeros(max_tracks, dtype=np.int64)
-    out_boxes = np.zeros((max_tracks, 4), dtype=np.float32)
-    out_ids[:k] = ids_arr
-    out_boxes[:k] = boxes_arr
-    return {"ids": out_ids, "boxes": out_boxes, "num_tracks": k}
+    return pad_tracks(ids_arr, boxes_arr, "boxes", max_tracks)
 
 
 def unpack_detections(observation: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Return the valid ``(boxes (n, 4), scores (n,))`` of a detection observation."""
-    n = int(observation["num_detections"])
-    return observation["boxes"][:n], observation["scores"][:n]
+    return valid_rows(observation, "num_detections", ("boxes", "scores"))  # type: ignore[return-value]
 
 
 def unpack_tracks(
@@ -88,22 +83,10 @@ def unpack_tracks(
         InvalidActionError: wrong keys, shapes or dtypes; NaN/inf or negative sizes;
             ids that are not positive integers or repeat.
     """
-    if not isinstance(action, dict) or "ids" not in action or "boxes" not in action:
-        raise InvalidActionError(
-            "action must be a dict with 'ids' and 'boxes' (and optionally 'num_tracks'); "
-            "build one with unitrack_env.spaces.pack_tracks(ids, boxes, max_tracks)"
-        )
-    ids = np.asarray(action["ids"])
-    boxes = np.asarray(action["boxes"])
-    if ids.ndim != 1:
-        raise InvalidActionError(f"action['ids'] must be 1-D, got shape {ids.shape}")
+    ids, boxes = track_arrays(action, "boxes", "pack_tracks(ids, boxes, max_tracks)")
     if boxes.ndim != 2 or boxes.shape[1] != 4:
         raise InvalidActionError(f"action['boxes'] must have shape (k, 4), got {boxes.shape}")
-    if not (np.issubdtype(boxes.dtype, np.floating) or np.issubdtype(boxes.dtype, np.integer)):
-        raise InvalidActionError(f"action['boxes'] must be numbers, got dtype {boxes.dtype}")
-    k = track_count(action, len(ids), len(boxes), "boxes", max_tracks)
-    ids = checked_ids(ids, k)
-    boxes = boxes[:k].astype(np.float64)
+    ids, boxes = checked_track_values(action, ids, boxes, "boxes", "boxes", max_tracks)
     if not np.all(np.isfinite(boxes)):
         row = int(np.argwhere(~np.isfinite(boxes))[0, 0])
         raise InvalidActionError(f"track {ids[row]} has a non-finite box {boxes[row].tolist()}")

@@ -100,3 +100,59 @@ def check_capacity(k: int, max_tracks: int) -> None:
             f"{k} tracks exceed the action capacity max_tracks={max_tracks}; "
             "raise max_tracks when making the environment"
         )
+
+
+def pad_tracks(ids: np.ndarray, values: np.ndarray, key: str, max_tracks: int) -> dict[str, Any]:
+    """A padded track action: ``ids`` and per-track ``values`` (float32) under ``key``.
+
+    ``ids`` and ``values`` hold ``k`` tracks (already checked to agree); both are padded
+    with zeros to ``max_tracks`` rows, and ``num_tracks`` is ``k``.
+    """
+    k = len(ids)
+    check_capacity(k, max_tracks)
+    out_ids = np.zeros(max_tracks, dtype=np.int64)
+    out_values = np.zeros((max_tracks,) + values.shape[1:], dtype=np.float32)
+    out_ids[:k] = ids
+    out_values[:k] = values
+    return {"ids": out_ids, key: out_values, "num_tracks": k}
+
+
+def track_arrays(action: Any, key: str, builder: str) -> tuple[np.ndarray, np.ndarray]:
+    """The ``ids`` (checked 1-D) and the ``key`` values of a track action dict.
+
+    ``builder`` names the helper that makes a valid action, for the error message.
+    """
+    if not isinstance(action, dict) or "ids" not in action or key not in action:
+        raise InvalidActionError(
+            f"action must be a dict with 'ids' and '{key}' (and optionally 'num_tracks'); "
+            f"build one with unitrack_env.spaces.{builder}"
+        )
+    ids = np.asarray(action["ids"])
+    values = np.asarray(action[key])
+    if ids.ndim != 1:
+        raise InvalidActionError(f"action['ids'] must be 1-D, got shape {ids.shape}")
+    return ids, values
+
+
+def require_numbers(values: np.ndarray, key: str) -> None:
+    """Raise unless ``values`` (the action's ``key``) holds integers or floats."""
+    if not (np.issubdtype(values.dtype, np.floating) or np.issubdtype(values.dtype, np.integer)):
+        raise InvalidActionError(f"action['{key}'] must be numbers, got dtype {values.dtype}")
+
+
+def valid_rows(
+    observation: dict[str, Any], count_key: str, keys: tuple[str, ...]
+) -> tuple[np.ndarray, ...]:
+    """The first ``observation[count_key]`` rows of each padded array ``keys``."""
+    n = int(observation[count_key])
+    return tuple(observation[key][:n] for key in keys)
+
+
+def checked_track_values(
+    action: dict[str, Any], ids: np.ndarray, values: np.ndarray, key: str, noun: str,
+    max_tracks: int | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The reported tracks' checked ids (int64) and their ``key`` values (float64)."""
+    require_numbers(values, key)
+    k = track_count(action, len(ids), len(values), noun, max_tracks)
+    return checked_ids(ids, k), values[:k].astype(np.float64)

@@ -10,10 +10,11 @@ from gymnasium import spaces
 from unitrack_env.errors import InvalidActionError
 from unitrack_env.spaces.limits import (
     COORD_MAX,
-    check_capacity,
-    checked_ids,
+    checked_track_values,
+    pad_tracks,
     refuse_duplicate_ids,
-    track_count,
+    track_arrays,
+    valid_rows,
 )
 
 
@@ -52,18 +53,12 @@ def pack_pose_tracks(ids: Any, keypoints: Any, max_tracks: int) -> dict[str, Any
     k = len(ids_arr)
     if kp.ndim != 3 or kp.shape[0] != k or kp.shape[2] != 3:
         raise InvalidActionError(f"{k} ids need keypoints of shape ({k}, K, 3); got {kp.shape}")
-    check_capacity(k, max_tracks)
-    out_ids = np.zeros(max_tracks, dtype=np.int64)
-    out_kp = np.zeros((max_tracks,) + kp.shape[1:], dtype=np.float32)
-    out_ids[:k] = ids_arr
-    out_kp[:k] = kp
-    return {"ids": out_ids, "keypoints": out_kp, "num_tracks": k}
+    return pad_tracks(ids_arr, kp, "keypoints", max_tracks)
 
 
 def unpack_poses(observation: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Return the valid ``(keypoints (n, K, 3), scores (n,))`` of a pose observation."""
-    n = int(observation["num_people"])
-    return observation["keypoints"][:n], observation["scores"][:n]
+    return valid_rows(observation, "num_people", ("keypoints", "scores"))  # type: ignore[return-value]
 
 
 def unpack_pose_tracks(
@@ -77,24 +72,13 @@ def unpack_pose_tracks(
         InvalidActionError: wrong keys, shapes or dtypes; NaN/inf coordinates; scores
             outside ``[0, 1]``; ids that are not positive integers or repeat.
     """
-    if not isinstance(action, dict) or "ids" not in action or "keypoints" not in action:
-        raise InvalidActionError(
-            "action must be a dict with 'ids' and 'keypoints' (and optionally 'num_tracks'); "
-            "build one with unitrack_env.spaces.pack_pose_tracks(ids, keypoints, max_tracks)"
-        )
-    ids = np.asarray(action["ids"])
-    kp = np.asarray(action["keypoints"])
-    if ids.ndim != 1:
-        raise InvalidActionError(f"action['ids'] must be 1-D, got shape {ids.shape}")
+    ids, kp = track_arrays(action, "keypoints", "pack_pose_tracks(ids, keypoints, max_tracks)")
     if kp.ndim != 3 or kp.shape[2] != 3 or (num_keypoints is not None
                                              and kp.shape[1] != num_keypoints):
         want = f"(k, {num_keypoints if num_keypoints is not None else 'K'}, 3)"
         raise InvalidActionError(f"action['keypoints'] must have shape {want}, got {kp.shape}")
-    if not (np.issubdtype(kp.dtype, np.floating) or np.issubdtype(kp.dtype, np.integer)):
-        raise InvalidActionError(f"action['keypoints'] must be numbers, got dtype {kp.dtype}")
-    k = track_count(action, len(ids), len(kp), "poses", max_tracks)
-    ids = checked_ids(ids, k)
-    kp = kp[:k].astype(np.float64)
+    ids, kp = checked_track_values(action, ids, kp, "keypoints", "poses", max_tracks)
+    k = len(ids)
     if not np.all(np.isfinite(kp)):
         row = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise InvalidActionError(f"track {ids[row]} has non-finite keypoints")
