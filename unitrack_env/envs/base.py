@@ -10,11 +10,10 @@ environment supplies its data set, observations, recording and scoring through a
 from __future__ import annotations
 
 import abc
-import hashlib
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, ClassVar, Generic, TypedDict, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypedDict, TypeVar
 
 import gymnasium as gym
 import numpy as np
@@ -25,39 +24,16 @@ from unitrack_env.fingerprint import sequence_files
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import ScoreReport
 
-#: Environment variable naming a folder that holds benchmark folders (``MOT17/``, ``DAVIS/``,
-#: ...); used when ``root`` is not given.
-DATA_ENV_VAR = "UNITRACK_DATA"
+# Data roots live in unitrack_env.roots; the old names stay importable from here.
+from unitrack_env.roots import DATA_ENV_VAR as DATA_ENV_VAR
+from unitrack_env.roots import DataRootNotFound as DataRootNotFound
+from unitrack_env.roots import resolve_root
 
+if TYPE_CHECKING:
+    from unitrack_env.benchmarks.base import Benchmark
 
-class DataRootNotFound(DataFormatError):
-    """The data folder that ``root=`` or ``$UNITRACK_DATA`` names does not exist."""
-
-
-def resolve_root(root: str | os.PathLike | None, benchmark_folder: str) -> Path | None:
-    """Return the data root to read, or None for the embedded synthetic default.
-
-    ``root`` wins; otherwise ``$UNITRACK_DATA/<benchmark_folder>`` must exist when the
-    variable is set (no silent fallback to synthetic data).
-    """
-    if root is not None:
-        path = Path(root).expanduser()
-        if not path.is_dir():
-            raise DataRootNotFound(path, "root= is not a folder")
-        return path
-    base = os.environ.get(DATA_ENV_VAR)
-    if base:
-        path = Path(base).expanduser() / benchmark_folder
-        if not path.is_dir():
-            raise DataRootNotFound(
-                path,
-                f"{DATA_ENV_VAR}={base} is set but has no '{benchmark_folder}' folder; "
-                f"unset it to use the embedded synthetic data, or pass root=",
-            )
-        return path
-    return None
-
-
+#: Default bound of the frame space (height, width): 4K.
+DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 
 #: The sequence type of an environment (``MOTSequence``, ``VOSSequence``, ...).
 SequenceT = TypeVar("SequenceT")
@@ -66,6 +42,8 @@ SequenceT = TypeVar("SequenceT")
 class EpisodeOptions(TypedDict, total=False):
     """The keyword arguments every environment takes besides its data set's own.
 
+    - ``max_frame_size``: bound ``(height, width)`` of the frame space (default: the
+      environment's :attr:`SequenceEnv.default_max_frame_size`).
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).
     - ``prefetch``: decode the next frame on a background thread.
@@ -73,6 +51,7 @@ class EpisodeOptions(TypedDict, total=False):
     - ``render_mode``: None or ``"rgb_array"``.
     """
 
+    max_frame_size: tuple[int, int]
     decode_frames: bool
     prefetch: bool
     shuffle: bool
@@ -96,14 +75,16 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     .. _first_step() + _length() - 1`` (0-based unless the environment numbers its frames
     otherwise) and is what :meth:`_observe`, :meth:`_record` and :meth:`_frame_path` get.
 
-    A task environment sets :attr:`sequence_names` (and its spaces) in ``__init__`` and
-    implements the episode hooks :meth:`_load`, :meth:`_observe`, :meth:`_record`,
-    :meth:`episode_metrics` and :meth:`_draw` (the ``rgb_array`` picture), overrides
-    :meth:`_length`, :meth:`_frame_path` and :meth:`_frame_size` unless its sequences list
-    their frames as ``frame_paths`` with an ``image_size``, plus the results contract that
-    ``evaluation`` relies on for every task: :meth:`sequence_length`,
-    :meth:`has_ground_truth`, :meth:`episode_digest`, :meth:`write_episode` (official result
-    format) and :meth:`score_folder` (official metrics of a folder of such results).
+    A task environment sets :attr:`sequence_names`, its spaces and :attr:`scoring` (its
+    :class:`~unitrack_env.benchmarks.base.Benchmark`) in ``__init__``; implements the
+    episode hooks :meth:`_load`, :meth:`_observe`, :meth:`_record`, :meth:`_draw` (the
+    ``rgb_array`` picture) and :meth:`episode_results`; and overrides :meth:`_length`,
+    :meth:`_frame_path` and :meth:`_frame_size` unless its sequences list their frames as
+    ``frame_paths`` with an ``image_size``. The results contract that ``evaluation``
+    relies on (:meth:`sequence_length`, :meth:`has_ground_truth`, :meth:`episode_digest`,
+    :meth:`episode_metrics`, :meth:`write_episode` in the official format and
+    :meth:`score_folder`) delegates to :attr:`scoring`; an environment whose metrics
+    accumulate during the episode overrides :meth:`episode_metrics`.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
@@ -118,6 +99,9 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     _sequence: SequenceT | None = None
     #: Decode frames (False: observations carry a 1x1 black placeholder instead).
     decode_frames: bool = True
+    #: The task's benchmark (set in ``__init__``): ground truth, the official result format,
+    #: scoring. The results contract below delegates to it.
+    scoring: Benchmark
 
     #: Import names of the runtime dependencies this environment's scoring needs, checked
     #: when it is made (:func:`unitrack_env.dependencies.require`).
@@ -128,6 +112,9 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     #: as ``info["task"]``, with the action capacities as ``info["capacities"]``.
     task: ClassVar[str] = ""
 
+    #: The bound ``(height, width)`` of the frame space when ``max_frame_size`` is not given.
+    default_max_frame_size: ClassVar[tuple[int, int]] = DEFAULT_MAX_FRAME_SIZE
+
     #: What states the frame size that decoded frames are checked against (named in the
     #: error of a frame of another size).
     frame_size_source: ClassVar[str] = "the sequence's first frame"
@@ -137,7 +124,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         if task is not None:
             cls.task = task
 
-    def __init__(self, max_frame_size: tuple[int, int] | None = None, *,
+    def __init__(self, *, max_frame_size: tuple[int, int] | None = None,
                  decode_frames: bool = True, prefetch: bool = True, shuffle: bool = False,
                  render_mode: str | None = None) -> None:
         for module in self.requires:
@@ -151,23 +138,23 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         self.shuffle = shuffle
         self._order: list[str] | None = None
         self._cursor = 0
-        if max_frame_size is not None:
-            self.max_frame_size = (int(max_frame_size[0]), int(max_frame_size[1]))
+        size = self.default_max_frame_size if max_frame_size is None else max_frame_size
+        self.max_frame_size = (int(size[0]), int(size[1]))
         self.decode_frames = decode_frames
         self.prefetch = prefetch
         self._sequence = None
         self._frames = None
-        self._t = 0
-        self._stop = 0
-        self._done = True
-        self._has_gt = False
+        self._t = self._stop = 0  # the cursor and the end of the episode's frame keys
+        self._done, self._has_gt = True, False
         self._frame: np.ndarray | None = None
         self._observation: dict[str, Any] = {}
+        #: The agent's last answer as the renderer draws it (set by _record; None at reset)
+        #: and the frame it answered.
+        self._answer: Any = None
+        self._answer_frame: np.ndarray | None = None
 
-    def _data_root(
-        self, root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
-        **synthetic_kwargs: Any,
-    ) -> Path:
+    def _data_root(self, root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
+                   **synthetic_kwargs: Any) -> Path:
         """The folder to read: ``root``, ``$UNITRACK_DATA/<folder>``, or the synthetic default.
 
         ``synthetic_args`` go to :func:`unitrack_env.datasets.synthetic.ensure_synthetic`
@@ -182,9 +169,16 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         return path
 
     @staticmethod
-    def _select_sequences(
-        requested: list[str] | tuple[str, ...] | None, available: list[str], where: object
-    ) -> list[str]:
+    def _one_of(label: str, value: str, valid: Iterable[str]) -> str:
+        """``value`` if it is one of ``valid`` (e.g. a rule set), else a ValueError naming them."""
+        valid = list(valid)
+        if value not in valid:
+            raise ValueError(f"unknown {label} '{value}'; valid: {valid}")
+        return value
+
+    @staticmethod
+    def _select_sequences(requested: list[str] | tuple[str, ...] | None, available: list[str],
+                          where: object) -> list[str]:
         """Validate a user's ``sequences=`` against the data set (None: all of them)."""
         if requested is None:
             return list(available)
@@ -234,6 +228,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         self._done = True
         extras = self._load(name)
         self._has_gt = bool(extras["has_ground_truth"])
+        self._answer = self._answer_frame = None
         first = self._first_step()
         self._stop = first + self._length()
         self._frames = self._open_frames(self._frame_path, range(first, self._stop),
@@ -250,6 +245,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
             raise RuntimeError("step() called on a finished episode; call reset() first")
         t = self._t
         reward, extra = self._record(action, t)
+        self._answer_frame = self._frame
         if t + 1 >= self._stop:
             self._done = True
             observation = {key: self._fresh(value) if isinstance(value, np.ndarray) else value
@@ -307,15 +303,12 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     def _record(self, action: Any, t: int) -> tuple[float, dict[str, Any]]:
         """Check the action for frame ``t``, record it and score it.
 
-        Raises ``InvalidActionError`` before anything is recorded.
+        Raises ``InvalidActionError`` before anything is recorded. Sets :attr:`_answer`
+        to what :meth:`_draw` shows of the answer (drawn on :attr:`_answer_frame`).
 
         Returns:
             The step's reward and the info keys it adds (e.g. ``{"clear": ...}``).
         """
-
-    @abc.abstractmethod
-    def episode_metrics(self) -> dict[str, float]:
-        """The official metrics of the recorded episode (needs ground truth)."""
 
     def capacities(self) -> dict[str, int]:
         """The environment's size limits (its ``max_*`` settings, e.g. ``max_tracks``)."""
@@ -399,29 +392,44 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         names = getattr(dataset, "sequence_names", self.sequence_names)
         return sequence_files(Path(root), name, names)
 
-    @abc.abstractmethod
     def sequence_length(self, name: str) -> int:
         """Number of frames (steps) of sequence ``name``, without loading it."""
+        return self.scoring.sequence_length(name)
 
-    @abc.abstractmethod
     def has_ground_truth(self, name: str) -> bool:
         """Whether sequence ``name`` can be scored."""
+        return self.scoring.has_ground_truth(name)
 
     @abc.abstractmethod
+    def episode_results(self) -> Any:
+        """The results recorded so far, in the form :attr:`scoring` writes and scores."""
+
     def episode_digest(self) -> str:
         """A stable digest of the actions recorded in the current episode."""
+        return self.scoring.digest(self.episode_results())
 
-    @abc.abstractmethod
+    def episode_metrics(self) -> dict[str, float]:
+        """The official metrics of the recorded episode (:attr:`scoring`'s ``score_sequence``).
+
+        Raises:
+            ValueError: the sequence has no ground truth.
+        """
+        if self._sequence is None or not self._has_gt:
+            raise ValueError("this sequence has no ground truth to score against")
+        return self.scoring.score_sequence(self._sequence.name, self.episode_results())
+
     def write_episode(self, folder: Path) -> None:
         """Write the current (finished) episode's results in the official format.
 
-        Writes must be atomic (``unitrack_env.io``) so an interrupted run never leaves half a
+        Writes are atomic (``unitrack_env.io``) so an interrupted run never leaves half a
         result behind.
         """
+        self._require_episode()
+        self.scoring.write(folder, self._sequence.name, self.episode_results())
 
-    @abc.abstractmethod
     def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
         """Score results written by :meth:`write_episode` with the official metrics."""
+        return self.scoring.score_folder(folder, sequences)
 
     def _require_episode(self, played: bool = True) -> None:
         """Refuse to write results before an episode was played (``played``: it was)."""
@@ -431,8 +439,3 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     @staticmethod
     def _fresh(array: np.ndarray) -> np.ndarray:
         return np.array(array, copy=True)
-
-    @staticmethod
-    def _rows_digest(rows: np.ndarray) -> str:
-        """SHA-256 of an array of results rounded to 1e-3 (ids, boxes, joints, ...)."""
-        return hashlib.sha256(np.ascontiguousarray(np.round(rows, 3)).tobytes()).hexdigest()

@@ -2,44 +2,25 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.datasets.davis import (
-    DAVIS_VOID_LABEL,
-    DAVISDataset,
-    VOSSequence,
-    read_label_png,
-    write_davis_result,
-)
+from unitrack_env.benchmarks.davis import BENCHMARK, BENCHMARK_FOLDER, DAVISBenchmark
+from unitrack_env.datasets.davis import DAVIS_VOID_LABEL, DAVISDataset, VOSSequence
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.metrics.report import COMBINED, ScoreReport
-from unitrack_env.metrics.vos import (
-    VOSScores,
-    aggregate_vos,
-    davis_statistics,
-    evaluate_vos_sequence,
-    frame_scores,
-)
+from unitrack_env.metrics.vos import VOSScores, davis_statistics, frame_scores
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import OVERLAY_ALPHA as OVERLAY_ALPHA
 from unitrack_env.render import overlay_labels
 
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
-
-#: Folder of the DAVIS data under ``$UNITRACK_DATA``.
-BENCHMARK_FOLDER = "DAVIS"
-#: Name of the rule set in score reports.
-BENCHMARK = "DAVIS-2017"
 #: Largest object label: labels are uint8 and 255 is void.
 MAX_OBJECTS = 254
 #: Default bound of the frame space (height, width): DAVIS Full-Resolution reaches 4096 wide.
@@ -207,6 +188,8 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
     - v0: initial version.
     """
 
+    default_max_frame_size = DEFAULT_MAX_FRAME_SIZE
+
     def __init__(
         self,
         root: str | os.PathLike | None = None,
@@ -214,12 +197,12 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         sequences: list[str] | tuple[str, ...] | None = None,
         resolution: str = "480p",
         year: str = "2017",
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
+        super().__init__(**options)
         data_root = self._data_root(root, BENCHMARK_FOLDER, BENCHMARK, "davis")
         self.dataset = DAVISDataset(data_root, split, resolution, year)
+        self.scoring = DAVISBenchmark(self.dataset)
         self.sequence_names = self._select_sequences(
             sequences, self.dataset.sequence_names, f"split {split!r} of {data_root}"
         )
@@ -232,22 +215,12 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
             *self.max_frame_size, max_label=MAX_OBJECTS
         )
 
-        self._loaded: dict[str, VOSSequence] = {}
         self._init_labels: np.ndarray | None = None
         self._results: list[np.ndarray] = []
         self._j: list[np.ndarray] = []
         self._f: list[np.ndarray] = []
-        self._render_frame: np.ndarray | None = None
-        self._render_labels: np.ndarray | None = None
 
     # ------------------------------------------------------------------ data
-    def _read(self, name: str) -> VOSSequence:
-        sequence = self._loaded.get(name)
-        if sequence is None:
-            sequence = self.dataset.load(name)
-            self._loaded[name] = sequence
-        return sequence
-
     @property
     def _shape(self) -> tuple[int, int]:
         width, height = self._sequence.image_size
@@ -255,7 +228,7 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
 
     # ------------------------------------------------------------------ episode hooks
     def _load(self, name: str) -> dict[str, Any]:
-        sequence = self._read(name)
+        sequence = self.scoring.load(name)
         width, height = sequence.image_size
         self._check_frame_size(name, width, height)
         if max(sequence.object_ids) > MAX_OBJECTS:  # pragma: no cover - 255 is void
@@ -265,7 +238,6 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         self._init_labels.setflags(write=False)
         self.action_space.narrow(height, width, (0, *sequence.object_ids))
         self._results, self._j, self._f = [], [], []
-        self._render_labels = None
         return dict(seq_length=sequence.num_frames, frame_rate=DAVIS_FRAME_RATE,
                     image_size=self._shape, benchmark=BENCHMARK,
                     has_ground_truth=sequence.has_ground_truth,
@@ -287,7 +259,7 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         sequence = self._sequence
         labels = validate_labels(action, self._shape, sequence.object_ids)
         self._results.append(labels)
-        self._render_frame, self._render_labels = self._frame, labels
+        self._answer = labels
         if sequence.annotation_paths[t] is None:
             return 0.0, {}
         gt = sequence.read_annotation(t)
@@ -304,14 +276,6 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
     def episode_results(self) -> list[np.ndarray]:
         """Return the label maps recorded so far (one ``(H, W)`` uint8 array per frame)."""
         return [labels.copy() for labels in self._results]
-
-    def episode_digest(self) -> str:
-        """Return a SHA-256 digest of the recorded label maps."""
-        digest = hashlib.sha256()
-        for labels in self._results:
-            digest.update(np.asarray(labels.shape, dtype=np.int64).tobytes())
-            digest.update(np.ascontiguousarray(labels).tobytes())
-        return digest.hexdigest()
 
     def episode_scores(self) -> VOSScores:
         """Return the DAVIS scores of the finished episode (per object and summary).
@@ -333,71 +297,14 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         """Return the DAVIS summary of the finished episode (``J-Mean``, ..., ``J&F-Mean``)."""
         return dict(self.episode_scores().summary)
 
-    def sequence_length(self, name: str) -> int:
-        """Return the number of frames (steps) of sequence ``name``."""
-        return self._read(name).num_frames
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Whether every frame of sequence ``name`` is annotated (train/val, not test-dev)."""
-        return self._read(name).has_ground_truth
-
     def write_episode(self, folder: Path) -> None:
-        """Write ``<folder>/<seq>/<frame>.png`` palette PNGs (the official result format).
-
-        Every file is written atomically.
-        """
+        """Write ``<folder>/<seq>/<frame>.png`` palette PNGs (the official result format)."""
         self._require_episode(played=bool(self._results))
-        for t, labels in enumerate(self._results):
-            write_davis_result(folder, self._sequence, t, labels)
-
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<seq>/<frame>.png`` results with the DAVIS-2017 protocol.
-
-        Like the official evaluation, only the scored frames' PNGs (all but the first and
-        the last) are read.
-
-        Raises:
-            DataFormatError: a result PNG is missing, of another size, or holds a label that
-                is not an object of the sequence.
-        """
-        per_sequence: dict[str, dict[str, float]] = {}
-        scores: dict[str, VOSScores] = {}
-        for name in sequences:
-            sequence = self._read(name)
-            gt = sequence.read_annotations()
-            predictions = [np.zeros_like(gt[0]) for _ in range(sequence.num_frames)]
-            for t in range(1, sequence.num_frames - 1):
-                predictions[t] = self._read_result(Path(folder), sequence, t)
-            scores[name] = evaluate_vos_sequence(gt, predictions, sequence.object_ids,
-                                                 sequence_name=name)
-            per_sequence[name] = dict(scores[name].summary)
-        combined: dict[str, float] = {}
-        if scores:
-            scores[COMBINED] = aggregate_vos(list(scores.values()))
-            combined = dict(scores[COMBINED].summary)
-        return ScoreReport(BENCHMARK, per_sequence, combined, scores)
-
-    @staticmethod
-    def _read_result(folder: Path, sequence: VOSSequence, t: int) -> np.ndarray:
-        path = folder / sequence.name / f"{sequence.frame_names[t]}.png"
-        if not path.is_file():
-            raise DataFormatError(path, f"result of sequence '{sequence.name}' frame "
-                                  f"{sequence.frame_names[t]} not found")
-        labels = read_label_png(path)
-        expected = (sequence.image_size[1], sequence.image_size[0])
-        if labels.shape != expected:
-            raise DataFormatError(path, f"label map is {labels.shape[1]}x{labels.shape[0]}, the "
-                                  f"frames are {expected[1]}x{expected[0]}")
-        extra = sorted(set(np.unique(labels).tolist()) - {0, *sequence.object_ids})
-        if extra:
-            raise DataFormatError(path, f"labels {extra} are not objects of '{sequence.name}' "
-                                  f"(objects: {list(sequence.object_ids)})")
-        return labels
+        super().write_episode(folder)
 
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """Return the frame with the agent's last label map (or the first-frame labels)."""
-        if self._render_labels is None:
+        if self._answer is None:
             return overlay_labels(self._frame, self._init_labels)
-        return overlay_labels(self._render_frame, self._render_labels)
-
+        return overlay_labels(self._answer_frame, self._answer)

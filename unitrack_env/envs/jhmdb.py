@@ -3,52 +3,28 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.datasets.jhmdb import (
-    JHMDB_SKELETON,
-    NUM_JOINTS,
-    JHMDBDataset,
-    PoseSequence,
-    read_joint_positions,
-)
+from unitrack_env.benchmarks.jhmdb import RESULT_FILE as RESULT_FILE
+from unitrack_env.benchmarks.jhmdb import JHMDBBenchmark
+from unitrack_env.benchmarks.jhmdb import pose_mat_bytes as pose_mat_bytes
+from unitrack_env.datasets.jhmdb import JHMDB_SKELETON, NUM_JOINTS, JHMDBDataset, PoseSequence
+from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
-from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.io import atomic_write_bytes
-from unitrack_env.metrics.pose import (
-    NORMALISERS,
-    PAPER_PCK_THRESHOLDS,
-    PCKCounts,
-    frame_pck,
-    pck_counts,
-)
-from unitrack_env.metrics.report import COMBINED, ScoreReport
+from unitrack_env.errors import InvalidActionError
+from unitrack_env.metrics.pose import NORMALISERS, PAPER_PCK_THRESHOLDS, frame_pck
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import draw_skeleton
 from unitrack_env.render import joint_colours as joint_colours
 
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
-
-#: Default bound of the frame space (height, width): 4K (JHMDB frames are 320x240).
-DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 #: PCK threshold of the per-step reward.
 REWARD_ALPHA = 0.1
-#: File name of a video's results, inside ``<folder>/<action>/<video>/`` (JHMDB's own).
-RESULT_FILE = "joint_positions.mat"
-
-
-def pose_mat_bytes(keypoints: np.ndarray) -> bytes:
-    """Return a ``joint_positions.mat`` (``pos_img`` ``(2, 15, T)``, 1-based) for 0-based joints."""
-    from unitrack_env.datasets.synthetic.jhmdb import joint_positions_mat
-
-    return joint_positions_mat(keypoints)
 
 
 class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
@@ -134,14 +110,14 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         sequences: list[str] | tuple[str, ...] | None = None,
         normaliser: str = "box_diagonal",
         thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS,
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
+        super().__init__(**options)
         if normaliser not in NORMALISERS:
             raise ValueError(f"normaliser must be one of {NORMALISERS}; got {normaliser!r}")
         data_root = self._data_root(root, "JHMDB", "JHMDB", kind="jhmdb")
         self.dataset = JHMDBDataset(data_root, split, split_index, split_dir)
+        self.scoring = JHMDBBenchmark(self.dataset, normaliser, thresholds)
         self.sequence_names = self._select_sequences(
             sequences, self.dataset.sequence_names, data_root
         )
@@ -154,7 +130,6 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         self.action_space = spaces.Box(-ut_spaces.COORD_MAX, ut_spaces.COORD_MAX,
                                        (NUM_JOINTS, 2), np.float32)
         self._predictions: list[np.ndarray] = []
-        self._render_pose: np.ndarray | None = None
 
     # ------------------------------------------------------------------ episode hooks
     def _load(self, name: str) -> dict[str, Any]:
@@ -163,7 +138,6 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         self._check_frame_size(name, width, height, axes=False)
         self._sequence = sequence
         self._predictions = []
-        self._render_pose = None
         return dict(seq_length=sequence.num_frames, frame_rate=30, image_size=(height, width),
                     synthetic=self.synthetic, has_ground_truth=True)
 
@@ -178,72 +152,32 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         """Record frame ``t``'s joints; the reward is PCK@0.1 (frame 1 is not scored)."""
         pred = _validate_joints(action)
         self._predictions.append(pred)
-        self._render_pose = pred
+        self._answer = pred
         if t == 0:
             return 0.0, {}
         reward = frame_pck(pred, self._sequence.keypoints[t], REWARD_ALPHA, self.normaliser)
         return reward, {"pck": reward}
 
     # ------------------------------------------------------------------ results
-    def episode_predictions(self) -> np.ndarray:
+    def episode_results(self) -> np.ndarray:
         """Return the ``(steps, 15, 2)`` joints recorded so far (0-based pixels)."""
         if not self._predictions:
             return np.zeros((0, NUM_JOINTS, 2))
         return np.stack(self._predictions)
 
-    def _counts(self, pred: np.ndarray, gt: np.ndarray) -> PCKCounts:
-        return pck_counts(pred, gt, self.thresholds, method=self.normaliser)
+    #: The older name of :meth:`episode_results`.
+    episode_predictions = episode_results
 
     def episode_metrics(self) -> dict[str, float]:
         """PCK at every threshold of the recorded video (frame 1 not scored)."""
-        pred = self.episode_predictions()
-        return self._counts(pred, self._sequence.keypoints[: len(pred)]).as_dict()
-
-    def episode_digest(self) -> str:
-        """Return a SHA-256 digest of the recorded joints (rounded to 1e-3 px)."""
-        return self._rows_digest(self.episode_predictions())
-
-    def sequence_length(self, name: str) -> int:
-        """Return the number of annotated frames of ``name`` (reads only its ``.mat``)."""
-        return len(read_joint_positions(self.dataset.joint_dir / name / "joint_positions.mat"))
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Every JHMDB video is annotated."""
-        return name in self.dataset.sequence_names
-
-    def write_episode(self, folder: Path) -> None:
-        """Write ``<folder>/<action>/<video>/joint_positions.mat`` (``pos_img``, 1-based)."""
-        self._require_episode()
-        atomic_write_bytes(Path(folder) / self._sequence.name / RESULT_FILE,
-                           pose_mat_bytes(self.episode_predictions()))
-
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<name>/joint_positions.mat`` files; ``COMBINED`` pools all joints.
-
-        Raises:
-            DataFormatError: a result file is missing or does not cover its video's frames.
-        """
-        per_sequence: dict[str, dict[str, float]] = {}
-        pooled: PCKCounts | None = None
-        for name in sequences:
-            path = Path(folder) / name / RESULT_FILE
-            pred = read_joint_positions(path)
-            gt = read_joint_positions(self.dataset.joint_dir / name / "joint_positions.mat")
-            if pred.shape != gt.shape:
-                raise DataFormatError(path, f"holds {len(pred)} frames, the video has {len(gt)}",
-                                      field="pos_img")
-            counts = self._counts(pred, gt)
-            per_sequence[name] = counts.as_dict()
-            pooled = counts if pooled is None else pooled.merge(counts)
-        combined = pooled.as_dict() if pooled is not None else {}
-        return ScoreReport("JHMDB", per_sequence, combined,
-                           scores={**per_sequence, COMBINED: combined})
+        pred = self.episode_results()
+        return self.scoring.counts(pred, self._sequence.keypoints[: len(pred)]).as_dict()
 
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """Return the frame with the last predicted skeleton (``init_keypoints`` at reset)."""
         canvas = np.ascontiguousarray(self._frame).copy()
-        pose = self._render_pose if self._render_pose is not None else self._sequence.keypoints[0]
+        pose = self._answer if self._answer is not None else self._sequence.keypoints[0]
         draw_skeleton(canvas, pose, JHMDB_SKELETON)
         return canvas
 

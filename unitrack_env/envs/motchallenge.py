@@ -4,35 +4,32 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
+from unitrack_env.benchmarks.motchallenge import RESULT_FORMAT as RESULT_FORMAT
+from unitrack_env.benchmarks.motchallenge import MOTChallengeBenchmark, result_rows
+from unitrack_env.benchmarks.motchallenge import format_mot_results as format_mot_results
 from unitrack_env.datasets.motchallenge import (
     BENCHMARKS,
     Annotations,
     MOTChallengeDataset,
     MOTSequence,
-    read_seqinfo,
 )
+from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
-from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.clear_stream import StreamingClear
 from unitrack_env.metrics.mot_preprocess import preprocess_frame
-from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.render import draw_boxes
-
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
 
 #: Default capacity of the padded detection arrays (MOT20 public detections reach ~250).
 DEFAULT_MAX_DETECTIONS = 512
 #: Default capacity of the padded track arrays.
 DEFAULT_MAX_TRACKS = 512
-#: Default bound of the frame space (height, width): 4K.
-DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 
 
 class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
@@ -128,15 +125,13 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         min_score: float | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
         max_tracks: int = DEFAULT_MAX_TRACKS,
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
-        if benchmark not in BENCHMARKS:
-            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
-        self.benchmark = benchmark
+        super().__init__(**options)
+        self.benchmark = self._one_of("benchmark", benchmark, sorted(BENCHMARKS))
         data_root = self._data_root(root, benchmark, benchmark)
         self.dataset = MOTChallengeDataset(data_root, benchmark, split, detections)
+        self.scoring = MOTChallengeBenchmark(self.dataset)
         self.sequence_names = self._select_sequences(
             sequences, self.dataset.sequence_names, self.dataset.split_dir
         )
@@ -151,8 +146,6 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         self._detections: Annotations | None = None
         self._clear = StreamingClear()
         self._results: list[np.ndarray] = []
-        self._render_tracks: tuple[np.ndarray, np.ndarray] | None = None
-        self._render_frame: np.ndarray | None = None
 
     # ------------------------------------------------------------------ episode hooks
     def _load(self, name: str) -> dict[str, Any]:
@@ -172,7 +165,6 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         self._detections = detections
         self._clear.reset()
         self._results = []
-        self._render_tracks = None
         return dict(seq_length=info.length, frame_rate=info.frame_rate,
                     image_size=(info.height, info.width), benchmark=self.benchmark,
                     has_ground_truth=sequence.ground_truth is not None,
@@ -203,8 +195,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
     def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
         """Record the tracks of frame ``t`` and score them (``info["clear"]``)."""
         ids, boxes = ut_spaces.unpack_tracks(action, self.max_tracks)
-        self._results.append(_result_rows(t, ids, boxes))
-        self._render_frame, self._render_tracks = self._frame, (ids, boxes)
+        self._results.append(result_rows(t, ids, boxes))
+        self._answer = (ids, boxes)
         gt = self._sequence.ground_truth
         if gt is None:
             return 0.0, {}
@@ -230,79 +222,15 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
             return np.zeros((0, 10))
         return np.concatenate(self._results)
 
-    def episode_digest(self) -> str:
-        """Return a SHA-256 digest of the recorded tracks (ids and boxes rounded to 1e-3)."""
-        return self._rows_digest(self.episode_results())
-
-    def episode_metrics(self) -> dict[str, float]:
-        """Score the recorded tracks of the current sequence with TrackEval.
-
-        Raises:
-            ValueError: the split has no ground truth.
-        """
-        from unitrack_env.metrics.motchallenge import score_sequence
-
-        if self._sequence is None or self._sequence.ground_truth is None:
-            raise ValueError("this sequence has no ground truth to score against")
-        score = score_sequence(
-            self._sequence.info.path,
-            self.episode_results(),
-            benchmark=self.benchmark,
-            seq_length=self._sequence.info.length,
-        )
-        return dict(score.summary)
-
-    def sequence_length(self, name: str) -> int:
-        """Return the number of frames of sequence ``name`` (reads only its seqinfo.ini)."""
-        return read_seqinfo(self.dataset.split_dir / name).length
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Whether sequence ``name`` has a ``gt/gt.txt``."""
-        return self.dataset.has_ground_truth(name)
-
-    def write_episode(self, folder: Path) -> None:
-        """Write ``<folder>/<sequence>.txt`` in the official MOTChallenge result format."""
-        self._require_episode()
-        atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
-                          format_mot_results(self.episode_results()))
-
     def sequence_inputs(self, name: str) -> list[Path]:
         """The sequence's folder and its detection file (which may live elsewhere)."""
         return [*super().sequence_inputs(name), self.dataset.detection_path(name)]
 
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
-        from unitrack_env.metrics.motchallenge import score_folder
-
-        return score_folder(self.dataset.split_dir, folder, benchmark=self.benchmark,
-                            sequences=sequences)
-
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """Return the current frame with id-coloured tracks (``rgb_array``), else None."""
-        if self._render_tracks is None:
+        if self._answer is None:
             rows = self._detections.rows(self._t)
             return draw_boxes(self._frame, self._detections.boxes[rows])
-        ids, boxes = self._render_tracks
-        return draw_boxes(self._render_frame, boxes, ids)
-
-
-#: printf formats of the result columns (MOTChallenge files use 2 decimals; keep 3).
-RESULT_FORMAT = ("%d", "%d", "%.3f", "%.3f", "%.3f", "%.3f", "%g", "%d", "%d", "%d")
-
-
-def format_mot_results(rows: np.ndarray) -> str:
-    """Format result rows ``frame, id, x, y, w, h, conf, -1, -1, -1`` as MOTChallenge text."""
-    lines = [",".join(fmt % value for fmt, value in zip(RESULT_FORMAT, row, strict=True))
-             for row in np.asarray(rows).reshape(-1, 10)]
-    return "\n".join(lines) + ("\n" if lines else "")
-
-
-def _result_rows(frame: int, ids: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    rows = np.empty((len(ids), 10))
-    rows[:, 0] = frame
-    rows[:, 1] = ids
-    rows[:, 2:6] = boxes
-    rows[:, 6] = 1.0
-    rows[:, 7:] = -1.0
-    return rows
+        ids, boxes = self._answer
+        return draw_boxes(self._answer_frame, boxes, ids)

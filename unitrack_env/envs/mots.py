@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
+from unitrack_env.benchmarks.mots import DATA_FOLDERS, DEFAULT_SPLITS, MOTSBenchmark
 from unitrack_env.datasets.mots import (
     BENCHMARKS,
     CLASS_IDS,
@@ -19,29 +20,18 @@ from unitrack_env.datasets.mots import (
     MOTSDataset,
     MOTSSequenceInfo,
     encode_masks,
-    format_instances_txt,
     resolve_overlaps,
 )
+from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
-from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mots import MaskClearStream
-from unitrack_env.metrics.report import ScoreReport
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import MASK_ALPHA as MASK_ALPHA
 from unitrack_env.render import draw_masks
 
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
-
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
-#: Default bound of the frame space (height, width): 4K.
-DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
-#: Default split of each benchmark.
-DEFAULT_SPLITS = {"MOTS20": "train", "KITTI-MOTS": "training"}
-#: Folder name under ``$UNITRACK_DATA`` of each benchmark.
-DATA_FOLDERS = {"MOTS20": "MOTS20", "KITTI-MOTS": "KITTI-MOTS"}
 
 
 class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
@@ -142,22 +132,20 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         object_class: str = "pedestrian",
         min_score: float | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
-        if benchmark not in BENCHMARKS:
-            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {list(BENCHMARKS)}")
+        super().__init__(**options)
+        self.benchmark = self._one_of("benchmark", benchmark, BENCHMARKS)
         valid = ["pedestrian"] if benchmark == "MOTS20" else list(CLASS_IDS)
         if object_class not in valid:
             raise ValueError(f"object_class={object_class!r} is not a {benchmark} class; "
                              f"valid: {valid}")
-        self.benchmark = benchmark
         self.object_class = object_class
         self.class_id = CLASS_IDS[object_class]
         data_root = self._data_root(root, DATA_FOLDERS[benchmark], benchmark, kind="mots")
         self.dataset = MOTSDataset(data_root, benchmark, split or DEFAULT_SPLITS[benchmark],
                                    detections)
+        self.scoring = MOTSBenchmark(self.dataset, object_class)
         self.sequence_names = self._select_sequences(
             sequences, self.dataset.sequence_names, self.dataset.split_dir
         )
@@ -172,7 +160,6 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         self._clear = MaskClearStream()
         self._results: list[tuple[int, np.ndarray, list[bytes]]] = []
         self._current: dict[str, Any] = {}
-        self._render_state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ episode hooks
     def _load(self, name: str) -> dict[str, Any]:
@@ -197,7 +184,6 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         self._dets = dets
         self._clear.reset()
         self._results = []
-        self._render_state = None
         return dict(seq_length=info.length, frame_rate=info.frame_rate,
                     image_size=(info.height, info.width), benchmark=self.benchmark,
                     has_ground_truth=self._gt is not None, synthetic=self.synthetic)
@@ -241,7 +227,7 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         reported_counts = [counts[i] for i in reported]
         self._results.append((t, ids[reported], reported_counts))
         keep = ids > 0
-        self._render_state = (self._frame, self._current["masks"][keep], ids[keep])
+        self._answer = (self._current["masks"][keep], ids[keep])
         if self._gt is None:
             return 0.0, {}
         info = self._sequence
@@ -272,45 +258,9 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
             np.full(k, self.class_id, np.int64), np.full(k, height, np.int64),
             np.full(k, width, np.int64), tuple(counts), np.ones(k), np.zeros(k, np.int64))
 
-    def episode_digest(self) -> str:
-        """SHA-256 of the episode's MOTS result text."""
-        text = format_instances_txt(self.episode_results())
-        return hashlib.sha256(text.encode("ascii")).hexdigest()
-
-    def episode_metrics(self) -> dict[str, float]:
-        """TrackEval's MOTS metrics of the recorded episode (needs ground truth)."""
-        from unitrack_env.metrics.mots import score_sequence
-
-        if self._gt is None:
-            raise ValueError("this sequence has no ground truth to score against")
-        score = score_sequence(self._gt, self.episode_results(), seq_length=self._sequence.length,
-                               benchmark=self.benchmark, object_class=self.object_class,
-                               sequence=self._sequence.name)
-        return dict(score.summary)
-
-    def sequence_length(self, name: str) -> int:
-        """Number of frames of sequence ``name``."""
-        return self.dataset.info(name).length
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Whether sequence ``name`` has ground truth."""
-        return self.dataset.has_ground_truth(name)
-
-    def write_episode(self, folder: Path) -> None:
-        """Write ``<folder>/<sequence>.txt`` in the official MOTS txt result format."""
-        self._require_episode()
-        atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
-                          format_instances_txt(self.episode_results()))
-
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
-        from unitrack_env.metrics.mots import score_folder
-
-        return score_folder(self.dataset, folder, sequences, object_class=self.object_class)
-
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
-        if self._render_state is None:
+        if self._answer is None:
             return draw_masks(self._frame, self._current["masks"])
-        return draw_masks(*self._render_state)
+        return draw_masks(self._answer_frame, *self._answer)

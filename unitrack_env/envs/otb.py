@@ -3,31 +3,23 @@
 from __future__ import annotations
 
 import os
-import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
+from unitrack_env.benchmarks.otb import BENCHMARK, BENCHMARK_FOLDER, OTBBenchmark, format_box_value
+from unitrack_env.benchmarks.otb import format_otb_results as format_otb_results
+from unitrack_env.datasets.otb import OTBDataset, SOTSequence
+from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.io import atomic_write_text
-from unitrack_env.metrics.report import COMBINED, ScoreReport
-from unitrack_env.metrics.sot import aggregate_sot, evaluate_sot_sequence, frame_iou
+from unitrack_env.metrics.sot import frame_iou
 from unitrack_env.render import draw_boxes
 
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
-
-#: Folder of the OTB data under ``$UNITRACK_DATA``.
-BENCHMARK_FOLDER = "OTB"
-#: Name of the rule set in score reports.
-BENCHMARK = "OTB-2015"
-#: Default bound of the frame space (height, width): 4K.
-DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 #: Colour of the agent's box in renderings (RGB).
 ACTION_COLOUR = (0, 255, 0)
 #: Colour of the initial box drawn before the first step (RGB).
@@ -41,17 +33,7 @@ def _canonical(box: np.ndarray) -> np.ndarray:
     metrics are computed from; reading the file back gives the very same float64 numbers,
     so ``score_folder`` reproduces ``info["metrics"]`` exactly.
     """
-    return np.array([float(_format(v)) for v in box], dtype=np.float64)
-
-
-def _format(value: float) -> str:
-    return np.format_float_positional(np.float32(value), unique=True, trim="-")
-
-
-def format_otb_results(boxes: np.ndarray) -> str:
-    """Format ``(T, 4)`` boxes as an OTB result file: ``x,y,w,h`` per line, one per frame."""
-    lines = [",".join(_format(v) for v in row) for row in np.asarray(boxes).reshape(-1, 4)]
-    return "\n".join(lines) + ("\n" if lines else "")
+    return np.array([float(format_box_value(v)) for v in box], dtype=np.float64)
 
 
 def validate_box(action: Any) -> np.ndarray:
@@ -169,12 +151,12 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         self,
         root: str | os.PathLike | None = None,
         sequences: list[str] | tuple[str, ...] | None = None,
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
+        super().__init__(**options)
         data_root = self._data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
         self.dataset = OTBDataset(data_root)
+        self.scoring = OTBBenchmark(self.dataset)
         if sequences is not None:
             self.sequence_names = [self.dataset.resolve(s) for s in sequences]
         else:
@@ -187,23 +169,10 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         })
         self.action_space = spaces.Box(box_low, box_high, (4,), np.float32)
 
-        self._loaded: dict[str, SOTSequence] = {}
         self._results: list[np.ndarray] = []
         self._scored: np.ndarray | None = None
-        self._render_frame: np.ndarray | None = None
-        self._render_box: np.ndarray | None = None
 
     # ------------------------------------------------------------------ data
-    def _read(self, name: str) -> SOTSequence:
-        """Read a sequence once (the reader's warning about trimmed copies appears once)."""
-        sequence = self._loaded.get(name)
-        if sequence is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("always")
-                sequence = self.dataset.load(name)
-            self._loaded[name] = sequence
-        return sequence
-
     @staticmethod
     def _gt_path(sequence: SOTSequence) -> Path:
         """The ground-truth file of a sequence (``groundtruth_rect.<k>.txt`` for ``Name.k``)."""
@@ -215,7 +184,7 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
 
     # ------------------------------------------------------------------ episode hooks
     def _load(self, name: str) -> dict[str, Any]:
-        sequence = self._read(name)
+        sequence = self.scoring.load(name)
         init = sequence.init_box
         if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):
             raise DataFormatError(
@@ -228,7 +197,6 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         self._sequence = sequence
         self._results = []
         self._scored = None
-        self._render_box = None
         return dict(seq_length=sequence.num_frames, frame_rate=30.0,
                     image_size=(height, width), benchmark=BENCHMARK,
                     has_ground_truth=sequence.has_ground_truth, synthetic=self.synthetic)
@@ -254,7 +222,7 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
             scored = box
         self._scored = scored
         reward = frame_iou(scored, gt)
-        self._render_frame, self._render_box = self._frame, box
+        self._answer = box
         return reward, {"iou": reward}
 
     # ------------------------------------------------------------------ results
@@ -263,10 +231,6 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         if not self._results:
             return np.zeros((0, 4))
         return np.stack(self._results)
-
-    def episode_digest(self) -> str:
-        """Return a SHA-256 digest of the recorded boxes (rounded to 1e-3)."""
-        return self._rows_digest(self.episode_results())
 
     def episode_metrics(self) -> dict[str, float]:
         """Score the recorded boxes of the finished episode with the OTB toolkit's rules.
@@ -277,53 +241,16 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         sequence = self._sequence
         if sequence is None or len(self._results) != sequence.num_frames:
             raise ValueError("the episode is not finished; play every frame first")
-        return evaluate_sot_sequence(self.episode_results(), sequence.boxes).as_dict()
-
-    def sequence_length(self, name: str) -> int:
-        """Return the number of frames (steps) of sequence ``name`` (its ground truth rows)."""
-        return self._read(name).num_frames
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Whether sequence ``name`` has boxes after the first frame."""
-        return self._read(name).has_ground_truth
+        return self.scoring.score_sequence(sequence.name, self.episode_results())
 
     def write_episode(self, folder: Path) -> None:
         """Write ``<folder>/<sequence>.txt``: one ``x,y,w,h`` line per frame, atomically."""
         self._require_episode(played=bool(self._results))
-        atomic_write_text(Path(folder) / f"{self._sequence.name}.txt",
-                          format_otb_results(self.episode_results()))
-
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<sequence>.txt`` result files with the OTB toolkit's rules.
-
-        Raises:
-            DataFormatError: a result file is missing, malformed, or has a different number
-                of rows than the sequence has frames.
-        """
-        per_sequence, scores = {}, {}
-        for name in sequences:
-            sequence = self._read(self.dataset.resolve(name))
-            path = Path(folder) / f"{sequence.name}.txt"
-            if not path.is_file():
-                raise DataFormatError(path, f"no result file for sequence '{sequence.name}'")
-            boxes = read_box_file(path)
-            if len(boxes) != sequence.num_frames:
-                raise DataFormatError(
-                    path, f"has {len(boxes)} boxes but '{sequence.name}' has "
-                    f"{sequence.num_frames} frames (one line per frame, the first included)",
-                )
-            scores[sequence.name] = evaluate_sot_sequence(boxes, sequence.boxes)
-            per_sequence[sequence.name] = scores[sequence.name].as_dict()
-        combined: dict[str, float] = {}
-        if scores:
-            scores[COMBINED] = aggregate_sot(list(scores.values()))
-            combined = scores[COMBINED].as_dict()
-        return ScoreReport(BENCHMARK, per_sequence, combined, scores)
+        super().write_episode(folder)
 
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """Return the frame with the agent's last box (or the initial box before any step)."""
-        if self._render_box is None:
+        if self._answer is None:
             return draw_boxes(self._frame, self._sequence.init_box[None], colour=INIT_COLOUR)
-        return draw_boxes(self._render_frame, self._render_box[None], colour=ACTION_COLOUR)
-
+        return draw_boxes(self._answer_frame, self._answer[None], colour=ACTION_COLOUR)

@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
+from unitrack_env.benchmarks.posetrack import BENCHMARK, PoseTrackBenchmark
 from unitrack_env.datasets.posetrack import (
     NUM_KEYPOINTS,
     PERSON_CATEGORY,
@@ -20,35 +21,26 @@ from unitrack_env.datasets.posetrack import (
     PoseTrackSequence,
     PoseTrackVideo,
     read_posetrack_json,
-    write_posetrack_json,
 )
+from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.posetrack import (
     POSEVAL_DROPS_LAST_FRAME,
     PoseFrame,
     PosevalSequence,
-    evaluate_video,
     evaluated_frames,
     summarise,
 )
-from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.render import draw_poses
-
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
 
 #: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).
 DEFAULT_MAX_PEOPLE = 100
 #: Default capacity of the padded track arrays.
 DEFAULT_MAX_TRACKS = 100
-#: Default bound of the frame space (height, width): 4K.
-DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
 #: Frame rate reported in ``info`` (PoseTrack files do not declare one; its videos are
 #: 25-30 fps).
 FRAME_RATE = 30
-#: Benchmark folder name under ``UNITRACK_DATA`` and in the synthetic cache.
-BENCHMARK = "PoseTrack2018"
 #: ``detections=`` value: the annotated poses without their ids.
 ORACLE = "oracle"
 _LIMBS = tuple((a - 1, b - 1) for a, b in POSETRACK_SKELETON)
@@ -162,11 +154,10 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         min_score: float | None = None,
         max_people: int = DEFAULT_MAX_PEOPLE,
         max_tracks: int = DEFAULT_MAX_TRACKS,
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
+        super().__init__(**options)
         data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
         self.dataset = PoseTrackDataset(data_root, split)
         self.sequence_names = self._select_sequences(
@@ -177,6 +168,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         self.max_people = int(max_people)
         self.max_tracks = int(max_tracks)
         self.drop_last_frame = bool(drop_last_frame)
+        self.scoring = PoseTrackBenchmark(self.dataset, self.drop_last_frame)
         self.observation_space = spaces.Dict({
             "frame": ut_spaces.Image(*self.max_frame_size),
             "keypoints": ut_spaces.keypoint_array_space(self.max_people, NUM_KEYPOINTS),
@@ -188,8 +180,6 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         self._evaluated: set[int] = set()
         self._poseval = PosevalSequence()
         self._results: list[list[PoseTrackPerson]] = []
-        self._render_tracks: tuple[np.ndarray, np.ndarray] | None = None
-        self._render_frame: np.ndarray | None = None
 
     def _detection_source(self, data_root: Path, detections: str | os.PathLike | None
                           ) -> tuple[str, Path | None]:
@@ -225,7 +215,6 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
                            if sequence.ground_truth is not None else set())
         self._poseval = PosevalSequence()
         self._results = []
-        self._render_tracks = None
         first = sequence.images[0]
         return dict(
             seq_length=sequence.length, frame_rate=FRAME_RATE, image_size=(height, width),
@@ -295,7 +284,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         people = [_result_person(image.id, int(i), kp) for i, kp in zip(ids, keypoints,
                                                                           strict=True)]
         self._results.append(people)
-        self._render_frame, self._render_tracks = self._frame, (ids, keypoints)
+        self._answer = (ids, keypoints)
         if t not in self._evaluated:
             return 0.0, {}
         counts = self._poseval.update(PoseFrame.from_people(self._sequence.ground_truth.people[t]),
@@ -318,52 +307,13 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         people = self._results + [[] for _ in range(self._sequence.length - len(self._results))]
         return PoseTrackVideo(list(self._sequence.images), people, [dict(PERSON_CATEGORY)])
 
-    def episode_digest(self) -> str:
-        """Return a SHA-256 digest of the recorded ids and keypoints (rounded to 1e-3)."""
-        digest = hashlib.sha256()
-        for k, people in enumerate(self._results):
-            for person in people:
-                row = np.concatenate([[k, person.track_id], person.keypoints.reshape(-1)])
-                digest.update(np.round(row, 3).tobytes())
-        return digest.hexdigest()
-
-    def sequence_length(self, name: str) -> int:
-        """Return the number of frames of ``name`` (its ``images`` entries or image files)."""
-        return self.dataset.sequence_length(name)
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Whether ``name`` has an annotation file."""
-        return self.dataset.has_ground_truth(name)
-
-    def write_episode(self, folder: Path) -> None:
-        """Write ``<folder>/<sequence>.json`` in the official PoseTrack 2018 result format."""
-        self._require_episode()
-        write_posetrack_json(Path(folder) / f"{self._sequence.name}.json", self.episode_results())
-
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
-        per_sequence: dict[str, dict[str, float]] = {}
-        counts = []
-        for name in sequences:
-            gt = read_posetrack_json(self.dataset.annotation_dir / f"{name}.json")
-            pred = read_posetrack_json(Path(folder) / f"{name}.json")
-            try:
-                seq_counts = evaluate_video(gt, pred, drop_last_frame=self.drop_last_frame)
-            except ValueError as err:
-                raise DataFormatError(Path(folder) / f"{name}.json", str(err)) from err
-            counts.append(seq_counts)
-            per_sequence[name] = summarise([seq_counts])
-        combined = summarise(counts) if counts else {}
-        return ScoreReport(BENCHMARK, per_sequence, combined,
-                           scores={**per_sequence, COMBINED: combined})
-
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """Return the frame with the tracked skeletons coloured by id (detections at reset)."""
-        if self._render_tracks is None:
+        if self._answer is None:
             return draw_poses(self._frame, self._poses[self._t][1], _LIMBS)
-        ids, keypoints = self._render_tracks
-        return draw_poses(self._render_frame, keypoints, _LIMBS, ids)
+        ids, keypoints = self._answer
+        return draw_poses(self._answer_frame, keypoints, _LIMBS, ids)
 
 
 def _observed_pose(person: PoseTrackPerson, *, oracle: bool) -> tuple[float, np.ndarray]:

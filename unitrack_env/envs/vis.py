@@ -2,41 +2,26 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 from collections import defaultdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
+from unitrack_env.benchmarks.vis import BENCHMARK, VISBenchmark
 from unitrack_env.datasets.mots import decode_masks
-from unitrack_env.datasets.youtube_vis import (
-    FRAME_RATE,
-    VisTrack,
-    VisVideo,
-    YouTubeVISDataset,
-    format_results,
-    parse_vis_results,
-)
+from unitrack_env.datasets.youtube_vis import FRAME_RATE, VisTrack, VisVideo, YouTubeVISDataset
+from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
-from unitrack_env.errors import DataFormatError
-from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mots import MaskClearStream
-from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.render import draw_masks
-
-if TYPE_CHECKING:
-    from typing_extensions import Unpack
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
-#: Default bound of the frame space (height, width).
-DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
-#: Benchmark name (and folder under ``$UNITRACK_DATA``).
-BENCHMARK = "YouTube-VIS-2019"
 
 
 class VISEnv(SequenceEnv[VisVideo], task="vis"):
@@ -122,12 +107,12 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         annotation_file: str | os.PathLike | None = None,
         min_score: float | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
-        max_frame_size: tuple[int, int] = DEFAULT_MAX_FRAME_SIZE,
         **options: Unpack[EpisodeOptions],
     ) -> None:
-        super().__init__(max_frame_size, **options)
+        super().__init__(**options)
         data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
         self.dataset = YouTubeVISDataset(data_root, split, detections, annotation_file)
+        self.scoring = VISBenchmark(self.dataset)
         self.sequence_names = self._select_sequences(
             sequences, self.dataset.sequence_names, self.dataset.annotation_path
         )
@@ -144,7 +129,6 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         self._clear = MaskClearStream()
         self._tracks: dict[int, dict[int, tuple[dict, int, float]]] = {}
         self._current: dict[str, Any] = {}
-        self._render_state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ episode hooks
     def _load(self, name: str) -> dict[str, Any]:
@@ -166,7 +150,6 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         self._dets = per_frame
         self._clear.reset()
         self._tracks = {}
-        self._render_state = None
         return dict(video_id=video.id, seq_length=video.length, frame_rate=FRAME_RATE,
                     image_size=(video.height, video.width), benchmark=BENCHMARK,
                     has_ground_truth=self._gt is not None, synthetic=self.synthetic)
@@ -204,7 +187,7 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         for i in reported:
             self._tracks.setdefault(int(ids[i]), {})[t] = dets[i]
         keep = ids > 0
-        self._render_state = (self._frame, self._current["masks"][keep], ids[keep])
+        self._answer = (self._current["masks"][keep], ids[keep])
         if self._gt is None:
             return 0.0, {}
         present = [(i, track.segmentations[t]) for i, track in enumerate(self._gt)
@@ -233,54 +216,15 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
             out.append(VisTrack(self._sequence.id, category, segs, score=score))
         return out
 
-    def episode_digest(self) -> str:
-        """SHA-256 of the episode's results JSON."""
-        return hashlib.sha256(format_results(self.episode_results()).encode()).hexdigest()
-
     def episode_metrics(self) -> dict[str, float]:
         """Track mAP of the recorded episode on its video (needs annotations)."""
-        from unitrack_env.metrics.vis import score_videos
-
         if self._gt is None:
             raise ValueError("this video has no annotations to score against")
-        report = score_videos(self.dataset.data, self.episode_results(), [self._sequence])
-        return report.per_sequence[self._sequence.name]
-
-    def sequence_length(self, name: str) -> int:
-        """Number of frames of video ``name``."""
-        return self.dataset.video(name).length
-
-    def has_ground_truth(self, name: str) -> bool:
-        """Whether the split has annotations."""
-        return self.dataset.has_annotations
-
-    def write_episode(self, folder: Path) -> None:
-        """Write ``<folder>/<video>.json``: this video's entries of the official results JSON.
-
-        ``unitrack_env.metrics.vis.merge_result_files(folder)`` concatenates them into the
-        challenge's ``results.json``.
-        """
-        self._require_episode()
-        atomic_write_text(Path(folder) / f"{self._sequence.name}.json",
-                          format_results(self.episode_results()))
-
-    def score_folder(self, folder: Path, sequences: list[str]) -> ScoreReport:
-        """Track mAP of ``<folder>/<video>.json`` files, per video and combined."""
-        from unitrack_env.metrics.vis import score_videos
-
-        videos = [self.dataset.video(name) for name in dict.fromkeys(sequences)]
-        results: list[VisTrack] = []
-        for video in videos:
-            path = Path(folder) / f"{video.name}.json"
-            if not path.is_file():
-                raise DataFormatError(path, f"result file for video '{video.name}' is missing")
-            results += parse_vis_results(path, {video.id: video})
-        return score_videos(self.dataset.data, results, videos, source=Path(folder))
+        return super().episode_metrics()
 
     # ------------------------------------------------------------------ rendering
     def _draw(self) -> np.ndarray:
         """The frame with id-coloured masks (after a step) or grey detections (at reset)."""
-        if self._render_state is None:
+        if self._answer is None:
             return draw_masks(self._frame, self._current["masks"])
-        return draw_masks(*self._render_state)
-
+        return draw_masks(self._answer_frame, *self._answer)
