@@ -20,13 +20,13 @@ frames (``<out>/<seq>/00000.png``), which is what the official evaluation reads.
 from __future__ import annotations
 
 import io
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.io import atomic_write_bytes
@@ -195,7 +195,7 @@ class VOSSequence:
         return np.stack([self.read_annotation(i) for i in range(self.num_frames)])
 
 
-class DAVISDataset:
+class DAVISDataset(SequenceDataset[VOSSequence]):
     """The sequences of one DAVIS-2017 split.
 
     Args:
@@ -239,13 +239,6 @@ class DAVISDataset:
         if not names:
             raise DataFormatError(self.image_dir, "no sequences")
         self.sequence_names: list[str] = names
-
-    def __len__(self) -> int:
-        return len(self.sequence_names)
-
-    def __iter__(self) -> Iterator[VOSSequence]:
-        for name in self.sequence_names:
-            yield self.load(name)
 
     def load(self, name: str) -> VOSSequence:
         """Read one sequence's file lists, size and object ids (masks load on demand)."""

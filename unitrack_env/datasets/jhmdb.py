@@ -25,12 +25,12 @@ annotated frames, the sequence is the first ``T`` frames; fewer images is an err
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.spaces import COORD_MAX
@@ -188,7 +188,7 @@ def read_split_files(split_dir: str | Path, split_index: int = 1) -> dict[str, i
     return membership
 
 
-class JHMDBDataset:
+class JHMDBDataset(SequenceDataset[PoseSequence]):
     """The annotated videos of a JHMDB folder.
 
     Args:
@@ -228,13 +228,6 @@ class JHMDBDataset:
         if not names:
             raise DataFormatError(self.joint_dir, "no <action>/<video>/joint_positions.mat")
         self.sequence_names: list[str] = names
-
-    def __len__(self) -> int:
-        return len(self.sequence_names)
-
-    def __iter__(self) -> Iterator[PoseSequence]:
-        for name in self.sequence_names:
-            yield self.load(name)
 
     def load(self, name: str) -> PoseSequence:
         """Read one video's frame list and joints."""

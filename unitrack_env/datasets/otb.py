@@ -38,12 +38,12 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.lasot import GOT10kDataset, LaSOTDataset
 from unitrack_env.datasets.sot import (
     BOX_FIELDS,
@@ -168,7 +168,7 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
                   f"{COORD_MAX:g}] pixels", line=first + i + 1, field=BOX_FIELDS[col])
 
 
-class OTBDataset:
+class OTBDataset(SequenceDataset[SOTSequence]):
     """The sequences of an OTB-layout folder (OTB-2015/100, OTB-2013/50, or a subset).
 
     Every ``<root>/<folder>`` with an ``img/`` folder is read. Folders named in
@@ -211,13 +211,6 @@ class OTBDataset:
             )
         self.sequence_names: list[str] = list(self._specs)
         self._lower = {n.lower(): n for n in self.sequence_names}
-
-    def __len__(self) -> int:
-        return len(self.sequence_names)
-
-    def __iter__(self) -> Iterator[SOTSequence]:
-        for name in self.sequence_names:
-            yield self.load(name)
 
     def resolve(self, name: str) -> str:
         """Return the dataset's spelling of ``name`` (aliases and case are accepted)."""

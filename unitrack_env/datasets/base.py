@@ -1,0 +1,35 @@
+"""What data set readers share: named sequences, counted and iterated in order.
+
+A reader lists its sequences in ``sequence_names`` (in the benchmark's order) and loads one
+with ``load(name)``; :class:`SequenceDataset` gives it ``len()`` and iteration over the
+loaded sequences.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from typing import Generic, TypeVar
+
+SequenceT = TypeVar("SequenceT")
+
+
+class SequenceDataset(ABC, Generic[SequenceT]):
+    """A data set of named sequences (template: subclasses set names and implement load).
+
+    Attributes:
+        sequence_names: the sequences, in the order iteration yields them.
+    """
+
+    sequence_names: list[str]
+
+    def __len__(self) -> int:
+        return len(self.sequence_names)
+
+    def __iter__(self) -> Iterator[SequenceT]:
+        for name in self.sequence_names:
+            yield self.load(name)
+
+    @abstractmethod
+    def load(self, name: str) -> SequenceT:
+        """Read one sequence by name."""
