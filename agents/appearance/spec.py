@@ -55,6 +55,19 @@ class AppearanceSpec:
             valid = ", ".join(f.name for f in fields(cls))
             raise TypeError(f"{agent}: {exc}; valid options: {valid}") from None
 
+    @classmethod
+    def configure(
+        cls: type[SpecT], agent: str, options: Mapping[str, Any],
+        model: AppearanceModel | None = None,
+    ) -> tuple[SpecT, AppearanceModel]:
+        """A head's config (:meth:`from_options`) and its model: ``model`` when shared, else built.
+
+        Raises:
+            TypeError: An unknown option (see :meth:`from_options`).
+        """
+        config = cls.from_options(agent, options)
+        return config, model if model is not None else config.build()
+
     def appearance(self) -> AppearanceSpec:
         """This config's appearance fields alone (a plain :class:`AppearanceSpec`)."""
         return AppearanceSpec(**{f.name: getattr(self, f.name) for f in fields(AppearanceSpec)})

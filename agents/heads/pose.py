@@ -39,7 +39,7 @@ import torch
 
 from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
 from unitrack_env.agents.base import Agent
-from unitrack_env.agents.heads.vos import build_model, make_propagation_config
+from unitrack_env.agents.heads.vos import make_propagation_config
 from unitrack_env.agents.primitives.label_propagation import LabelPropagator
 
 POSE_INPUT_SIZE: tuple[int, int] = (320, 320)
@@ -144,8 +144,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
 
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
-        self.config = UniTrackPoseConfig.from_options("unitrack-pose", options)
-        self.model = build_model(self.config, appearance_model)
+        self.config, self.model = UniTrackPoseConfig.configure(self.name, options, appearance_model)
         self.propagator = LabelPropagator(make_propagation_config(self.config.propagation))
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None

@@ -102,8 +102,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
 
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
-        self.config = UniTrackVOSConfig.from_options("unitrack-vos", options)
-        self.model = build_model(self.config, appearance_model)
+        self.config, self.model = UniTrackVOSConfig.configure(self.name, options, appearance_model)
         self.propagator = LabelPropagator(self.config.propagation_config())
         self.object_ids: tuple[int, ...] = ()
         self._first_answer: np.ndarray | None = None
