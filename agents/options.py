@@ -32,6 +32,14 @@ def _hints(obj: Any) -> dict[str, Any]:
         return {}
 
 
+def _unpacked_keys(hint: Any) -> dict[str, Any] | None:
+    """The keys and types of ``**kwargs: Unpack[SomeTypedDict]``; None for untyped kwargs."""
+    args = typing.get_args(hint) if hint is not None else ()
+    if len(args) != 1 or not typing.is_typeddict(args[0]):
+        return None
+    return _hints(args[0])
+
+
 def agent_options(cls: type) -> dict[str, Any]:
     """Option names of an agent class and their annotated types (``Any`` when untyped)."""
     options: dict[str, Any] = {}
@@ -43,7 +51,11 @@ def agent_options(cls: type) -> dict[str, Any]:
             if name == "self" or param.kind is param.VAR_POSITIONAL:
                 continue
             if param.kind is param.VAR_KEYWORD:
-                accepts_any = True
+                typed = _unpacked_keys(hints.get(name))
+                if typed is None:
+                    accepts_any = True
+                else:
+                    options.update(typed)
                 continue
             options[name] = hints.get(name, Any)
     config = getattr(cls, "config_class", None)
