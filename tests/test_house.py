@@ -1,0 +1,122 @@
+"""House rules a maintainer can live with (issue 14), checked on every library file.
+
+* no library module over :data:`MAX_FILE_LINES` lines and no function over
+  :data:`MAX_FUNCTION_LINES` (``end_lineno - lineno + 1``, decorators excluded);
+* no block of :data:`MIN_BLOCK` or more lines repeated, with the same shape (names, strings and
+  numbers aside), between two environments or between two heads: sibling modules that share
+  logic share one piece of code.
+"""
+
+from __future__ import annotations
+
+import ast
+import io
+import keyword
+import tokenize
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("unitrack_env", "agents", "evaluation")
+MAX_FILE_LINES = 450
+MAX_FUNCTION_LINES = 60
+MIN_BLOCK = 6
+#: Sibling groups whose modules must not repeat each other.
+SIBLINGS = ("unitrack_env/envs", "agents/heads")
+#: String tokens (Python 3.12 splits f-strings into three kinds).
+STRING_TOKENS = {tokenize.STRING} | {getattr(tokenize, name) for name in (
+    "FSTRING_START", "FSTRING_MIDDLE", "FSTRING_END") if hasattr(tokenize, name)}
+
+
+def library_files() -> list[Path]:
+    """Every Python file of the three top-level folders (links into them are not followed)."""
+    found: list[Path] = []
+    for package in PACKAGES:
+        for path in sorted((REPO / package).rglob("*.py")):
+            relative = path.relative_to(REPO)
+            if any((REPO / Path(*relative.parts[:i])).is_symlink()
+                   for i in range(1, len(relative.parts))):
+                continue
+            found.append(path)
+    return found
+
+
+def long_functions(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    return [f"{path.relative_to(REPO)}:{node.lineno} {node.name} "
+            f"({node.end_lineno - node.lineno + 1} lines)"
+            for node in ast.walk(tree)
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+            and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES]
+
+
+def shape_lines(path: Path) -> list[tuple[int, str]]:
+    """``(line number, shape)`` of each code line: names, strings and numbers abstracted.
+
+    Comments, docstrings, blank lines, imports and lines that are only punctuation are left
+    out, so that what remains is logic.
+    """
+    shapes: dict[int, list[str]] = defaultdict(list)
+    previous = tokenize.NEWLINE
+    skip_line = -1
+    for token in tokenize.generate_tokens(io.StringIO(path.read_text()).readline):
+        kind, text, (row, _), _, _ = token
+        if kind in (tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT,
+                    tokenize.DEDENT, tokenize.ENCODING, tokenize.ENDMARKER):
+            previous = kind if kind in (tokenize.NEWLINE, tokenize.INDENT,
+                                        tokenize.DEDENT) else previous
+            continue
+        statement_start = previous in (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)
+        previous = kind
+        if statement_start and (text in ("import", "from") or kind == tokenize.STRING):
+            skip_line = row  # an import, or a docstring / bare string statement
+        if row == skip_line or (kind == tokenize.STRING and skip_line == row):
+            continue
+        if kind == tokenize.NAME and not keyword.iskeyword(text):
+            shapes[row].append("n")
+        elif kind in STRING_TOKENS:
+            shapes[row].append("s")
+        elif kind == tokenize.NUMBER:
+            shapes[row].append("0")
+        else:
+            shapes[row].append(text)
+    return [(row, " ".join(parts)) for row, parts in sorted(shapes.items())
+            if any(part.isalpha() or part in ("n", "s", "0") for part in parts)
+            and len(parts) > 2]
+
+
+def repeated_blocks(paths: list[Path]) -> list[str]:
+    """Blocks of :data:`MIN_BLOCK` code lines of the same shape in two different files."""
+    windows: dict[tuple[str, ...], tuple[Path, int]] = {}
+    found: list[str] = []
+    for path in paths:
+        lines = shape_lines(path)
+        reported_until = -1
+        for i in range(len(lines) - MIN_BLOCK + 1):
+            key = tuple(shape for _, shape in lines[i:i + MIN_BLOCK])
+            first = windows.setdefault(key, (path, lines[i][0]))
+            if first[0] != path and lines[i][0] > reported_until:
+                found.append(f"{path.relative_to(REPO)}:{lines[i][0]} repeats "
+                             f"{first[0].relative_to(REPO)}:{first[1]}")
+                reported_until = lines[i + MIN_BLOCK - 1][0]
+    return found
+
+
+def test_no_library_file_is_too_long():
+    too_long = [f"{path.relative_to(REPO)} ({n} lines)" for path in library_files()
+                if (n := len(path.read_text().splitlines())) > MAX_FILE_LINES]
+    assert not too_long, f"split these modules (> {MAX_FILE_LINES} lines): {too_long}"
+
+
+def test_no_function_is_too_long():
+    too_long = [entry for path in library_files() for entry in long_functions(path)]
+    assert not too_long, f"break these functions up (> {MAX_FUNCTION_LINES} lines): {too_long}"
+
+
+@pytest.mark.parametrize("folder", SIBLINGS)
+def test_siblings_do_not_repeat_each_other(folder):
+    paths = sorted(p for p in (REPO / folder).glob("*.py") if p.name != "__init__.py")
+    repeats = repeated_blocks(paths)
+    assert not repeats, f"move the shared logic of {folder} into one place: {repeats}"
