@@ -126,18 +126,17 @@ def decode_maps(maps: torch.Tensor, refine_radius: int = REFINE_RADIUS) -> tuple
 
 
 class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
-    """UniTrack's pose-propagation head (JHMDB).
+    """UniTrack's pose-propagation head (JHMDB): joints as Gaussian belief maps, propagated.
 
     Args:
-        appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel` to share
-            (then ``weights``/``arch``/``layer``/``device`` are ignored).
+        appearance_model: An :class:`~unitrack_env.agents.appearance.AppearanceModel` shared
+            with other heads; its own weights options win over this head's.
         **options: Fields of :class:`UniTrackPoseConfig`.
 
     Attributes:
-        config: The options.
-        model: The appearance model.
-        propagator: The label-propagation state of the current video.
         sigma: Gaussian sigma (feature pixels) of the current video's belief maps.
+        propagator: The current video's label propagation (its memory of belief maps).
+        config, model: The options and the appearance model.
     """
 
     config_class = UniTrackPoseConfig
