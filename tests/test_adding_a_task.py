@@ -1,258 +1,100 @@
-"""Adding a task from a user's project: one env module, one benchmark module, one table row.
+"""Adding a task from a user's project, as docs/adding-a-task.md writes it.
 
-A project folder outside this repository defines a toy point-tracking task (follow one point
-through noisy measurements of it): ``point_task/env.py`` (the environment: the episode
-template's hooks of a ``SequenceEnv``), ``point_task/benchmark.py`` (its
-:class:`~unitrack_env.benchmarks.Benchmark`: ground truth, result files, scoring, columns),
-the registration row in ``point_task/__init__.py``
-(:func:`unitrack_env.registration.register_variant`) and a trivial agent. Nothing in
-unitrack-env is edited; ``unitrack evaluate`` plays and scores the task, and ``unitrack
-score`` scores the written folder again to the same numbers.
+The doc's code blocks titled with a file name (```` ```python title="point_task/env.py" ````)
+are written into a project folder outside this repository: a toy point-tracking task with
+its environment (the episode template's hooks of a ``SequenceEnv``), its benchmark, its
+registration row (:func:`unitrack_env.registration.register_variant`), a trivial agent, a
+data script and a script that runs the ``unitrack`` command with the task registered. The
+commands of the doc's shell block then run in that folder: ``evaluate`` plays and scores
+the task, ``score`` scores the written folder again to the same numbers. Nothing in
+unitrack-env is edited.
 """
 
 from __future__ import annotations
 
 import json
+import re
+import runpy
+import shlex
 import sys
-import textwrap
 from pathlib import Path
 
 import gymnasium as gym
 import pytest
+from gymnasium.utils.env_checker import check_env
 
 from unitrack_env import registration
-from unitrack_env.evaluation.cli import main
 
+REPO = Path(__file__).resolve().parents[1]
+DOC = REPO / "docs" / "adding-a-task.md"
 ENV_ID = "UniTrack/Point-v0"
-
-INIT = '''
-"""A toy point-tracking task: its registration row."""
-
-from unitrack_env.registration import Variant, register_variant
-
-register_variant(Variant("Point", "point_task.env:PointEnv", {}, "point",
-                         scoring="point_task.benchmark:PointBenchmark"))
-'''
-
-BENCHMARK = '''
-"""Point tracking's benchmark: ground truth, ``x,y`` result files, mean error, success."""
-
-import json
-from pathlib import Path
-
-import numpy as np
-
-from unitrack_env.benchmarks.base import Benchmark, rounded_digest
-from unitrack_env.io import atomic_write_text
-from unitrack_env.metrics.report import COMBINED, ScoreReport
+PROJECT_FILES = {"point_task/__init__.py", "point_task/benchmark.py", "point_task/env.py",
+                 "point_task/agent.py", "make_points.py", "point_cli.py"}
 
 
-class PointSequence:
-    """One sequence: its name, true points and measured points, ``(frames, 2)`` each."""
-
-    def __init__(self, name, truth, measured):
-        self.name = name
-        self.truth = np.asarray(truth, dtype=np.float64)
-        self.measured = np.asarray(measured, dtype=np.float64)
+def doc_files() -> dict[str, str]:
+    """The doc's titled code blocks: file name -> source."""
+    return dict(re.findall(r'```python title="([^"]+)"\n(.*?)```', DOC.read_text(), re.S))
 
 
-class PointData:
-    """``<root>/points.json``: ``{sequence: {"truth": [[x, y], ...], "measured": [...]}}``."""
-
-    def __init__(self, root):
-        self.root = Path(root)
-        self.sequences = json.loads((self.root / "points.json").read_text())
-        self.sequence_names = sorted(self.sequences)
-
-    def sequence(self, name):
-        return PointSequence(name, **self.sequences[name])
+def doc_commands() -> list[str]:
+    """The commands of the doc's shell block that runs the point task."""
+    blocks = re.findall(r"```bash\n(.*?)```", DOC.read_text(), re.S)
+    block = next(b for b in blocks if "point_cli.py" in b)
+    return [line for line in block.splitlines() if line.strip()]
 
 
-def point_metrics(predicted, truth):
-    error = np.linalg.norm(predicted - truth, axis=1)
-    return {"MeanError": float(error.mean()), "Success@5px": float((error <= 5).mean())}
-
-
-class PointBenchmark(Benchmark):
-    """Results of one sequence: ``(frames, 2)`` points, one ``x,y`` line per frame."""
-
-    task = "point"
-    columns = ("Success@5px", "MeanError")
-
-    @classmethod
-    def from_kwargs(cls, root=None, **_):
-        if root is None:
-            raise ValueError("the point task needs root= (a folder with points.json)")
-        return cls(PointData(root))
-
-    @property
-    def name(self):
-        return "Points"
-
-    def sequence_length(self, name):
-        return len(self.dataset.sequences[name]["truth"])
-
-    def has_ground_truth(self, name):
-        return True
-
-    def write(self, folder, sequence, results):
-        lines = [f"{x:.3f},{y:.3f}" for x, y in results]
-        atomic_write_text(Path(folder) / f"{sequence}.txt", "\\n".join(lines) + "\\n")
-
-    def read(self, folder, sequence):
-        return np.loadtxt(Path(folder) / f"{sequence}.txt", delimiter=",", ndmin=2)
-
-    def digest(self, results):
-        return rounded_digest(results)
-
-    def score_sequence(self, sequence, results):
-        return point_metrics(results, self.dataset.sequence(sequence).truth)
-
-    def score_folder(self, folder, sequences):
-        per_sequence = {name: self.score_sequence(name, self.read(folder, name))
-                        for name in sequences}
-        predicted = np.concatenate([self.read(folder, name) for name in sequences])
-        truth = np.concatenate([self.dataset.sequence(name).truth for name in sequences])
-        combined = point_metrics(predicted, truth)
-        return ScoreReport(self.name, per_sequence, combined,
-                           {**per_sequence, COMBINED: combined})
-'''
-
-ENV = '''
-"""Point tracking: follow one point through noisy measurements of it."""
-
-from pathlib import Path
-
-import numpy as np
-from gymnasium import spaces
-
-from point_task.benchmark import PointBenchmark
-from unitrack_env.envs.base import SequenceEnv
-
-
-class PointEnv(SequenceEnv, task="point"):
-    """Observation: the frame's measured ``point``; action: the point; reward: -error (px)."""
-
-    def __init__(self, root=None, shuffle=False, render_mode=None):
-        # No images: nothing to decode or prefetch.
-        super().__init__(decode_frames=False, prefetch=False, shuffle=shuffle,
-                         render_mode=render_mode)
-        self.scoring = PointBenchmark.from_kwargs(root=root)
-        self.sequence_names = self.scoring.sequence_names
-        self.observation_space = spaces.Dict(
-            {"point": spaces.Box(-1e4, 1e4, (2,), np.float32)})
-        self.action_space = spaces.Box(-1e4, 1e4, (2,), np.float32)
-        self._results = []
-
-    # ----------------------------------------------------------- the episode hooks
-    def _load(self, name):
-        self._sequence = self.scoring.dataset.sequence(name)
-        self._results = []
-        return {"seq_length": self._length(), "has_ground_truth": True}
-
-    def _length(self):
-        return len(self._sequence.truth)
-
-    def _frame_path(self, t):
-        return Path(f"{self._sequence.name}-{t}")  # never read: decode_frames=False
-
-    def _observe(self, t):
-        return {"point": self._sequence.measured[t].astype(np.float32)}
-
-    def _record(self, action, t):
-        point = np.asarray(action, dtype=np.float64).reshape(2)
-        self._results.append(point)
-        return -float(np.linalg.norm(point - self._sequence.truth[t])), {}
-
-    def episode_metrics(self):
-        return self.scoring.score_sequence(self._sequence.name, self.episode_results())
-
-    def _draw(self):
-        return np.zeros((8, 8, 3), dtype=np.uint8)
-
-    # ----------------------------------------------------------- results: the benchmark's
-    def episode_results(self):
-        return np.asarray(self._results, dtype=np.float64).reshape(-1, 2)
-
-    def episode_digest(self):
-        return self.scoring.digest(self.episode_results())
-
-    def write_episode(self, folder):
-        self.scoring.write(folder, self._sequence.name, self.episode_results())
-
-    def sequence_length(self, name):
-        return self.scoring.sequence_length(name)
-
-    def has_ground_truth(self, name):
-        return self.scoring.has_ground_truth(name)
-
-    def score_folder(self, folder, sequences):
-        return self.scoring.score_folder(folder, sequences)
-'''
-
-AGENT = '''
-"""The trivial point tracker: it answers the measurement."""
-
-from unitrack_env.agents import Agent
-
-
-class EchoAgent(Agent):
-    tasks = ("point",)
-
-    def reset(self, observation, info):
-        pass
-
-    def act(self, observation):
-        return observation["point"]
-'''
-
-
-def _write_project(folder: Path) -> Path:
-    package = folder / "point_task"
-    package.mkdir(parents=True)
-    for name, text in {"__init__": INIT, "benchmark": BENCHMARK, "env": ENV,
-                       "agent": AGENT}.items():
-        (package / f"{name}.py").write_text(textwrap.dedent(text).lstrip())
-    data = folder / "data"
-    data.mkdir()
-    sequences = {}
-    for k, (dx, dy) in enumerate([(2.0, 1.0), (-1.5, 3.0)], start=1):
-        truth = [[50 + dx * t, 40 + dy * t] for t in range(12)]
-        noise = [[(-1) ** t * 2.0 * k, (t % 3) * 3.0] for t in range(12)]
-        measured = [[x + nx, y + ny] for (x, y), (nx, ny) in zip(truth, noise, strict=True)]
-        sequences[f"dot-{k}"] = {"truth": truth, "measured": measured}
-    (data / "points.json").write_text(json.dumps(sequences))
-    return data
+def run_command(command: str, monkeypatch: pytest.MonkeyPatch, *extra: str) -> None:
+    """Run a ``python <script>.py [args]`` line of the doc in this process (exit status 0)."""
+    python, script, *args = shlex.split(command)
+    assert python == "python", command
+    monkeypatch.setattr(sys, "argv", [script, *args, *extra])
+    try:
+        runpy.run_path(script, run_name="__main__")
+    except SystemExit as exc:
+        assert exc.code in (0, None), f"{command}: exit status {exc.code}"
 
 
 @pytest.fixture
 def project(tmp_path, monkeypatch):
-    """The user's project on ``sys.path``, its row registered; all undone afterwards."""
-    data = _write_project(tmp_path / "project")
-    monkeypatch.syspath_prepend(str(tmp_path / "project"))
+    """The doc's project in a temporary folder (the current folder, on ``sys.path``), its
+    data written by the doc's script and its row registered; all undone afterwards."""
+    folder = tmp_path / "project"
+    files = doc_files()
+    assert PROJECT_FILES <= set(files), sorted(files)
+    for name in PROJECT_FILES:
+        path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(files[name])
+    monkeypatch.chdir(folder)
+    monkeypatch.syspath_prepend(str(folder))
     monkeypatch.setattr(registration, "_ADDED", [])
+    commands = doc_commands()
+    assert commands[0] == "python make_points.py"
+    run_command(commands[0], monkeypatch)
     import point_task  # noqa: F401 - registers the row
 
-    yield data
+    yield folder / "data"
     gym.registry.pop(ENV_ID, None)
     for name in [m for m in sys.modules if m == "point_task" or m.startswith("point_task.")]:
         del sys.modules[name]
 
 
-def test_a_new_task_runs_through_evaluate_and_score(project, tmp_path, capsys):
-    out = tmp_path / "run"
-    common = ["--env", ENV_ID, "--root", str(project)]
-    assert main(["evaluate", *common, "--agent", "point_task.agent:EchoAgent",
-                 "--out", str(out), "--format", "json"]) == 0
+def test_a_new_task_runs_through_evaluate_and_score(project, monkeypatch, capsys):
+    evaluate, score = doc_commands()[1:]
+    assert " evaluate " in evaluate and " score " in score
+    capsys.readouterr()
+    run_command(evaluate, monkeypatch, "--format", "json")
     evaluated = json.loads(capsys.readouterr().out)
+    out = Path(shlex.split(evaluate)[shlex.split(evaluate).index("--out") + 1])
     assert sorted(p.name for p in (out / "data").iterdir()) == ["dot-1.txt", "dot-2.txt"]
     assert set(evaluated["combined"]) == {"MeanError", "Success@5px"}
     assert 0.0 < evaluated["combined"]["MeanError"] < 10.0
 
-    assert main(["score", *common, "--results", str(out / "data"), "--format", "json"]) == 0
+    run_command(score, monkeypatch, "--format", "json")
     assert json.loads(capsys.readouterr().out) == evaluated
 
-    assert main(["score", *common, "--results", str(out / "data")]) == 0
+    run_command(score, monkeypatch)
     table = capsys.readouterr().out
     assert "Success@5px" in table and "dot-2" in table
 
@@ -267,3 +109,19 @@ def test_the_row_names_its_benchmark_and_ids_do_not_clash(project):
     registration.register_variant(row)  # the same row again: nothing happens
     with pytest.raises(ValueError, match="already registered"):
         registration.register_variant(registration.Variant("Point", "elsewhere:Env"))
+
+
+@pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # a point in pixels
+def test_the_toy_env_keeps_the_gymnasium_contract(project):
+    env = gym.make(ENV_ID, root=str(project))
+    check_env(env.unwrapped, skip_render_check=True)
+    observation, info = env.reset(options={"sequence": "dot-2"})
+    assert info["task"] == "point" and info["seq_length"] == 12
+    terminated = False
+    while not terminated:
+        observation, reward, terminated, _, info = env.step(observation["point"])
+    assert set(info["metrics"]) == {"MeanError", "Success@5px"}
+    env.reset()
+    with pytest.raises(ValueError, match="finite"):
+        env.step([float("nan"), 0.0])
+    env.close()

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import re
+import shlex
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -61,3 +63,32 @@ def test_writing_an_agent_example_runs():
         assert 0 < report.combined["IDF1"] <= 1
     finally:
         AGENTS.pop("nearest-centre", None)
+
+
+def _titled_blocks(path: Path) -> dict[str, str]:
+    """The code blocks titled with a file name: ```` ```python title="name.py" ````."""
+    return dict(re.findall(r'```python title="([^"]+)"\n(.*?)```', path.read_text(), re.S))
+
+
+def test_adding_a_tracker_example_runs(tmp_path, monkeypatch, capsys):
+    """The tracker of adding-a-task.md (adapter + Associator) plays boxes and masks."""
+    from unitrack_env.agents.base import AGENTS
+    from unitrack_env.evaluation.cli import main
+
+    doc = REPO / "docs" / "adding-a-task.md"
+    (tmp_path / "colour_tracker.py").write_text(_titled_blocks(doc)["colour_tracker.py"])
+    block = next(b for b in re.findall(r"```bash\n(.*?)```", doc.read_text(), re.S)
+                 if "colour_tracker.py" in b)
+    commands = [shlex.split(line) for line in block.splitlines() if line.strip()]
+    assert {c[c.index("--env") + 1] for c in commands} == {"UniTrack/MOT17-v0",
+                                                           "UniTrack/MOTS-v0"}
+    monkeypatch.chdir(tmp_path)
+    try:
+        for command in commands:
+            assert command[:2] == ["unitrack", "evaluate"]
+            capsys.readouterr()
+            assert main([*command[1:], "--format", "json", "--quiet"]) == 0
+            combined = json.loads(capsys.readouterr().out)["combined"]
+            assert combined["IDF1"] > 0.5, (command, combined)
+    finally:
+        AGENTS.pop("colour", None)

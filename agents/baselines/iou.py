@@ -18,9 +18,9 @@ import numpy as np
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.primitives.adapters import (
     ObservationAdapter,
-    default_max_tracks,
     detect_task,
     episode_adapter,
+    former_capacity_constants,
 )
 from unitrack_env.agents.primitives.overlap import (
     OKS_SIGMAS,
@@ -34,14 +34,9 @@ from unitrack_env.agents.primitives.overlap_tracker import OverlapTracker
 
 __all__ = ["OKS_SIGMAS", "IoUAgent", "IoUConfig", "object_keypoint_similarity"]
 
-_DEFAULT_CAPACITY_TASKS = {"DEFAULT_MAX_TRACKS": "mot", "POSE_MAX_TRACKS": "posetrack"}
-
-
-def __getattr__(name: str) -> Any:
-    """Former constants: the environments' default capacities (read from the environments)."""
-    if name in _DEFAULT_CAPACITY_TASKS:
-        return default_max_tracks(_DEFAULT_CAPACITY_TASKS[name])
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# Former constants: the environments' default capacities (read from the environments).
+__getattr__ = former_capacity_constants(
+    __name__, {"DEFAULT_MAX_TRACKS": "mot", "POSE_MAX_TRACKS": "posetrack"})
 
 
 @dataclass(frozen=True)

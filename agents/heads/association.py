@@ -76,8 +76,8 @@ from unitrack_env.agents.primitives.adapters import (
     Detections,
     ObservationAdapter,
     adapter_for,
-    default_max_tracks,
     detect_task,
+    former_capacity_constants,
     reset_task,
 )
 from unitrack_env.agents.primitives.association import Associator, TrackOutput
@@ -100,14 +100,9 @@ __all__ = [
     "detect_task",
 ]
 
-_DEFAULT_CAPACITY_TASKS = {"DEFAULT_MAX_TRACKS": "mot", "POSETRACK_MAX_TRACKS": "posetrack"}
-
-
-def __getattr__(name: str) -> Any:
-    """Former constants: the environments' default capacities (read from the environments)."""
-    if name in _DEFAULT_CAPACITY_TASKS:
-        return default_max_tracks(_DEFAULT_CAPACITY_TASKS[name])
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# Former constants: the environments' default capacities (read from the environments).
+__getattr__ = former_capacity_constants(
+    __name__, {"DEFAULT_MAX_TRACKS": "mot", "POSETRACK_MAX_TRACKS": "posetrack"})
 
 
 @dataclass(frozen=True)

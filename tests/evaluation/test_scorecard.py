@@ -152,13 +152,51 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path):
             expected = row["per_sequence"][sequence][name]
             if expected is not None:
                 assert expected == pytest.approx(value, abs=1e-9), (row["task"], name)
-    # the documentation shows this table (numbers within 0.2 points on another CPU)
+    heads_beat_their_baselines(card, "imagenet-lite0")
+    # The documentation shows this table. Another x86-64 CPU rounds floats differently:
+    # association and propagation columns stay within 0.2 points, but a single-object tracker
+    # carries every frame's rounding into the next frame's search window, so SOT columns get
+    # 1 point (CI's machine measured SOT AUC (XCorr) 60.2 where this one measured 60.5).
     page = (REPO / "docs" / "evaluate-your-representation.md").read_text()
-    shown = re.findall(r"\| (imagenet-lite0|random|\*baseline.*?\*) \|(.*)\|", page)
-    made = re.findall(r"\| (imagenet-lite0|random|\*baseline.*?\*) \|(.*)\|",
-                      markdown_table(card))
+    pattern = r"\| (imagenet-lite0|random|\*baseline.*?\*) \|(.*)\|"
+    shown = re.findall(pattern, page)
+    table = markdown_table(card)
+    made = re.findall(pattern, table)
     assert [name for name, _ in shown] == [name for name, _ in made]
-    for (_, a), (_, b) in zip(shown, made, strict=True):
-        numbers_a = [float(x) for x in re.findall(r"-?\d+\.?\d*", a)]
-        numbers_b = [float(x) for x in re.findall(r"-?\d+\.?\d*", b)]
-        assert numbers_a == pytest.approx(numbers_b, abs=0.2)
+    header = [cell.strip() for cell in table.splitlines()[0].strip("|").split("|")][1:]
+    for (name, a), (_, b) in zip(shown, made, strict=True):
+        cells = zip(header, a.split("|"), b.split("|"), strict=True)
+        for column, cell_a, cell_b in cells:
+            numbers = [re.findall(r"-?\d+\.?\d*", cell) for cell in (cell_a, cell_b)]
+            assert len(numbers[0]) == len(numbers[1]), (name, column, cell_a, cell_b)
+            tolerance = 1.0 if column.startswith("SOT") else 0.2
+            assert [float(x) for x in numbers[0]] == pytest.approx(
+                [float(x) for x in numbers[1]], abs=tolerance), (name, column)
+
+
+def heads_beat_their_baselines(card: dict, model: str) -> None:
+    """Every propagation head beats its appearance-free baseline on the real fixtures.
+
+    These are the real-data checks of tests/agents/test_propagation_heads.py (which stay
+    there, under ``slow``, for a single head), read from the scorecard's episodes instead of
+    playing the same sequences a second time in CI.
+    """
+    rows = {(row["model"], row["task"], row["head"]): row for row in card["rows"]}
+
+    def scores(task: str, head: str, key: str = "per_sequence") -> dict:
+        name = sc.BASELINE if head == sc.TASKS[task].baseline.label else model
+        return rows[(name, task, head)][key]
+
+    repeat = scores("sot", "repeat-box")
+    for head in ("XCorr", "DCF"):
+        for sequence, metrics in scores("sot", head).items():
+            assert metrics["AUC"] > repeat[sequence]["AUC"], (head, sequence, metrics)
+    # Measured J-Mean: 0.905 (blackswan) and 0.854 (dog); repeating the first mask 0.545/0.32.
+    floors = {"blackswan": 0.895, "dog": 0.84}
+    repeat = scores("vos", "repeat-mask")
+    for sequence, metrics in scores("vos", "UniTrack").items():
+        floor = max(floors.get(sequence, 0.0), repeat[sequence]["J-Mean"])
+        assert metrics["J-Mean"] > floor, (sequence, metrics)
+    ours = scores("pose-prop", "UniTrack", "combined")
+    repeat = scores("pose-prop", "repeat-pose", "combined")
+    assert ours["PCK@0.1"] > repeat["PCK@0.1"] + 0.2 and ours["PCK@0.2"] > 0.5, (ours, repeat)
