@@ -7,9 +7,19 @@ True
 """
 
 from unitrack_env import vector as _vector  # noqa: F401 - shared memory for vector envs
-from unitrack_env.registration import VARIANTS, env_ids, register_all, task_of, variant
+from unitrack_env.registration import (
+    VARIANTS,
+    Variant,
+    env_ids,
+    register_all,
+    register_variant,
+    task_of,
+    variant,
+    variants,
+)
 
 __version__ = "0.1.0"
-__all__ = ["VARIANTS", "env_ids", "register_all", "task_of", "variant", "__version__"]
+__all__ = ["VARIANTS", "Variant", "env_ids", "register_all", "register_variant", "task_of",
+           "variant", "variants", "__version__"]
 
 register_all()

@@ -23,6 +23,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 
 from unitrack_env.metrics.report import ScoreReport
+from unitrack_env.roots import resolve_root
 
 
 def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
@@ -33,9 +34,6 @@ def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
     built (once, cached) by :func:`unitrack_env.datasets.synthetic.ensure_synthetic` with
     ``synthetic_args`` and ``synthetic_kwargs``, as the environments do.
     """
-    # Imported here: the environments import benchmarks, not the other way round at load time.
-    from unitrack_env.envs.base import resolve_root
-
     path = resolve_root(root, folder)
     if path is not None:
         return path, False
