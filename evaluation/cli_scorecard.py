@@ -30,6 +30,9 @@ def add_options(card: argparse.ArgumentParser) -> None:
                       "(default: start a local Ray)")
     card.add_argument("--motion", action="store_true", help="keep motion cues in the "
                       "association heads (the paper's Table 2 drops them)")
+    card.add_argument("--runtime", choices=("torch", "openvino", "onnxruntime", "auto"),
+                      help="inference runtime of the appearance models: auto picks the "
+                      "fastest installed (default: $UNITRACK_RUNTIME, else torch)")
     card.add_argument("--radar-scale", choices=("rank", "value"), default="rank",
                       help="radar axes: rank among the models (the paper's) or the value")
     card.add_argument("--compare", nargs="+", metavar="SCORECARD_JSON",
@@ -55,7 +58,8 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
         with cell_progress(enabled=not args.quiet) as progress:
             card = sc.scorecard(models, out=out, tasks=tasks, data=data, backend=args.backend,
                                 workers=args.workers, address=args.address,
-                                motion=args.motion, radar_scale=args.radar_scale,
+                                motion=args.motion, runtime=args.runtime,
+                                radar_scale=args.radar_scale,
                                 on_progress=progress)
         files = sorted(out.glob("scorecard.*"))
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)

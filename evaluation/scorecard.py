@@ -18,6 +18,10 @@ it reuses every cell whose inputs and files are unchanged, so the numbers are ex
 As in the paper's Table 2 protocol, the association heads run without motion cues
 (``use_motion=False``: "motion cues are discarded to better highlight distinctions between
 different representations"); ``motion=True`` keeps them.
+
+``runtime`` picks the inference runtime of every appearance model (``"auto"``: the fastest
+installed, e.g. OpenVINO; see :mod:`~unitrack_env.agents.appearance.runtime`). It changes the
+speed, not the representation: features agree with torch's to float rounding.
 """
 
 from __future__ import annotations
@@ -199,7 +203,8 @@ def _safe(name: str) -> str:
 
 
 def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *,
-         motion: bool = False) -> tuple[list[Cell], dict[str, Source]]:
+         motion: bool = False, runtime: str | None = None,
+         ) -> tuple[list[Cell], dict[str, Source]]:
     """Every cell of the scorecard, and each task's data source."""
     import gymnasium as gym
 
@@ -215,7 +220,8 @@ def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *
             sequences = [s for s in base.sequence_names if base.has_ground_truth(s)]
         finally:
             env.close()
-        rows = [(m.name, m.agent_kwargs()) for m in models]
+        rows = [(m.name, m.agent_kwargs() | ({"runtime": runtime} if runtime else {}))
+                for m in models]
         for head in (*task.heads, task.baseline):
             for model, appearance in (rows if head.appearance else [(BASELINE, {})]):
                 kwargs = dict(appearance)
@@ -314,7 +320,7 @@ def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank")
 def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
               tasks: Sequence[str] | None = None, data: str | os.PathLike | None = None,
               backend: str = "pool", workers: int = 1, address: str | None = None,
-              motion: bool = False, radar_scale: str = "rank",
+              motion: bool = False, runtime: str | None = None, radar_scale: str = "rank",
               on_progress: Callable[[int, int, Cell | None], None] | None = None,
               ) -> dict[str, Any]:
     """Play, store and score every cell; write the outputs; return the scorecard.
@@ -329,6 +335,8 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         workers: processes of the pool (Ray uses the cluster's CPUs).
         address: Ray cluster address (``auto``, ``ray://host:port``; None: a local Ray).
         motion: keep motion cues in the association heads (the paper's Table 2 drops them).
+        runtime: inference runtime of the appearance models (``torch``, ``openvino``,
+            ``onnxruntime``, ``auto``; None: ``$UNITRACK_RUNTIME``, else torch).
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
     """
@@ -347,7 +355,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     data_path = Path(data).expanduser() if data is not None else None
     if data_path is not None and not data_path.is_dir():
         raise ValueError(f"--data {data} is not a folder")
-    cells, sources = plan(models, names, data_path, motion=motion)
+    cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
     todo = [c for c in cells if not cell_done(out, c)]
     done = len(cells) - len(todo)
     if on_progress is not None:

@@ -41,8 +41,20 @@ def test_data_sources(tmp_path):
     assert sc.data_source(tmp_path, sc.TASKS["mot"]).env_id == "UniTrack/MOT17-v0"
 
 
+def test_plan_gives_every_appearance_head_the_runtime_and_drops_motion():
+    models = [sc.ModelSpec.parse("random")]
+    cells, _ = sc.plan(models, ["mot", "sot"], None, runtime="openvino")
+    kwargs = {(c.task, c.head): c.agent_kwargs for c in cells}
+    assert kwargs[("mot", "UniTrack")] == {"weights": "random", "runtime": "openvino",
+                                          "use_motion": False}
+    assert kwargs[("sot", "DCF")] == {"weights": "random", "runtime": "openvino"}
+    assert kwargs[("mot", "IoU baseline")] == kwargs[("sot", "repeat-box")] == {}
+    cells, _ = sc.plan(models, ["mot"], None, motion=True)
+    assert {c.head: c.agent_kwargs for c in cells}["UniTrack"] == {"weights": "random"}
+
+
 # The tests below play real heads over whole synthetic clips (minutes on 2 cores): they are
-# marked slow and named "scorecard", and CI runs them (`-m slow -k "real or scorecard"`).
+# marked slow and named "scorecard", and CI runs them (`-m slow -k "scorecard or pets"`).
 @pytest.fixture(scope="module")
 def pose_card(tmp_path_factory):
     """A small real scorecard: pose propagation on the synthetic JHMDB, two models."""
