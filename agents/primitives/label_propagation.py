@@ -19,26 +19,21 @@ frames to the current one through the affinity of their stride-8 feature maps:
 Features are L2-normalised per location (the inner product of the paper is then a cosine,
 the scale the temperature 0.05 is meant for).
 
-Implementation (CPU-friendly, memory bounded, float32). The top-k of the union of several
-candidate sets is the top-k of the union of each set's top-k, so the two kinds of context are
-searched separately and merged exactly:
-
-* first frame: dense affinity ``(queries, h*w)`` by blocks of queries (one matmul into a
-  reused buffer and one top-k per block, at most ``max_affinity_elements`` affinities at a
-  time; smaller, cache-sized blocks measured slower on the shared 2-core machine: every
-  block is a parallel region whose threads must all be scheduled);
-* recent frames: the query grid is cut into ``tile_size`` x ``tile_size`` tiles. A tile only
-  needs the keys within the radius of one of its queries: the tile's square grown by the
-  radius (its Minkowski sum with the disk, ``t^2 + 4 t r + pi r^2`` locations instead of the
-  ``(t + 2r)^2`` square). Those keys are gathered for a block of tiles and every recent frame
-  with ONE index into a ring buffer that holds every memory frame already zero-padded and
-  channels-last (written once, when the frame enters the memory, not at every step); one
-  batched matmul, one masking pass (radius and map border, a cached boolean mask) and one
-  top-k then serve the whole block. Python loops run over blocks of tiles (a handful per
-  frame), never over tiles.
+Implementation (CPU-friendly, memory bounded, float32; details in
+:mod:`unitrack_env.agents.primitives.label_windows`): the top-k of a union of candidate sets
+is the top-k of the union of each set's top-k, so the recent frames and the first frame are
+searched apart and merged exactly. Recent frames: every tile of queries meets the same keys
+(its square grown by the radius) in every recent frame; those windows are cut out of a frame
+once, when it enters the memory (im2col), so each step is one batched matmul and a grouped
+top-k per block of tiles. First frame: a dense matmul by blocks of queries, keeping only the
+keys at or above the query's ``k``-th best recent affinity (nothing below can enter the
+merged top-k).
 
 :func:`propagate_dense` is the plain (slow, memory-hungry) definition used as the
-reference in the tests; :class:`LabelPropagator` is the fast stateful version the heads use.
+reference in the tests; :class:`LabelPropagator` is the fast stateful version the heads use
+(``reference=True``: the formulation it replaced,
+:mod:`unitrack_env.agents.primitives.label_search_tiled`, kept for the benchmark and the
+equality tests).
 """
 
 from __future__ import annotations
@@ -50,12 +45,14 @@ import torch
 import torch.nn.functional as F
 
 from unitrack_env.agents.primitives.label_search import (
-    LocalGeometry,
+    MemorySearch,
     grid_positions,
     merge_topk,
     search_dense,
-    search_local,
+    stage,
 )
+from unitrack_env.agents.primitives.label_search_tiled import TiledSearch
+from unitrack_env.agents.primitives.label_windows import WindowSearch
 
 MEMORY_SIZE: int = 6
 """``M``: frames in the memory bank, the first frame plus the ``M - 1`` latest (appendix B.2)."""
@@ -72,8 +69,9 @@ TEMPERATURE: float = 0.05
 TILE_SIZE: int = 8
 """Query tile side of the local search (feature pixels). Larger tiles mean larger matmuls
 but more keys outside a query's radius (``t^2 + 4 t r + pi r^2`` keys per tile against
-``pi r^2`` per query); 8 measured fastest here at 480p for r = 12
-(``benchmarks/label_propagation.py``)."""
+``pi r^2`` per query) and smaller tiles a larger window ring (each key is copied into
+``~(t + 2 r)^2 / t^2`` windows); 8 measured fastest here at 480p for r = 12
+(``benchmarks/propagation.py --parts stages``)."""
 
 MAX_AFFINITY_ELEMENTS: int = 1 << 23
 """Most affinity numbers (float32) held at once, per search: 8 Mi = 32 MiB."""
@@ -97,9 +95,12 @@ class LabelPropagationConfig:
         topk: Memory locations kept per query.
         temperature: Softmax temperature over the kept affinities.
         normalize: L2-normalise every location's feature (cosine affinities).
-        tile_size: Query tile side of the local search (speed only; results do not depend
-            on it beyond float rounding).
-        max_affinity_elements: Memory bound: most affinity values held at once.
+        tile_size: Query tile side of the local search (speed and memory only; results do
+            not depend on it beyond float rounding). The window ring holds every recent
+            frame about ``(t + 2 r)^2 / t^2`` times (t = 8, r = 12: 13 times, 211 MB for
+            five 112-channel 60 x 107 maps).
+        max_affinity_elements: Memory bound: most affinity values held at once (per block
+            of queries or tiles; fewer, larger blocks mean fewer parallel regions).
         affinity_dtype: ``"float32"`` (default, exact) or ``"bfloat16"``: dtype of the stored
             features and of the affinity matmuls (accumulated in float32 by oneDNN). On CPUs
             with AVX512-BF16 the matmuls run several times faster (measured here: 3.4x for
@@ -212,20 +213,24 @@ class LabelPropagator:
 
     Args:
         config: Hyper-parameters (default: the paper's).
+        reference: Search the memory with the formulation this one replaced (keys gathered
+            at every step, plain top-k;
+            :mod:`unitrack_env.agents.primitives.label_search_tiled`): the same results,
+            slower; for benchmarks and tests.
 
     Attributes:
         config: The hyper-parameters.
+        search: How the memory is laid out and searched.
     """
 
-    def __init__(self, config: LabelPropagationConfig | None = None) -> None:
+    def __init__(self, config: LabelPropagationConfig | None = None, *,
+                 reference: bool = False) -> None:
         self.config = config or LabelPropagationConfig()
+        self.search: MemorySearch = (TiledSearch if reference else WindowSearch)(self.config)
         self._first: tuple[torch.Tensor, torch.Tensor] | None = None
         self._recent: deque[tuple[torch.Tensor, torch.Tensor]] = deque(
             maxlen=self.config.memory_size - 1
         )
-        self._geometry: LocalGeometry | None = None
-        self._ring_keys: torch.Tensor | None = None  # (slots, Hp * Wp, C), zero-padded
-        self._ring_labels: torch.Tensor | None = None  # (slots, Hp * Wp, K)
         self._slots: deque[int] = deque()  # ring slots in use, oldest first
 
     # ------------------------------------------------------------------ memory
@@ -237,8 +242,10 @@ class LabelPropagator:
             raise ValueError(
                 f"features must be (C, h, w) or (1, C, h, w); got {tuple(features.shape)}"
             )
-        features = normalize_features(features) if self.config.normalize else features.float()
-        return features.to(AFFINITY_DTYPES[self.config.affinity_dtype])
+        with stage("normalize"):
+            features = (normalize_features(features) if self.config.normalize
+                        else features.float())
+            return features.to(AFFINITY_DTYPES[self.config.affinity_dtype])
 
     def reset(self, features: torch.Tensor, labels: torch.Tensor) -> None:
         """Start a video: the first frame's features ``(C, h, w)`` and labels ``(K, h, w)``."""
@@ -248,7 +255,7 @@ class LabelPropagator:
         self._first = (feats.contiguous(), labels.contiguous())
         self._recent.clear()
         self._slots.clear()
-        self._ring_keys = self._ring_labels = None
+        self.search.clear()
 
     def push(self, features: torch.Tensor, labels: torch.Tensor) -> None:
         """Add a frame with its (predicted) labels to the recent memory (oldest dropped)."""
@@ -275,29 +282,15 @@ class LabelPropagator:
         return self._propagate_prepared(self._prepare(features))
 
     def _remember(self, feats: torch.Tensor, labels: torch.Tensor) -> None:
-        """Append to the recent memory; for the local search, also to the padded ring."""
-        cfg = self.config
-        if cfg.memory_size <= 1:
+        """Append to the recent memory; the search copies it into its ring slot."""
+        slots = self.config.memory_size - 1
+        if slots < 1:
             return
         self._recent.append((feats.contiguous(), labels.contiguous()))
-        if cfg.radius is None:
-            return
-        c, h, w = feats.shape
-        geo = self._local_geometry(h, w, feats.device)
-        slots = cfg.memory_size - 1
-        if self._ring_keys is None or self._ring_labels is None:
-            self._ring_keys = feats.new_zeros(slots, geo.padded_h * geo.padded_w, c)
-            self._ring_labels = labels.new_zeros(slots, geo.padded_h * geo.padded_w,
-                                                 labels.shape[0])
-        if len(self._slots) == slots:
-            slot = self._slots.popleft()  # the oldest frame's slot is overwritten
-        else:
-            slot = len(self._slots)
-        pad = geo.pad
-        keys = self._ring_keys[slot].view(geo.padded_h, geo.padded_w, c)
-        keys[pad:pad + h, pad:pad + w] = feats.permute(1, 2, 0)
-        lbl = self._ring_labels[slot].view(geo.padded_h, geo.padded_w, -1)
-        lbl[pad:pad + h, pad:pad + w] = labels.permute(1, 2, 0)
+        # The oldest frame's slot is overwritten once the ring is full.
+        slot = self._slots.popleft() if len(self._slots) == slots else len(self._slots)
+        with torch.inference_mode():
+            self.search.write(slot, feats, labels)
         self._slots.append(slot)
 
     @property
@@ -312,63 +305,24 @@ class LabelPropagator:
 
     # ------------------------------------------------------------------ propagation
     def _propagate_prepared(self, query: torch.Tensor) -> torch.Tensor:
-        first_feats, first_labels = self._require()
-        if query.shape != first_feats.shape:
+        first = self._require()
+        if query.shape != first[0].shape:
             raise ValueError(
                 f"query features {tuple(query.shape)} differ from the first frame's "
-                f"{tuple(first_feats.shape)} (frames of one video must have one size)"
+                f"{tuple(first[0].shape)} (frames of one video must have one size)"
             )
-        cfg = self.config
-        c, h, w = query.shape
-        num_labels = first_labels.shape[0]
+        _, h, w = query.shape
         with torch.inference_mode():
-            q = query.reshape(c, -1).t().contiguous()  # (Q, C)
-            values: list[torch.Tensor] = []
-            labels: list[torch.Tensor] = []
-            v, lab = self._search_first(q, first_feats, first_labels, h, w)
-            values.append(v)
-            labels.append(lab)
-            if self._recent:
-                if cfg.radius is None:
-                    for feats, lbl in self._recent:
-                        v, lab = self._search_dense(q, feats, lbl, h, w, None)
-                        values.append(v)
-                        labels.append(lab)
-                else:
-                    v, lab = self._search_local(query, h, w)
-                    values.append(v)
-                    labels.append(lab)
-            out = merge_topk(values, labels, cfg.topk, cfg.temperature)
-        return out.t().reshape(num_labels, h, w).clone()
+            out = self.search.propagate(query, first, list(self._recent), list(self._slots))
+        return out.t().reshape(-1, h, w).clone()
 
+    # Stage entry points of benchmarks/runtime.py (one search each, as the heads run them).
     def _search_first(self, q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int,
                       w: int) -> tuple[torch.Tensor, torch.Tensor]:
-        return self._search_dense(q, feats, lbl, h, w, self.config.first_frame_radius)
-
-    def _search_dense(
-        self, q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int, w: int,
-        radius: float | None,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Top-k of every query over one whole memory frame (:func:`search_dense`)."""
         cfg = self.config
-        return search_dense(q, feats, lbl, h, w, radius, cfg.topk, cfg.max_affinity_elements)
-
-    def _local_geometry(self, h: int, w: int, device: torch.device) -> LocalGeometry:
-        """The local search's layout for an ``h x w`` map (cached: one video, one size)."""
-        cfg = self.config
-        tile = max(1, min(cfg.tile_size, max(h, w)))
-        key = (h, w, tile, float(cfg.radius or 0.0), str(device))
-        if self._geometry is None or self._geometry.key != key:
-            self._geometry = LocalGeometry.build(h, w, tile, float(cfg.radius or 0.0), device,
-                                                 key)
-        return self._geometry
+        return search_dense(q, feats, lbl, h, w, cfg.first_frame_radius, cfg.topk,
+                            cfg.max_affinity_elements)
 
     def _search_local(self, query: torch.Tensor, h: int,
                       w: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Top-k of every query over the radius windows of all recent frames."""
-        if self._ring_keys is None or self._ring_labels is None:
-            raise RuntimeError("the recent memory has no padded ring")  # never: _remember
-        cfg = self.config
-        geo = self._local_geometry(h, w, query.device)
-        return search_local(query, geo, self._ring_keys, self._ring_labels, self._slots,
-                            cfg.topk, cfg.max_affinity_elements)
+        return self.search.search_recent(query, list(self._slots))

@@ -1,20 +1,34 @@
-"""The k-NN searches of label propagation: dense over a frame, local over a padded ring.
+"""The k-NN searches of label propagation: over a whole frame, and above a floor.
 
-Both return, per query location, the ``k`` largest affinities and the labels of those
-memory locations; :func:`merge_topk` merges the candidate groups exactly (the top-k of a
-union is the top-k of the union of each group's top-k). The layout of the local search (tiles,
-their radius windows and the exclusion mask) is :class:`LocalGeometry`. Described in
-:mod:`unitrack_env.agents.primitives.label_propagation`.
+Each search returns, per query location, its best affinities and the labels of those memory
+locations; :func:`merge_topk` merges the candidate groups exactly (the top-k of a union is
+the top-k of the union of each group's top-k) and weighs the kept labels. How a
+:class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator` lays out and
+searches its memory is a :class:`MemorySearch`: the default
+:class:`~unitrack_env.agents.primitives.label_windows.WindowSearch` or the reference
+:class:`~unitrack_env.agents.primitives.label_search_tiled.TiledSearch`. Stages are marked
+with :func:`stage` for ``torch.profiler`` (``benchmarks/propagation.py`` reports them).
 """
 
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
-import torch.nn.functional as F
+
+if TYPE_CHECKING:
+    from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
+
+STAGE_PREFIX: str = "label_propagation."
+"""Prefix of the ``torch.profiler`` labels of :func:`stage`."""
+
+
+def stage(name: str) -> torch.profiler.record_function:
+    """A ``torch.profiler`` label for one stage (affinity, top-k, labels, weights, memory)."""
+    return torch.profiler.record_function(STAGE_PREFIX + name)
 
 
 def grid_positions(h: int, w: int, device: torch.device) -> torch.Tensor:
@@ -40,14 +54,39 @@ def merge_topk(
     Returns:
         ``(Q, K)`` propagated labels.
     """
-    value = torch.cat(values, dim=1)
-    label = torch.cat(labels, dim=1)
-    k = min(topk, value.shape[1])
-    best, index = value.topk(k, dim=1)
-    kept = torch.gather(label, 1, index.unsqueeze(-1).expand(-1, -1, label.shape[2]))
-    weights = torch.softmax(best / temperature, dim=1)  # -inf entries get weight 0
-    return torch.einsum("qk,qkc->qc", weights, kept)
+    with stage("top-k"):
+        value = torch.cat(values, dim=1).float()
+        label = torch.cat(labels, dim=1)
+        k = min(topk, value.shape[1])
+        best, index = value.topk(k, dim=1)
+    with stage("labels"):
+        kept = torch.gather(label, 1, index.unsqueeze(-1).expand(-1, -1, label.shape[2]))
+    with stage("weights"):
+        weights = torch.softmax(best / temperature, dim=1)  # -inf entries get weight 0
+        return torch.einsum("qk,qkc->qc", weights, kept)
 
+
+def kth_best(values: list[torch.Tensor], k: int) -> torch.Tensor:
+    """``(Q,)`` the ``k``-th largest of the candidate groups per query (``-inf``: fewer).
+
+    Each group is sorted, largest first (as ``torch.topk`` returns it).
+    """
+    if len(values) == 1 and values[0].shape[1] == k:  # one group, sorted by its top-k
+        return values[0][:, k - 1].float()
+    value = torch.cat(values, dim=1)
+    if value.shape[1] < k:
+        return value.new_full((value.shape[0],), float("-inf"))
+    return value.topk(k, dim=1).values[:, k - 1].float()
+
+
+def _affinity_block(q: torch.Tensor, keys: torch.Tensor, out: torch.Tensor,
+                    grid: torch.Tensor | None, rows: torch.Tensor | slice,
+                    radius: float | None) -> None:
+    """``out = q @ keys``; beyond ``radius`` of the query positions ``grid[rows]``: -inf."""
+    with stage("affinity"):
+        torch.mm(q, keys, out=out)
+        if grid is not None:
+            out.masked_fill_(torch.cdist(grid[rows], grid) > radius, float("-inf"))
 
 
 def search_dense(
@@ -71,7 +110,6 @@ def search_dense(
     """
     size = h * w
     keys = feats.reshape(feats.shape[0], -1)  # (C, S)
-    flat_labels = lbl.reshape(lbl.shape[0], -1).t()  # (S, K)
     k = min(topk, size)
     chunk = max(1, max_elements // size)
     grid = grid_positions(h, w, q.device) if radius is not None else None
@@ -81,132 +119,144 @@ def search_dense(
     for start in range(0, q.shape[0], chunk):
         stop = min(q.shape[0], start + chunk)
         block_aff = aff[:stop - start]
-        torch.mm(q[start:stop], keys, out=block_aff)
-        if grid is not None:
-            block_aff.masked_fill_(torch.cdist(grid[start:stop], grid) > radius,
-                                   float("-inf"))
-        best, index = block_aff.topk(k, dim=1)
-        out_v[start:stop] = best
-        out_i[start:stop] = index
-    return out_v, flat_labels[out_i]
+        _affinity_block(q[start:stop], keys, block_aff, grid, slice(start, stop), radius)
+        with stage("top-k"):
+            best, index = block_aff.topk(k, dim=1)
+            out_v[start:stop] = best
+            out_i[start:stop] = index
+    with stage("labels"):
+        return out_v, lbl.reshape(lbl.shape[0], -1).t()[out_i]
 
 
-def search_local(
-    query: torch.Tensor, geo: LocalGeometry, ring_keys: torch.Tensor,
-    ring_labels: torch.Tensor, slots: Sequence[int], topk: int, max_elements: int,
+GROUP_SIZE: int = 20
+"""Keys per group of the first-frame search above a floor (see :func:`search_above`)."""
+
+GROUP_CAP: int = 4
+"""Groups a query may reach the floor in before it falls back to a plain top-k of its row."""
+
+
+def search_above(
+    q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int, w: int,
+    radius: float | None, floor: torch.Tensor, topk: int, max_elements: int,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k of every query over the radius windows of all recent frames.
+    """Top-k of every query over one memory frame, where it can reach ``floor``.
+
+    Exact for the merged top-k when ``floor`` is, per query, the ``topk``-th best affinity
+    of other candidates: nothing below it can enter the merged top-k, so only the keys at or
+    above the floor need to be found. The ``S`` keys form ``ceil(S / 20)`` strided groups of
+    20 (key ``j`` in group ``j mod ceil(S / 20)``); one strided max per block of queries gives
+    every group's best affinity; only the (typically one or two) groups whose best reaches
+    the floor are read again, instead of a top-k over every key. A query reaching the floor
+    in more than :data:`GROUP_CAP` groups, or with an infinite floor, gets a plain top-k.
 
     Args:
-        query: ``(C, h, w)`` query features.
-        geo: The local search's layout for this map size.
-        ring_keys: ``(slots, Hp * Wp, C)`` zero-padded memory features.
-        ring_labels: ``(slots, Hp * Wp, K)`` zero-padded memory labels.
-        slots: Ring slots in use, oldest first.
+        q: ``(Q, C)`` query features.
+        feats: ``(C, h, w)`` memory features.
+        lbl: ``(K, h, w)`` memory labels.
+        h: Map rows.
+        w: Map columns.
+        radius: Euclidean radius a query may attend to (None: all).
+        floor: ``(Q,)`` float32: least affinity worth finding per query (``-inf``: all).
         topk: Kept affinities per query.
         max_elements: Most affinities held at once.
 
     Returns:
-        ``(h * w, k)`` affinities and ``(h * w, k, K)`` labels.
+        ``(Q, k)`` affinities (``-inf`` or below the floor: not needed) and ``(Q, k, K)``
+        labels.
     """
-    c, h, w = query.shape
-    tile, t2 = geo.tile, geo.tile * geo.tile
-    num_tiles, window = geo.key_index.shape
-    slot_index = torch.tensor(list(slots), device=query.device)
-    frames = len(slot_index)
-    candidates = frames * window
-    k = min(topk, candidates)
-    num_labels = ring_labels.shape[2]
-    # Queries by tile: (T, t^2, C) (zero-padded to whole tiles).
-    padded = F.pad(query, (0, geo.tiles_x * tile - w, 0, geo.tiles_y * tile - h))
-    q_tiles = padded.view(c, geo.tiles_y, tile, geo.tiles_x, tile).permute(
-        1, 3, 2, 4, 0).reshape(num_tiles, t2, c)
-    # Every tile's keys in every recent frame, as rows of the flattened ring.
-    ring_size = geo.padded_h * geo.padded_w
-    rows = (slot_index.view(1, -1, 1) * ring_size + geo.key_index.unsqueeze(1)).reshape(
-        num_tiles, candidates)  # (T, R * L), frame-major per tile
-    flat_keys = ring_keys.view(-1, c)
-    flat_labels = ring_labels.view(-1, num_labels)
-    per_block = max(1, max_elements // (t2 * candidates))
-    out_v = torch.empty(num_tiles, t2, k, device=query.device)
-    out_l = torch.empty(num_tiles, t2, k, num_labels, device=query.device)
-    for start in range(0, num_tiles, per_block):
-        stop = min(num_tiles, start + per_block)
-        n = stop - start
-        block_rows = rows[start:stop]
-        keys = flat_keys.index_select(0, block_rows.reshape(-1)).view(n, candidates, c)
-        aff = torch.bmm(q_tiles[start:stop], keys.transpose(1, 2))  # (n, t^2, R * L)
-        aff.view(n, t2, frames, window).masked_fill_(
-            geo.excluded[start:stop].unsqueeze(2), float("-inf"))
-        best, index = aff.topk(k, dim=2)  # (n, t^2, k)
-        chosen = torch.gather(block_rows.unsqueeze(1).expand(n, t2, candidates), 2, index)
-        out_v[start:stop] = best
-        out_l[start:stop] = flat_labels[chosen]
-    return geo.untile(out_v, h, w), geo.untile(out_l, h, w)
+    size = h * w
+    keys = feats.reshape(feats.shape[0], -1)
+    lanes = math.ceil(size / GROUP_SIZE)
+    k = min(topk, size)
+    chunk = max(1, max_elements // (lanes * GROUP_SIZE))
+    grid = grid_positions(h, w, q.device) if radius is not None else None
+    out_v = torch.empty(q.shape[0], k, device=q.device)
+    out_i = torch.empty(q.shape[0], k, dtype=torch.long, device=q.device)
+    aff = torch.empty(min(chunk, q.shape[0]), lanes * GROUP_SIZE, dtype=q.dtype,
+                      device=q.device)
+    aff[:, size:] = float("-inf")  # the tail past S (if any) stays -inf
+    heavy = []
+    for start in range(0, q.shape[0], chunk):
+        stop = min(q.shape[0], start + chunk)
+        block = aff[:stop - start]
+        _affinity_block(q[start:stop], keys, block[:, :size], grid, slice(start, stop), radius)
+        with stage("top-k"):
+            best, index, rows = _select_above(block, lanes, floor[start:stop], k)
+            out_v[start:stop] = best
+            out_i[start:stop] = index
+            heavy.append(rows + start)
+    # Queries that reach their floor in too many groups: a plain top-k of their rows.
+    rows = torch.cat(heavy)
+    for start in range(0, len(rows), chunk):
+        part = rows[start:start + chunk]
+        _affinity_block(q[part], keys, aff[:len(part), :size], grid, part, radius)
+        with stage("top-k"):
+            best, index = aff[:len(part)].topk(k, dim=1)
+            out_v[part] = best.float()
+            out_i[part] = index
+    with stage("labels"):
+        return out_v, lbl.reshape(lbl.shape[0], -1).t()[out_i.clamp_(max=size - 1)]
 
 
-@dataclass(frozen=True)
-class LocalGeometry:
-    """Layout of the local search for one map size (see the module docstring).
+def _select_above(block: torch.Tensor, lanes: int, floor: torch.Tensor,
+                  k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Top-k of each row of ``block`` among its groups reaching ``floor``.
 
-    Attributes:
-        key: What it was built for ``(h, w, tile, radius, device)``.
-        tile: Tile side.
-        pad: Zero padding of the ring's maps (``floor(radius)``) on every side.
-        tiles_y: Tile rows.
-        tiles_x: Tile columns.
-        padded_h: Rows of a padded ring map (``tiles_y * tile + 2 pad``).
-        padded_w: Columns of a padded ring map.
-        key_index: ``(T, L)`` long: per tile, the flat positions (in a padded map) of the keys
-            within the radius of at least one of its queries.
-        excluded: ``(T, t^2, L)`` bool: key out of the query's radius or off the map.
+    Returns:
+        ``(n, k)`` values and columns, and the rows that reach their floor in more than
+        ``cap`` groups (or have an infinite floor): their values are not valid.
+    """
+    n = block.shape[0]
+    cap = min(lanes, max(GROUP_CAP, math.ceil(k / GROUP_SIZE)))
+    grid = block.view(n, GROUP_SIZE, lanes)
+    best_groups, group = grid.amax(1).topk(min(lanes, cap + 1), dim=1)
+    # The cap best groups hold every key at or above the floor unless one more group does.
+    heavy = ~torch.isfinite(floor)
+    if cap < lanes:
+        heavy |= best_groups[:, cap] >= floor
+    group = group[:, :cap]
+    picked = torch.gather(grid, 2, group.unsqueeze(1).expand(n, GROUP_SIZE, cap))
+    best, pick = picked.view(n, -1).topk(k, dim=1)  # (n, 20 cap): member, group
+    index = (pick // cap) * lanes + group.gather(1, pick % cap)
+    return best.float(), index, heavy.nonzero().squeeze(1)
+
+
+class MemorySearch(ABC):
+    """How a label propagator lays out its recent memory and finds each query's top-k.
+
+    The propagator keeps the bookkeeping (the first frame, the recent frames and their
+    ring slots); a search keeps its own copy of the recent frames in the layout it
+    searches, written once per frame by :meth:`write`.
+
+    Args:
+        config: The propagator's hyper-parameters.
     """
 
-    key: tuple[object, ...]
-    tile: int
-    pad: int
-    tiles_y: int
-    tiles_x: int
-    padded_h: int
-    padded_w: int
-    key_index: torch.Tensor
-    excluded: torch.Tensor
+    def __init__(self, config: LabelPropagationConfig) -> None:
+        self.config = config
 
-    @classmethod
-    def build(cls, h: int, w: int, tile: int, radius: float, device: torch.device,
-              key: tuple[object, ...]) -> LocalGeometry:
-        """Lay out the local search of an ``h x w`` map with ``tile`` tiles."""
-        pad = int(math.floor(radius))
-        tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
-        padded_h, padded_w = tiles_y * tile + 2 * pad, tiles_x * tile + 2 * pad
-        win = tile + 2 * pad
-        # Window positions (relative to the tile's top-left query, minus pad) within the
-        # radius of the nearest query of the tile: the tile square grown by the radius.
-        oy, ox = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
-        oy, ox = oy.reshape(-1), ox.reshape(-1)
-        gap_y = torch.clamp(torch.maximum(pad - oy, oy - (pad + tile - 1)), min=0)
-        gap_x = torch.clamp(torch.maximum(pad - ox, ox - (pad + tile - 1)), min=0)
-        keep = (gap_y * gap_y + gap_x * gap_x).double() <= radius * radius
-        oy, ox = oy[keep], ox[keep]  # (L,)
-        ty = torch.arange(tiles_y).repeat_interleave(tiles_x)  # (T,) row-major tiles
-        tx = torch.arange(tiles_x).repeat(tiles_y)
-        rows = ty.view(-1, 1) * tile + oy.view(1, -1)  # (T, L) padded-map rows
-        cols = tx.view(-1, 1) * tile + ox.view(1, -1)
-        key_index = rows * padded_w + cols
-        qy, qx = torch.meshgrid(torch.arange(tile), torch.arange(tile), indexing="ij")
-        dy = oy.view(1, -1) - pad - qy.reshape(-1, 1)  # (t^2, L)
-        dx = ox.view(1, -1) - pad - qx.reshape(-1, 1)
-        outside = (dy * dy + dx * dx).double() > radius * radius
-        off_map = ((rows < pad) | (rows >= pad + h) | (cols < pad) | (cols >= pad + w))
-        excluded = outside.unsqueeze(0) | off_map.unsqueeze(1)  # (T, t^2, L)
-        return cls(key, tile, pad, tiles_y, tiles_x, padded_h, padded_w,
-                   key_index.to(device), excluded.to(device))
+    @abstractmethod
+    def clear(self) -> None:
+        """Forget the recent memory (a new video)."""
 
+    @abstractmethod
+    def write(self, slot: int, feats: torch.Tensor, labels: torch.Tensor) -> None:
+        """A recent frame ``(C, h, w)`` with labels ``(K, h, w)`` takes ring slot ``slot``."""
 
-    def untile(self, values: torch.Tensor, h: int, w: int) -> torch.Tensor:
-        """Tiles back to the map: ``(T, t^2, k, ...)`` -> ``(h * w, k, ...)``."""
-        tile, rest = self.tile, values.shape[2:]
-        tiles_hw = (self.tiles_y, self.tiles_x, tile, tile)
-        order = (0, 2, 1, 3) + tuple(range(4, 4 + len(rest)))
-        return values.view(*tiles_hw, *rest).permute(*order).reshape(
-            self.tiles_y * tile, self.tiles_x * tile, *rest)[:h, :w].reshape(h * w, *rest)
+    @abstractmethod
+    def search_recent(self, query: torch.Tensor, slots: Sequence[int]
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(h * w, k)`` affinities and ``(h * w, k, K)`` labels over the recent windows."""
+
+    @abstractmethod
+    def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
+                  recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                  slots: Sequence[int]) -> torch.Tensor:
+        """``(h * w, K)`` labels of ``query`` ``(C, h, w)`` from the whole memory.
+
+        Args:
+            query: Prepared (normalised) query features.
+            first: The first frame's features and labels.
+            recent: The recent frames' features and labels, oldest first.
+            slots: Their ring slots, oldest first.
+        """

@@ -1,5 +1,6 @@
-"""Label propagation (level 2): the fast tiled search against the dense definition, and
-known answers for the radius, the first frame, the memory bank and the soft labels."""
+"""Label propagation (level 2): the window search and the reference (tiled, gathered) search
+against the dense definition and each other, their top-k pieces, and known answers for the
+radius, the first frame, the memory bank and the soft labels."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from unitrack_env.agents.primitives.label_propagation import (
     normalize_features,
     propagate_dense,
 )
+from unitrack_env.agents.primitives.label_search import merge_topk, search_above, search_dense
+from unitrack_env.agents.primitives.label_windows import grouped_topk
 
 
 def random_video(frames: int, c: int = 8, h: int = 13, w: int = 21, k: int = 3, seed: int = 0):
@@ -21,12 +24,14 @@ def random_video(frames: int, c: int = 8, h: int = 13, w: int = 21, k: int = 3, 
     return feats, labels
 
 
+@pytest.mark.parametrize("reference", [False, True])
 @pytest.mark.parametrize("tile", [1, 5, 16, 64])
 @pytest.mark.parametrize("radius", [0.0, 2.5, 12.0])
-def test_tiled_search_equals_the_dense_definition(tile, radius):
+def test_searches_equal_the_dense_definition(tile, radius, reference):
     feats, labels = random_video(7)
     prop = LabelPropagator(LabelPropagationConfig(tile_size=tile, radius=radius,
-                                                  max_affinity_elements=3000))
+                                                  max_affinity_elements=3000),
+                           reference=reference)
     prop.reset(feats[0], labels[0])
     for t in range(1, 6):
         prop.push(feats[t], labels[t])
@@ -170,3 +175,62 @@ def test_padded_ring_follows_the_memory_after_wrapping(tile):
     torch.testing.assert_close(
         prop.propagate(feats[2]), propagate_dense(feats[2], [feats[1]], [labels[1]], [None]),
         atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize(("tile", "radius", "memory_size", "channels", "max_elements"), [
+    (8, 12.0, 6, 2, 1 << 23),  # the heads' settings, one block
+    (3, 4.0, 4, 15, 4000),  # pose-like: 15 belief maps; many small blocks
+    (5, 2.5, 2, 3, 20000),
+    (4, 0.0, 6, 3, 1 << 23),  # radius 0: 5 recent candidates per query, fewer than k
+])
+def test_window_search_follows_the_reference_recurrently(tile, radius, memory_size, channels,
+                                                          max_elements):
+    # The heads' use: every prediction is written back; both searches must stay together.
+    feats, labels = random_video(12, c=16, h=23, w=31, k=channels, seed=7)
+    cfg = LabelPropagationConfig(tile_size=tile, radius=radius, memory_size=memory_size,
+                                 max_affinity_elements=max_elements)
+    new, old = LabelPropagator(cfg), LabelPropagator(cfg, reference=True)
+    for prop in (new, old):
+        prop.reset(feats[0], labels[0])
+    for t in range(1, 12):
+        torch.testing.assert_close(new.step(feats[t]), old.step(feats[t]), atol=1e-5, rtol=0)
+
+
+def test_grouped_topk_is_the_topk():
+    gen = torch.Generator().manual_seed(8)
+    aff = torch.randn(300, 7 * 13, generator=gen)
+    aff[aff < -1.0] = float("-inf")  # excluded candidates
+    aff[:5] = float("-inf")  # rows with no candidate at all
+    best, column = grouped_topk(aff, rows=7, k=10)
+    expected = aff.topk(10, dim=1).values
+    torch.testing.assert_close(best, expected, atol=0, rtol=0)
+    torch.testing.assert_close(aff.gather(1, column), expected, atol=0, rtol=0)
+    few, _ = grouped_topk(aff[:, :7 * 2], rows=7, k=10)  # 2 groups < k: still exact
+    torch.testing.assert_close(few, aff[:, :14].topk(10, dim=1).values, atol=0, rtol=0)
+
+
+@pytest.mark.parametrize("radius", [None, 3.0])
+def test_search_above_keeps_what_can_beat_the_floor(radius):
+    # Merged with k other candidates whose k-th best is the floor, the search above the
+    # floor gives what the full search gives, whatever the floor: high (few keys), low
+    # (every key: plain top-k fallback) or infinite.
+    gen = torch.Generator().manual_seed(9)
+    c, h, w, k = 8, 9, 13, 10
+    q = normalize_features(torch.randn(c, h, w, generator=gen)).reshape(c, -1).t()
+    feats = normalize_features(torch.randn(c, h, w, generator=gen))
+    lbl = torch.rand(3, h, w, generator=gen)
+    full = search_dense(q, feats, lbl, h, w, radius, k, 500)
+    # Floors at each query's 3rd best key (3 keys, at most 3 groups reach it) ...
+    floor = full[0][:, 2].clone()
+    floor[:10] = -2.0  # ... low floors (every key reaches them) and no floor at all
+    floor[10:15] = float("-inf")
+    other_v = torch.rand(h * w, k, generator=gen).sort(dim=1, descending=True).values
+    other_v[:, -1] = 0.0
+    other_v = floor.unsqueeze(1) + other_v  # k candidates >= the floor
+    other_v[10:15] = torch.linspace(0.9, -0.9, k)
+    other_v[10:15, -1] = float("-inf")
+    other_l = torch.rand(h * w, k, 3, generator=gen)
+    above = search_above(q, feats, lbl, h, w, radius, floor, k, 500)
+    expected = merge_topk([full[0], other_v], [full[1], other_l], k, 0.05)
+    torch.testing.assert_close(merge_topk([above[0], other_v], [above[1], other_l], k, 0.05),
+                               expected, atol=1e-6, rtol=0)
