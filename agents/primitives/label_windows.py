@@ -39,6 +39,7 @@ import torch.nn.functional as F
 
 from unitrack_env.agents.primitives.label_search import (
     MemorySearch,
+    Workspace,
     kth_best,
     merge_topk,
     search_above,
@@ -124,16 +125,21 @@ class WindowLayout:
         """``T``: tiles of the map."""
         return self.tiles_y * self.tiles_x
 
-    def windows(self, feats: torch.Tensor) -> torch.Tensor:
-        """im2col: ``(C, h, w)`` -> ``(T, R, g, C)``, every tile's keys."""
+    def windows(self, feats: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+        """im2col: ``(C, h, w)`` -> ``(T, R, g, C)``, every tile's keys (a view of ``out``).
+
+        Args:
+            feats: One frame's features.
+            out: ``(T R g, C)`` buffer the keys are written into.
+        """
         c, h, w = feats.shape
         t, pad = self.tile, self.pad
         padded = feats.new_zeros((self.tiles_y * t + 2 * pad) * (self.tiles_x * t + 2 * pad)
                                  + 1, c)
         padded[:-1].view(self.tiles_y * t + 2 * pad, -1, c)[pad:pad + h, pad:pad + w] = (
             feats.permute(1, 2, 0))
-        return padded.index_select(0, self.key_index.view(-1)).view(
-            self.num_tiles, self.rows, self.width, c)
+        torch.index_select(padded, 0, self.key_index.view(-1), out=out)
+        return out.view(self.num_tiles, self.rows, self.width, c)
 
     def tiles(self, query: torch.Tensor) -> torch.Tensor:
         """``(C, h, w)`` -> ``(T, t^2, C)`` queries by tile (zero-padded to whole tiles)."""
@@ -171,8 +177,8 @@ def grouped_topk(aff: torch.Tensor, rows: int, k: int) -> tuple[torch.Tensor, to
 
 
 def search_windows(query: torch.Tensor, layout: WindowLayout, ring: torch.Tensor,
-                   ring_labels: torch.Tensor, used: int, topk: int,
-                   max_elements: int) -> tuple[torch.Tensor, torch.Tensor]:
+                   ring_labels: torch.Tensor, used: int, topk: int, max_elements: int,
+                   workspace: Workspace | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Top-k of every query over the radius windows of the recent frames in the ring.
 
     Args:
@@ -183,11 +189,13 @@ def search_windows(query: torch.Tensor, layout: WindowLayout, ring: torch.Tensor
         used: Ring slots holding frames (``0 .. used - 1``; the others are ignored).
         topk: Kept affinities per query.
         max_elements: Most affinities held at once.
+        workspace: Where to keep the affinity buffer between calls (None: a new one).
 
     Returns:
         ``(h * w, k)`` affinities and ``(h * w, k, K)`` labels.
     """
     c, h, w = query.shape
+    workspace = workspace if workspace is not None else Workspace()
     num_tiles, rows, slots, width = ring.shape[:4]
     t2 = layout.tile * layout.tile
     candidates = rows * slots * width
@@ -195,13 +203,14 @@ def search_windows(query: torch.Tensor, layout: WindowLayout, ring: torch.Tensor
     q_tiles = layout.tiles(query)
     out_v = torch.empty(num_tiles, t2, k, device=query.device)
     out_i = torch.empty(num_tiles, t2, k, dtype=torch.long, device=query.device)
-    per_block = max(1, max_elements // (t2 * candidates))
+    per_block = min(num_tiles, max(1, max_elements // (t2 * candidates)))
+    buffer = workspace.get("windows", (per_block, t2, candidates), ring.dtype, ring.device)
     for start in range(0, num_tiles, per_block):
         stop = min(num_tiles, start + per_block)
         n = stop - start
         with stage("affinity"):
             keys = ring[start:stop].view(n, candidates, c)
-            aff = torch.bmm(q_tiles[start:stop], keys.transpose(1, 2))  # (n, t^2, R S g)
+            aff = torch.bmm(q_tiles[start:stop], keys.transpose(1, 2), out=buffer[:n])
             grid = aff.view(n, t2, rows, slots, width)
             grid += layout.bias[start:stop]  # -inf: beyond the radius, off the map, dummy
             if used < slots:
@@ -232,6 +241,7 @@ class WindowSearch(MemorySearch):
         self._layout: WindowLayout | None = None
         self._ring: torch.Tensor | None = None  # (T, R, slots, g, C)
         self._ring_labels: torch.Tensor | None = None  # (slots, h * w, K)
+        self.workspace = Workspace()
 
     def clear(self) -> None:
         """Forget the ring (a new video)."""
@@ -260,7 +270,9 @@ class WindowSearch(MemorySearch):
                 self._ring = feats.new_zeros(layout.num_tiles, layout.rows, slots,
                                              layout.width, c)
                 self._ring_labels = labels.new_zeros(slots, h * w, labels.shape[0])
-            self._ring[:, :, slot] = layout.windows(feats)
+            scratch = self.workspace.get("im2col", (layout.key_index.numel(), c),
+                                         feats.dtype, feats.device)
+            self._ring[:, :, slot] = layout.windows(feats, scratch)
             self._ring_labels[slot] = labels.reshape(labels.shape[0], -1).t()
 
     def search_recent(self, query: torch.Tensor, slots: Sequence[int]
@@ -271,7 +283,7 @@ class WindowSearch(MemorySearch):
         cfg = self.config
         layout = self.layout(query.shape[1], query.shape[2], query.device)
         return search_windows(query, layout, self._ring, self._ring_labels, len(slots),
-                              cfg.topk, cfg.max_affinity_elements)
+                              cfg.topk, cfg.max_affinity_elements, self.workspace)
 
     def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
@@ -295,7 +307,7 @@ class WindowSearch(MemorySearch):
             with stage("top-k"):
                 floor = kth_best(values, cfg.topk)
             v, lab = search_above(q, *first, h, w, cfg.first_frame_radius, floor, cfg.topk,
-                                  cfg.max_affinity_elements)
+                                  cfg.max_affinity_elements, self.workspace)
         else:  # the first frame alone: nothing to set a floor
             v, lab = search_dense(q, *first, h, w, cfg.first_frame_radius, cfg.topk,
                                   cfg.max_affinity_elements)
