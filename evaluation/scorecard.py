@@ -317,6 +317,24 @@ def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank")
     return written
 
 
+def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
+                     data: str | os.PathLike | None) -> tuple[list[str], Path | None]:
+    """The task names and data folder of a scorecard request, refused when wrong."""
+    names = list(tasks) if tasks else list(TASKS)
+    unknown = [t for t in names if t not in TASKS]
+    if unknown:
+        raise ValueError(f"unknown tasks {unknown}; valid: {', '.join(TASKS)}")
+    if not models:
+        raise ValueError("give at least one --model (e.g. imagenet-lite0)")
+    labels = [m.name for m in models]
+    if len(set(labels)) != len(labels):
+        raise ValueError(f"two models have the same label {labels}; add label= to one")
+    data_path = Path(data).expanduser() if data is not None else None
+    if data_path is not None and not data_path.is_dir():
+        raise ValueError(f"--data {data} is not a folder")
+    return names, data_path
+
+
 def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
               tasks: Sequence[str] | None = None, data: str | os.PathLike | None = None,
               backend: str = "pool", workers: int = 1, address: str | None = None,
@@ -342,19 +360,8 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     """
     from unitrack_env.evaluation.backends import make_backend
 
-    names = list(tasks) if tasks else list(TASKS)
-    unknown = [t for t in names if t not in TASKS]
-    if unknown:
-        raise ValueError(f"unknown tasks {unknown}; valid: {', '.join(TASKS)}")
-    if not models:
-        raise ValueError("give at least one --model (e.g. imagenet-lite0)")
-    labels = [m.name for m in models]
-    if len(set(labels)) != len(labels):
-        raise ValueError(f"two models have the same label {labels}; add label= to one")
+    names, data_path = _checked_request(models, tasks, data)
     out = Path(out)
-    data_path = Path(data).expanduser() if data is not None else None
-    if data_path is not None and not data_path.is_dir():
-        raise ValueError(f"--data {data} is not a folder")
     cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
     todo = [c for c in cells if not cell_done(out, c)]
     done = len(cells) - len(todo)
