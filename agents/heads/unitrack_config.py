@@ -12,7 +12,7 @@ MOT values are explained in :class:`~unitrack_env.agents.primitives.association.
 * ``mot``: chi-square gate 9.4877; duplicates at IoU > 0.85 (code: 0.15 distance); MOT
   output filter; plus four measured departures from the paper
   (:data:`~unitrack_env.agents.primitives.association.MOT_ASSOCIATION`: detection boxes
-  reported, an ambiguity margin of 0.1 on appearance matches, confirmation at IoU > 0.5
+  reported, an ambiguity margin of 0.2 on appearance matches, confirmation at IoU > 0.5
   instead of 0.8, lost tracks in the IoU stage); ``paper_settings=True`` drops them.
 * ``mots``: no gate (the code gates MOT only); confirmation and duplicates as MOT;
   at most 200 locations per mask.
