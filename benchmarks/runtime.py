@@ -165,7 +165,8 @@ def propagation(cfg: Config) -> None:
         stages[f"first frame [{name}]"] = lambda p=prop: p._search_first(flat, *p._first, h, w)
         stages[f"local [{name}]"] = lambda p=prop: p._search_local(q, h, w)
         stages[f"step [{name}]"] = lambda p=prop: p.propagate(query)
-    times = round_robin(stages, cfg.repeats)
+    with torch.inference_mode():  # the propagators' step buffers are inference tensors
+        times = round_robin(stages, cfg.repeats)
     for stage in ("first frame", "local", "step"):
         before, now = min(times[f"{stage} [before]"]), min(times[f"{stage} [now]"])
         medians = [statistics.median(times[f"{stage} [{n}]"]) * 1e3 for n in ("before", "now")]
