@@ -18,6 +18,7 @@ Parts (run all, or pick with --parts):
 
 Usage: python benchmarks/mot_agent.py [--parts stages,association,...] [--threads 2]
        python benchmarks/mot_agent.py --parts accuracy [--work DIR] [--input-size 544 304]
+                                       [--layer stage3] [--runtime openvino]
 """
 
 from __future__ import annotations
@@ -277,7 +278,8 @@ def _replay_scores(recordings: list, config, similarity) -> tuple[dict, dict]:
 
 def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int] | None = None,
              random_weights: bool = True, peers_too: bool = True, data: str = "",
-             all_variants: bool = False) -> None:
+             all_variants: bool = False, layer: str | None = None,
+             runtime: str | None = None) -> None:
     """The issue-11 accuracy table and per-stage diagnostics on every long sequence.
 
     Every sequence is recorded once per appearance model (detections + box features, see
@@ -306,6 +308,10 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
                       "feature_cache": str(work / "features"), **_agent_kwargs(data.env_id)}
             if input_size is not None:
                 kwargs["input_size"] = tuple(input_size)
+            if layer is not None and weights != "random":
+                kwargs["layer"] = layer
+            if runtime is not None:
+                kwargs["runtime"] = runtime
             record_kwargs = {k: v for k, v in kwargs.items() if k != "new_track_score"}
             recordings = record(data.env_id, data.env_kwargs, record_kwargs, work / "recordings")
             if weights == "imagenet-lite0" and peers_too:
@@ -443,6 +449,12 @@ def main() -> None:
                              "comma-separated words (pets, hard, mot17, mot16)")
     parser.add_argument("--all-variants", action="store_true",
                         help="accuracy: also cf/gf/gpf with motion")
+    parser.add_argument("--layer", default=None,
+                        help="accuracy: layer of the ImageNet model (default stage5; e.g. "
+                             "stage3, stage4, stage3+stage5)")
+    parser.add_argument("--runtime", default=None,
+                        help="accuracy: inference runtime of the recordings (torch, openvino, "
+                             "onnxruntime, auto; default torch)")
     args = parser.parse_args()
     for part in args.parts.split(","):
         if part in {"stages", "cache", "peers"} and not SHARED.is_dir():
@@ -450,7 +462,8 @@ def main() -> None:
             continue
         if part == "accuracy":
             accuracy(args.threads, args.work, args.input_size, not args.no_random,
-                     not args.no_peers, args.data, args.all_variants)
+                     not args.no_peers, args.data, args.all_variants, args.layer,
+                     args.runtime)
         else:
             PARTS[part](args.threads)
 
