@@ -45,3 +45,19 @@ def timed_acts(env: Any, agent: Any, obs: Any, max_frames: int,
         if terminated or truncated:
             break
     return seconds, frames, obs
+
+
+#: Peak resident memory of the running process, as a Python snippet. ``ru_maxrss`` is kept
+#: across ``execve`` on Linux, so a child started by a large benchmark process would report the
+#: parent's peak; ``VmHWM`` in /proc/self/status belongs to the child's own address space.
+PEAK_RSS_GIB = (
+    "def peak_rss_gib():\n"
+    "    try:\n"
+    "        for line in open('/proc/self/status'):\n"
+    "            if line.startswith('VmHWM:'):\n"
+    "                return int(line.split()[1]) / 2**20\n"
+    "    except OSError:\n"
+    "        pass\n"
+    "    import resource\n"
+    "    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20\n"
+)

@@ -21,8 +21,8 @@ Parts:
 * ``speed``: frames per second of each head on the real fixtures (first ``--frames`` frames
   of OTB Crossing, DAVIS blackswan at 480p, the JHMDB catch clip) and the share of the time
   spent in the backbone (``AppearanceModel.features``, timed by a wrapper).
-* ``memory``: peak resident memory (``resource.getrusage`` ``ru_maxrss``; torch CPU tensors
-  are not seen by tracemalloc) of a VOS run at 480p with M = 6, in a fresh subprocess.
+* ``memory``: peak resident memory (``VmHWM`` of the child; torch CPU tensors are not seen
+  by tracemalloc) of a VOS run at 480p with M = 6, in a fresh subprocess.
 * ``accuracy``: heads vs the repeat baselines vs OpenCV's ``TrackerMIL`` (a classical SOT
   peer, used only here), offline default weights vs ``weights="random"`` vs the default
   weights read out as the ``stage3+stage5`` hypercolumn, on the real
@@ -58,7 +58,7 @@ from unitrack_env.agents.primitives.label_propagation import LabelPropagator
 from unitrack_env.agents.primitives.label_search import STAGE_PREFIX
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import Timed, timed_acts  # noqa: E402  (a sibling file of this script)
+from _timing import PEAK_RSS_GIB, Timed, timed_acts  # noqa: E402  (a sibling file of this script)
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
@@ -345,18 +345,18 @@ def speed(cfg: Config) -> None:
 def memory(cfg: Config) -> None:
     print("\n== memory (VOS, DAVIS blackswan 480p, M = 6, fresh process) ==")
     code = (
-        "import resource, torch, gymnasium as gym, unitrack_env\n"
+        PEAK_RSS_GIB
+        + "import torch, gymnasium as gym, unitrack_env\n"
         "from unitrack_env.agents import make_agent\n"
         f"torch.set_num_threads({cfg.threads})\n"
         f"env = gym.make('UniTrack/DAVIS-v0', root={str(DATA / 'DAVIS')!r})\n"
         "agent = make_agent('unitrack-vos')\n"
         "obs, info = env.reset(options={'sequence': 'blackswan'})\n"
-        "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+        "base = peak_rss_gib()\n"
         "agent.reset(obs, info)\n"
         f"for _ in range({max(cfg.frames, 8)}):\n"
         "    obs, *_ = env.step(agent.act(obs))\n"
-        "peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
-        "print(base / 2**20, peak / 2**20)\n"
+        "print(base, peak_rss_gib())\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=Path(__file__).resolve().parents[1])

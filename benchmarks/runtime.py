@@ -56,6 +56,9 @@ from unitrack_env.agents.appearance.runtime import available_runtimes
 from unitrack_env.agents.primitives import label_propagation as current_lp
 from unitrack_env.agents.primitives.label_propagation import normalize_features
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import PEAK_RSS_GIB  # noqa: E402  (a sibling file of this script)
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / ".." / "shared" / "data"
 BEFORE = "f786a63"
@@ -291,20 +294,24 @@ def memory(cfg: Config) -> None:
     print("\n== memory: peak RSS of a VOS run (DAVIS blackswan 480p, M = 6), fresh process ==")
     for name in available_runtimes():
         code = (
-            "import resource, torch, gymnasium as gym, unitrack_env\n"
+            PEAK_RSS_GIB
+            + "import torch, gymnasium as gym, unitrack_env\n"
             "from unitrack_env.agents import make_agent\n"
             f"torch.set_num_threads({cfg.threads})\n"
             f"env = gym.make('UniTrack/DAVIS-v0', root={str(DATA / 'DAVIS')!r})\n"
             f"agent = make_agent('unitrack-vos', runtime={name!r})\n"
             "obs, info = env.reset(options={'sequence': 'blackswan'})\n"
+            "before = peak_rss_gib()\n"
             "agent.reset(obs, info)\n"
             f"for _ in range({max(cfg.frames, 8)}):\n"
             "    obs, *_ = env.step(agent.act(obs))\n"
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20)\n"
+            "print(agent.model.runtime, before, peak_rss_gib())\n"
         )
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              check=True, cwd=REPO)
-        print(f"{name:<12} peak RSS {float(out.stdout.split()[-1]):.2f} GiB")
+        runtime, before, peak = out.stdout.split()[-3:]
+        print(f"{name:<12} peak RSS {float(peak):.2f} GiB (runtime {runtime}; "
+              f"{float(before):.2f} GiB before the agent's first frame)")
 
 
 def main() -> None:
