@@ -222,6 +222,13 @@ HEADS = {
 }
 
 
+def _argmax_decode(agent: Any, soft: torch.Tensor) -> np.ndarray:
+    """The VOS head's label decoding before issue 13 (``argmax(0)``, not ``max(0).indices``)."""
+    full = torch.nn.functional.interpolate(soft[None], size=agent._size, mode="bilinear",
+                                           align_corners=False)[0]
+    return agent._lookup[full.argmax(0).numpy().astype(np.intp)]
+
+
 def _make_head(agent_name: str, model: AppearanceModel,
                before: dict[str, types.ModuleType] | None) -> Any:
     options = {"feature_cache": False} if agent_name == "unitrack" else {}
@@ -230,6 +237,8 @@ def _make_head(agent_name: str, model: AppearanceModel,
         return agent
     if agent_name in ("unitrack-vos", "unitrack-pose"):
         agent.propagator = before["lp"].LabelPropagator(agent.propagator.config)
+    if agent_name == "unitrack-vos":
+        agent.decode = types.MethodType(_argmax_decode, agent)
     elif agent_name in ("unitrack-xcorr", "unitrack-dcf"):
         box = before["bp"]
         config = box.BoxPropagationConfig(**vars(agent.propagator.config))
