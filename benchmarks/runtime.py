@@ -237,8 +237,8 @@ def _make_head(agent_name: str, model: AppearanceModel,
         return agent
     if agent_name in ("unitrack-vos", "unitrack-pose"):
         agent.propagator = before["lp"].LabelPropagator(agent.propagator.config)
-    if agent_name == "unitrack-vos":
-        agent.decode = types.MethodType(_argmax_decode, agent)
+        if agent_name == "unitrack-vos":
+            agent.decode = types.MethodType(_argmax_decode, agent)
     elif agent_name in ("unitrack-xcorr", "unitrack-dcf"):
         box = before["bp"]
         config = box.BoxPropagationConfig(**vars(agent.propagator.config))
