@@ -10,10 +10,11 @@ passes a threshold as an IoU *distance* (``1 - IoU``), it is converted to an IoU
 MOT values are explained in :class:`~unitrack_env.agents.primitives.association.AssociationConfig`):
 
 * ``mot``: chi-square gate 9.4877; duplicates at IoU > 0.85 (code: 0.15 distance); MOT
-  output filter; plus four measured departures from the paper
+  output filter; plus five measured departures from the paper
   (:data:`~unitrack_env.agents.primitives.association.MOT_ASSOCIATION`: detection boxes
-  reported, an ambiguity margin of 0.2 on appearance matches, confirmation at IoU > 0.5
-  instead of 0.8, lost tracks in the IoU stage); ``paper_settings=True`` drops them.
+  reported, a moving average (momentum 0.95) of each track's appearance, an ambiguity margin
+  of 0.05 on appearance matches, confirmation at IoU > 0.5 instead of 0.8, lost tracks in
+  the IoU stage); ``paper_settings=True`` drops them.
 * ``mots``: no gate (the code gates MOT only); confirmation and duplicates as MOT;
   at most 200 locations per mask.
 * ``vis``: no gate; confirmed at IoU > 0.4 (code: 0.6 distance); duplicates at IoU > 0.8

@@ -34,7 +34,8 @@ The output of a frame is the confirmed tracks matched in that frame (optionally 
 box area and width/height ratio, the MOTChallenge output filter of the authors' code).
 
 Tracks keep the payload of their LAST matched observation (paper; authors' code
-``curr_feat``), not a running average.
+``curr_feat``) unless :attr:`AssociationConfig.appearance_momentum` asks for a moving average
+(:mod:`~unitrack_env.agents.primitives.appearance_memory`).
 
 Where this engine departs from the letter of Algorithm 1, it follows the authors' code:
 gated pairs are excluded *before* the Hungarian step (the paper filters them after it,
@@ -51,10 +52,8 @@ from typing import Any, Generic
 
 import numpy as np
 
-from unitrack_env.agents.primitives.association_config import (
-    MOT_ASSOCIATION,
-    AssociationConfig,
-)
+from unitrack_env.agents.primitives.appearance_memory import remember
+from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION, AssociationConfig
 from unitrack_env.agents.primitives.kalman import KalmanFilter, xywh_to_xyah
 from unitrack_env.agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
 from unitrack_env.agents.primitives.tracks import (
@@ -356,7 +355,8 @@ class Associator(Generic[P]):
             track.mean[None], track.covariance[None], now.measurements[det : det + 1]
         )
         track.mean, track.covariance = mean[0], cov[0]
-        track.payload = now.payloads[det]
+        momentum = self.config.appearance_momentum
+        track.payload = remember(track.payload, now.payloads[det], momentum)
         track.score = float(now.scores[det])
         track.detection_box = now.boxes[det].copy()
         track.last_frame = now.frame

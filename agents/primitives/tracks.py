@@ -38,7 +38,8 @@ class Track(Generic[P]):
         state: Life-cycle state.
         mean: ``(8,)`` Kalman state ``(u, v, a, h, du, dv, da, dh)``.
         covariance: ``(8, 8)`` Kalman covariance.
-        payload: Payload of the last matched observation.
+        payload: Payload of the last matched observation (or the moving average of the
+            matched ones, see ``AssociationConfig.appearance_momentum``).
         score: Score of the last matched detection.
         detection_box: ``(4,)`` ``(x, y, w, h)`` of the last matched detection.
         start_frame: Episode frame counter (1-based) at birth.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from unitrack_env.agents.primitives.association import (
     AssociationConfig,
@@ -336,3 +337,40 @@ def test_ambiguity_margin_leaves_look_alikes_to_the_iou_stage() -> None:
     step(plain, [box(0), box(60)], [RED, RED])
     step(plain, [box(2), box(58)], [RED, RED])
     assert {m[2] for m in plain.last_step.matches} == {"appearance"}
+
+
+def test_appearance_momentum_keeps_a_track_after_one_wrong_observation() -> None:
+    # Frame 2 gives the track a detection that looks like someone else (matched by overlap);
+    # frame 3 offers both looks far away, so appearance alone decides whom the track follows.
+    red, green = torch.from_numpy(RED[None]), torch.from_numpy(GREEN[None])
+    followed = {}
+    for momentum in (0.0, 0.9):
+        assoc = Associator(dot_similarity, AssociationConfig(use_motion=False,
+                                                             appearance_momentum=momentum))
+        step(assoc, [box(0)], [red])
+        assert step(assoc, [box(0)], [green]) == {0: 1}
+        ids = step(assoc, [box(300), box(600)], [red, green])
+        followed[momentum] = [det for det, track_id in ids.items() if track_id == 1]
+    assert followed == {0.0: [1], 0.9: [0]}  # last observation: the other look; memory: its own
+
+
+def test_remember_averages_location_sets_of_one_shape_only() -> None:
+    from unitrack_env.agents.primitives.appearance_memory import remember
+
+    old = torch.tensor([[1.0, 0.0], [0.0, 2.0]])
+    new = torch.tensor([[0.0, 1.0], [0.0, 1.0]], dtype=torch.float16)
+    mixed = remember(old, new, 0.5)
+    assert mixed.dtype == torch.float16 and mixed.shape == (2, 2)
+    np.testing.assert_allclose(mixed.float().norm(dim=1).numpy(), 1.0, atol=1e-3)
+    np.testing.assert_allclose(mixed[0].float().numpy(), [0.7071, 0.7071], atol=1e-3)
+    np.testing.assert_allclose(mixed[1].float().numpy(), [0.0, 1.0], atol=1e-3)
+    assert remember(old, new, 0.0) is new
+    bigger = torch.ones(3, 2)
+    assert remember(old, bigger, 0.9) is bigger  # a mask of another size: the newest
+    assert remember(RED, GREEN, 0.9) is GREEN  # not tensors: the newest
+
+
+@pytest.mark.parametrize("momentum", [-0.1, 1.0, float("nan")])
+def test_appearance_momentum_must_be_below_one(momentum: float) -> None:
+    with pytest.raises(ValueError, match="appearance_momentum"):
+        AssociationConfig(appearance_momentum=momentum)
