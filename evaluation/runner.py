@@ -204,6 +204,21 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
         raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
 
 
+def _sequence_lengths(bench: Benchmark, todo: list[str]
+                      ) -> tuple[dict[str, int], dict[str, str]]:
+    """Frames of each sequence to play, read before any is played; a sequence whose files
+    fail the readers' checks is a failure of its own and the others still play (OTB and
+    DAVIS read a whole sequence here, MOTChallenge its ``seqinfo.ini``)."""
+    lengths: dict[str, int] = {}
+    failures: dict[str, str] = {}
+    for name in todo:
+        try:
+            lengths[name] = bench.sequence_length(name)
+        except (ValueError, KeyError, OSError) as exc:
+            failures[name] = SequenceFailure.describe(exc)
+    return lengths, failures
+
+
 def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
                todo: list[str], inputs: dict[str, str], bar: Any
                ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
@@ -319,16 +334,17 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     replayed = {n: why for n in finished
                 if (why := _stale_reason(out, base, n, inputs[n])) is not None}
     skipped = [n for n in finished if n not in replayed]
-    todo = [n for n in names if n not in skipped]
-    lengths = {s: bench.sequence_length(s) for s in todo}
+    lengths, failures = _sequence_lengths(bench, [n for n in names if n not in skipped])
+    todo = list(lengths)
 
     from unitrack_env.evaluation.progress import RunProgress
 
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:
         if workers <= 1 or len(todo) <= 1:
-            records, failures = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar)
+            records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar)
         else:
-            records, failures = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
+            records, played = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
+    failures |= played
     if failures:
         raise RunFailed(failures, out)
     for name in skipped:

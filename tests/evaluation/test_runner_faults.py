@@ -54,6 +54,29 @@ def test_a_corrupt_frame_fails_its_sequence_only(tmp_path, mot16, workers, bad, 
     assert "1 sequence(s) failed" in err
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_sequence_refused_at_the_door_fails_alone(tmp_path, workers, capsys):
+    """OTB and DAVIS read a whole sequence to count its frames: one with a malformed ground
+    truth fails alone, before any frame is played, and the others are played and kept."""
+    root = tmp_path / "OTB"
+    shutil.copytree(ensure_synthetic("OTB", "otb"), root)
+    truth = root / "SynWalker" / "groundtruth_rect.txt"
+    truth.write_text("10,20,30\n" + truth.read_text())
+    out = tmp_path / "run"
+    with pytest.raises(RunFailed) as failed:
+        run("UniTrack/OTB-v0", "repeat-box", out=out, env_kwargs={"root": str(root)},
+            workers=workers, progress=False)
+    assert list(failed.value.failures) == ["SynWalker"]
+    assert "groundtruth_rect.txt" in failed.value.failures["SynWalker"]
+    assert sorted(p.name for p in (out / "sequences").iterdir()) == [
+        "SynCrossing.json", "SynLateStart.json"]
+    code = main(["evaluate", "--env", "UniTrack/OTB-v0", "--root", str(root), "--agent",
+                 "repeat-box", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and "1 sequence(s) failed" in err and "SynWalker" in err
+    assert "Traceback" not in err
+
+
 def test_changed_detections_replay_that_sequence_only(tmp_path, mot16):
     out = tmp_path / "run"
     first = run(ENV, "iou", out=out, env_kwargs={"root": str(mot16)}, progress=False)
