@@ -117,6 +117,29 @@ def test_otb_special_sequences(tmp_path):
     assert clip.frame_numbers == (5, 6) and clip.image_size == (8, 6)
 
 
+def test_otb_named_folders_with_other_ground_truth_files_are_not_dropped(tmp_path):
+    # Jogging with one plain file (the toolkit defines .1 and .2): read as a custom folder.
+    _images(tmp_path / "Jogging" / "img", range(1, 3))
+    (tmp_path / "Jogging" / "groundtruth_rect.txt").write_text("1,1,2,2\n1,1,2,2\n")
+    # Crossing with two targets (the toolkit defines one file): read as a custom folder.
+    _images(tmp_path / "Crossing" / "img", range(1, 3))
+    for k in (1, 2):
+        (tmp_path / "Crossing" / f"groundtruth_rect.{k}.txt").write_text("1,1,2,2\n" * 2)
+    # Skating2 holds its two files and one more: that one is named, the others read.
+    _images(tmp_path / "Skating2" / "img", range(1, 3))
+    for name in ("groundtruth_rect.1.txt", "groundtruth_rect.2.txt", "groundtruth_rect.txt"):
+        (tmp_path / "Skating2" / name).write_text("1,1,2,2\n" * 2)
+    with pytest.warns(UserWarning) as caught:
+        ds = otb.OTBDataset(tmp_path)
+    messages = "\n".join(str(w.message) for w in caught)
+    assert "Jogging: named like the OTB-100 sequence Jogging" in messages
+    assert "holds groundtruth_rect.1.txt, groundtruth_rect.2.txt" in messages
+    assert "Skating2: groundtruth_rect.txt ignored" in messages
+    assert ds.sequence_names == ["Crossing.1", "Crossing.2", "Jogging", "Skating2.1",
+                                 "Skating2.2"]
+    assert ds.load("Jogging").frame_numbers == (1, 2)
+
+
 def test_otb_errors(tmp_path):
     _images(tmp_path / "Deer" / "img", range(1, 3))
     (tmp_path / "Deer" / "groundtruth_rect.txt").write_text("1,1,2,2\n" * 72)

@@ -190,10 +190,7 @@ class OTBDataset(SequenceDataset[SOTSequence]):
         self._specs: dict[str, OTBSequenceSpec | tuple[Path, Path]] = {}
         for folder in sorted(p for p in self.root.iterdir() if (p / "img").is_dir()):
             known = by_folder.get(folder.name.lower())
-            if known:
-                for spec in known:
-                    if (folder / spec.gt_file).is_file():
-                        self._specs[spec.name] = spec
+            if known and self._add_known(folder, known):
                 continue
             for gt in sorted(folder.iterdir()):
                 match = OTB_GT_PATTERN.match(gt.name)
@@ -211,6 +208,33 @@ class OTBDataset(SequenceDataset[SOTSequence]):
             )
         self.sequence_names: list[str] = list(self._specs)
         self._lower = {n.lower(): n for n in self.sequence_names}
+
+    def _add_known(self, folder: Path, known: list[OTBSequenceSpec]) -> bool:
+        """Add the OTB-100 targets of ``folder``; False when it has none of their files.
+
+        Ground-truth files the toolkit does not define for the folder are never dropped in
+        silence: when none of its own are present the folder is read as a custom one (with
+        a warning), else the extra files are named in a warning.
+        """
+        found = [spec for spec in known if (folder / spec.gt_file).is_file()]
+        used = {spec.gt_file for spec in found}
+        extra = sorted(p.name for p in folder.iterdir()
+                       if OTB_GT_PATTERN.match(p.name) and p.name not in used)
+        expected = ", ".join(spec.gt_file for spec in known)
+        if not found:
+            if extra:
+                warnings.warn(
+                    f"{folder}: named like the OTB-100 sequence {known[0].folder}, whose ground "
+                    f"truth is {expected}, but holds {', '.join(extra)}; read as a custom "
+                    "sequence (frames from the first numbered image, not the toolkit's range)",
+                    stacklevel=3)
+            return False
+        if extra:
+            warnings.warn(f"{folder}: {', '.join(extra)} ignored (the OTB toolkit defines "
+                          f"{expected} for this sequence)", stacklevel=3)
+        for spec in found:
+            self._specs[spec.name] = spec
+        return True
 
     def resolve(self, name: str) -> str:
         """Return the dataset's spelling of ``name`` (aliases and case are accepted)."""
