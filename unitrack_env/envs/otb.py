@@ -111,7 +111,8 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
     on the first frame the toolkit scores the given box (so the reward is 1), on later
     frames the agent's box (a zero-size box is replaced by the previous frame's scored
     box). Frames whose ground truth is not a valid box (NaN, ``w <= 0`` or ``h <= 0``)
-    give 0. The episode return divided by the number of frames is the mean overlap;
+    give 0. The episode return divided by the number of frames with valid ground truth is
+    ``AverageOverlap`` (divided by all frames when every frame is valid);
     ``info["iou"]`` repeats the reward.
 
     ## Starting state
@@ -126,8 +127,9 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
     ``terminated=True`` after the agent has answered the last frame (there is no
     truncation). The final ``info["metrics"]`` holds the sequence's OTB scores, computed
     with the toolkit's rules (first frame = ground truth, degenerate boxes repaired, 21
-    overlap thresholds ``0:0.05:1``, strictly greater, 51 precision thresholds, invalid
-    ground truth counted as failures): ``AUC`` (mean success rate; a perfect tracker
+    overlap thresholds ``0:0.05:1``, strictly greater, 51 precision thresholds; a frame
+    with invalid ground truth stays in the denominators and fails every success threshold
+    but passes every precision threshold): ``AUC`` (mean success rate; a perfect tracker
     scores 20/21), ``Precision@20px`` and ``AverageOverlap``. :meth:`write_episode` writes
     ``<Seq>.txt``, one ``x,y,w,h`` line per frame (the usual OTB result file), and
     :meth:`score_folder` scores such files with the same functions.
