@@ -138,6 +138,10 @@ def test_missing_frame_and_unknown_sequence(tmp_path: Path):
     (seq / "img1" / "000002.jpg").unlink()
     with pytest.raises(DataFormatError, match="000002.jpg: missing frame 2 of 3"):
         dataset.load("S1")
+    for frame in (seq / "img1").iterdir():  # PNG frames, seqinfo.ini still says .jpg
+        frame.rename(frame.with_suffix(".png"))
+    with pytest.raises(DataFormatError, match="folder holds 000001.png: is seqinfo.ini imExt"):
+        dataset.load("S1")
     with pytest.raises(UnknownSequenceError, match="available: S1"):
         dataset.load("S9")
 

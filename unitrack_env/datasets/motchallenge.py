@@ -339,11 +339,14 @@ class MOTChallengeDataset:
                 raise DataFormatError(image_dir, "image folder missing (seqinfo.ini imDir)")
             present = {p.name for p in image_dir.iterdir()}
             for frame in range(1, info.length + 1):
-                if info.frame_path(frame).name not in present:
+                path = info.frame_path(frame)
+                if path.name not in present:
+                    other = sorted(p for p in present if Path(p).stem == path.stem)
+                    hint = (f"; the folder holds {other[0]}: is seqinfo.ini imExt right?"
+                            if other else "")
                     raise DataFormatError(
-                        info.frame_path(frame),
-                        f"missing frame {frame} of {info.length} (seqinfo.ini seqLength)",
-                    )
+                        path, f"missing frame {frame} of {info.length} (seqinfo.ini "
+                              f"seqLength){hint}")
         detections = read_detections(self.detection_path(name), info.length)
         gt_path = seq_dir / "gt" / "gt.txt"
         ground_truth = (
