@@ -71,23 +71,32 @@ def _execute(name: str, spec: importlib.machinery.ModuleSpec) -> Any:
 
 
 def _import_module(name: str) -> Any:
-    """Import ``name``; a top-level package or module in the current folder is found too.
+    """Import ``name`` as ``python -m`` would: the current folder first, then ``sys.path``.
 
-    ``python -m`` puts the current folder on ``sys.path``, an installed console script does
-    not: looking there as well makes ``unitrack evaluate --agent myagents:MyTracker`` work
-    from the folder that holds ``myagents.py``, as the user expects.
+    ``python -m`` puts the current folder first on ``sys.path``, an installed console script
+    does not: looking there first makes ``unitrack evaluate --agent agents.mine:MyTracker``
+    import the user's own ``agents/`` even where an installed distribution also provides a
+    top-level ``agents`` (openai-agents does).
     """
+    top = name.partition(".")[0]
+    local = (importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
+             if top not in sys.modules else None)
+    if local is not None and local.loader is not None:
+        _execute(top, local)
+        return importlib.import_module(name)
     try:
         return importlib.import_module(name)
     except ModuleNotFoundError as exc:
-        top = name.partition(".")[0]
-        if exc.name != top or top in sys.modules:
+        origin = getattr(sys.modules.get(top), "__file__", None)
+        if origin is None:
             raise
-        spec = importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
-        if spec is None or spec.loader is None:
+        shadowed = importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
+        if shadowed is None or shadowed.origin == origin:
             raise
-        _execute(top, spec)
-        return importlib.import_module(name)
+        raise ModuleNotFoundError(
+            f"{exc}: '{top}' is already imported from {origin}, which hides ./{top}; name "
+            f"the file instead ({name.replace('.', '/')}.py:ClassName)", name=exc.name,
+        ) from None
 
 
 def _is_file(target: str) -> bool:

@@ -104,6 +104,7 @@ def outsider(tmp_path_factory: pytest.TempPathFactory) -> dict:
     (project / "pytest.ini").write_text("[pytest]\npythonpath = .\n")
     (project / "my_tracker.py").write_text(MY_AGENTS)
     (project / "nearest.py").write_text(_doc_blocks("writing-an-agent.md")[0])
+    (project / "agents" / "nearest.py").write_text(_doc_blocks("writing-an-agent.md")[0])
     (project / "tests").mkdir()
     (project / "tests" / "test_my_tracker.py").write_text(_doc_blocks("regression-tests.md")[0])
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
@@ -151,6 +152,12 @@ def test_readme_install_then_quickstart_pytest_and_cli(outsider):
     _run([outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT16-v0", "--agent",
           "nearest.py:NearestCentre", "--agent-arg", "max_distance=80", "--workers", "2",
           "--out", "runs/nc80"], project, env)
+    # The project's own agents/ package, though openai-agents installed a top-level agents
+    _run([outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT16-v0", "--agent",
+          "agents.nearest:NearestCentre", "--quiet", "--out", "runs/nc-own"], project, env)
+    combined = [json.loads((project / "runs" / run / "metrics.json").read_text())["combined"]
+                for run in ("nc", "nc-own")]
+    assert combined[0] == combined[1]
 
     evaluate = [outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT17-v0", "--agent",
                 "my_tracker:MyTracker", "--quiet", "--format", "json"]

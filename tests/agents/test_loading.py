@@ -57,6 +57,40 @@ def test_module_reference_from_the_current_folder(tmp_path, monkeypatch):
     assert portable_reference(cls) == "cwd_trackers:FileTracker"
 
 
+def _clash(tmp_path, monkeypatch):
+    """An installed top-level ``clashing_pkg`` (as openai-agents ships ``agents``) and the
+    user's own ``clashing_pkg/`` with a tracker, in the current folder."""
+    site = tmp_path / "site"
+    (site / "clashing_pkg").mkdir(parents=True)
+    (site / "clashing_pkg" / "__init__.py").write_text('"""installed"""\n')
+    project = tmp_path / "project"
+    (project / "clashing_pkg").mkdir(parents=True)
+    (project / "clashing_pkg" / "__init__.py").write_text('"""the user own"""\n')
+    (project / "clashing_pkg" / "mine.py").write_text(TRACKER)
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.chdir(project)
+    for name in ("clashing_pkg", "clashing_pkg.mine"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    return site, project
+
+
+def test_the_current_folder_comes_first_as_with_python_m(tmp_path, monkeypatch):
+    _, project = _clash(tmp_path, monkeypatch)
+    cls = agent_class("clashing_pkg.mine:FileTracker")
+    assert sys.modules["clashing_pkg"].__file__.startswith(str(project))
+    assert cls.__module__ == "clashing_pkg.mine"
+
+
+def test_an_installed_package_already_imported_is_named_when_it_hides_the_users(
+        tmp_path, monkeypatch):
+    site, _ = _clash(tmp_path, monkeypatch)
+    import clashing_pkg  # noqa: F401  (imported by something else first)
+
+    with pytest.raises(ImportError, match="already imported from .*site.*hides ./clashing_pkg; "
+                                          "name the file instead"):
+        agent_class("clashing_pkg.mine:FileTracker")
+
+
 @pytest.mark.parametrize(("spec", "message"), [
     ("no_such_module_xyz:Tracker", "cannot import module 'no_such_module_xyz'"),
     ("unitrack_env.agents.baselines.iou:Nope", "has no attribute 'Nope'"),
