@@ -37,8 +37,8 @@ EXAMPLES = {
   unitrack score --benchmark MOT17 --gt data/MOT17/train --results runs/mot17/data --format csv
 """,
     "scorecard": """examples:
-  unitrack scorecard --model imagenet-lite0 --model random --data ../shared/data --out runs/sc
-  unitrack scorecard --model moco_v2.pth,arch=resnet50,layer=layer3,label=MoCo-v2 \
+  unitrack scorecard --model imagenet-lite0 --model random --data data --out runs/sc
+  unitrack scorecard --model moco_v2.pth,arch=resnet50,layer=layer3,label=MoCo-v2 \\
       --model imagenet-lite0 --tasks sot,vos,mot --workers 2 --out runs/sc
   unitrack scorecard --backend ray --address auto --model imagenet-lite0 --out runs/sc
   unitrack scorecard --compare runs/a/scorecard.json runs/b/scorecard.json --out runs/both

@@ -81,10 +81,12 @@ def cell_progress(enabled: bool) -> Iterator[Callable[[int, int, Any], None]]:
         TimeElapsedColumn,
         TimeRemainingColumn,
     )
+    from rich.table import Column
 
     with Progress(TextColumn("cells"), BarColumn(bar_width=20), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                  TextColumn("{task.description}", overflow="ellipsis"),
+                  TextColumn("{task.description}",
+                             table_column=Column(no_wrap=True, overflow="ellipsis")),
                   console=Console(stderr=True, highlight=False, soft_wrap=True)) as progress:
         task = progress.add_task("", total=None)
 

@@ -45,7 +45,7 @@ from unitrack_env.benchmarks import Benchmark, benchmark_for
 from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
 from unitrack_env.evaluation.identity import RunIdentity, result_digest
 from unitrack_env.evaluation.workers import SequenceFailure, play_in_workers
-from unitrack_env.io import atomic_write_text
+from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
 
@@ -182,6 +182,14 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int
     return cls, name, reference
 
 
+def check_out_folder(out: Path) -> None:
+    """Refuse an output folder that is a file (or lies below one) before any work."""
+    blocker = file_in_the_way(out)
+    if blocker is not None:
+        raise OutputError(f"cannot write to {out}: {blocker} is a file, not a folder; "
+                          "give --out a folder")
+
+
 def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
     run_file = out / "run.json"
     if run_file.is_file() and not overwrite:
@@ -304,6 +312,7 @@ def run(
     cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
+    check_out_folder(out)
     env = spec.make_env()
     try:
         base = env.unwrapped

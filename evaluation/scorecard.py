@@ -332,6 +332,10 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
     data_path = Path(data).expanduser() if data is not None else None
     if data_path is not None and not data_path.is_dir():
         raise ValueError(f"--data {data} is not a folder")
+    from unitrack_env.agents.appearance.weights import load_weights
+
+    for model in models:  # a bad checkpoint or layer is one error now, not one per cell later
+        load_weights(model.weights, arch=model.arch, layer=model.layer)
     return names, data_path
 
 
@@ -360,8 +364,11 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     """
     from unitrack_env.evaluation.backends import make_backend
 
+    from unitrack_env.evaluation.runner import check_out_folder
+
     names, data_path = _checked_request(models, tasks, data)
     out = Path(out)
+    check_out_folder(out)
     cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
     todo = [c for c in cells if not cell_done(out, c)]
     done = len(cells) - len(todo)

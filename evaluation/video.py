@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from unitrack_env.io import file_in_the_way
+
 #: Video extensions and how they are written.
 FORMATS = {".mp4": "H.264 (imageio-ffmpeg)", ".avi": "Motion-JPEG (OpenCV)"}
 
@@ -66,6 +68,11 @@ def check_video_path(out: str | os.PathLike) -> Path:
     suffix = out.suffix.lower()
     if suffix not in FORMATS:
         raise ValueError(f"{out}: video extension must be one of {sorted(FORMATS)}")
+    if out.is_dir():
+        raise ValueError(f"{out} is a folder; give the video's file name ({out / 'episode.mp4'})")
+    blocker = file_in_the_way(out.parent)
+    if blocker is not None:
+        raise ValueError(f"cannot write {out}: {blocker} is a file, not a folder")
     if suffix == ".mp4":
         try:
             import imageio_ffmpeg  # noqa: F401

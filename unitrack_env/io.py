@@ -35,3 +35,16 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def file_in_the_way(folder: str | os.PathLike) -> Path | None:
+    """The first of ``folder`` and its parents that exists as something other than a folder.
+
+    None when ``folder`` is a folder or can be created as one. Output options check this
+    before any work, so that ``--out results.csv`` fails at once with a sentence, not after
+    the first sequence with an ``[Errno 20]``.
+    """
+    for path in (Path(folder), *Path(folder).parents):
+        if path.exists():
+            return None if path.is_dir() else path
+    return None

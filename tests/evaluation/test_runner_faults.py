@@ -217,6 +217,25 @@ def test_cli_reports_user_errors_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
+def test_an_output_path_through_a_file_is_refused_before_any_work(tmp_path, capsys):
+    blocker = tmp_path / "results.csv"
+    blocker.write_text("not a folder")
+    commands = {
+        "evaluate": ["evaluate", "--env", ENV, "--agent", "iou", "--out", str(blocker)],
+        "below": ["evaluate", "--env", ENV, "--agent", "iou", "--out", str(blocker / "run")],
+        "scorecard": ["scorecard", "--model", "imagenet-lite0", "--tasks", "vos", "--out",
+                      str(blocker)],
+        "render": ["render", "--env", ENV, "--agent", "iou", "--sequence", "SYN-01", "--out",
+                   str(blocker / "video.avi")],
+    }
+    for what, args in commands.items():
+        code = main([*args, "--quiet"] if what != "render" else args)
+        err = capsys.readouterr().err
+        assert code == 2 and f"{blocker} is a file, not a folder" in err, (what, err)
+        assert "Errno" not in err and "Traceback" not in err, (what, err)
+    assert blocker.read_text() == "not a folder"
+
+
 def test_error_text_is_printed_literally(monkeypatch, capsys):
     # rich would read "[nan, 1.0, ...]" as markup and print nothing of it
     from unitrack_env.evaluation import cli

@@ -215,3 +215,28 @@ def heads_beat_their_baselines(card: dict, model: str) -> None:
     ours = scores("pose-prop", "UniTrack", "combined")
     repeat = scores("pose-prop", "repeat-pose", "combined")
     assert ours["PCK@0.1"] > repeat["PCK@0.1"] + 0.2 and ours["PCK@0.2"] > 0.5, (ours, repeat)
+
+
+def test_the_cell_progress_bar_draws(capsys):
+    """The bar the scorecard shows without --quiet (rich's own API, any rich >= 13)."""
+    from types import SimpleNamespace
+
+    from unitrack_env.evaluation.cli_scorecard import cell_progress
+
+    with cell_progress(enabled=True) as update:
+        update(0, 2, None)
+        update(1, 2, SimpleNamespace(label="imagenet-lite0 / vos UniTrack / " + "x" * 80))
+    assert "cells" in capsys.readouterr().err
+
+
+def test_a_bad_checkpoint_or_layer_is_refused_before_any_cell(tmp_path):
+    from unitrack_env.errors import CheckpointError
+
+    bad = tmp_path / "bad.pth"
+    bad.write_text("not a checkpoint")
+    out = tmp_path / "card"
+    with pytest.raises(CheckpointError, match="bad.pth: not a readable PyTorch checkpoint"):
+        sc.scorecard([sc.ModelSpec(str(bad))], out=out, tasks=["vos"])
+    with pytest.raises(ValueError, match="layer 'stage9'"):
+        sc.scorecard([sc.ModelSpec("imagenet-lite0", layer="stage9")], out=out, tasks=["vos"])
+    assert not out.exists()
