@@ -54,9 +54,14 @@ class EpisodeRegression:
             return check_episode(env_id, agent, sequence, self.golden_path(golden),
                                  update=self.update, **kwargs)
         except DataRootNotFound as exc:
-            pytest.skip(f"no data for {env_id}: {exc}")
+            skip, message = True, f"no data for {env_id}: {exc}"
         except GoldenMismatch as exc:
-            pytest.fail(str(exc), pytrace=False)
+            skip, message = False, str(exc)
+        # Outside the except blocks, so that the report shows the message once (no chained
+        # "During handling of the above exception" copy).
+        if skip:
+            pytest.skip(message)
+        pytest.fail(message, pytrace=False)
 
 
 @pytest.fixture

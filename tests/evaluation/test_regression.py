@@ -78,3 +78,21 @@ def test_compare_records_tolerance_and_digest():
     assert compare_records(base, moved, tolerance={"MOTA": 1e-4})[0].startswith("metrics moved")
     assert "action digest changed" in compare_records(base, moved, tolerance=1e-3,
                                                       strict_actions=True)[0]
+
+
+def test_the_fixture_reports_a_missing_golden_once(tmp_path):
+    """Through pytest itself: the user sees the message once, not chained twice."""
+    import subprocess
+    import sys
+
+    (tmp_path / "test_user.py").write_text(
+        "def test_mine(episode_regression):\n"
+        "    episode_regression.check('UniTrack/MOT16-v0', agent='fresh-ids',\n"
+        "                             sequence='SYN-01', golden='goldens/none.json')\n")
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                             str(tmp_path / "test_user.py")], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 1
+    assert result.stdout.count("does not exist; run pytest with --update-goldens") == 1, (
+        result.stdout)
+    assert "During handling" not in result.stdout
