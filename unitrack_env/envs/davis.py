@@ -137,7 +137,10 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
     is accepted (``argmax`` output need not be cast); other shapes, float or bool dtypes,
     255 (void) and labels that are not objects of the sequence raise
     ``InvalidActionError`` before anything is recorded. ``action_space.sample()`` draws a
-    valid map for the current episode (the space is narrowed at every reset).
+    valid map for the current episode (the space is narrowed at every reset). A vector
+    environment's batched ``action_space`` was copied before any reset and does not know
+    each copy's frame size, so its samples are not valid actions: give each copy a map of
+    the size of its own ``observation["frame"]``.
 
     ## Rewards
     The frame's contribution to the official J-Mean: the mean J (region IoU outside void
