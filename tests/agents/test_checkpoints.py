@@ -39,6 +39,13 @@ def r18_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, 
     return path, state
 
 
+def _assert_same_features(actual: torch.Tensor, expected: torch.Tensor) -> None:
+    """Equal up to float32 rounding on any x86-64: the same network and weights, but oneDNN
+    picks other convolution kernels on other CPUs (on an AVX-512 machine the model's path
+    and the plain forward differ by up to 2e-5 on a few of these layer3 values)."""
+    torch.testing.assert_close(actual, expected, rtol=1e-4, atol=1e-4)
+
+
 def _reference_features(state: dict[str, torch.Tensor], layer: str = "layer3") -> torch.Tensor:
     net = ResNet("resnet18").eval()
     net.load_state_dict(state)
@@ -58,7 +65,7 @@ def test_torchvision_layout_file_round_trips(r18_file: tuple[Path, dict]) -> Non
     assert report is not None and report.complete and report.remap == "torchvision"
     assert sorted(report.matched) == sorted(state)
     assert not report.missing and not report.unexpected and not report.mismatched
-    torch.testing.assert_close(model.features(IMAGE), _reference_features(state))
+    _assert_same_features(model.features(IMAGE), _reference_features(state))
     assert model.identity.weights == str(path)
     assert "122 matched" in model.describe()["load"]
 
@@ -131,7 +138,7 @@ def test_moco_checkpoint_loads_through_the_remap_table(
         assert model.load_report is not None and model.load_report.remap == "moco"
         assert len(model.load_report.matched) == len(state)
         assert len(model.load_report.unexpected) == len(other) + 1  # encoder_k + queue
-        torch.testing.assert_close(model.features(IMAGE), _reference_features(state))
+        _assert_same_features(model.features(IMAGE), _reference_features(state))
 
 
 def test_crw_remap_sets_cifar_normalisation(tmp_path: Path, r18_file: tuple[Path, dict]) -> None:
@@ -153,7 +160,7 @@ def test_timecycle_5d_kernels_are_squeezed(tmp_path: Path, r18_file: tuple[Path,
     path = tmp_path / "timecycle.pth"
     torch.save({"state_dict": five_d}, path)
     model = AppearanceModel(path, arch="resnet18", remap="timecycle")
-    torch.testing.assert_close(model.features(IMAGE), _reference_features(state))
+    _assert_same_features(model.features(IMAGE), _reference_features(state))
 
 
 def test_partial_checkpoints(tmp_path: Path, r18_file: tuple[Path, dict]) -> None:
@@ -209,7 +216,7 @@ def test_user_remaps_and_loaders(tmp_path: Path, r18_file: tuple[Path, dict]) ->
     }
     named = AppearanceModel("my-r18", loaders=loaders, remaps=remaps)
     assert named.identity.weights == "my-r18"
-    torch.testing.assert_close(named.features(IMAGE), _reference_features(state))
+    _assert_same_features(named.features(IMAGE), _reference_features(state))
 
 
 def test_digest_tracks_the_weights(tmp_path: Path, r18_file: tuple[Path, dict]) -> None:
