@@ -252,6 +252,17 @@ def test_davis_missing_first_annotation(tmp_path):
         davis.DAVISDataset(tmp_path, None).load("clip")
 
 
+def test_davis_labels_that_are_not_one_to_n_warn(tmp_path):
+    _images(tmp_path / "JPEGImages" / "480p" / "clip", range(2), digits=5)
+    labels = np.zeros((6, 8), np.uint8)
+    labels[1:3, 1:3] = 38  # what convert("L") makes of palette index 1
+    davis.write_label_png(tmp_path / "Annotations" / "480p" / "clip" / "00000.png", labels)
+    with pytest.warns(UserWarning, match=r"labels \[38\] are not 1..1; the DAVIS evaluation "
+                                         r"counts objects 1..38"):
+        clip = davis.DAVISDataset(tmp_path, None).load("clip")
+    assert clip.object_ids == (38,)
+
+
 # --------------------------------------------------------------------------- JHMDB
 
 

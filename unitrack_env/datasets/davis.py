@@ -20,6 +20,7 @@ frames (``<out>/<seq>/00000.png``), which is what the official evaluation reads.
 from __future__ import annotations
 
 import io
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -289,6 +290,13 @@ class DAVISDataset(SequenceDataset[VOSSequence]):
                 "no object in the first annotation (labels other than 0 and 255); a DAVIS-2016 "
                 "0/255 mask must be converted to labels 0/1",
             )
+        if ids != tuple(range(1, ids[-1] + 1)):
+            warnings.warn(
+                f"{annotations[0]}: object labels {list(ids)} are not 1..{len(ids)}; the DAVIS "
+                f"evaluation counts objects 1..{ids[-1]} (the absent ones as perfectly "
+                "tracked), we score the labels present. Grayscale values of a converted "
+                "palette image? Save the annotations as palette PNGs of labels 1..N",
+                stacklevel=2)
         for path in present[1:]:
             _check_annotation(path, size)
         return VOSSequence(name, frames, annotations, size, ids)
