@@ -345,6 +345,28 @@ def _first_gray_2016(root: Path) -> None:
     _save_png(path, np.where(labels > 0, 255, 0).astype(np.uint8))
 
 
+def _first_labels_times_ten(root: Path) -> None:
+    from unitrack_env.datasets.davis import read_label_png, write_label_png
+
+    path = _davis_png(root, 0)
+    labels = read_label_png(path)
+    if path.is_symlink():
+        path.unlink()
+    write_label_png(path, labels * 10)
+
+
+def _otb_named_like_jogging(scratch: Path) -> None:
+    """SynLateStart renamed Jogging: one plain file where OTB-100 defines .1 and .2."""
+    root = clone(synthetic("otb", "OTB"), scratch / "OTB")
+    (root / OTB_SEQ).rename(root / "Jogging")
+    open_env("UniTrack/OTB-v0", root, "Jogging")
+
+
+def _png_frames(seq: Path) -> None:
+    for frame in (seq / "img1").iterdir():
+        frame.rename(frame.with_suffix(".png"))
+
+
 JHMDB_SEQ = "run/SYN_run_f_cm_np1_ri_med_1"
 
 
@@ -677,6 +699,8 @@ CASES: tuple[Case, ...] = (
        mot(_at(INI, lambda c: c.replace("[Sequence]\n", "[Seq]\n"))), "[Sequence]"),
     _c("MOT-seqinfo-length-past-frames", "seqLength=80 with 72 images",
        mot(_ini("seqLength", "80")), "000073.jpg", "missing frame 73 of 80"),
+    _c("MOT-seqinfo-imExt-wrong", "PNG frames while seqinfo.ini says imExt=.jpg",
+       mot(_png_frames), "000001.jpg", "missing frame 1", "000001.png", "imExt"),
     _c("MOT-det-x-1e9", "a detection at x=1e9",
        mot(_at(DET, cells(3, c2="1e9"))), "line 3, field 'x'", "outside the observation bounds"),
     _c("MOT-det-empty", "an empty det.txt",
@@ -871,6 +895,10 @@ CASES: tuple[Case, ...] = (
     _c("OTB-empty", "an empty groundtruth_rect.txt",
        otb(lambda seq: write(seq / "groundtruth_rect.txt", "")), "groundtruth_rect.txt",
        "empty ground-truth file", "skipped", kind="warning"),
+    _c("OTB-named-folder-other-files", "a folder named Jogging with one groundtruth_rect.txt "
+       "(OTB-100 defines .1 and .2)", _otb_named_like_jogging, "Jogging", "named like the "
+       "OTB-100 sequence", "groundtruth_rect.1.txt", "read as a custom sequence",
+       kind="warning"),
     _c("OTB-frame-truncated", "a frame cut to half its bytes",
        otb(lambda seq: _truncate_frame(seq / "img", 12)), "truncated image"),
     _c("OTB-frames-missing", "fewer images than boxes",
@@ -891,6 +919,9 @@ CASES: tuple[Case, ...] = (
        "first-frame annotation missing"),
     _c("DAVIS-first-annotation-2016", "a DAVIS-2016 0/255 mask as the first annotation",
        davis(_first_gray_2016), "00000.png", "DAVIS-2016", "0/1"),
+    _c("DAVIS-first-labels-not-1-to-n", "first-frame labels 10, 20, 30 instead of 1, 2, 3",
+       davis(_first_labels_times_ten), "00000.png", "not 1..3", "objects 1..30",
+       kind="warning"),
     _c("DAVIS-frame-truncated", "a JPEG frame cut to half its bytes",
        davis(lambda root: _truncate_frame(root / "JPEGImages" / "480p" / DAVIS_SEQ, 7)),
        "00007.jpg", "truncated image"),
