@@ -37,14 +37,15 @@ from unitrack_env.spaces import pack_tracks, unpack_detections
 class MyTracker(Agent, name="my-tracker", tasks=("mot",)):
     """Every detection above threshold gets the id of the previous box it overlaps most."""
 
-    def __init__(self, threshold: float = 0.0, delay: float = 0.0):
-        self.threshold, self.delay = threshold, delay
+    def __init__(self, threshold: float = 0.0, delay: float = 0.0, slow: str = ""):
+        self.threshold, self.delay, self.slow = threshold, delay, slow
 
     def reset(self, observation, info):
         self.next_id, self.previous = 1, []
+        self.pause = self.delay if info["sequence"] == self.slow or not self.slow else 0.0
 
     def act(self, observation):
-        time.sleep(self.delay)
+        time.sleep(self.pause)
         boxes, scores = unpack_detections(observation)
         boxes = boxes[scores >= self.threshold]
         ids = []
@@ -162,8 +163,10 @@ def test_readme_install_then_quickstart_pytest_and_cli(outsider):
     evaluate = [outsider["unitrack"], "evaluate", "--env", "UniTrack/MOT17-v0", "--agent",
                 "my_tracker:MyTracker", "--quiet", "--format", "json"]
     reference = _run([*evaluate, "--out", "ref"], project, env)
-    # SYN-02 (64 frames) finishes ~1.6 s before SYN-01 (72 frames) at 0.2 s a frame.
-    slow = [*evaluate, "--agent-arg", "delay=0.2", "--workers", "2", "--out", "run"]
+    # SYN-01 is played at 0.2 s a frame (72 frames, ~14 s), SYN-02 at full speed: SYN-02 is
+    # kept and SYN-01 is interrupted however far apart the two workers start.
+    slow = [*evaluate, "--agent-arg", "delay=0.2", "--agent-arg", "slow=SYN-01", "--workers",
+            "2", "--out", "run"]
     process = subprocess.Popen(slow, cwd=project, env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, start_new_session=True)
     records = project / "run" / "sequences"
