@@ -813,11 +813,18 @@ CASES: tuple[Case, ...] = (
        vis(lambda root: edit_json(root / "detections" / "train.json",
                                   lambda d: d[0].__setitem__("score", float("nan")))),
        "detections/train.json", "[0].score", "not finite"),
+    _c("VIS-detections-unknown-category", "a detection (results format) of category 99",
+       vis(lambda root: edit_json(root / "detections" / "train.json",
+                                  lambda d: d[0].__setitem__("category_id", 99))),
+       "detections/train.json", "[0].category_id", "unknown category 99"),
     _c("VIS-detections-missing", "detections= a file that does not exist",
        lambda scratch: open_env("UniTrack/VIS-v0", synthetic("youtube_vis", "YouTube-VIS-2019"),
                                 "syn-01", detections=str(scratch / "none.json")),
        "none.json", "not found"),
     # ---------------------------------------------------------------- PoseTrack
+    _c("PoseTrack-no-head-box", "ground-truth persons without bbox_head (poseval's PCKh "
+       "reference)", posetrack(lambda d: [a.pop("bbox_head", None) for a in d["annotations"]]),
+       f"{POSE_SEQ}.json", "bbox_head", "track_id", "poseval needs the head box"),
     _c("PoseTrack-track-id-list", "track_id is a list",
        posetrack(lambda d: d["annotations"][0].__setitem__("track_id", [1])),
        "annotations[0].track_id", "must be an integer, got list"),

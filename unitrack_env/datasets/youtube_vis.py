@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -254,10 +255,13 @@ def parse_vis_json(path: str | os.PathLike, *, text: str | None = None) -> VisDa
 
 
 def parse_vis_results(source: str | os.PathLike | list, videos: dict[int, VisVideo], *,
-                      path: Path | None = None) -> list[VisTrack]:
+                      path: Path | None = None,
+                      categories: Mapping[int, str] | None = None) -> list[VisTrack]:
     """Read results-format entries (a file or a loaded list) for the given videos.
 
-    Entries of other videos are skipped (a results file covers a whole split).
+    Entries of other videos are skipped (a results file covers a whole split). With
+    ``categories`` (detections that become observations), an entry of another category is
+    refused: the scorer would drop its tracks without a word.
 
     Raises:
         DataFormatError: naming the file and the entry of the first problem.
@@ -278,7 +282,12 @@ def parse_vis_results(source: str | os.PathLike | list, videos: dict[int, VisVid
         score = _require(entry, "score", (int, float), path, where)
         if not np.isfinite(score):
             raise DataFormatError(path, "score is not finite", field=f"{where}.score")
-        out.append(VisTrack(video_id, _require(entry, "category_id", int, path, where),
+        category = _require(entry, "category_id", int, path, where)
+        if categories is not None and category not in categories:
+            raise DataFormatError(
+                path, f"unknown category {category}; the annotation file's categories are "
+                      f"{sorted(categories)}", field=f"{where}.category_id")
+        out.append(VisTrack(video_id, category,
                             _segmentations(entry, videos[video_id], path, where),
                             score=float(score)))
     return out
@@ -383,7 +392,7 @@ class YouTubeVISDataset:
                                       "detections: pass detections=<results-format JSON> or 'gt'")
             by_id = {v.id: v for v in self.data.videos}
             grouped: dict[int, list[VisTrack]] = {}
-            for t in parse_vis_results(path, by_id):
+            for t in parse_vis_results(path, by_id, categories=self.data.categories):
                 grouped.setdefault(t.video_id, []).append(t)
             self._detections = grouped
         return self._detections.get(video.id, [])

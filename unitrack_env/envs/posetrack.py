@@ -32,6 +32,7 @@ from unitrack_env.metrics.posetrack import (
     evaluated_frames,
     summarise,
 )
+from unitrack_env.metrics.posetrack_frames import remove_ignored
 from unitrack_env.render import draw_poses
 
 #: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).
@@ -213,6 +214,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         self._evaluated = (set(evaluated_frames(sequence.ground_truth,
                                                 drop_last_frame=self.drop_last_frame))
                            if sequence.ground_truth is not None else set())
+        _check_head_boxes(sequence, self._evaluated)
         self._poseval = PosevalSequence()
         self._results = []
         first = sequence.images[0]
@@ -314,6 +316,23 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
             return draw_poses(self._frame, self._poses[self._t][1], _LIMBS)
         ids, keypoints = self._answer
         return draw_poses(self._answer_frame, keypoints, _LIMBS, ids)
+
+
+def _check_head_boxes(sequence: PoseTrackSequence, evaluated: set[int]) -> None:
+    """Refuse, at reset, a scored ground-truth person without ``bbox_head``: poseval
+    normalises joint distances by the head box and would fail on that frame mid-episode."""
+    for t in sorted(evaluated):
+        image = sequence.images[t]
+        frame = PoseFrame.from_people(sequence.ground_truth.people[t])
+        if image.ignore_regions:
+            frame = remove_ignored(frame, image.ignore_regions)
+        missing = frame.present.any(axis=1) & ~np.isfinite(frame.head_size)
+        if missing.any():
+            raise DataFormatError(
+                sequence.annotation_path or sequence.name,
+                f"person with track_id {int(frame.ids[missing][0])} on image {image.id} "
+                f"({image.file_name}) has keypoints but no bbox_head; poseval needs the head "
+                "box to normalise joint distances", field="bbox_head")
 
 
 def _observed_pose(person: PoseTrackPerson, *, oracle: bool) -> tuple[float, np.ndarray]:
