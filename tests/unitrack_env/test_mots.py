@@ -169,6 +169,26 @@ def test_trackeval_soft_match_ignore_region_and_false_positive():
     assert score["MOTSP"] == pytest.approx(0.6)
 
 
+def test_an_ignore_region_over_two_rows_is_one_region(tmp_path):
+    """TrackEval merges the rows of id 10000 in a frame; so do the checks and the stream."""
+    from unitrack_env.datasets.mots import MOTSSequenceInfo, check_ground_truth
+
+    person = (1, 2001, 2, box_mask(0, 0, 4, 5))
+    split = records([person, (1, 10000, 10, box_mask(6, 0, 8, 3)),
+                     (1, 10000, 10, box_mask(6, 3, 8, 6))])
+    whole = records([person, (1, 10000, 10, box_mask(6, 0, 8, 6))])
+    check_ground_truth(split, MOTSSequenceInfo("S", tmp_path, 1, 1, W, H, 30.0, ".jpg"))
+    res = records([(1, 1, 2, box_mask(0, 0, 4, 5)), (1, 2, 2, box_mask(6, 1, 8, 5))])
+    assert score_sequence(split, res, seq_length=1) == score_sequence(whole, res, seq_length=1)
+    stream = MaskClearStream()
+    stream.reset()
+    g, r = split.rows(1), res.rows(1)
+    keep = split.classes[g] == 2
+    stream.update(split.ids[g][keep], split.rles(g[keep]), split.rles(g[~keep]), res.ids[r],
+                  res.rles(r))
+    assert (stream.totals.tp, stream.totals.fp) == (1, 0)  # the second mask is ignored
+
+
 def test_streaming_counts_match_trackeval_on_the_same_frames():
     p1, p2 = box_mask(0, 0, 3, 4), box_mask(4, 0, 8, 4)
     ign = box_mask(0, 5, 8, 6)

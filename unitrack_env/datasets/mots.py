@@ -240,7 +240,8 @@ def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
     """Refuse ground truth that TrackEval would refuse when scoring, naming file and line.
 
     Checks: every ``time_frame`` is a frame of the sequence, every mask has the frame's
-    size, no object id twice in one frame, and no two masks of a frame overlap (TrackEval's
+    size, no object id twice in one frame (the ignore id 10000 may be: TrackEval merges its
+    rows into one region), and no two masks of a frame overlap (TrackEval's
     MOTS readers reject overlapping masks). Works on the run-length encodings (no mask is
     decoded).
 
@@ -259,11 +260,11 @@ def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
                                f"{info.width}x{info.height}", "img_height")
     for frame in np.unique(gt.frames):
         idx = gt.rows(frame)
-        ids = gt.ids[idx]
+        ids = gt.ids[idx][gt.ids[idx] != IGNORE_ID]  # an ignore region may span several rows
         if len(np.unique(ids)) != len(ids):
             seen: set[int] = set()
             for i in idx:
-                if int(gt.ids[i]) in seen:
+                if int(gt.ids[i]) in seen and gt.ids[i] != IGNORE_ID:
                     raise gt._error(int(i), f"id {gt.ids[i]} appears twice in frame {frame}",
                                     "id")
                 seen.add(int(gt.ids[i]))
