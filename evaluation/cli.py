@@ -76,14 +76,14 @@ def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
     unitrack_env.register_all()
     cls = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point)
-    kwargs = parse_options(cls, args.env_arg or [], agent=env_id, kind="environment",
+    given = list(args.env_arg or [])
+    for name in ("split", "detections"):  # checked like --env-arg: OTB has neither
+        if getattr(args, name, None):
+            given.append(f"{name}={getattr(args, name)}")
+    kwargs = parse_options(cls, given, agent=env_id, kind="environment",
                            extra=GYM_MAKE_OPTIONS)
     if args.root is not None:
         kwargs["root"] = str(Path(args.root).expanduser().resolve())
-    if getattr(args, "split", None):
-        kwargs["split"] = args.split
-    if getattr(args, "detections", None):
-        kwargs["detections"] = args.detections
     return kwargs
 
 
