@@ -12,6 +12,7 @@ the verdict of the same case against the code before issue 10, recorded once in
 
 from __future__ import annotations
 
+import argparse
 import collections
 import importlib.util
 import json
@@ -132,6 +133,7 @@ def parse_rows(text: str) -> dict[str, list[str]]:
 
 def main() -> int:
     """Run the corpus and write the page."""
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     results = run_all()
     PAGE.write_text(render(results))
     counts = collections.Counter(o.verdict for o in results.values())

@@ -6,6 +6,7 @@ A test fails when a page is out of date.
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import inspect
 import sys
@@ -37,6 +38,7 @@ def pages() -> dict[str, str]:
 
 def main() -> int:
     """Write every page."""
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     DOCS.mkdir(parents=True, exist_ok=True)
     for name, text in pages().items():
         (DOCS / name).write_text(text)
