@@ -167,8 +167,11 @@ def test_readme_install_then_quickstart_pytest_and_cli(outsider):
     # kept and SYN-01 is interrupted however far apart the two workers start.
     slow = [*evaluate, "--agent-arg", "delay=0.2", "--agent-arg", "slow=SYN-01", "--workers",
             "2", "--out", "run"]
+    # As from a terminal: SIGINT at its default even when these tests run in a background job
+    # (bash starts those with SIGINT ignored, and Python keeps an ignored SIGINT ignored).
     process = subprocess.Popen(slow, cwd=project, env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+                               stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     records = project / "run" / "sequences"
     deadline = time.monotonic() + 300
     while not (records.is_dir() and any(records.iterdir())) and time.monotonic() < deadline:
