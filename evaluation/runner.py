@@ -214,9 +214,11 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
 
 def _sequence_lengths(bench: Benchmark, todo: list[str]
                       ) -> tuple[dict[str, int], dict[str, str]]:
-    """Frames of each sequence to play, read before any is played; a sequence whose files
-    fail the readers' checks is a failure of its own and the others still play (OTB and
-    DAVIS read a whole sequence here, MOTChallenge its ``seqinfo.ini``)."""
+    """Frames of each sequence to play, read before any is played.
+
+    A sequence whose files fail the readers' checks is a failure of its own and the others
+    still play (OTB and DAVIS read a whole sequence here, MOTChallenge its ``seqinfo.ini``).
+    """
     lengths: dict[str, int] = {}
     failures: dict[str, str] = {}
     for name in todo:

@@ -363,7 +363,6 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         on_progress: called with (cells done, cells in all, the cell just finished).
     """
     from unitrack_env.evaluation.backends import make_backend
-
     from unitrack_env.evaluation.runner import check_out_folder
 
     names, data_path = _checked_request(models, tasks, data)

@@ -319,8 +319,11 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
 
 
 def _check_head_boxes(sequence: PoseTrackSequence, evaluated: set[int]) -> None:
-    """Refuse, at reset, a scored ground-truth person without ``bbox_head``: poseval
-    normalises joint distances by the head box and would fail on that frame mid-episode."""
+    """Refuse, at reset, a scored ground-truth person without ``bbox_head``.
+
+    Poseval normalises joint distances by the head box and would fail on that frame
+    mid-episode.
+    """
     for t in sorted(evaluated):
         image = sequence.images[t]
         frame = PoseFrame.from_people(sequence.ground_truth.people[t])
