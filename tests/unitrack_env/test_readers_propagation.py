@@ -303,3 +303,15 @@ def test_jhmdb_split_files(tmp_path):
     (splits / "catch_test_split1.txt").write_text("broken line here\n")
     with pytest.raises(DataFormatError, match="line 1"):
         jhmdb.JHMDBDataset(tmp_path, split="test")
+
+
+def test_written_mat_files_do_not_depend_on_the_clock(monkeypatch):
+    """scipy stamps the time into a MAT header; the same joints must give the same bytes."""
+    import time
+
+    from unitrack_env.datasets.synthetic.jhmdb import joint_positions_mat
+
+    joints = np.arange(2 * 15 * 2, dtype=np.float64).reshape(2, 15, 2)
+    first = joint_positions_mat(joints)
+    monkeypatch.setattr(time, "asctime", lambda *args: "Thu Jan  1 00:00:00 2099")
+    assert joint_positions_mat(joints) == first

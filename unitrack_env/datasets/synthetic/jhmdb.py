@@ -102,6 +102,10 @@ def puppet_joints(spec: VideoSpec) -> np.ndarray:
                      for t in range(video.num_frames)])
 
 
+MAT_HEADER: bytes = b"MATLAB 5.0 MAT-file, written by unitrack-env".ljust(116)
+"""The text header of the MAT files we write (MATLAB 5: 116 bytes of free text)."""
+
+
 def joint_positions_mat(joints: np.ndarray) -> bytes:
     """Return the bytes of a ``joint_positions.mat`` holding ``pos_img`` for 0-based joints.
 
@@ -116,7 +120,9 @@ def joint_positions_mat(joints: np.ndarray) -> bytes:
     pos = (np.asarray(joints, dtype=np.float64) + MATLAB_ORIGIN).transpose(2, 1, 0)
     buffer = io.BytesIO()
     savemat(buffer, {"pos_img": np.ascontiguousarray(pos)}, do_compression=False)
-    return buffer.getvalue()
+    # scipy writes the time to the second into the 116-byte text header; a fixed text makes
+    # the same joints the same bytes (result digests, byte-equal comparisons).
+    return MAT_HEADER + buffer.getvalue()[len(MAT_HEADER):]
 
 
 def write_jhmdb(root: str | Path, benchmark: str = "JHMDB", *,
