@@ -81,7 +81,11 @@ def test_compare_records_tolerance_and_digest():
 
 
 def test_the_fixture_reports_a_missing_golden_once(tmp_path):
-    """Through pytest itself: the user sees the message once, not chained twice."""
+    """Through pytest itself: the user sees the message once, not chained twice.
+
+    The short summary (``-rN`` turns it off) repeats the message when the terminal is wide
+    enough, which depends on the machine; the failure report itself must hold it once.
+    """
     import subprocess
     import sys
 
@@ -90,7 +94,7 @@ def test_the_fixture_reports_a_missing_golden_once(tmp_path):
         "    episode_regression.check('UniTrack/MOT16-v0', agent='fresh-ids',\n"
         "                             sequence='SYN-01', golden='goldens/none.json')\n")
     result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                             str(tmp_path / "test_user.py")], cwd=tmp_path,
+                             "-rN", str(tmp_path / "test_user.py")], cwd=tmp_path,
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 1
     assert result.stdout.count("does not exist; run pytest with --update-goldens") == 1, (
