@@ -10,7 +10,14 @@ floating-point order of the appearance model's arithmetic, the way another machi
 * for numpy/scipy code (the baselines' Kalman filters, IoU, Hungarian matching, the
   official scorers): ``NPY_DISABLE_CPU_FEATURES`` (numpy without its AVX-512 kernels),
   ``OPENBLAS_CORETYPE=Sandybridge`` (OpenBLAS's AVX kernels instead of the native ones) and
-  ``MKL_ENABLE_INSTRUCTIONS=AVX2`` (torch's MKL without AVX-512).
+  ``MKL_ENABLE_INSTRUCTIONS=AVX2`` (torch's MKL without AVX-512);
+* ``noise-1e-5/s0`` .. ``s3``: every feature map of the appearance model multiplied by
+  ``1 + 1e-5 * N(0, 1)`` (four seeds). The kernel settings above are only the kernels this
+  machine has; another CPU rounds differently again. An episode that sits on a knife edge
+  (a tracker choosing between two nearly equal peaks) shows it here as two clusters of
+  values: such an episode cannot be a golden at any tolerance (choose another sequence).
+
+The feature cache is off in the replays (a cached feature map would hide the kernels).
 
 It prints, per golden file and metric, the golden value and the largest distance from it
 over the settings; ``docs/regression-tests.md`` explains how the tolerances were set from it.
@@ -39,6 +46,10 @@ REAL_ROOTS = {"UniTrack/MOT17-v0": "MOT17", "UniTrack/MOT15-v0": "MOT15"}
 SHARED = REPO.parent / "shared" / "data"
 
 #: (label, extra environment variables, num_threads override)
+#: Relative size of the feature noise of the ``noise-*`` settings: float32 backbones on two
+#: instruction sets differ by about this much.
+NOISE = 1e-5
+
 SETTINGS: tuple[tuple[str, dict[str, str], int], ...] = (
     ("native/1", {}, 1),
     ("native/2", {}, 2),
@@ -48,11 +59,24 @@ SETTINGS: tuple[tuple[str, dict[str, str], int], ...] = (
     ("onednn-avx2/1", {"ONEDNN_MAX_CPU_ISA": "AVX2"}, 1),
     ("blas-numpy-mkl/1", {"NPY_DISABLE_CPU_FEATURES": _AVX512, "OPENBLAS_CORETYPE": "Sandybridge",
                           "MKL_ENABLE_INSTRUCTIONS": "AVX2"}, 1),
+    *((f"noise-{NOISE:g}/s{seed}", {"UNITRACK_SPREAD_NOISE": f"{NOISE}:{seed}"}, 1)
+      for seed in range(4)),
 )
 
 _CHILD = """
-import json, sys
+import json, os, sys
+import torch
+from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.evaluation.regression.golden import EpisodeRecord, record_episode
+noise = os.environ.get("UNITRACK_SPREAD_NOISE")
+if noise:
+    scale, seed = float(noise.split(":")[0]), int(noise.split(":")[1])
+    generator = torch.Generator().manual_seed(seed)
+    exact = AppearanceModel.features
+    def noisy(self, images):
+        out = exact(self, images)
+        return out * (1 + scale * torch.randn(out.shape, generator=generator))
+    AppearanceModel.features = AppearanceModel.__call__ = noisy
 golden = EpisodeRecord.load(sys.argv[1])
 kwargs = dict(golden.agent_kwargs)
 if "num_threads" in kwargs:
@@ -72,7 +96,7 @@ def replay(path: Path, env: dict[str, str], threads: int) -> dict:
     folder = REAL_ROOTS.get(golden["env_id"])
     real = folder is not None and not golden["sequence"].startswith("SYN")
     root = str(SHARED / folder) if real else ""
-    full_env = {**os.environ, **env}
+    full_env = {**os.environ, "UNITRACK_FEATURE_CACHE": "off", **env}
     out = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(threads), root],
                          capture_output=True, text=True, env=full_env, check=True, cwd=REPO)
     return json.loads(out.stdout.strip().splitlines()[-1])

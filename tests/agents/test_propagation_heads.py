@@ -20,18 +20,18 @@ GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
 ONE = {"num_threads": 1}
 #: Fast SOT settings: half-size crops (the paper's 520 costs 4 backbone passes per frame).
 FAST_SOT = {**ONE, "propagation": {"crop_size": 256}}
-#: Per-head metric tolerances, derived from the spread measured across CPU kernels and thread
-#: counts by scripts/measure_golden_spread.py (docs/regression-tests.md, "Tolerances across
-#: machines"): twice the largest measured change, and at least one frame's worth of a
-#: metric counted per frame (Precision@20px: 1 of 30 frames). Actions are not compared: the
-#: trackers' float32 arithmetic picks another response peak on another CPU.
+#: Per-head metric tolerances, derived from the spread measured across CPU kernels, thread
+#: counts and 1e-5 feature noise by scripts/measure_golden_spread.py (docs/regression-tests.md,
+#: "Tolerances across machines"): twice the largest measured change, and at least one frame's
+#: worth of a metric counted per frame (Precision@20px: 1 of 30 frames). Actions are not
+#: compared: the trackers' float32 arithmetic picks another response peak on another CPU.
+#: The box trackers' episodes were chosen for being stable under that noise: DCF on
+#: SynLateStart was not (AUC 0.80 or 0.64 depending on the CPU: a jump to a look-alike).
 GOLDEN_TOLERANCES: dict[str, dict[str, float]] = {
-    # measured: AUC 0.022, AverageOverlap 0.021 (threads 2, ATEN default), Precision 0
-    "unitrack-dcf": {"AUC": 0.045, "AverageOverlap": 0.045, "Precision@20px": 0.034},
-    # measured: AUC 0.0032 (threads 2), AverageOverlap 0.0021 (oneDNN AVX2: the other
-    # machine's failure, 0.922122, exactly), Precision 0
-    "unitrack-xcorr": {"AUC": 0.007, "AverageOverlap": 0.005, "Precision@20px": 0.034},
-    # measured: no change (identical masks in every setting)
+    # measured: AUC 0.0060, AverageOverlap 0.0069 (noise), Precision 0
+    "unitrack-dcf": {"AUC": 0.015, "AverageOverlap": 0.015, "Precision@20px": 0.034},
+    # measured: AUC 0.0063 (native/2), AverageOverlap 0.0026 (onednn-avx2/1), Precision 0
+    "unitrack-xcorr": {"AUC": 0.013, "AverageOverlap": 0.006, "Precision@20px": 0.034},
     "unitrack-vos": {"*": 2e-3},
     # measured: no change in PCK (4 different action digests, the same PCK)
     "unitrack-pose": {"*": 4e-3},
@@ -96,7 +96,7 @@ def test_pose_decoding_is_subcell():
 # One short synthetic episode per head: it must beat its repeat baseline by a margin and
 # match its golden file (pytest --update-goldens re-records).
 SMOKE = [
-    ("UniTrack/OTB-v0", "unitrack-dcf", "SynLateStart", FAST_SOT, "repeat-box", "AUC", 0.3),
+    ("UniTrack/OTB-v0", "unitrack-dcf", "SynWalker", FAST_SOT, "repeat-box", "AUC", 0.3),
     ("UniTrack/OTB-v0", "unitrack-xcorr", "SynLateStart", FAST_SOT, "repeat-box", "AUC", 0.3),
     # Measured: 0.257 vs 0.212 (look-alike textured people who occlude one another).
     ("UniTrack/DAVIS-v0", "unitrack-vos", "syn-occluded", ONE, "repeat-mask", "J-Mean", 0.02),
