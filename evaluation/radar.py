@@ -10,8 +10,10 @@ same way). Axis scales:
 * ``value``: the metric itself (all axis metrics are fractions in [0, 1]).
 
 Axes whose task ran on synthetic data say so in their label, and their vertices are drawn
-hollow, so that no one mistakes them for benchmark numbers. Needs matplotlib (the ``plots``
-extra); without it no chart is drawn and :func:`draw_radar` says so.
+hollow, so that no one mistakes them for benchmark numbers. A scorecard of one or two tasks
+has no polygon to draw (a point, a line): it is drawn as grouped bars on the same scale, one
+group per task, hollow bars for synthetic data. Needs matplotlib (the ``plots`` extra);
+without it no chart is drawn and :func:`draw_radar` says so.
 """
 
 from __future__ import annotations
@@ -74,22 +76,49 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
         warnings.warn("no radar chart: matplotlib is missing (pip install "
                       "'unitrack-env[plots]')", stacklevel=2)
         return []
-    from unitrack_env.evaluation.scorecard import BASELINE
-
     spokes = axes(card)
     data = radii(card, scale)
+    draw = _polygons if len(spokes) >= 3 else _bars
+    figure = draw(plt, card, spokes, data, scale)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    written = []
+    for suffix in (".png", ".svg"):
+        path = stem.with_suffix(suffix)
+        figure.savefig(path, dpi=150, bbox_inches="tight",
+                       metadata={"Date": None} if suffix == ".svg" else None)
+        written.append(path)
+    plt.close(figure)
+    return written
+
+
+def _style(plt: Any, name: str, index: int) -> dict[str, Any]:
+    """Line style of one polygon: the baselines grey and dashed, the models in tab10."""
+    from unitrack_env.evaluation.scorecard import BASELINE
+
+    if name == BASELINE:
+        return {"color": "0.5", "linestyle": "--", "linewidth": 1.2}
+    return {"color": plt.get_cmap("tab10")(index % 10), "linewidth": 2}
+
+
+def _title(scale: str, better: str = "outer") -> str:
+    what = f"rank per task ({better} = better)" if scale == "rank" else "metric value (%)"
+    return f"Tracking scorecard: {what}"
+
+
+def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
+              data: dict[str, list[float | None]], scale: str) -> Any:
+    """The radar proper (three axes or more)."""
+    from unitrack_env.evaluation.scorecard import BASELINE
+
     angles = [2 * math.pi * i / len(spokes) for i in range(len(spokes))]
     figure, ax = plt.subplots(figsize=(6.4, 6.4), subplot_kw={"projection": "polar"})
     ax.set_theta_offset(math.pi / 2)  # first task at the top, the others clockwise
     ax.set_theta_direction(-1)
-    colors = plt.get_cmap("tab10")
     for index, (name, values) in enumerate(data.items()):
         radius = [0.0 if v is None else v for v in values]
-        baseline = name == BASELINE
-        style = {"color": "0.5", "linestyle": "--", "linewidth": 1.2} if baseline else {
-            "color": colors(index % 10), "linewidth": 2}
+        style = _style(plt, name, index)
         ax.plot([*angles, angles[0]], [*radius, radius[0]], label=name, **style)
-        if not baseline:
+        if name != BASELINE:
             ax.fill([*angles, angles[0]], [*radius, radius[0]], alpha=0.08,
                     color=style["color"])
         for angle, r, (task, *_rest) in zip(angles, radius, spokes, strict=True):
@@ -102,16 +131,40 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
     ax.set_ylim(0, 1.0)
     ax.set_yticks([0.25, 0.5, 0.75, 1.0])
     ax.set_yticklabels([] if scale == "rank" else ["25", "50", "75", "100"], fontsize=7)
-    title = "rank per task (outer = better)" if scale == "rank" else "metric value (%)"
-    ax.set_title(f"Tracking scorecard: {title}", pad=24, fontsize=11)
+    ax.set_title(_title(scale), pad=24, fontsize=11)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2, fontsize=8,
               frameon=False)
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    written = []
-    for suffix in (".png", ".svg"):
-        path = stem.with_suffix(suffix)
-        figure.savefig(path, dpi=150, bbox_inches="tight",
-                       metadata={"Date": None} if suffix == ".svg" else None)
-        written.append(path)
-    plt.close(figure)
-    return written
+    return figure
+
+
+def _bars(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
+          data: dict[str, list[float | None]], scale: str) -> Any:
+    """One or two tasks: grouped bars (no radar polygon has fewer than three vertices)."""
+    from matplotlib.patches import Patch
+
+    from unitrack_env.evaluation.scorecard import BASELINE
+
+    figure, ax = plt.subplots(figsize=(3.2 + 1.6 * len(spokes), 4.8))
+    width = 0.8 / len(data)
+    legend = []
+    for index, (name, values) in enumerate(data.items()):
+        style = _style(plt, name, index)
+        look = {"edgecolor": style["color"], "linewidth": 1.5,
+                "linestyle": style.get("linestyle", "-"),
+                "hatch": "//" if name == BASELINE else None}
+        legend.append(Patch(facecolor=style["color"], label=name, **look))
+        for slot, (value, (task, *_rest)) in enumerate(zip(values, spokes, strict=True)):
+            if value is not None:
+                hollow = card["sources"][task]["kind"] == "synthetic"
+                ax.bar(slot - 0.4 + width * (index + 0.5), value, width * 0.9,
+                       facecolor="white" if hollow else style["color"], **look)
+    ax.set_xticks(range(len(spokes)))
+    ax.set_xticklabels([label for *_rest, label in spokes], fontsize=9)
+    ax.set_ylim(0, 1.0)
+    ax.set_yticks([0.25, 0.5, 0.75, 1.0])
+    ax.set_yticklabels(["", "", "", "best"] if scale == "rank" else ["25", "50", "75", "100"],
+                       fontsize=7)
+    ax.set_title(_title(scale, "higher"), fontsize=11)
+    ax.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2,
+              fontsize=8, frameon=False)
+    return figure

@@ -240,3 +240,43 @@ def test_a_bad_checkpoint_or_layer_is_refused_before_any_cell(tmp_path):
     with pytest.raises(ValueError, match="layer 'stage9'"):
         sc.scorecard([sc.ModelSpec("imagenet-lite0", layer="stage9")], out=out, tasks=["vos"])
     assert not out.exists()
+
+
+def _card(tasks: list[str]) -> dict:
+    """A hand-made scorecard: two models and the baselines on ``tasks`` (no episode played)."""
+    rows = []
+    for offset, task in enumerate(tasks):
+        spec = sc.TASKS[task]
+        head, metric = spec.axis
+        for model, number in (("a", 0.6), ("b", 0.4)):
+            rows.append({"model": model, "task": task, "head": head,
+                         "combined": {metric: number + offset / 10}})
+        rows.append({"model": sc.BASELINE, "task": task, "head": spec.baseline.label,
+                     "combined": {metric: 0.3}})
+    kinds = ["synthetic", "fixture", "benchmark"]
+    return {"models": ["a", "b"], "tasks": tasks, "rows": rows,
+            "sources": {t: {"kind": kinds[i % 3]} for i, t in enumerate(tasks)}}
+
+
+@pytest.mark.parametrize("tasks", [["pose-prop"], ["pose-prop", "sot"],
+                                   ["pose-prop", "sot", "vos"]])
+def test_radar_draws_bars_below_three_tasks(tmp_path, monkeypatch, tasks):
+    """One or two axes make no polygon: the chart falls back to grouped bars, same files."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from unitrack_env.evaluation import radar
+
+    card = _card(tasks)
+    assert radii(card, "rank")["a"] == [1.0] * len(tasks)
+    assert radii(card, "value")["b"] == pytest.approx([0.4 + i / 10 for i in range(len(tasks))])
+    drawn = []
+    for name in ("_bars", "_polygons"):
+        real = getattr(radar, name)
+        monkeypatch.setattr(radar, name,
+                            lambda *a, real=real, name=name: drawn.append(name) or real(*a))
+    files = radar.draw_radar(card, tmp_path / "chart")
+    assert drawn == (["_bars"] if len(tasks) < 3 else ["_polygons"])
+    assert [f.name for f in files] == ["chart.png", "chart.svg"]
+    assert all(f.stat().st_size > 1000 for f in files)
+    assert plt.get_fignums() == []  # closed
