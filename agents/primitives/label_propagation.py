@@ -73,8 +73,10 @@ but more keys outside a query's radius (``t^2 + 4 t r + pi r^2`` keys per tile a
 ``~(t + 2 r)^2 / t^2`` windows); 8 measured fastest here at 480p for r = 12
 (``benchmarks/propagation.py --parts stages``)."""
 
-MAX_AFFINITY_ELEMENTS: int = 1 << 23
-"""Most affinity numbers (float32) held at once, per search: 8 Mi = 32 MiB."""
+MAX_AFFINITY_ELEMENTS: int = 1 << 22
+"""Most affinity numbers (float32) held at once, per search: 4 Mi = 16 MiB. Measured per
+480p step on DAVIS dog / blackswan (2 cores, AVX-512): 137 / 134 ms, against 148 / 142 ms at
+8 Mi and 138 / 134 ms at 2 Mi (smaller blocks: more Python-level calls)."""
 
 AFFINITY_DTYPES: dict[str, torch.dtype] = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 """Allowed ``affinity_dtype`` names and their torch dtypes."""

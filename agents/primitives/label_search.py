@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import torch
+import torch.nn.functional as F
 
 if TYPE_CHECKING:
     from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
@@ -156,10 +157,13 @@ def search_dense(
 GROUP_SIZE: int = 20
 """Keys per group of the first-frame search above a floor (see :func:`search_above`)."""
 
-GROUP_CAP: int = 8
-"""Groups a query may reach the floor in before it falls back to a plain top-k of its row
-(measured on DAVIS blackswan / dog at 480p: 7% / 15% of the queries reach it in more than 8
-of the 321 groups, 14% / 23% in more than 4)."""
+ABOVE_WIDTH: int = 32
+"""Most first-frame keys at or above its floor a query keeps (unsorted: the merge sorts)
+before it falls back to a plain top-k of its row. Measured on DAVIS blackswan / dog at 480p
+(M = 6, top-10): a query's floor is reached in about 2 / 5 groups on average, and by more
+than 32 keys for 0.1% / 4.5% of the queries. The old rule (a top-k over at most 8 reached
+groups) sent 15% of the dog's queries to the plain top-k, which then cost as much as the rest
+of the selection."""
 
 
 def search_above(
@@ -167,16 +171,16 @@ def search_above(
     radius: float | None, floor: torch.Tensor, topk: int, max_elements: int,
     workspace: Workspace | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k of every query over one memory frame, where it can reach ``floor``.
+    """Every key of one memory frame at or above each query's ``floor`` (or its top-k).
 
-    Exact for the merged top-k when ``floor`` is, per query, the ``topk``-th best affinity
-    of other candidates: nothing below it can enter the merged top-k, so only the keys at or
-    above the floor need to be found. The ``S`` keys form ``ceil(S / 20)`` strided groups of
-    20 (key ``j`` in group ``j mod ceil(S / 20)``); one strided max per block of queries gives
-    every group's best affinity; only the (typically one or two) groups whose best reaches
-    the floor are read again, instead of a top-k over every key. A query reaching the floor
-    in more than :data:`GROUP_CAP` groups, or with an infinite floor, gets a plain top-k of
-    its row.
+    Exact for the merged top-k (:func:`merge_topk`) when ``floor`` is, per query, the
+    ``topk``-th best affinity of other candidates: nothing below it can enter the merged
+    top-k, so only the keys at or above the floor need to be found, in any order. The ``S``
+    keys form ``ceil(S / 20)`` strided groups of 20 (key ``j`` in group ``j mod ceil(S /
+    20)``); one strided max per block of queries gives every group's best affinity; only the
+    (typically one or two) groups whose best reaches the floor are read again, and their
+    members at or above the floor are kept, up to :data:`ABOVE_WIDTH` of them. A query with
+    more (a low floor), or with an infinite floor, gets a plain top-k of its row.
 
     Args:
         q: ``(Q, C)`` query features.
@@ -191,17 +195,18 @@ def search_above(
         workspace: Where to keep the affinity buffer between calls (None: a new one).
 
     Returns:
-        ``(Q, k)`` affinities (``-inf`` or below the floor: not needed) and ``(Q, k, K)``
-        labels.
+        ``(Q, W)`` affinities (``W = max(topk, ABOVE_WIDTH)``, unsorted; ``-inf``: empty
+        slot) and ``(Q, W, K)`` labels.
     """
     size = h * w
     keys = feats.reshape(feats.shape[0], -1)
     lanes = math.ceil(size / GROUP_SIZE)
     k = min(topk, size)
+    width = max(k, ABOVE_WIDTH)
     chunk = max(1, max_elements // (lanes * GROUP_SIZE))
     grid = grid_positions(h, w, q.device) if radius is not None else None
-    out_v = torch.empty(q.shape[0], k, device=q.device)
-    out_i = torch.empty(q.shape[0], k, dtype=torch.long, device=q.device)
+    out_v = torch.empty(q.shape[0], width, device=q.device)
+    out_i = torch.empty(q.shape[0], width, dtype=torch.long, device=q.device)
     shape = (min(chunk, q.shape[0]), lanes * GROUP_SIZE)
     aff = (workspace.get("first frame", shape, q.dtype, q.device) if workspace is not None
            else torch.empty(shape, dtype=q.dtype, device=q.device))
@@ -211,34 +216,46 @@ def search_above(
         block = aff[:stop - start]
         _affinity_block(q[start:stop], keys, block[:, :size], grid, slice(start, stop), radius)
         with stage("top-k"):
-            best, index = _select_above(block, lanes, floor[start:stop], k)
-            out_v[start:stop] = best
-            out_i[start:stop] = index
+            _select_above(block, lanes, floor[start:stop], k, out_v[start:stop],
+                          out_i[start:stop])
     with stage("labels"):
         return out_v, lbl.reshape(lbl.shape[0], -1).t()[out_i.clamp_(max=size - 1)]
 
 
-def _select_above(block: torch.Tensor, lanes: int, floor: torch.Tensor,
-                  k: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k of each row of ``block`` among its groups reaching ``floor`` (or of all)."""
-    n = block.shape[0]
-    cap = min(lanes, max(GROUP_CAP, math.ceil(k / GROUP_SIZE)))
+def _select_above(block: torch.Tensor, lanes: int, floor: torch.Tensor, k: int,
+                  out_v: torch.Tensor, out_i: torch.Tensor) -> None:
+    """Fill ``out_v``/``out_i`` ``(n, W)``: each row's keys at or above its floor, or its top-k.
+
+    A row keeps its keys at or above the floor (unsorted) when it has at most ``W`` of them,
+    else its plain top-k; empty slots get ``-inf`` and column 0.
+    """
+    n, width = out_v.shape
     grid = block.view(n, GROUP_SIZE, lanes)
-    best_groups, group = grid.amax(1).topk(min(lanes, cap + 1), dim=1)
-    group = group[:, :cap]
-    picked = torch.gather(grid, 2, group.unsqueeze(1).expand(n, GROUP_SIZE, cap))
-    best, pick = picked.view(n, -1).topk(k, dim=1)  # (n, 20 cap): member, group
-    best, index = best.float(), (pick // cap) * lanes + group.gather(1, pick % cap)
-    # The cap best groups hold every key at or above the floor unless one more group does.
-    heavy = ~torch.isfinite(floor)
-    if cap < lanes:
-        heavy |= best_groups[:, cap] >= floor
-    rows = heavy.nonzero().squeeze(1)
-    if len(rows):  # the floor is reached in too many groups: a plain top-k of the row
-        top_v, top_i = block[rows].topk(k, dim=1)
-        best[rows] = top_v.float()
-        index[rows] = top_i
-    return best, index
+    hit = grid.amax(1) >= floor.unsqueeze(1)  # (n, lanes): groups whose best reaches it
+    light = hit.sum(1) <= width  # each hit group holds a key at or above the floor
+    row, group = (hit & light.unsqueeze(1)).nonzero(as_tuple=True)  # rows ascending
+    columns = group.unsqueeze(1) + torch.arange(GROUP_SIZE, device=block.device) * lanes
+    # index_select, not tensor[index]: several times faster for these 1-D gathers on CPU.
+    where = ((row * block.shape[1]).unsqueeze(1) + columns).view(-1)
+    values = block.view(-1).index_select(0, where)  # the hit groups' keys, (P * 20,)
+    least = floor.index_select(0, row).repeat_interleave(GROUP_SIZE)
+    kept = (values >= least).nonzero().squeeze(1)  # in row order
+    key_row = row.index_select(0, kept // GROUP_SIZE)
+    count = torch.bincount(key_row, minlength=n)
+    # A kept key's slot: its rank among its row's kept keys. Rows with more than W are
+    # clamped into the last slot here and rewritten below.
+    before = (count.cumsum(0) - count).index_select(0, key_row)
+    slot = torch.arange(len(kept), device=block.device) - before
+    flat = key_row * width + slot.clamp_(max=width - 1)
+    out_v.fill_(float("-inf"))
+    out_i.zero_()
+    out_v.view(-1)[flat] = values.index_select(0, kept).to(out_v.dtype)
+    out_i.view(-1)[flat] = columns.view(-1).index_select(0, kept)
+    heavy = (~light | (count > width)).nonzero().squeeze(1)
+    if len(heavy):  # the floor is reached by too many keys: a plain top-k of the row
+        top_v, top_i = block[heavy].topk(k, dim=1)
+        out_v[heavy] = F.pad(top_v.to(out_v.dtype), (0, width - k), value=float("-inf"))
+        out_i[heavy] = F.pad(top_i, (0, width - k))
 
 
 class MemorySearch(ABC):

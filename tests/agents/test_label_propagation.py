@@ -209,19 +209,25 @@ def test_grouped_topk_is_the_topk():
     torch.testing.assert_close(few, aff[:, :14].topk(10, dim=1).values, atol=0, rtol=0)
 
 
-@pytest.mark.parametrize("radius", [None, 3.0])
-def test_search_above_keeps_what_can_beat_the_floor(radius):
+@pytest.mark.parametrize(("radius", "h", "w"), [(None, 9, 13), (3.0, 9, 13), (None, 30, 41),
+                                                (9.0, 30, 41)])
+def test_search_above_keeps_what_can_beat_the_floor(radius, h, w):
     # Merged with k other candidates whose k-th best is the floor, the search above the
-    # floor gives what the full search gives, whatever the floor: high (few keys), low
-    # (every key: plain top-k fallback) or infinite.
+    # floor gives what the full search gives, whatever the floor: high (few keys), middling
+    # (more keys than ABOVE_WIDTH, or more reached groups: plain top-k fallback), low (every
+    # key) or infinite. 30 x 41 keys make 62 groups, more than ABOVE_WIDTH.
     gen = torch.Generator().manual_seed(9)
-    c, h, w, k = 8, 9, 13, 10
+    c, k = 8, 10
     q = normalize_features(torch.randn(c, h, w, generator=gen)).reshape(c, -1).t()
     feats = normalize_features(torch.randn(c, h, w, generator=gen))
     lbl = torch.rand(3, h, w, generator=gen)
-    full = search_dense(q, feats, lbl, h, w, radius, k, 500)
-    # Floors at each query's 3rd best key (3 keys, at most 3 groups reach it) ...
-    floor = full[0][:, 2].clone()
+    full = search_dense(q, feats, lbl, h, w, radius, 300, 5000)
+    # Floors at each query's 3rd best key (3 keys, at most 3 groups reach it), at its 25th,
+    # 40th or 300th best (when there are that many) ...
+    rank = torch.tensor([2, 24, 39, 299]).repeat(h * w // 4 + 1)[:h * w]
+    finite = torch.isfinite(full[0]).sum(1)
+    floor = full[0].gather(1, torch.minimum(rank, finite - 1).unsqueeze(1)).squeeze(1)
+    full = (full[0][:, :k], full[1][:, :k])
     floor[:10] = -2.0  # ... low floors (every key reaches them) and no floor at all
     floor[10:15] = float("-inf")
     other_v = torch.rand(h * w, k, generator=gen).sort(dim=1, descending=True).values
