@@ -11,7 +11,7 @@ floating-point order of the appearance model's arithmetic, the way another machi
   official scorers): ``NPY_DISABLE_CPU_FEATURES`` (numpy without its AVX-512 kernels),
   ``OPENBLAS_CORETYPE=Sandybridge`` (OpenBLAS's AVX kernels instead of the native ones) and
   ``MKL_ENABLE_INSTRUCTIONS=AVX2`` (torch's MKL without AVX-512);
-* ``noise-1e-5/s0`` .. ``s3``: every feature map of the appearance model multiplied by
+* ``noise-1e-05/s0`` .. ``s3``: every feature map of the appearance model multiplied by
   ``1 + 1e-5 * N(0, 1)`` (four seeds). The kernel settings above are only the kernels this
   machine has; another CPU rounds differently again. An episode that sits on a knife edge
   (a tracker choosing between two nearly equal peaks) shows it here as two clusters of
@@ -45,11 +45,11 @@ _AVX512 = "AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_S
 REAL_ROOTS = {"UniTrack/MOT17-v0": "MOT17", "UniTrack/MOT15-v0": "MOT15"}
 SHARED = REPO.parent / "shared" / "data"
 
-#: (label, extra environment variables, num_threads override)
 #: Relative size of the feature noise of the ``noise-*`` settings: float32 backbones on two
 #: instruction sets differ by about this much.
 NOISE = 1e-5
 
+#: (label, extra environment variables, num_threads override)
 SETTINGS: tuple[tuple[str, dict[str, str], int], ...] = (
     ("native/1", {}, 1),
     ("native/2", {}, 2),
