@@ -264,6 +264,20 @@ def posetrack(change: Callable[[Any], Any]) -> Callable[[Path], None]:
     return run
 
 
+def _posetrack_other_video(scratch: Path) -> None:
+    """Every file_name of 900002 leads into a copy of its frames named like another video."""
+    root = clone(synthetic("posetrack", "PoseTrack2018"), scratch / "PoseTrack")
+    images = root / "posetrack_data" / "images" / "val"
+    shutil.copytree(images / POSE_SEQ, images / "900009_synthetic_val")
+
+    def elsewhere(data: Any) -> None:
+        for image in data["images"]:
+            image["file_name"] = image["file_name"].replace(POSE_SEQ, "900009_synthetic_val")
+
+    edit_json(root / "posetrack_data" / "annotations" / "val" / f"{POSE_SEQ}.json", elsewhere)
+    open_env("UniTrack/PoseTrack-v0", root, POSE_SEQ)
+
+
 def posetrack_raw(text: str) -> Callable[[Path], None]:
     """A PoseTrack case whose ground-truth file holds ``text``."""
     def run(scratch: Path) -> None:
@@ -859,6 +873,10 @@ CASES: tuple[Case, ...] = (
     _c("PoseTrack-file-name", "an image file_name that is not '<frame>.jpg'",
        posetrack(lambda d: d["images"][0].__setitem__("file_name", "images/val/x/first.jpg")),
        "images[0].file_name", "is not '<frame>.jpg'"),
+    _c("PoseTrack-file-name-other-video", "file_name leading into another video's folder "
+       "(same frame size) while the sequence's own folder exists", _posetrack_other_video,
+       f"{POSE_SEQ}.json", "images.file_name", "900009_synthetic_val", "of another video",
+       kind="warning"),
     _c("PoseTrack-json-syntax", "the ground-truth file is not JSON",
        posetrack_raw("{'images': []"), f"{POSE_SEQ}.json", "not readable JSON"),
     _c("PoseTrack-nframes-word", "nframes is 'many'",

@@ -38,6 +38,7 @@ integral floats are written as integers like the official files).
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -220,6 +221,7 @@ class PoseTrackDataset:
             video = read_posetrack_json(annotation)
             images = tuple(video.images)
             paths = tuple(self._frame_path(annotation, name, image) for image in images)
+            _warn_other_video(annotation, name, paths, self.image_dir / name)
         else:
             video, annotation = None, None
             files = self._image_files(name)
@@ -245,3 +247,19 @@ class PoseTrackDataset:
             return fallback
         raise DataFormatError(annotation, f"lists frame {image.file_name!r} but neither {path} "
                                           f"nor {fallback} exists", field="images.file_name")
+
+
+def _warn_other_video(annotation: Path, name: str, paths: tuple[Path, ...], own: Path) -> None:
+    """Warn when ``images.file_name`` leads into another video's folder while ``own`` exists.
+
+    The frames are played from where ``file_name`` points (the PoseTrack tools read it so),
+    but a copied or renamed annotation file shows one video's frames against another's
+    ground truth, and the scorer cannot notice.
+    """
+    others = sorted({path.parent.name for path in paths} - {name})
+    if others and own.is_dir():
+        warnings.warn(
+            f"{annotation}: images.file_name leads into the folder(s) {others} of another "
+            f"video, not into this sequence's own {own}; those frames are played. A copied or "
+            "renamed annotation file? Point file_name at images/<split>/" + name + "/",
+            stacklevel=3)
