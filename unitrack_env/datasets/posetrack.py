@@ -261,5 +261,5 @@ def _warn_other_video(annotation: Path, name: str, paths: tuple[Path, ...], own:
         warnings.warn(
             f"{annotation}: images.file_name leads into the folder(s) {others} of another "
             f"video, not into this sequence's own {own}; those frames are played. A copied or "
-            "renamed annotation file? Point file_name at images/<split>/" + name + "/",
+            f"renamed annotation file? Point file_name at images/<split>/{name}/",
             stacklevel=3)
