@@ -44,6 +44,14 @@ def is_reference(spec: str) -> bool:
     return bool(sep and target and attribute and "/" not in attribute and "\\" not in attribute)
 
 
+def _search_first(folder: Path) -> None:
+    """Put ``folder`` first on ``sys.path`` (once), as ``python`` does for a script's folder
+    and ``python -m`` for the current one: a user's module imports the files beside it."""
+    entry = str(folder)
+    if entry not in sys.path:
+        sys.path.insert(0, entry)
+
+
 def _load_file(path: Path) -> Any:
     if not path.is_file():
         raise FileNotFoundError(f"agent file {path} does not exist")
@@ -55,7 +63,11 @@ def _load_file(path: Path) -> Any:
     spec = importlib.util.spec_from_file_location(name, resolved)
     if spec is None or spec.loader is None:
         raise ImportError(f"cannot load {resolved} as a Python module")
-    return _execute(name, spec)
+    _search_first(resolved.parent)
+    try:
+        return _execute(name, spec)
+    except ImportError as exc:
+        raise ImportError(f"agent file {path}: {exc}") from exc
 
 
 def _execute(name: str, spec: importlib.machinery.ModuleSpec) -> Any:
@@ -74,7 +86,8 @@ def _import_module(name: str) -> Any:
     """Import ``name`` as ``python -m`` would: the current folder first, then ``sys.path``.
 
     ``python -m`` puts the current folder first on ``sys.path``, an installed console script
-    does not: looking there first makes ``unitrack evaluate --agent agents.mine:MyTracker``
+    does not: a module found there puts it first (so that it imports the files beside it),
+    and looking there first makes ``unitrack evaluate --agent agents.mine:MyTracker``
     import the user's own ``agents/`` even where an installed distribution also provides a
     top-level ``agents`` (openai-agents does).
     """
@@ -82,6 +95,7 @@ def _import_module(name: str) -> Any:
     local = (importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
              if top not in sys.modules else None)
     if local is not None and local.loader is not None:
+        _search_first(Path.cwd())
         _execute(top, local)
         return importlib.import_module(name)
     try:

@@ -32,6 +32,23 @@ TRACKER = textwrap.dedent('''
 ''')
 
 
+BASE = textwrap.dedent('''
+    from unitrack_env.agents import Agent
+
+    class Base(Agent, tasks=("mot",)):
+        def reset(self, observation, info):
+            pass
+        def act(self, observation):
+            return {}
+''')
+
+
+@pytest.fixture(autouse=True)
+def _restore_sys_path(monkeypatch):
+    """Loading a user's agent puts its folder on ``sys.path``; undo that after each test."""
+    monkeypatch.setattr(sys, "path", list(sys.path))
+
+
 def test_reference_spellings():
     assert is_reference("pkg.mod:Class") and is_reference("dir/file.py:Class")
     assert is_reference("C:/trackers/file.py:Class")
@@ -55,6 +72,30 @@ def test_module_reference_from_the_current_folder(tmp_path, monkeypatch):
     cls = agent_class("cwd_trackers:FileTracker")
     assert cls.__module__ == "cwd_trackers"
     assert portable_reference(cls) == "cwd_trackers:FileTracker"
+
+
+def test_a_file_agent_imports_the_files_beside_it(tmp_path):
+    # As `python file.py` would: the file's folder first on sys.path.
+    (tmp_path / "beside_file_base.py").write_text(BASE)
+    (tmp_path / "file_agent.py").write_text("from beside_file_base import Base\n"
+                                            "class Mine(Base):\n    pass\n")
+    assert agent_class(f"{tmp_path / 'file_agent.py'}:Mine").__mro__[1].__name__ == "Base"
+
+
+def test_a_module_agent_imports_the_files_beside_it(tmp_path, monkeypatch):
+    # As `python -m module_agent` would: the current folder first on sys.path.
+    (tmp_path / "beside_module_base.py").write_text(BASE)
+    (tmp_path / "module_agent.py").write_text("from beside_module_base import Base\n"
+                                              "class Mine(Base):\n    pass\n")
+    monkeypatch.chdir(tmp_path)
+    assert agent_class("module_agent:Mine").__module__ == "module_agent"
+
+
+def test_a_file_agent_whose_import_fails_is_named(tmp_path):
+    (tmp_path / "broken_agent.py").write_text("import no_such_helper_xyz\n")
+    with pytest.raises(ImportError, match="agent file .*broken_agent.py: No module named "
+                                          "'no_such_helper_xyz'"):
+        agent_class(f"{tmp_path / 'broken_agent.py'}:Mine")
 
 
 def _clash(tmp_path, monkeypatch):
