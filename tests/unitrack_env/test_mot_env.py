@@ -134,6 +134,16 @@ def test_invalid_actions_raise_before_recording(action, message):
     assert len(env.episode_results()) == 0 and env._t == 1
 
 
+def test_an_invalid_action_names_its_frame():
+    env = gym.make("UniTrack/MOT16-v0")
+    env.reset(seed=0)
+    _, _, _, _, info = env.step({"ids": np.zeros(0, int), "boxes": np.zeros((0, 4))})
+    bad = {"ids": np.array([7]), "boxes": np.array([[1.0, 2.0, np.nan, 4.0]])}
+    with pytest.raises(InvalidActionError,
+                       match=rf"^frame {info['frame_index']}: track 7 has a non-finite box"):
+        env.step(bad)
+
+
 def test_unpadded_action_and_results_format():
     env = gym.make("UniTrack/MOT16-v0").unwrapped
     env.reset(seed=0)

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from unitrack_env.dependencies import require
-from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.errors import DataFormatError, InvalidActionError, UnknownSequenceError
 from unitrack_env.fingerprint import sequence_files
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import ScoreReport
@@ -244,7 +244,11 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         if self._done or self._sequence is None:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         t = self._t
-        reward, extra = self._record(action, t)
+        try:
+            reward, extra = self._record(action, t)
+        except InvalidActionError as exc:  # say which frame: the agent's bug may be rare
+            raise InvalidActionError(f"frame {self._frame_info(t)['frame_index']}: {exc}") \
+                from None
         self._answer_frame = self._frame
         if t + 1 >= self._stop:
             self._done = True
