@@ -190,6 +190,32 @@ def check_out_folder(out: Path) -> None:
                           "give --out a folder")
 
 
+#: run.json fields as a difference names them.
+_RUN_FIELDS = {"env_id": "env", "agent": "agent", "agent_ref": "agent class",
+               "env_kwargs": "env option", "agent_kwargs": "agent option"}
+
+
+def _shown(options: dict[str, Any], name: str) -> str:
+    return repr(options[name]) if name in options else "unset"
+
+
+def _run_difference(previous: Any, spec: RunSpec) -> str:
+    """What differs between a stored ``run.json`` and ``spec``, in a user's words."""
+    if not isinstance(previous, dict):
+        return "its run.json is unreadable"
+    now = spec.to_json()
+    changes = []
+    for key, label in _RUN_FIELDS.items():
+        old, new = previous.get(key), now.get(key)
+        if isinstance(old, dict) and isinstance(new, dict):
+            changes += [f"{label} {name}: {_shown(old, name)} -> {_shown(new, name)}"
+                        for name in sorted(old.keys() | new.keys())
+                        if _shown(old, name) != _shown(new, name)]
+        elif old != new:
+            changes.append(f"{label}: {old!r} -> {new!r}")
+    return "; ".join(changes) or "another run.json format"
+
+
 def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
     run_file = out / "run.json"
     if run_file.is_file() and not overwrite:
@@ -198,10 +224,9 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
         except ValueError:
             previous = None
         if previous != spec.to_json():
-            what = (f"({previous.get('agent')} on {previous.get('env_id')})"
-                    if isinstance(previous, dict) else "(unreadable run.json)")
-            raise ValueError(f"{out} already holds a different run {what}; choose another "
-                             "--out, or pass overwrite=True (--overwrite) to replace it")
+            raise ValueError(f"{out} already holds a different run "
+                             f"({_run_difference(previous, spec)}); choose another --out, or "
+                             "replace it with --overwrite (overwrite=True in run())")
     try:
         if overwrite:
             for sub in ("data", "sequences"):

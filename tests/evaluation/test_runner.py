@@ -72,8 +72,13 @@ def test_agent_errors_name_sequence_and_frame(tmp_path, monkeypatch):
 
 def test_refuses_to_mix_runs_in_one_folder(tmp_path):
     run(ENV, "iou", out=tmp_path, progress=False, sequences=["SYN-01"])
-    with pytest.raises(ValueError, match="already holds a different run"):
+    with pytest.raises(ValueError, match="already holds a different run .agent: 'iou' -> "
+                                         "'fresh-ids'; agent class: "):
         run(ENV, "fresh-ids", out=tmp_path, progress=False, sequences=["SYN-01"])
+    with pytest.raises(ValueError, match=r"different run \(agent option min_hits: unset -> 5\); "
+                                         "choose another --out, or replace it with --overwrite"):
+        run(ENV, "iou", out=tmp_path, progress=False, sequences=["SYN-01"],
+            agent_kwargs={"min_hits": 5})
     report = run(ENV, "fresh-ids", out=tmp_path, progress=False, sequences=["SYN-01"],
                  overwrite=True)
     assert report.skipped == []
