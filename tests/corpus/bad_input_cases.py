@@ -677,6 +677,10 @@ CASES: tuple[Case, ...] = (
        "id 1 appears twice in frame 1", "first on line 1"),
     _c("MOT-gt-unknown-class", "gt class 14 (MOT17 has 1..13)",
        mot(_at(GT, cells(3, c7=14))), "line 3, field 'class'", "class 14"),
+    _c("MOT-gt-mot15-layout", "MOT15's 10-column gt (world x, y, z) under MOT17",
+       mot(_at(GT, lambda c: "".join(",".join(line.split(",")[:7] + ["-1", "-1", "-1"]) + "\n"
+                                     for line in c.splitlines()))),
+       "field 'class'", "MOT15's layout", "UniTrack/MOT15-v0"),
     _c("MOT-gt-frame-past-end", "a gt row for frame 500 of a 72-frame sequence",
        mot(_at(GT, cells(1, c0=500))), "line 1, field 'frame'", "72 frames"),
     _c("MOT-gt-frame-zero", "a gt row for frame 0 (frames are 1-based)",

@@ -73,6 +73,21 @@ def test_result_without_ground_truth_is_named(folders: tuple[Path, Path]) -> Non
     assert e.value.path == results / "TUD-Crossing.txt"
 
 
+def test_a_benchmark_folder_or_a_run_folder_says_where_to_point(
+        folders: tuple[Path, Path]) -> None:
+    gt_root, results = folders
+    benchmark, run = gt_root.parent / "MOT15", results.parent / "run"
+    benchmark.mkdir()
+    run.mkdir()
+    gt_root.rename(benchmark / "train")
+    results.rename(run / "data")
+    with pytest.raises(DataFormatError, match=f"the ground truth folder is the split folder "
+                                              f"{benchmark / 'train'}$"):
+        score_results(benchmark, run / "data", benchmark="MOT15")
+    with pytest.raises(DataFormatError, match=f"the run's result files are in {run / 'data'}$"):
+        score_results(benchmark / "train", run, benchmark="MOT15")
+
+
 def test_malformed_line_names_file_line_and_field(folders: tuple[Path, Path]) -> None:
     gt_root, results = folders
     bad = results / "TUD-Campus.txt"

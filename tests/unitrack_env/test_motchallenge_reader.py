@@ -152,6 +152,15 @@ def test_root_without_split_folder_explains(tmp_path: Path):
         MOTChallengeDataset(tmp_path, "MOT17", split="test")
 
 
+def test_a_root_one_level_off_says_where_to_point(tmp_path: Path):
+    make_sequence(tmp_path / "MOT17")
+    with pytest.raises(DataFormatError, match=f"did you mean root={tmp_path / 'MOT17'}\\?"):
+        MOTChallengeDataset(tmp_path, "MOT17")  # the folder holding the benchmarks
+    with pytest.raises(DataFormatError, match=f"it is a split folder, pass its parent "
+                                              f"{tmp_path / 'MOT17'}$"):
+        MOTChallengeDataset(tmp_path / "MOT17" / "train", "MOT17")
+
+
 def test_user_detection_folder(tmp_path: Path):
     make_sequence(tmp_path)
     dets = tmp_path / "mydets"

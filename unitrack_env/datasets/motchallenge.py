@@ -253,6 +253,21 @@ class MOTSequence:
         return self.info.path.name
 
 
+def _root_hint(root: Path, split: str, benchmark: str) -> str:
+    """Where ``root`` probably should point when it has no ``split`` folder."""
+    if not root.is_dir():
+        return ""
+    present = sorted(p for p in root.iterdir() if p.is_dir())
+    inside = [p for p in present if (p / split).is_dir()]
+    if inside:  # one level too high: root=data instead of data/MOT17
+        best = next((p for p in inside if p.name == benchmark), inside[0])
+        return f"; did you mean root={best}?"
+    if any((p / "seqinfo.ini").is_file() for p in present):  # the split folder itself
+        return f"; {root} holds sequences: it is a split folder, pass its parent {root.parent}"
+    names = ", ".join(p.name for p in present)
+    return f" (found: {names})" if names else ""
+
+
 class MOTChallengeDataset:
     """The sequences of one split of a MOTChallenge-layout data set.
 
@@ -279,13 +294,10 @@ class MOTChallengeDataset:
             raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
         self.split_dir = self.root / split
         if not self.split_dir.is_dir():
-            present = sorted(p.name for p in self.root.iterdir() if p.is_dir()) if (
-                self.root.is_dir()) else []
-            hint = f" (found: {', '.join(present)})" if present else ""
             raise DataFormatError(
                 self.split_dir,
                 f"split folder missing; root= should be the benchmark folder that holds "
-                f"train/ and test/{hint}",
+                f"train/ and test/{_root_hint(self.root, split, benchmark)}",
             )
         self.sequence_names = sorted(
             p.name for p in self.split_dir.iterdir()

@@ -151,9 +151,12 @@ def check_rows(
             bad_cls = ~np.isin(classes, list(VALID_GT_CLASSES))
             if bad_cls.any():
                 i = int(np.argmax(bad_cls))
+                # MOT16/17/20 ground truth has 9 columns, MOT15's 10 (world x, y, z last).
+                hint = ("; its 10 columns are MOT15's layout (world x, y, z last): read it "
+                        "with UniTrack/MOT15-v0") if table.shape[1] == 10 else ""
                 raise DataFormatError(
                     path, f"class {classes[i]:g} is not a MOTChallenge class id (1..13, "
-                          "TrackEval refuses others when scoring)",
+                          f"TrackEval refuses others when scoring){hint}",
                     line=int(lines[i]), field="class")
 
 

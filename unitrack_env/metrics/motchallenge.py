@@ -354,7 +354,11 @@ def _folder_sequences(
     if sequences is None:
         seqs = _sequences_from_results(results_dir)
         if not seqs:
-            raise DataFormatError(results_dir, f"contains no result files (*{RESULT_SUFFIX})")
+            inner = results_dir / "data"  # a run folder of `unitrack evaluate`
+            hint = (f"; the run's result files are in {inner}"
+                    if inner.is_dir() and _sequences_from_results(inner) else "")
+            raise DataFormatError(results_dir,
+                                  f"contains no result files (*{RESULT_SUFFIX}){hint}")
     else:
         seqs = list(dict.fromkeys(sequences))
         if not seqs:
@@ -366,8 +370,11 @@ def _folder_sequences(
     for seq in seqs:
         gt_file = gt_root / seq / "gt" / "gt.txt"
         if not gt_file.is_file():
+            splits = [gt_root / split for split in ("train", "test")
+                      if (gt_root / split / seq / "gt" / "gt.txt").is_file()]
+            hint = f"; the ground truth folder is the split folder {splits[0]}" if splits else ""
             raise DataFormatError(
                 results_dir / f"{seq}{RESULT_SUFFIX}",
-                f"sequence '{seq}' has no ground truth (expected {gt_file})",
+                f"sequence '{seq}' has no ground truth (expected {gt_file}){hint}",
             )
     return seqs
