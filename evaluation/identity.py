@@ -36,6 +36,16 @@ def _named_files(values: Iterable[Any]) -> list[Path]:
     return found
 
 
+def _shown(options: dict[str, Any], name: str) -> str:
+    return repr(options[name]) if name in options else "unset"
+
+
+def option_changes(old: dict[str, Any], new: dict[str, Any], label: str) -> list[str]:
+    """``["<label> <name>: <old> -> <new>", ...]`` for every option that differs (sorted)."""
+    return [f"{label} {name}: {_shown(old, name)} -> {_shown(new, name)}"
+            for name in sorted(old.keys() | new.keys()) if _shown(old, name) != _shown(new, name)]
+
+
 @dataclass(frozen=True)
 class RunIdentity:
     """A digest of everything but the data that decides a sequence's results."""

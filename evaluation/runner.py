@@ -43,7 +43,7 @@ from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks import Benchmark, benchmark_for
 from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
-from unitrack_env.evaluation.identity import RunIdentity, result_digest
+from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
 from unitrack_env.evaluation.workers import SequenceFailure, play_in_workers
 from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
@@ -195,10 +195,6 @@ _RUN_FIELDS = {"env_id": "env", "agent": "agent", "agent_ref": "agent class",
                "env_kwargs": "env option", "agent_kwargs": "agent option"}
 
 
-def _shown(options: dict[str, Any], name: str) -> str:
-    return repr(options[name]) if name in options else "unset"
-
-
 def _run_difference(previous: Any, spec: RunSpec) -> str:
     """What differs between a stored ``run.json`` and ``spec``, in a user's words."""
     if not isinstance(previous, dict):
@@ -208,9 +204,7 @@ def _run_difference(previous: Any, spec: RunSpec) -> str:
     for key, label in _RUN_FIELDS.items():
         old, new = previous.get(key), now.get(key)
         if isinstance(old, dict) and isinstance(new, dict):
-            changes += [f"{label} {name}: {_shown(old, name)} -> {_shown(new, name)}"
-                        for name in sorted(old.keys() | new.keys())
-                        if _shown(old, name) != _shown(new, name)]
+            changes += option_changes(old, new, label)
         elif old != new:
             changes.append(f"{label}: {old!r} -> {new!r}")
     return "; ".join(changes) or "another run.json format"

@@ -16,6 +16,7 @@ import unitrack_env
 from unitrack_env.agents import make_agent
 from unitrack_env.benchmarks import Benchmark, benchmark_for
 from unitrack_env.evaluation.episode import play_episode
+from unitrack_env.evaluation.identity import option_changes
 from unitrack_env.io import atomic_write_text
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
@@ -199,7 +200,10 @@ def check_episode(
         )
     problems = compare_records(expected, actual, tolerance=tolerance, metrics=metrics,
                                strict_actions=strict_actions)
-    if problems:
+    if problems:  # options that changed since the recording come first: the likely cause
+        problems = [*option_changes(expected.agent_kwargs, actual.agent_kwargs, "agent option"),
+                    *option_changes(expected.env_kwargs, actual.env_kwargs, "env option"),
+                    *problems]
         raise GoldenMismatch(
             f"{agent} on {env_id} / {sequence} differs from {path}:\n" + "\n".join(problems)
             + "\n(if the change is intended, re-record with pytest --update-goldens)"

@@ -62,6 +62,15 @@ def test_a_moved_metric_fails_with_a_readable_diff(tmp_path):
     assert "IDF1" not in text  # only what moved is listed
 
 
+def test_a_diff_names_the_options_changed_since_the_recording(tmp_path):
+    path = tmp_path / "golden.json"
+    check_episode("UniTrack/MOT16-v0", "iou", "SYN-01", path, update=True)
+    with pytest.raises(GoldenMismatch) as info:
+        check_episode("UniTrack/MOT16-v0", "iou", "SYN-01", path,
+                      agent_kwargs={"iou_threshold": 0.9})
+    assert str(info.value).splitlines()[1] == "agent option iou_threshold: unset -> 0.9"
+
+
 def test_missing_golden_and_update_flag(tmp_path):
     path = tmp_path / "new.json"
     with pytest.raises(GoldenMismatch, match="does not exist; run pytest with --update-goldens"):
