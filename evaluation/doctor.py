@@ -22,8 +22,8 @@ OPTIONAL = {
     "matplotlib": ("plots", "scorecard radar charts"),
     "imageio_ffmpeg": ("video", "H.264 videos (unitrack render .mp4)"),
     "moviepy": ("video", "gymnasium.wrappers.RecordVideo"),
-    "openvino": ("openvino", "the OpenVINO runtime for the appearance model"),
-    "onnxruntime": ("onnxruntime", "the ONNX Runtime for the appearance model"),
+    "openvino": ("openvino", "runtime='openvino' of the appearance model"),
+    "onnxruntime": ("onnxruntime", "runtime='onnxruntime' of the appearance model"),
     "ray": ("ray", "--backend ray"),
 }
 
@@ -144,7 +144,7 @@ def check_optional() -> list[Finding]:
         if importlib.util.find_spec(module) is not None:
             out.append(Finding(f"extra {extra}", "ok", f"{module}: {purpose}"))
         else:
-            out.append(Finding(f"extra {extra}", "warn", f"{module} not installed: no {purpose}",
+            out.append(Finding(f"extra {extra}", "warn", f"{module} not installed (for {purpose})",
                                f"pip install 'unitrack-env[{extra}]'"))
     return out
 
