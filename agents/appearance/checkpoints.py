@@ -93,8 +93,9 @@ DEFAULT_REMAPS: Mapping[str, KeyRemap] = MappingProxyType({
         description="CRW (Jabri et al. 2020): ckpt['model'], strip 'encoder.model.', CIFAR stats",
     ),
     "moco": KeyRemap(
-        "moco", containers=("state_dict",), strip_prefixes=("module.encoder_q.",),
-        description="MoCo v1/v2: ckpt['state_dict'], strip 'module.encoder_q.'",
+        "moco", containers=("state_dict",), strip_prefixes=("module.encoder_q.", "encoder_q."),
+        description="MoCo v1/v2: ckpt['state_dict'], strip 'module.encoder_q.' (DataParallel) "
+                    "or 'encoder_q.' (one GPU)",
     ),
     "uvc": KeyRemap(
         "uvc", containers=("state_dict",), strip_prefixes=("module.gray_encoder.",),
@@ -201,11 +202,12 @@ def read_checkpoint(path: str | os.PathLike[str]) -> Any:
     except Exception as exc:  # torch raises many types: UnpicklingError, RuntimeError, ...
         lines = str(exc).splitlines() or [""]
         detail = next((line for line in lines if "Unsupported" in line), lines[0])
+        detail = detail.split(". ")[0][:MAX_DETAIL_CHARS]  # torch's first sentence
         raise CheckpointError(
             path,
-            "not a readable PyTorch checkpoint (corrupt, truncated, not a torch.save file, or "
-            f"containing objects that weights_only=True refuses): {type(exc).__name__}: "
-            f"{detail[:MAX_DETAIL_CHARS]}",
+            f"not a readable PyTorch checkpoint ({path.stat().st_size:,} bytes; corrupt, "
+            "truncated, not a torch.save file, or containing objects that weights_only=True "
+            f"refuses): {type(exc).__name__}: {detail}",
         ) from exc
 
 
@@ -300,6 +302,19 @@ def choose_remap(
     return best[1]
 
 
+def _prefix_hint(state: Mapping[str, Any], model_state: Mapping[str, Any]) -> str:
+    """`` Every key starts with 'p.' ...`` when the keys fit the model once ``p.`` is cut."""
+    heads = {key.partition(".")[0] for key in state}
+    if len(heads) != 1 or not all("." in key for key in state):
+        return ""
+    prefix = f"{heads.pop()}."
+    fits = sum(key[len(prefix):] in model_state for key in state)
+    if not fits:
+        return ""
+    return (f" Every key starts with {prefix!r} and {fits} keys fit the backbone without it: "
+            "save the backbone's own state_dict (or strip the prefix) and load that file.")
+
+
 def load_state_into(
     module: nn.Module,
     state: Mapping[str, torch.Tensor],
@@ -348,8 +363,8 @@ def load_state_into(
             path,
             f"checkpoint does not fit the backbone (remap {remap!r}); "
             + "; ".join(parts)
-            + f". {report.summary()}. Pick the right architecture/remap, or pass "
-            "allow_partial=True to load only the matching keys.",
+            + f". {report.summary()}.{_prefix_hint(state, model_state)} Pick the right "
+            "architecture/remap, or pass allow_partial=True to load only the matching keys.",
         )
     new_state = dict(model_state)
     for key in report.matched:

@@ -284,7 +284,7 @@ def resolve_weights(
         raise ValueError(
             f"weights={str(weights)!r} is neither a known name "
             f"({', '.join(map(repr, loaders))}, or 'torchvision:<Enum>.<MEMBER>') nor an "
-            f"existing checkpoint file"
+            f"existing checkpoint file (no file {path.resolve()})"
         )
     checkpoint = read_checkpoint(path)
     if arch is None:
@@ -295,7 +295,10 @@ def resolve_weights(
 
 
 def infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
-    """Architecture of a ResNet checkpoint (content ``obj`` of ``path``), from its keys."""
+    """Architecture of a checkpoint (content ``obj`` of ``path``), from its keys.
+
+    A ResNet's depth from its blocks, or EfficientNet-Lite0 from its ``_conv_stem``.
+    """
     if isinstance(remap, KeyRemap):
         candidates = [remap]
     elif remap == "auto":
@@ -313,6 +316,8 @@ def infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
     )
     keys = list(extract_state_dict(obj, chosen, path=path))
     arch = infer_resnet_arch(keys)
+    if arch is None and _holds_lite0(obj, candidates, path):
+        arch = EFFICIENTNET_LITE0
     if arch is None:
         raise CheckpointError(
             path,
@@ -320,6 +325,17 @@ def infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
             f"{keys[:5]}); pass arch= explicitly ({', '.join(ARCHITECTURES)})",
         )
     return arch
+
+
+def _holds_lite0(obj: Any, remaps: Sequence[KeyRemap], path: Path) -> bool:
+    """Whether the checkpoint under one of ``remaps`` has EfficientNet-Lite0's stem."""
+    for remap in remaps:
+        try:
+            if "_conv_stem.weight" in extract_state_dict(obj, remap, path=path):
+                return True
+        except CheckpointError:
+            continue
+    return False
 
 
 def _torchvision_weights(spec: str) -> WeightsSource:

@@ -102,7 +102,7 @@ def test_corrupt_files_give_a_clear_error(
     path.write_bytes(content)
     with pytest.raises(CheckpointError, match="not a readable PyTorch checkpoint") as info:
         AppearanceModel(path, arch="resnet18")
-    assert str(path) in str(info.value)
+    assert str(path) in str(info.value) and f"({len(content):,} bytes;" in str(info.value)
 
 
 def test_pickled_objects_are_refused(tmp_path: Path) -> None:
@@ -139,6 +139,34 @@ def test_moco_checkpoint_loads_through_the_remap_table(
         assert len(model.load_report.matched) == len(state)
         assert len(model.load_report.unexpected) == len(other) + 1  # encoder_k + queue
         _assert_same_features(model.features(IMAGE), _reference_features(state))
+
+
+def test_one_gpu_moco_keys_load_and_the_architecture_is_inferred(
+    tmp_path: Path, r18_file: tuple[Path, dict]
+) -> None:
+    _, state = r18_file  # MoCo trained without DataParallel: 'encoder_q.' without 'module.'
+    path = tmp_path / "moco-1gpu.pth"
+    torch.save({"state_dict": {f"encoder_q.{k}": v for k, v in state.items()}}, path)
+    model = AppearanceModel(path)
+    assert model.arch == "resnet18" and model.load_report.remap == "moco"
+    assert len(model.load_report.matched) == len(state)
+
+
+def test_an_efficientnet_lite0_state_dict_needs_no_arch(tmp_path: Path) -> None:
+    from unitrack_env.agents.appearance.efficientnet_lite import EfficientNetLite0
+
+    path = tmp_path / "lite0.pth"
+    torch.save({f"module.{k}": v for k, v in EfficientNetLite0().state_dict().items()}, path)
+    assert AppearanceModel(path).arch == "efficientnet-lite0"
+
+
+def test_a_foreign_prefix_is_named(tmp_path: Path, r18_file: tuple[Path, dict]) -> None:
+    _, state = r18_file
+    path = tmp_path / "wrapped.pth"
+    torch.save({f"backbone.{k}": v for k, v in state.items()}, path)
+    with pytest.raises(CheckpointError, match=f"Every key starts with 'backbone.' and "
+                                              f"{len(state)} keys fit the backbone without it"):
+        AppearanceModel(path, arch="resnet18")
 
 
 def test_crw_remap_sets_cifar_normalisation(tmp_path: Path, r18_file: tuple[Path, dict]) -> None:
