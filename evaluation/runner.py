@@ -65,6 +65,18 @@ class RunFailed(RuntimeError):
         return (type(self), (self.failures, self.out))
 
 
+class RunMismatch(ValueError):
+    """The output folder holds another run (``difference`` says what differs)."""
+
+    def __init__(self, out: Path, difference: str) -> None:
+        self.out, self.difference = out, difference
+        super().__init__(f"{out} already holds a different run ({difference}); choose another "
+                         "--out, or replace it with --overwrite (overwrite=True in run())")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.out, self.difference))
+
+
 class OutputError(OSError):
     """The output folder cannot be written (read-only, full, failing disk)."""
 
@@ -218,9 +230,7 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
         except ValueError:
             previous = None
         if previous != spec.to_json():
-            raise ValueError(f"{out} already holds a different run "
-                             f"({_run_difference(previous, spec)}); choose another --out, or "
-                             "replace it with --overwrite (overwrite=True in run())")
+            raise RunMismatch(out, _run_difference(previous, spec))
     try:
         if overwrite:
             for sub in ("data", "sequences"):

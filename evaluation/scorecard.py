@@ -136,8 +136,14 @@ class ModelSpec:
         return "+".join(part for part in (base, self.arch, self.layer) if part)
 
     def agent_kwargs(self) -> dict[str, Any]:
-        """The appearance options every UniTrack head takes."""
-        kwargs: dict[str, Any] = {"weights": self.weights}
+        """The appearance options every UniTrack head takes.
+
+        A checkpoint file is given by its absolute path: the same file typed from another
+        folder is the same run (and resumes).
+        """
+        path = Path(self.weights).expanduser()
+        weights = str(path.resolve()) if path.is_file() else self.weights
+        kwargs: dict[str, Any] = {"weights": weights}
         if self.arch:
             kwargs["arch"] = self.arch
         if self.layer:
@@ -275,7 +281,7 @@ def _finite(value: Any) -> float | None:
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.runner import RunMismatch, run
 
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
@@ -283,9 +289,15 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
     rows = []
     for (model, task, head), members in groups.items():
         first = members[0]
-        report = run(first.env_id, first.agent, out=out / "cells" / first.folder,
-                     env_kwargs=first.env_kwargs, agent_kwargs=first.agent_kwargs,
-                     sequences=[c.sequence for c in members], progress=False)
+        try:
+            report = run(first.env_id, first.agent, out=out / "cells" / first.folder,
+                         env_kwargs=first.env_kwargs, agent_kwargs=first.agent_kwargs,
+                         sequences=[c.sequence for c in members], progress=False)
+        except RunMismatch as exc:
+            raise ValueError(
+                f"{exc.out} holds the cells of another model labelled {model!r} "
+                f"({exc.difference}); give this model another label= or use another --out"
+            ) from None
         scores = report.scores
         rows.append({
             "model": model, "task": task, "head": head, "agent": first.agent,

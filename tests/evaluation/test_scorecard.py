@@ -29,6 +29,25 @@ def test_model_specs():
         sc.ModelSpec.parse("random,lr=0.1")
 
 
+def test_a_checkpoint_typed_from_another_folder_is_the_same_model(tmp_path, monkeypatch):
+    (tmp_path / "ckpt.pth").write_bytes(b"")
+    monkeypatch.chdir(tmp_path)
+    assert sc.ModelSpec.parse("ckpt.pth").agent_kwargs() == {"weights": str(tmp_path / "ckpt.pth")}
+    assert sc.ModelSpec.parse(str(tmp_path / "ckpt.pth")).agent_kwargs() == \
+        sc.ModelSpec.parse("./ckpt.pth").agent_kwargs()
+
+
+def test_cells_of_another_model_under_the_same_label_are_named(tmp_path):
+    cell = sc.Cell("mine", "mot", "IoU", "iou", "UniTrack/MOT16-v0", "SYN-01",
+                   agent_kwargs={"min_hits": 3})
+    run(cell.env_id, cell.agent, out=tmp_path / "cells" / cell.folder, progress=False,
+        sequences=[cell.sequence], agent_kwargs={"min_hits": 2})
+    with pytest.raises(ValueError, match="holds the cells of another model labelled 'mine' "
+                                         r"\(agent option min_hits: 2 -> 3\); give this model "
+                                         "another label= or use another --out"):
+        sc.combine(tmp_path, [cell], {"mot": sc.Source("synthetic", None, cell.env_id)})
+
+
 def test_data_sources(tmp_path):
     (tmp_path / "OTB").mkdir()
     assert sc.data_source(tmp_path, sc.TASKS["sot"]).kind == "benchmark"
