@@ -378,6 +378,9 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     from unitrack_env.evaluation.runner import check_out_folder
 
     names, data_path = _checked_request(models, tasks, data)
+    from unitrack_env.agents.appearance.runtime import resolve_runtime
+
+    resolve_runtime(runtime)  # a runtime that is not installed: one error now, not one per cell
     out = Path(out)
     check_out_folder(out)
     cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)

@@ -261,6 +261,18 @@ def test_a_bad_checkpoint_or_layer_is_refused_before_any_cell(tmp_path):
     assert not out.exists()
 
 
+def test_a_runtime_that_is_not_installed_is_refused_before_any_cell(tmp_path, monkeypatch):
+    from unitrack_env.agents.appearance import runtime
+
+    monkeypatch.setattr(runtime, "runtime_installed", lambda name: name == "torch")
+    out = tmp_path / "card"
+    with pytest.raises(ImportError, match=r"runtime='openvino' needs .*pip install "
+                                          r"'unitrack-env\[openvino\]'"):
+        sc.scorecard([sc.ModelSpec("imagenet-lite0")], out=out, tasks=["vos"],
+                     runtime="openvino")
+    assert not out.exists()
+
+
 def _card(tasks: list[str]) -> dict:
     """A hand-made scorecard: two models and the baselines on ``tasks`` (no episode played)."""
     rows = []
