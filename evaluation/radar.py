@@ -115,19 +115,28 @@ def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, 
     ax.set_theta_offset(math.pi / 2)  # first task at the top, the others clockwise
     ax.set_theta_direction(-1)
     for index, (name, values) in enumerate(data.items()):
-        radius = [0.0 if v is None else v for v in values]
+        # An undefined value (e.g. IDF1 without ground-truth tracks) is a gap, not a zero.
+        radius = [math.nan if v is None else v for v in values]
         style = _style(plt, name, index)
         ax.plot([*angles, angles[0]], [*radius, radius[0]], label=name, **style)
-        if name != BASELINE:
+        if name != BASELINE and None not in values:
             ax.fill([*angles, angles[0]], [*radius, radius[0]], alpha=0.08,
                     color=style["color"])
         for angle, r, (task, *_rest) in zip(angles, radius, spokes, strict=True):
             hollow = card["sources"][task]["kind"] == "synthetic"
-            ax.plot([angle], [r], marker="o", markersize=5, color=style["color"],
-                    markerfacecolor="white" if hollow else style["color"])
+            if not math.isnan(r):
+                ax.plot([angle], [r], marker="o", markersize=5, color=style["color"],
+                        markerfacecolor="white" if hollow else style["color"])
+    undefined = [all(values[i] is None for values in data.values()) for i in range(len(spokes))]
     ax.set_xticks(angles)
-    ax.set_xticklabels([label for *_rest, label in spokes], fontsize=9)
+    ax.set_xticklabels([label + ("\n(no value)" if none else "")
+                        for (*_rest, label), none in zip(spokes, undefined, strict=True)],
+                       fontsize=9)
     ax.tick_params(axis="x", pad=12)
+    for tick, angle in zip(ax.get_xticklabels(), angles, strict=True):
+        side = math.sin(angle)  # clockwise from the top: > 0 on the right half
+        tick.set_horizontalalignment("left" if side > 0.1 else "right" if side < -0.1
+                                     else "center")  # away from the circle, not across it
     ax.set_ylim(0, 1.0)
     ax.set_yticks([0.25, 0.5, 0.75, 1.0])
     ax.set_yticklabels([] if scale == "rank" else ["25", "50", "75", "100"], fontsize=7)
