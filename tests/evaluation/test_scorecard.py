@@ -311,3 +311,16 @@ def test_radar_draws_bars_below_three_tasks(tmp_path, monkeypatch, tasks):
     assert [f.name for f in files] == ["chart.png", "chart.svg"]
     assert all(f.stat().st_size > 1000 for f in files)
     assert plt.get_fignums() == []  # closed
+
+
+def test_radar_shows_an_undefined_axis_as_a_gap(tmp_path):
+    pytest.importorskip("matplotlib")
+    from unitrack_env.evaluation import radar
+
+    card = _card(["pose-prop", "sot", "vos"])
+    for row in card["rows"]:
+        if row["task"] == "vos":
+            row["combined"] = {name: None for name in row["combined"]}
+    assert radii(card, "rank")["a"][2] is None
+    svg = radar.draw_radar(card, tmp_path / "chart")[1].read_text()
+    assert "(no value)" in svg
