@@ -19,6 +19,8 @@ from typing import Any
 
 from rich.console import Console
 
+from unitrack_env.evaluation.progress import one_line_warnings
+
 #: gym.make's own keyword arguments, accepted by every environment.
 GYM_MAKE_OPTIONS: dict[str, Any] = {
     "max_episode_steps": int | None, "autoreset": bool, "disable_env_checker": bool | None,
@@ -370,6 +372,7 @@ def _error_text(exc: BaseException) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``unitrack`` command; returns the exit status."""
     args = build_parser().parse_args(argv)
+    one_line_warnings()
     console = _console()
     try:
         return args.func(args, console)

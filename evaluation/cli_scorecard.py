@@ -44,10 +44,11 @@ def add_options(card: argparse.ArgumentParser) -> None:
 def run_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
     from unitrack_env.evaluation import scorecard as sc
+    from unitrack_env.evaluation.scorecard_report import merge_cards
 
     out = Path(args.out)
     if args.compare:
-        card = sc.merge_cards([Path(p) for p in args.compare])
+        card = merge_cards([Path(p) for p in args.compare])
         files = sc.write_outputs(out, card, radar_scale=args.radar_scale)
     else:
         if not args.model:

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import os
+import warnings
+from pathlib import Path
 from types import TracebackType
 
 from rich.progress import (
@@ -15,6 +20,35 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 from rich.text import Text
+
+_default_format = warnings.formatwarning
+
+
+@functools.cache
+def _package_folders() -> tuple[str, ...]:
+    """Where this package's modules live (in a clone: three folders beside each other)."""
+    folders = []
+    for name in ("unitrack_env", "unitrack_env.agents", "unitrack_env.evaluation"):
+        spec = importlib.util.find_spec(name)
+        folders += [str(Path(p).resolve()) + os.sep
+                    for p in (spec.submodule_search_locations or []) if spec]
+    return tuple(folders)
+
+
+def _format(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+            line: str | None = None) -> str:
+    if str(Path(filename).resolve()).startswith(_package_folders()):
+        return f"warning: {message}\n"  # written for users: no source location, no code line
+    return _default_format(message, category, filename, lineno, line)
+
+
+def one_line_warnings() -> None:
+    """Show this package's warnings as one ``warning: ...`` line each.
+
+    A command's output, not a source location and a line of code; other libraries'
+    warnings keep Python's format.
+    """
+    warnings.formatwarning = _format
 
 
 class _FpsColumn(ProgressColumn):

@@ -30,12 +30,14 @@ import json
 import math
 import os
 import tempfile
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import unitrack_env
+from unitrack_env.evaluation.scorecard_report import merge_cards as merge_cards
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
 
@@ -250,7 +252,9 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
         import torch
 
         torch.set_num_threads(threads)
-    with tempfile.TemporaryDirectory(prefix="unitrack-cell-") as scratch:
+    with (tempfile.TemporaryDirectory(prefix="unitrack-cell-") as scratch,
+          warnings.catch_warnings(record=True) as caught):
+        warnings.simplefilter("always")  # every cell reports its own; the driver shows each once
         out = Path(scratch)
         report = run(cell.env_id, cell.agent, out=out, env_kwargs=cell.env_kwargs,
                      agent_kwargs=cell.agent_kwargs, sequences=[cell.sequence], progress=False)
@@ -259,7 +263,8 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
                  for sub in ("data", "sequences") for path in (out / sub).rglob("*")
                  if path.is_file()}
         metrics = report.scores.per_sequence.get(cell.sequence, {}) if report.scores else {}
-    return {"files": files, "metrics": metrics}
+    return {"files": files, "metrics": metrics,
+            "warnings": sorted({str(w.message) for w in caught})}
 
 
 def store_cell(out: Path, cell: Cell, payload: dict[str, Any]) -> None:
@@ -351,6 +356,36 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
     return names, data_path
 
 
+def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
+              on_progress: Callable[[int, int, Cell | None], None] | None) -> None:
+    """Play and store every cell not done yet; each warning of the cells is shown once."""
+    from unitrack_env.evaluation.backends import make_backend
+    from unitrack_env.evaluation.runner import RunFailed
+    from unitrack_env.evaluation.workers import SequenceFailure
+
+    todo = [c for c in cells if not cell_done(out, c)]
+    done = len(cells) - len(todo)
+    if on_progress is not None:
+        on_progress(done, len(cells), None)
+    failures: dict[str, str] = {}
+    shown: set[str] = set()
+    with make_backend(backend, workers=workers, address=address) as run_cells:
+        for cell, payload in run_cells(play_cell, todo):
+            if isinstance(payload, BaseException):
+                failures[cell.label] = SequenceFailure.describe(payload)
+            else:
+                for text in payload.get("warnings", ()):
+                    if text not in shown:  # the same data warning from every model and head
+                        shown.add(text)
+                        warnings.warn(text, UserWarning, stacklevel=3)
+                store_cell(out, cell, payload)
+                done += 1
+            if on_progress is not None:
+                on_progress(done, len(cells), cell)
+    if failures:
+        raise RunFailed(failures, out)
+
+
 def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
               tasks: Sequence[str] | None = None, data: str | os.PathLike | None = None,
               backend: str = "pool", workers: int = 1, address: str | None = None,
@@ -374,7 +409,6 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
     """
-    from unitrack_env.evaluation.backends import make_backend
     from unitrack_env.evaluation.runner import check_out_folder
 
     names, data_path = _checked_request(models, tasks, data)
@@ -384,63 +418,8 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     out = Path(out)
     check_out_folder(out)
     cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
-    todo = [c for c in cells if not cell_done(out, c)]
-    done = len(cells) - len(todo)
-    if on_progress is not None:
-        on_progress(done, len(cells), None)
-    failures: dict[str, str] = {}
-    with make_backend(backend, workers=workers, address=address) as run_cells:
-        for cell, payload in run_cells(play_cell, todo):
-            if isinstance(payload, BaseException):
-                from unitrack_env.evaluation.workers import SequenceFailure
-
-                failures[cell.label] = SequenceFailure.describe(payload)
-            else:
-                store_cell(out, cell, payload)
-                done += 1
-            if on_progress is not None:
-                on_progress(done, len(cells), cell)
-    if failures:
-        from unitrack_env.evaluation.runner import RunFailed
-
-        raise RunFailed(failures, out)
+    _play_all(out, cells, backend=backend, workers=workers, address=address,
+              on_progress=on_progress)
     card = combine(out, cells, sources)
     write_outputs(out, card, radar_scale=radar_scale)
     return card
-
-
-def merge_cards(paths: Sequence[Path]) -> dict[str, Any]:
-    """Several ``scorecard.json`` files as one scorecard (for ``--compare``).
-
-    Models keep their labels, prefixed with their folder's name where two files use the same
-    label; the baselines and the data sources are the first file's. A task whose data source
-    differs between the files is refused: its numbers would not be comparable.
-    """
-    cards = []
-    for path in paths:
-        try:
-            cards.append((path, json.loads(Path(path).read_text())))
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"{path}: not a readable scorecard.json ({exc})") from None
-    first = cards[0][1]
-    merged: dict[str, Any] = {**first, "models": [], "rows": [],
-                              "compared": [str(p) for p in paths]}
-    labels = [m for _, card in cards for m in card["models"]]
-    for path, card in cards:
-        for task, source in card["sources"].items():
-            known = merged["sources"].setdefault(task, source)
-            if (known["kind"], known["root"]) != (source["kind"], source["root"]):
-                raise ValueError(f"{path}: task {task} was scored on {source['kind']} data "
-                                 f"({source['root']}), the first scorecard on {known['kind']} "
-                                 f"({known['root']}); their numbers are not comparable")
-        rename = {m: f"{Path(path).parent.name}/{m}" if labels.count(m) > 1 else m
-                  for m in card["models"]}
-        merged["models"] += list(rename.values())
-        for row in card["rows"]:
-            if row["model"] == BASELINE:
-                if card is first:
-                    merged["rows"].append(row)
-                continue
-            merged["rows"].append({**row, "model": rename[row["model"]]})
-        merged["tasks"] += [t for t in card["tasks"] if t not in merged["tasks"]]
-    return merged

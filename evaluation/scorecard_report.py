@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import csv
 import io
+import json
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from unitrack_env.evaluation.tables import COUNT_METRICS
@@ -126,3 +129,42 @@ def polygon_values(card: dict[str, Any],
 
     return {model: [value(card, model, task, head, metric) for task, head, metric, _ in spokes]
             for model in [*card["models"], BASELINE]}
+
+
+def merge_cards(paths: Sequence[Path]) -> dict[str, Any]:
+    """Several ``scorecard.json`` files as one scorecard (for ``--compare``).
+
+    Models keep their labels, prefixed with their folder's name where two files use the same
+    label; the baselines and the data sources are the first file's. A task whose data source
+    differs between the files is refused: its numbers would not be comparable.
+    """
+    from unitrack_env.evaluation.scorecard import BASELINE
+
+    cards = []
+    for path in paths:
+        try:
+            cards.append((path, json.loads(Path(path).read_text())))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable scorecard.json ({exc})") from None
+    first = cards[0][1]
+    merged: dict[str, Any] = {**first, "models": [], "rows": [],
+                              "compared": [str(p) for p in paths]}
+    labels = [m for _, card in cards for m in card["models"]]
+    for path, card in cards:
+        for task, source in card["sources"].items():
+            known = merged["sources"].setdefault(task, source)
+            if (known["kind"], known["root"]) != (source["kind"], source["root"]):
+                raise ValueError(f"{path}: task {task} was scored on {source['kind']} data "
+                                 f"({source['root']}), the first scorecard on {known['kind']} "
+                                 f"({known['root']}); their numbers are not comparable")
+        rename = {m: f"{Path(path).parent.name}/{m}" if labels.count(m) > 1 else m
+                  for m in card["models"]}
+        merged["models"] += list(rename.values())
+        for row in card["rows"]:
+            if row["model"] == BASELINE:
+                if card is first:
+                    merged["rows"].append(row)
+                continue
+            merged["rows"].append({**row, "model": rename[row["model"]]})
+        merged["tasks"] += [t for t in card["tasks"] if t not in merged["tasks"]]
+    return merged

@@ -22,6 +22,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from unitrack_env.evaluation.progress import one_line_warnings
+
 #: Seconds between a worker's checks that its parent is alive.
 WATCHDOG_PERIOD = 0.5
 
@@ -58,6 +60,7 @@ def _init_worker(parent: int, threads: int) -> None:
     # sequences, stops the pool), so the workers must not die mid-write on their own.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _watch_parent(parent)
+    one_line_warnings()
     if threads:
         import torch
 
