@@ -104,6 +104,18 @@ def _toy():
     return DotEnv(decode_frames=False)
 
 
+def test_step_before_reset_or_after_close_says_which():
+    env = _toy()
+    with pytest.raises(RuntimeError, match=r"step\(\) called before any reset\(\)"):
+        env.step(np.zeros(2))
+    observation, _ = env.reset(options={"sequence": "a"})
+    env.close()
+    with pytest.raises(RuntimeError, match=r"step\(\) called after close\(\); call reset"):
+        env.step(observation["point"])
+    observation, _ = env.reset(options={"sequence": "a"})  # a closed env starts again
+    assert env.step(observation["point"])[1] == 0.0
+
+
 def test_template_plays_an_episode_from_hooks_only(tmp_path):
     env = _toy()
     observation, info = env.reset(options={"sequence": "a"})
@@ -118,7 +130,7 @@ def test_template_plays_an_episode_from_hooks_only(tmp_path):
     assert steps == 5 and info["frame_index"] == 4 and info["metrics"] == {"Error": 0.0}
     np.testing.assert_array_equal(observation["point"], last["point"])
     assert observation["point"] is not last["point"]  # the terminal observation is fresh
-    with pytest.raises(RuntimeError, match="finished episode; call reset"):
+    with pytest.raises(RuntimeError, match="on a finished episode; call reset"):
         env.step(observation["point"])
     env.write_episode(tmp_path)
     assert env.score_folder(tmp_path, ["a"]).per_sequence == {"a": {"Error": 0.0}}

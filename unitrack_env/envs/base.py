@@ -145,7 +145,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         self._sequence = None
         self._frames = None
         self._t = self._stop = 0  # the cursor and the end of the episode's frame keys
-        self._done, self._has_gt = True, False
+        self._done, self._has_gt, self._closed = True, False, False
         self._frame: np.ndarray | None = None
         self._observation: dict[str, Any] = {}
         #: The agent's last answer as the renderer draws it (set by _record; None at reset)
@@ -190,9 +190,13 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         return list(requested)
 
     def close(self) -> None:
-        """Stop the frame prefetching thread, if any."""
+        """Stop the frame prefetching thread, if any, and end the episode.
+
+        ``reset()`` starts another; ``step()`` before it raises.
+        """
         if self._frames is not None:
             self._frames.close()
+        self._done = self._closed = True
         super().close()
 
     def _choose_sequence(self, seed: int | None, options: dict[str, Any] | None) -> str:
@@ -234,7 +238,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         self._frames = self._open_frames(self._frame_path, range(first, self._stop),
                                          prefetch=self.prefetch)
         self._t = first
-        self._done = False
+        self._done = self._closed = False
         observation = self._observation = self._observe(first)
         info = self._step_info(first) | extras
         return observation, {**info, "task": self.task, "capacities": self.capacities()}
@@ -242,7 +246,9 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """Record the agent's answer for the current frame, score it, and move on."""
         if self._done or self._sequence is None:
-            raise RuntimeError("step() called on a finished episode; call reset() first")
+            state = ("before any reset()" if self._sequence is None else
+                     "after close()" if self._closed else "on a finished episode")
+            raise RuntimeError(f"step() called {state}; call reset() to start an episode")
         t = self._t
         try:
             reward, extra = self._record(action, t)
