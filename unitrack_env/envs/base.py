@@ -190,10 +190,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         return list(requested)
 
     def close(self) -> None:
-        """Stop the frame prefetching thread, if any, and end the episode.
-
-        ``reset()`` starts another; ``step()`` before it raises.
-        """
+        """Stop the frame prefetching thread (if any) and end the episode: reset() next."""
         if self._frames is not None:
             self._frames.close()
         self._done = self._closed = True
