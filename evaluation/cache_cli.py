@@ -30,8 +30,9 @@ from rich.table import Table
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add the ``cache`` command (with ``info``, ``prune``, ``clear``) to ``subparsers``."""
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--dir", help="cache folder (default: $UNITRACK_FEATURE_CACHE or the "
-                                      "user cache folder)")
+    common.add_argument("--dir", help="cache folder (default: $UNITRACK_FEATURE_CACHE, else "
+                                      "$UNITRACK_CACHE/features, else the user cache "
+                                      "folder; Linux: ~/.cache/unitrack-env/features)")
     parser = subparsers.add_parser(
         "cache", help="inspect, prune or clear the feature cache",
         description="The on-disk feature cache of the UniTrack heads (on by default).")

@@ -19,6 +19,7 @@ from typing import Any
 
 from rich.console import Console
 
+from unitrack_env.evaluation.cli_types import names, positive_float, positive_int
 from unitrack_env.evaluation.progress import one_line_warnings
 
 #: gym.make's own keyword arguments, accepted by every environment.
@@ -145,7 +146,7 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
     with _feature_cache_report(args.agent, agent_kwargs) as cache_summary:
         report = run(args.env, args.agent, out=args.out, env_kwargs=env_kwargs,
                      agent_kwargs=agent_kwargs,
-                     sequences=args.sequences.split(",") if args.sequences else None,
+                     sequences=args.sequences,
                      workers=args.workers, overwrite=args.overwrite,
                      progress=not args.quiet and args.format == "table")
     log = console if args.format == "table" else _console(stderr=True)
@@ -165,13 +166,19 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
                        f"{args.agent} on {args.env}", unitrack_env.task_of(args.env),
                        args.format, fps)
     log.print(f"metrics: {report.out / 'metrics.json'}", markup=False)
+    others = sorted({p.stem for p in (report.out / "sequences").glob("*.json")}
+                    - set(args.sequences or ()))
+    if args.sequences and others:
+        log.print(f"(metrics.json covers the {len(args.sequences)} sequence(s) asked for; "
+                  f"{len(others)} other finished sequence(s) in {report.out} are kept but not "
+                  "in it: run without --sequences to score them all)", markup=False)
     return 0
 
 
 def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     import json
 
-    sequences = args.sequences.split(",") if args.sequences else None
+    sequences = args.sequences
     if args.env:
         import unitrack_env
         from unitrack_env.benchmarks import benchmark_for
@@ -285,8 +292,9 @@ def _add_evaluate(ev: argparse.ArgumentParser) -> None:
     _env_options(ev)
     ev.add_argument("--out", required=True, help="output folder: results in the official "
                     "format, per-sequence records, metrics.json (an existing run is resumed)")
-    ev.add_argument("--sequences", help="comma-separated sequence names (default: all)")
-    ev.add_argument("--workers", type=int, default=1,
+    ev.add_argument("--sequences", type=names,
+                    help="comma-separated sequence names (default: all)")
+    ev.add_argument("--workers", type=positive_int, default=1,
                     help="parallel worker processes, one sequence each (default: 1)")
     ev.add_argument("--overwrite", action="store_true",
                     help="discard a previous run in --out instead of resuming it")
@@ -305,7 +313,8 @@ def _add_score(sc: argparse.ArgumentParser) -> None:
     sc.add_argument("--gt", help="MOTChallenge shortcut: folder of sequences with gt/gt.txt")
     sc.add_argument("--results", required=True,
                     help="results folder (as written by `unitrack evaluate` under <out>/data)")
-    sc.add_argument("--sequences", help="comma-separated sequence names (default: all files)")
+    sc.add_argument("--sequences", type=names,
+                    help="comma-separated sequence names (default: all files)")
     sc.add_argument("--out", help="also write the metrics as JSON to this file")
     _format_option(sc)
     sc.set_defaults(func=_cmd_score)
@@ -317,7 +326,7 @@ def _add_render(rd: argparse.ArgumentParser) -> None:
                     help="the sequence to play (its name in the data set, e.g. MOT17-04-FRCNN)")
     rd.add_argument("--out", required=True,
                     help="video file: .mp4 (H.264, needs the video extra) or .avi (MJPEG)")
-    rd.add_argument("--fps", type=float, default=None,
+    rd.add_argument("--fps", type=positive_float, default=None,
                     help="video frame rate (default: the sequence's)")
     rd.set_defaults(func=_cmd_render)
 

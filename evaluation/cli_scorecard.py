@@ -11,6 +11,8 @@ from typing import Any
 
 from rich.console import Console
 
+from unitrack_env.evaluation.cli_types import positive_int
+
 
 def add_options(card: argparse.ArgumentParser) -> None:
     """The options of ``unitrack scorecard``."""
@@ -24,7 +26,7 @@ def add_options(card: argparse.ArgumentParser) -> None:
     card.add_argument("--out", required=True, help="output folder (finished cells are reused)")
     card.add_argument("--backend", choices=("pool", "ray"), default="pool",
                       help="where cells run: local processes (default) or Ray")
-    card.add_argument("--workers", type=int, default=1,
+    card.add_argument("--workers", type=positive_int, default=1,
                       help="pool processes, or the CPUs of a local Ray (default: 1)")
     card.add_argument("--address", help="Ray cluster to join: auto or ray://host:port "
                       "(default: start a local Ray)")

@@ -698,7 +698,7 @@ CASES: tuple[Case, ...] = (
        mot(_bytes(GT, lambda b: b.replace(b"\n", b"\xe9\n", 1))), "line 1", "not UTF-8"),
     _c("MOT-gt-ragged", "a gt row with 10 columns among rows of 9",
        mot(_at(GT, lambda c: c.replace("\n", ",7\n", 1))), "line 2",
-       "columns where earlier lines have"),
+       "9 columns where line 1 has 10"),
     _c("MOT-seqinfo-seqLength-6.9", "seqLength=6.9",
        mot(_ini("seqLength", "6.9")), "field 'seqLength'", "whole number", "6.9"),
     _c("MOT-seqinfo-frameRate-nan", "frameRate=nan",

@@ -100,3 +100,27 @@ def test_the_pytest_plugin_loads_without_the_heavy_parts():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True)
     assert result.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["evaluate", "--workers", "0"], "argument --workers: 0 is not >= 1"),
+    (["evaluate", "--sequences", "SYN-01,"], "argument --sequences: 'SYN-01,' holds an empty"),
+    (["render", "--sequence", "SYN-01", "--fps", "-5"], "argument --fps: -5 is not a positive"),
+    (["render", "--sequence", "SYN-01", "--fps", "0"], "argument --fps: 0 is not a positive"),
+    (["scorecard", "--model", "random", "--workers", "-3"], "argument --workers: -3 is not"),
+])
+def test_numbers_and_names_are_checked_by_the_parser(argv, message, tmp_path, capsys):
+    command, *rest = argv
+    env = [] if command == "scorecard" else ["--env", ENV, "--agent", "iou"]
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, *env, "--out", str(tmp_path / "out.mp4"), *rest])
+    assert exit_info.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_a_subset_rerun_says_what_metrics_json_covers(tmp_path, capsys):
+    out = str(tmp_path / "run")
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", out, "--quiet"]) == 0
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", out, "--quiet",
+                 "--sequences", "SYN-01"]) == 0
+    assert ("metrics.json covers the 1 sequence(s) asked for; 1 other finished sequence(s)"
+            in capsys.readouterr().out.replace("\n", " "))

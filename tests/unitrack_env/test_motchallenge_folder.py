@@ -109,6 +109,9 @@ def test_empty_or_missing_folders(tmp_path: Path) -> None:
         score_results(tmp_path / "gt", tmp_path / "res", benchmark="MOT17")
     with pytest.raises(DataFormatError, match="results folder not found"):
         score_results(tmp_path / "gt", tmp_path / "nope", benchmark="MOT17")
+    (tmp_path / "res" / "S1.txt").write_text("")
+    with pytest.raises(DataFormatError, match="is a file; --results takes the folder"):
+        score_results(tmp_path / "gt", tmp_path / "res" / "S1.txt", benchmark="MOT17")
     with pytest.raises(DataFormatError, match="ground-truth folder not found"):
         score_results(tmp_path / "nope", tmp_path / "res", benchmark="MOT17")
 

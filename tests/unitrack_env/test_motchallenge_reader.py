@@ -172,6 +172,12 @@ def test_user_detection_folder(tmp_path: Path):
     dets.mkdir()
     with pytest.raises(DataFormatError, match="no detection file for sequence 'S1'"):
         MOTChallengeDataset(tmp_path, "MOT17", detections=dets).load("S1")
+    (dets / "S1.txt").write_text("2,-1,3,3,5,5,0.4\n")
+    (dets / "S2-typo.txt").write_text("2,-1,3,3,5,5,0.4\n")
+    with pytest.warns(UserWarning, match="S2-typo.txt match no sequence of"):
+        MOTChallengeDataset(tmp_path, "MOT17", detections=dets)
+    with pytest.raises(DataFormatError, match="detections folder not found"):
+        MOTChallengeDataset(tmp_path, "MOT17", detections=tmp_path / "nope").load("S1")
 
 
 def test_corrupt_frame_is_reported_by_the_env(tmp_path: Path):

@@ -305,6 +305,12 @@ class MOTChallengeDataset:
         )
         if not self.sequence_names:
             raise DataFormatError(self.split_dir, "contains no sequence folders with seqinfo.ini")
+        if detections != "public" and Path(detections).is_dir():
+            stray = sorted(p.name for p in Path(detections).glob("*.txt")
+                           if p.stem not in self.sequence_names)
+            if stray:  # a misspelt name leaves its sequence without detections
+                warnings.warn(f"{detections}: {', '.join(stray)} match no sequence of "
+                              f"{self.split_dir} and are not read", stacklevel=2)
 
     def __len__(self) -> int:
         return len(self.sequence_names)
@@ -314,6 +320,9 @@ class MOTChallengeDataset:
         if self.detections == "public":
             return self.split_dir / name / "det" / "det.txt"
         folder = Path(self.detections)
+        if not folder.is_dir():
+            raise DataFormatError(folder, "detections folder not found (detections= takes "
+                                          "'public' or a folder of <sequence>.txt files)")
         for candidate in (folder / f"{name}.txt", folder / name / "det" / "det.txt"):
             if candidate.is_file():
                 return candidate

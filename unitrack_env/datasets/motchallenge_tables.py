@@ -110,7 +110,7 @@ def _locate_problem(
     field_names: tuple[str, ...],
 ) -> None:
     """Raise for the first short, ragged or non-numeric line of a table numpy refused."""
-    width = None
+    width, first = None, 0
     for (lineno, _), cells in zip(lines, rows, strict=True):
         if len(cells) < min_columns:
             raise DataFormatError(
@@ -120,10 +120,11 @@ def _locate_problem(
                 line=lineno,
             )
         if width is not None and len(cells) != width:
-            raise DataFormatError(
-                path, f"has {len(cells)} columns where earlier lines have {width}", line=lineno
-            )
-        width = len(cells)
+            where = f"line {first} has" if first == lineno - 1 else \
+                f"lines {first}-{lineno - 1} have"
+            raise DataFormatError(path, f"has {len(cells)} columns where {where} {width}; every "
+                                        "line needs the same columns", line=lineno)
+        width, first = len(cells), first or lineno
         for col, cell in enumerate(cells):
             try:
                 float(cell)

@@ -331,7 +331,9 @@ def score_folder(
     if not gt_root.is_dir():
         raise DataFormatError(gt_root, "ground-truth folder not found")
     if not results_dir.is_dir():
-        raise DataFormatError(results_dir, "results folder not found")
+        raise DataFormatError(results_dir, "is a file; --results takes the folder of result "
+                                           "files" if results_dir.is_file() else
+                              "results folder not found")
 
     seqs = _folder_sequences(gt_root, results_dir, sequences)
     scores = {
