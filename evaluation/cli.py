@@ -137,6 +137,10 @@ def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, 
                           "--format csv shows every metric)", markup=False)
 
 
+def _defined(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and value != value)
+
+
 def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
     import unitrack_env
     from unitrack_env.evaluation.runner import run
@@ -165,6 +169,12 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
         _print_metrics(console, report.scores.per_sequence, report.scores.combined,
                        f"{args.agent} on {args.env}", unitrack_env.task_of(args.env),
                        args.format, fps)
+        undefined = sorted(name for name, values in report.scores.per_sequence.items()
+                           if any(not _defined(v) for v in values.values()))
+        if undefined:
+            log.print(f"(undefined metrics, shown as - or nan, in {', '.join(undefined)}: "
+                      "nothing there to score under the benchmark's rules; the environment's "
+                      "page in docs/envs/ says when)", markup=False)
     log.print(f"metrics: {report.out / 'metrics.json'}", markup=False)
     others = sorted({p.stem for p in (report.out / "sequences").glob("*.json")}
                     - set(args.sequences or ()))

@@ -124,3 +124,12 @@ def test_a_subset_rerun_says_what_metrics_json_covers(tmp_path, capsys):
                  "--sequences", "SYN-01"]) == 0
     assert ("metrics.json covers the 1 sequence(s) asked for; 1 other finished sequence(s)"
             in capsys.readouterr().out.replace("\n", " "))
+
+
+def test_undefined_metrics_are_explained(shared_data, tmp_path, capsys):
+    # DAVIS 'tennis' in the fixtures has 2 frames: the official rules score neither.
+    assert main(["evaluate", "--env", "UniTrack/DAVIS-v0", "--root", str(shared_data / "DAVIS"),
+                 "--split", "train", "--sequences", "tennis", "--agent", "repeat-mask",
+                 "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    assert "(undefined metrics, shown as - or nan, in tennis: nothing there to score" in \
+        capsys.readouterr().out.replace("\n", " ")
