@@ -45,8 +45,11 @@ def is_reference(spec: str) -> bool:
 
 
 def _search_first(folder: Path) -> None:
-    """Put ``folder`` first on ``sys.path`` (once), as ``python`` does for a script's folder
-    and ``python -m`` for the current one: a user's module imports the files beside it."""
+    """Put ``folder`` first on ``sys.path`` (once).
+
+    As ``python`` does for a script's folder and ``python -m`` for the current one: a user's
+    module imports the files beside it.
+    """
     entry = str(folder)
     if entry not in sys.path:
         sys.path.insert(0, entry)
@@ -56,7 +59,8 @@ def _load_file(path: Path) -> Any:
     if not path.is_file():
         raise FileNotFoundError(f"agent file {path} does not exist")
     resolved = path.resolve()
-    digest = hashlib.sha1(str(resolved).encode()).hexdigest()[:10]
+    # Keyed by path and content: an edited file is loaded anew in the same process (a notebook).
+    digest = hashlib.sha1(str(resolved).encode() + resolved.read_bytes()).hexdigest()[:10]
     name = f"unitrack_user_agents.{resolved.stem}_{digest}"
     if name in sys.modules:
         return sys.modules[name]

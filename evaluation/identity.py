@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,6 +47,18 @@ def option_changes(old: dict[str, Any], new: dict[str, Any], label: str) -> list
             for name in sorted(old.keys() | new.keys()) if _shown(old, name) != _shown(new, name)]
 
 
+def _agent_source(reference: str) -> list[Path]:
+    """The file that defines the agent class: edited code must not reuse old results."""
+    target, sep, _ = reference.rpartition(":")
+    if not sep:
+        return []
+    if target.endswith(".py") or "/" in target or "\\" in target:
+        path = Path(target)
+    else:
+        path = Path(getattr(sys.modules.get(target), "__file__", None) or "")
+    return [path] if path.name and path.is_file() else []
+
+
 @dataclass(frozen=True)
 class RunIdentity:
     """A digest of everything but the data that decides a sequence's results."""
@@ -63,7 +76,8 @@ class RunIdentity:
         )
         named = [*spec.agent_kwargs.values(), *(
             v for k, v in spec.env_kwargs.items() if k != "root")]
-        files = files_fingerprint(_named_files(named), content=True)
+        code = _agent_source(spec.agent_ref or spec.agent)
+        files = files_fingerprint(_named_files(named) + code, content=True)
         return cls(hashlib.blake2b(f"{described}\n{files}".encode(), digest_size=16).hexdigest())
 
     def sequence_fingerprint(self, inputs: Iterable[Path]) -> str:

@@ -165,7 +165,7 @@ def _stale_reason(out: Path, base: Any, name: str, inputs: str) -> str | None:
     except (OSError, ValueError, TypeError):
         return "its record is unreadable"
     if record.inputs != inputs:
-        return "its inputs (data files, agent or options) changed since it was played"
+        return "its inputs (data files, agent code or options) changed since it was played"
     if record.results != result_digest(out / "data", name, base.sequence_names):
         return "its result files are missing or were changed since it was played"
     return None

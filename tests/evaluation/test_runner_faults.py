@@ -89,6 +89,24 @@ def test_changed_detections_replay_that_sequence_only(tmp_path, mot16):
     assert second.scores.per_sequence["SYN-01"]["HOTA"] == 0
 
 
+def test_an_edited_agent_file_replays_its_sequences(tmp_path):
+    agent = tmp_path / "my_agent.py"
+    agent.write_text("from unitrack_env.agents.baselines.iou import IoUAgent\n\n"
+                     "class Mine(IoUAgent):\n    pass\n")
+    out = tmp_path / "run"
+    run(ENV, f"{agent}:Mine", out=out, progress=False)
+    assert run(ENV, f"{agent}:Mine", out=out, progress=False).skipped == ["SYN-01", "SYN-02"]
+    agent.write_text(agent.read_text() + "# tuned\n")
+    agent.write_text(agent.read_text().replace("pass", "def act(self, observation):\n"
+                                               "        raise ValueError('the new code')"))
+    with pytest.raises(RunFailed, match="the new code"):  # replayed with the edited class
+        run(ENV, f"{agent}:Mine", out=out, progress=False)
+    agent.write_text(agent.read_text().replace("raise ValueError('the new code')",
+                                               "return super().act(observation)"))
+    again = run(ENV, f"{agent}:Mine", out=out, progress=False)
+    assert again.skipped == [] and "agent code" in again.replayed["SYN-01"]
+
+
 def test_a_tampered_result_file_is_replayed(tmp_path):
     out = tmp_path / "run"
     first = run(ENV, "iou", out=out, progress=False)
