@@ -77,6 +77,13 @@ class Agent(abc.ABC):
         """Release resources (threads, files); optional."""
 
 
+def close_agent(agent: Any) -> None:
+    """Call ``agent.close()`` when it has one (a duck-typed agent need not)."""
+    close = getattr(agent, "close", None)
+    if callable(close):
+        close()
+
+
 def available_agents() -> list[str]:
     """Return the names of all known agents (built-in, registered and installed plug-ins)."""
     return sorted(set(AGENTS) | set(_BUILTIN_MODULES) | set(entry_point_agents()))

@@ -38,7 +38,7 @@ from typing import Any
 import gymnasium as gym
 
 import unitrack_env
-from unitrack_env.agents.base import agent_class
+from unitrack_env.agents.base import agent_class, close_agent
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks import Benchmark, benchmark_for
@@ -50,11 +50,18 @@ from unitrack_env.metrics.report import ScoreReport
 
 
 class RunFailed(RuntimeError):
-    """Some sequences failed; the others finished and were kept (``failures`` by name)."""
+    """Some sequences failed; the others finished and were kept (``failures`` by name).
 
-    def __init__(self, failures: dict[str, str], out: Path) -> None:
+    ``errors`` holds the exceptions of the sequences played in this process (``workers=1``),
+    tracebacks included (``pdb.post_mortem(e.errors[name].__traceback__)``); the first is also
+    this error's ``__cause__``. Worker processes send their messages only.
+    """
+
+    def __init__(self, failures: dict[str, str], out: Path,
+                 errors: dict[str, BaseException] | None = None) -> None:
         self.failures = dict(failures)
         self.out = Path(out)
+        self.errors = dict(errors or {})
         lines = "\n".join(f"  {name}: {message}" for name, message in failures.items())
         super().__init__(
             f"{len(failures)} sequence(s) failed (finished ones are kept in {out}; fix the "
@@ -259,8 +266,10 @@ def _sequence_lengths(bench: Benchmark, todo: list[str]
 
 
 def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
-               todo: list[str], inputs: dict[str, str], bar: Any
+               todo: list[str], inputs: dict[str, str], bar: Any,
+               causes: dict[str, BaseException]
                ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
+    """Play ``todo`` in this process; a failed sequence's exception goes into ``causes``."""
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     player = env
@@ -271,7 +280,7 @@ def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, ou
                 record, _ = play_episode(player, agent_obj, name, benchmark=bench,
                                          on_frame=bar.advance)
             except (ValueError, KeyError, OSError, RuntimeError) as exc:
-                failures[name] = SequenceFailure.describe(exc)
+                failures[name], causes[name] = SequenceFailure.describe(exc), exc
                 # A reset that raised leaves Gymnasium's checker wrapper without its first
                 # observation; the next episode gets a fresh environment.
                 if player is not env:
@@ -361,7 +370,7 @@ def run(
         report = _run_prepared(spec, env, bench, agent_obj, out, names, inputs, workers,
                                progress)
     finally:
-        agent_obj.close()
+        close_agent(agent_obj)
         env.close()
     return report
 
@@ -379,14 +388,16 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
 
     from unitrack_env.evaluation.progress import RunProgress
 
+    causes: dict[str, BaseException] = {}
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:
         if workers <= 1 or len(todo) <= 1:
-            records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar)
+            records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar,
+                                         causes)
         else:
             records, played = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
     failures |= played
-    if failures:
-        raise RunFailed(failures, out)
+    if failures:  # in this process, the first failure's traceback (the agent's code) is kept
+        raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
     scores = _score_and_write(out, spec, bench, names, records)

@@ -111,6 +111,7 @@ def render_episode(
 
     import unitrack_env
     from unitrack_env.agents import make_agent
+    from unitrack_env.agents.base import close_agent
     from unitrack_env.evaluation.episode import play_episode
 
     out = check_video_path(out)
@@ -140,6 +141,6 @@ def render_episode(
     finally:
         if writer is not None:
             writer.close()
-        tracker.close()
+        close_agent(tracker)
         env.close()
     return frames

@@ -69,6 +69,7 @@ def _init_worker(parent: int, threads: int) -> None:
 
 def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any]:
     """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``."""
+    from unitrack_env.agents.base import close_agent
     from unitrack_env.evaluation.episode import play_episode
     from unitrack_env.evaluation.runner import OutputError, save_episode
 
@@ -87,7 +88,7 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any
         return "error", SequenceFailure.describe(exc)
     finally:
         if agent is not None:
-            agent.close()
+            close_agent(agent)
         if env is not None:
             env.close()
 

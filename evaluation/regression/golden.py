@@ -14,6 +14,7 @@ import gymnasium as gym
 
 import unitrack_env
 from unitrack_env.agents import make_agent
+from unitrack_env.agents.base import close_agent
 from unitrack_env.benchmarks import Benchmark, benchmark_for
 from unitrack_env.evaluation.episode import play_episode
 from unitrack_env.evaluation.identity import option_changes
@@ -79,7 +80,7 @@ def record_episode(
         bench = _benchmark(env_id, env_kwargs)
         record, info = play_episode(env, tracker, sequence, benchmark=bench)
     finally:
-        tracker.close()
+        close_agent(tracker)
         env.close()
     if "metrics" not in info:
         raise ValueError(f"{env_id} sequence '{sequence}' has no ground truth: nothing to record")

@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +69,37 @@ def test_agent_errors_name_sequence_and_frame(tmp_path, monkeypatch):
     monkeypatch.setattr(IoUAgent, "act", lambda self, obs: 1 / 0)
     with pytest.raises(RuntimeError, match="agent 'iou' failed on sequence 'SYN-01', frame 1"):
         run(ENV, "iou", out=tmp_path, progress=False)
+
+
+def test_an_agent_error_keeps_its_traceback(tmp_path, monkeypatch):
+    from unitrack_env.agents.baselines.iou import IoUAgent
+    from unitrack_env.evaluation.runner import RunFailed
+
+    def helper(observation):
+        return observation["no such key"]
+
+    monkeypatch.setattr(IoUAgent, "act", lambda self, obs: helper(obs))
+    with pytest.raises(RunFailed) as info:
+        run(ENV, "iou", out=tmp_path, progress=False, sequences=["SYN-01"])
+    error = info.value.errors["SYN-01"]
+    assert info.value.__cause__ is error and isinstance(error.__cause__, KeyError)
+    frames = traceback.extract_tb(error.__cause__.__traceback__)
+    assert frames[-1].name == "helper"  # the user's own line, for pdb.post_mortem
+
+
+class DuckTyped:
+    """An agent by protocol only: reset and act, no close()."""
+
+    def reset(self, observation, info):
+        pass
+
+    def act(self, observation):
+        return {"ids": np.zeros(0, int), "boxes": np.zeros((0, 4))}
+
+
+def test_an_agent_without_close_keeps_its_report(tmp_path):
+    report = run(ENV, DuckTyped, out=tmp_path, progress=False, sequences=["SYN-01"])
+    assert report.scores is not None and (tmp_path / "metrics.json").is_file()
 
 
 def test_refuses_to_mix_runs_in_one_folder(tmp_path):
