@@ -89,17 +89,36 @@ def available_agents() -> list[str]:
     return sorted(set(AGENTS) | set(_BUILTIN_MODULES) | set(entry_point_agents()))
 
 
-def agent_class(spec: str) -> type[Agent]:
-    """Return the agent class named by ``spec`` (a name or a ``module:Class`` reference).
+def _is_agent_class(cls: type) -> bool:
+    return issubclass(cls, Agent) or (callable(getattr(cls, "reset", None))
+                                      and callable(getattr(cls, "act", None)))
+
+
+def agent_class(spec: str | type) -> type[Agent]:
+    """Return the agent class named by ``spec``: a name, a reference or the class itself.
+
+    A reference is ``module:Class`` or ``path/to/file.py:Class``.
 
     Raises:
         KeyError: an unknown name (the message lists the known ones).
         ImportError: a reference that cannot be imported, or a class that is no agent.
+        TypeError: ``spec`` is an agent object or anything else but a name or a class.
     """
+    if isinstance(spec, type):
+        if not _is_agent_class(spec):
+            raise TypeError(f"{spec.__name__} has no reset(observation, info) and "
+                            "act(observation) methods")
+        return spec
+    if not isinstance(spec, str):
+        got = (f"an instance of {type(spec).__name__}" if _is_agent_class(type(spec))
+               else repr(spec))
+        raise TypeError(
+            f"an agent is named by a name, 'module:Class', 'path/to/file.py:Class' or the "
+            f"class itself; got {got} (pass its class, and its options as keyword arguments "
+            "or agent_kwargs)")
     if is_reference(spec):
         cls = load_reference(spec)
-        if not (issubclass(cls, Agent) or (callable(getattr(cls, "reset", None))
-                                           and callable(getattr(cls, "act", None)))):
+        if not _is_agent_class(cls):
             raise ImportError(f"agent '{spec}' has no reset(observation, info) and "
                               "act(observation) methods")
         return cls
@@ -133,6 +152,6 @@ def agents_for_task(task: str) -> list[str]:
     return fitting
 
 
-def make_agent(spec: str, **kwargs: Any) -> Agent:
+def make_agent(spec: str | type, **kwargs: Any) -> Agent:
     """Build the agent named by ``spec`` (see :func:`agent_class`) with keyword arguments."""
     return agent_class(spec)(**kwargs)

@@ -170,7 +170,10 @@ def portable_reference(cls: type) -> str | None:
         main = sys.modules.get("__main__")
         if getattr(main, "__file__", None) is None:
             return None
-        return agent_reference(cls)
+        found: Any = main  # a class inside a function, or exec'd: not at its qualname
+        for part in cls.__qualname__.split("."):
+            found = getattr(found, part, None)
+        return agent_reference(cls) if found is cls else None
     reference = agent_reference(cls)
     try:
         found = load_reference(reference)

@@ -44,7 +44,11 @@ from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks import Benchmark, benchmark_for
 from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
 from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
-from unitrack_env.evaluation.workers import SequenceFailure, play_in_workers
+from unitrack_env.evaluation.workers import (
+    SequenceFailure,
+    play_in_workers,
+    refuse_unguarded_script,
+)
 from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
@@ -181,7 +185,9 @@ def _stale_reason(out: Path, base: Any, name: str, inputs: str) -> str | None:
 def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int,
                    env_id: str) -> tuple[type, str, str | None]:
     """The agent class, its name for the record and its importable reference (checked)."""
-    cls = agent if isinstance(agent, type) else agent_class(agent)
+    if workers > 1:
+        refuse_unguarded_script()
+    cls = agent_class(agent)  # a name, a reference or a class; anything else: TypeError
     name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
     check_options(cls, agent_kwargs, agent=name)
     task = unitrack_env.task_of(env_id)
@@ -194,9 +200,10 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int
     reference = portable_reference(cls)
     if reference is None and workers > 1:
         raise ValueError(
-            f"agent class {cls.__qualname__} is defined interactively (a notebook or "
-            "python -c), so worker processes cannot import it; move it to a module (or a "
-            ".py file and pass 'path/to/file.py:ClassName'), or use workers=1"
+            f"agent class {cls.__qualname__} is defined where worker processes cannot "
+            "import it (a notebook, python -c, exec, or inside a function); move it to the "
+            "top level of a module (or a .py file and pass 'path/to/file.py:ClassName'), or "
+            "use workers=1"
         )
     return cls, name, reference
 
@@ -349,6 +356,8 @@ def run(
             to resume once the cause is fixed).
     """
     agent_kwargs = dict(agent_kwargs or {})
+    if isinstance(sequences, str):  # one name, not its letters
+        sequences = [sequences]
     cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)

@@ -412,6 +412,10 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     from unitrack_env.evaluation.runner import check_out_folder
 
     names, data_path = _checked_request(models, tasks, data)
+    if backend == "pool" and workers > 1:
+        from unitrack_env.evaluation.workers import refuse_unguarded_script
+
+        refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime
 
     resolve_runtime(runtime)  # a runtime that is not installed: one error now, not one per cell

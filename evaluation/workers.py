@@ -10,15 +10,18 @@
 
 from __future__ import annotations
 
+import ast
 import contextlib
+import inspect
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from multiprocessing import get_context
+from multiprocessing import current_process, get_context
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +94,41 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any
             close_agent(agent)
         if env is not None:
             env.close()
+
+
+def refuse_unguarded_script() -> None:
+    """Refuse to start worker processes from a script's unguarded top level.
+
+    Spawned workers import the script that started them; its top-level code would run again
+    in each (in a worker, Python refuses to start processes, so every sequence failed as "a
+    worker died"; a second ``run(..., overwrite=True)`` could even clear the folder being
+    written). Raised in the parent before anything is written, and in a worker that imports
+    such a script.
+    """
+    message = ("put the code that calls run(..., workers=N) or scorecard(..., workers=N) under "
+               "'if __name__ == \"__main__\":' — worker processes import {} and would run it "
+               "again")
+    if getattr(current_process(), "_inheriting", False):  # a worker importing the script
+        raise RuntimeError(message.format("the script"))
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    frame, top = inspect.currentframe(), None
+    while frame is not None:  # the script's own top-level statement that led here
+        if frame.f_globals.get("__name__") == "__main__" and frame.f_code.co_name == "<module>":
+            top = frame
+        frame = frame.f_back
+    if path is None or top is None or not Path(path).is_file():
+        return
+    try:
+        tree = ast.parse(Path(path).read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, ValueError):
+        return
+    line = top.f_lineno
+    guarded = any(isinstance(node, ast.If) and "__main__" in ast.unparse(node.test)
+                  and node.lineno <= line <= (node.end_lineno or node.lineno)
+                  for node in tree.body)
+    if not guarded:
+        raise RuntimeError(message.format(f"{path} (line {line})"))
 
 
 @contextlib.contextmanager

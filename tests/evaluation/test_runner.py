@@ -181,3 +181,35 @@ def test_real_pets_with_iou(tmp_path, mot15_root):
     assert report.records["PETS09-S2L1"].frames == 400
     assert report.combined["IDF1"] > 0.3
     np.testing.assert_array_less(0, report.combined["HOTA"])
+
+
+def test_agents_are_named_by_a_name_a_reference_or_the_class(tmp_path):
+    from unitrack_env.agents import make_agent
+
+    assert isinstance(make_agent(DuckTyped), DuckTyped)
+    with pytest.raises(TypeError, match="got an instance of DuckTyped .pass its class"):
+        run(ENV, DuckTyped(), out=tmp_path, progress=False)
+    report = run(ENV, DuckTyped, out=tmp_path, progress=False, sequences="SYN-01")
+    assert list(report.records) == ["SYN-01"]  # one name, not its letters
+
+
+def test_a_class_workers_cannot_import_is_refused_up_front(tmp_path):
+    def local_class():
+        class Local(DuckTyped):
+            pass
+        return Local
+
+    with pytest.raises(ValueError, match="inside a function"):
+        run(ENV, local_class(), out=tmp_path / "run", progress=False, workers=2)
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_script_without_the_main_guard_is_refused_before_any_work(tmp_path):
+    script = tmp_path / "unguarded.py"
+    script.write_text("from unitrack_env.evaluation.runner import run\n"
+                      f"run({ENV!r}, 'iou', out={str(tmp_path / 'run')!r}, workers=2)\n")
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode != 0 and not (tmp_path / "run").exists()
+    assert "under 'if __name__ == \"__main__\":'" in done.stderr
+    assert f"{script} (line 2)" in done.stderr
