@@ -391,10 +391,10 @@ def _error_text(exc: BaseException) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``unitrack`` command; returns the exit status."""
     args = build_parser().parse_args(argv)
-    one_line_warnings()
     console = _console()
     try:
-        return args.func(args, console)
+        with one_line_warnings():
+            return args.func(args, console)
     except KeyboardInterrupt:
         _console(stderr=True).print("interrupted: finished sequences are kept; run the same "
                                     "command again to resume", markup=False)

@@ -1,11 +1,17 @@
-"""A progress bar over frames with FPS and ETA (rich), silent when disabled."""
+"""Console output of the commands: a progress bar and this package's warnings.
+
+The bar runs over frames with FPS and ETA (rich) and is silent when disabled; warnings of
+this package are shown as one ``warning: ...`` line.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib.util
 import os
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
 
@@ -35,20 +41,26 @@ def _package_folders() -> tuple[str, ...]:
     return tuple(folders)
 
 
-def _format(message: Warning | str, category: type[Warning], filename: str, lineno: int,
-            line: str | None = None) -> str:
-    if str(Path(filename).resolve()).startswith(_package_folders()):
-        return f"warning: {message}\n"  # written for users: no source location, no code line
-    return _default_format(message, category, filename, lineno, line)
-
-
-def one_line_warnings() -> None:
-    """Show this package's warnings as one ``warning: ...`` line each.
+def format_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                   line: str | None = None) -> str:
+    """A ``warnings.formatwarning``: this package's warnings as one ``warning: ...`` line.
 
     A command's output, not a source location and a line of code; other libraries'
     warnings keep Python's format.
     """
-    warnings.formatwarning = _format
+    if str(Path(filename).resolve()).startswith(_package_folders()):
+        return f"warning: {message}\n"
+    return _default_format(message, category, filename, lineno, line)
+
+
+@contextlib.contextmanager
+def one_line_warnings() -> Iterator[None]:
+    """Within the block, warnings are formatted by :func:`format_warning`."""
+    previous, warnings.formatwarning = warnings.formatwarning, format_warning
+    try:
+        yield
+    finally:
+        warnings.formatwarning = previous
 
 
 class _FpsColumn(ProgressColumn):

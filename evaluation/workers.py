@@ -18,6 +18,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -25,7 +26,7 @@ from multiprocessing import current_process, get_context
 from pathlib import Path
 from typing import Any
 
-from unitrack_env.evaluation.progress import one_line_warnings
+from unitrack_env.evaluation.progress import format_warning
 
 #: Seconds between a worker's checks that its parent is alive.
 WATCHDOG_PERIOD = 0.5
@@ -63,7 +64,7 @@ def _init_worker(parent: int, threads: int) -> None:
     # sequences, stops the pool), so the workers must not die mid-write on their own.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _watch_parent(parent)
-    one_line_warnings()
+    warnings.formatwarning = format_warning  # the worker's own warnings, as one line
     if threads:
         import torch
 

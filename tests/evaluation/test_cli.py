@@ -133,3 +133,23 @@ def test_undefined_metrics_are_explained(shared_data, tmp_path, capsys):
                  "--out", str(tmp_path / "run"), "--quiet"]) == 0
     assert "(undefined metrics, shown as - or nan, in tennis: nothing there to score" in \
         capsys.readouterr().out.replace("\n", " ")
+
+
+def test_the_commands_show_this_packages_warnings_as_one_line():
+    import warnings
+
+    import unitrack_env.benchmarks.otb as ours
+    from unitrack_env.evaluation.progress import one_line_warnings
+
+    before = warnings.formatwarning
+    with one_line_warnings():
+        assert warnings.formatwarning("trimmed copy", UserWarning, ours.__file__, 64) == \
+            "warning: trimmed copy\n"
+        assert "numpy" in warnings.formatwarning("x", UserWarning, np_file(), 1)
+    assert warnings.formatwarning is before  # restored: the command leaves no trace
+
+
+def np_file() -> str:
+    import numpy
+
+    return numpy.__file__
