@@ -13,6 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from unitrack_env.datasets.limits import check_image_size, image_size
 from unitrack_env.errors import DataFormatError
 
 #: OpenCV >= 4.11 decodes straight to RGB, which saves a full-frame colour conversion.
@@ -26,40 +27,48 @@ _TAIL_BYTES = 64
 
 
 def check_complete(path: str | Path) -> None:
-    """Refuse a JPEG or PNG file whose end marker is missing (a truncated file).
+    """Refuse a JPEG or PNG file that is truncated, not an image, or a decompression bomb.
 
     libjpeg decodes a truncated JPEG without an error (the missing rows become one flat
     colour; it only prints "Premature end of JPEG file" on stderr), so the file's tail is
     checked instead: a JPEG must end with the EOI marker ``FF D9`` (padding after it is
-    allowed), a PNG with its ``IEND`` chunk. Other formats are not checked. Cheap: one
-    small read at the end of the file.
+    allowed), a PNG with its ``IEND`` chunk. The format is taken from the file's first
+    bytes, not its name: a PNG saved as ``.jpg`` is decoded as the PNG it is (OpenCV and the
+    official tools read images by content), and a ``.jpg``/``.png`` that is neither is
+    refused naming what it is. The header's width and height are checked against
+    :data:`~unitrack_env.datasets.limits.MAX_IMAGE_PIXELS` before anything is decoded.
+    Other suffixes are not checked. Cheap: two small reads.
 
     Raises:
-        DataFormatError: the file is missing, empty, or truncated.
+        DataFormatError: the file is missing, empty, not an image, too large, or truncated.
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in (".jpg", ".jpeg"):
-        marker, kind = _JPEG_END, "JPEG end-of-image marker (FF D9)"
-    elif suffix == ".png":
-        marker, kind = _PNG_END, "PNG IEND chunk"
-    else:
+    if suffix not in (".jpg", ".jpeg", ".png"):
         return
+    kind, size = image_size(path)
     try:
         with path.open("rb") as handle:
-            size = handle.seek(0, 2)
-            handle.seek(max(0, size - _TAIL_BYTES))
+            size_bytes = handle.seek(0, 2)
+            handle.seek(max(0, size_bytes - _TAIL_BYTES))
             tail = handle.read()
-    except FileNotFoundError:
-        raise DataFormatError(path, "missing") from None
     except OSError as exc:
         raise DataFormatError(path, f"unreadable ({exc})") from None
-    if size == 0:
+    if size_bytes == 0:
         raise DataFormatError(path, "empty image file (0 bytes)")
+    named = "PNG" if suffix == ".png" else "JPEG"
+    if kind not in ("PNG", "JPEG"):
+        what = f"a {kind} file" if kind else "not a JPEG or PNG image (unknown first bytes)"
+        raise DataFormatError(path, f"{what} named {suffix}; convert it to {named}")
+    check_image_size(path, size)
+    marker, end = ((_JPEG_END, "JPEG end-of-image marker (FF D9)") if kind == "JPEG"
+                   else (_PNG_END, "PNG IEND chunk"))
     if marker not in tail:
+        really = f" (a {kind} file named {suffix})" if kind != named else ""
         raise DataFormatError(
-            path, f"truncated image: no {kind} at the end of its {size} bytes; the file was "
-                  "cut short (an interrupted copy or download); replace it with a complete copy")
+            path, f"truncated image{really}: no {end} at the end of its {size_bytes} bytes; "
+                  "the file was cut short (an interrupted copy or download); replace it with "
+                  "a complete copy")
 
 
 def read_rgb(path: str | Path) -> np.ndarray:

@@ -143,7 +143,7 @@ class MaskOverlap(OverlapMeasure[dict]):
 
     def states(self, detections: Any) -> list[dict]:
         """The RLE of each mask of an ``(m, H, W)`` bool stack."""
-        from pycocotools import mask as mask_utils
+        from unitrack_env.datasets.rle import mask_api as mask_utils
 
         masks = np.asarray(detections, dtype=bool)
         if not len(masks):
@@ -152,7 +152,7 @@ class MaskOverlap(OverlapMeasure[dict]):
 
     def similarity(self, a: Sequence[dict], b: Sequence[dict]) -> np.ndarray:
         """Mask IoU (no crowd regions)."""
-        from pycocotools import mask as mask_utils
+        from unitrack_env.datasets.rle import mask_api as mask_utils
 
         return np.asarray(mask_utils.iou(list(a), list(b), [False] * len(b))
                           ).reshape(len(a), len(b))

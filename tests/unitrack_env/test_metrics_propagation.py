@@ -204,8 +204,9 @@ _PYCOCOTOOLS_NUMPY2 = "ignore:__array__ implementation doesn't accept a copy key
 def _trackeval_jf():
     pytest.importorskip("pycocotools")
     pytest.importorskip("skimage")
-    from pycocotools import mask as mask_utils
     from trackeval.metrics.j_and_f import JAndF
+
+    from unitrack_env.datasets.rle import mask_api as mask_utils
 
     def rle(m: np.ndarray):
         return mask_utils.encode(np.asfortranarray(m.astype(np.uint8)))

@@ -7,7 +7,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from pycocotools import mask as mask_utils
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.datasets.mots import (
@@ -21,6 +20,7 @@ from unitrack_env.datasets.mots import (
     resolve_overlaps,
     write_instances_png,
 )
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.synthetic import ensure_synthetic
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.metrics.mots import MaskClearStream, mask_iou, score_sequence

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from pycocotools import mask as mask_utils
 
 from unitrack_env.datasets.mots import check_rle, rle_runs
+from unitrack_env.datasets.rle import mask_api as mask_utils
 
 
 def reference_runs(mask: np.ndarray) -> list[int]:

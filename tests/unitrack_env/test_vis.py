@@ -8,10 +8,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from pycocotools import mask as mask_utils
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.datasets.mots import encode_masks
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.youtube_vis import (
     VisData,
     VisTrack,

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from unitrack_env.datasets.base import SequenceDataset
+from unitrack_env.datasets.limits import check_image_header
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.io import atomic_write_bytes
@@ -89,8 +90,12 @@ def read_label_png(path: str | Path) -> np.ndarray:
             pixel values are not labels.
     """
     image_mod = _pil_image()
+    check_image_header(path)  # a decompression bomb is refused before Pillow opens it
     try:
-        with image_mod.open(path) as image:
+        with warnings.catch_warnings():  # Pillow's bomb warning is an error here, not a note
+            warnings.simplefilter("error", image_mod.DecompressionBombWarning)
+            image = image_mod.open(path)
+        with image:
             mode = image.mode
             if mode not in ("P", "L"):
                 raise DataFormatError(
@@ -99,6 +104,8 @@ def read_label_png(path: str | Path) -> np.ndarray:
                     "be palette ('P') PNGs whose indices are object ids",
                 )
             return np.array(image, dtype=np.uint8)
+    except (image_mod.DecompressionBombError, image_mod.DecompressionBombWarning) as err:
+        raise DataFormatError(path, f"image too large to decode ({err})") from None
     except OSError as err:
         raise DataFormatError(path, f"missing or unreadable PNG ({err})") from err
 
@@ -106,6 +113,7 @@ def read_label_png(path: str | Path) -> np.ndarray:
 def read_png_palette(path: str | Path) -> np.ndarray:
     """Return the palette of a palette PNG as ``(n, 3)`` uint8 (n = entries stored)."""
     image_mod = _pil_image()
+    check_image_header(path)
     with image_mod.open(path) as image:
         palette = image.getpalette()
     if palette is None:
@@ -310,10 +318,13 @@ def _check_annotation(path: Path, size: tuple[int, int]) -> None:
     object would silently become void (255) and lower J&F.
     """
     image_mod = _pil_image()
+    check_image_header(path)
     try:
         with image_mod.open(path) as image:
             mode, found = image.mode, image.size
             values = np.unique(np.asarray(image)) if mode == "L" else None
+    except (image_mod.DecompressionBombError, image_mod.DecompressionBombWarning) as err:
+        raise DataFormatError(path, f"image too large to decode ({err})") from None
     except OSError as err:
         raise DataFormatError(path, f"missing or unreadable PNG ({err})") from err
     if mode not in ("P", "L"):

@@ -36,7 +36,6 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from unitrack_env.datasets.motchallenge import read_seqinfo
@@ -62,6 +61,7 @@ from unitrack_env.datasets.rle import (
     resolve_overlaps,
     rle_runs,
 )
+from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError
 
 __all__ = [
@@ -199,11 +199,9 @@ class MOTSDataset:
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg"))
         if not files:
             raise DataFormatError(folder, "contains no frames (000000.png ...)")
-        first = cv2.imread(str(files[0]), cv2.IMREAD_UNCHANGED)
-        if first is None:
-            raise DataFormatError(files[0], "not a decodable image")
-        return MOTSSequenceInfo(name, folder, len(files), int(files[0].stem), first.shape[1],
-                                first.shape[0], KITTI_FRAME_RATE, files[0].suffix)
+        width, height = read_image_size(files[0])
+        return MOTSSequenceInfo(name, folder, len(files), int(files[0].stem), width, height,
+                                KITTI_FRAME_RATE, files[0].suffix)
 
     def ground_truth(self, name: str) -> MaskAnnotations | None:
         """The sequence's ground truth, or None on a split without it."""
@@ -248,7 +246,7 @@ def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
     Raises:
         DataFormatError: the first problem found.
     """
-    from pycocotools import mask as mask_utils
+    from unitrack_env.datasets.rle import mask_api as mask_utils
 
     last = info.first_frame + info.length - 1
     for i in range(len(gt)):

@@ -16,6 +16,7 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
+from unitrack_env.datasets.limits import check_image_header
 from unitrack_env.datasets.rle import check_rle, decode_masks, encode_masks
 from unitrack_env.errors import DataFormatError
 
@@ -109,6 +110,8 @@ class MaskAnnotations:
                                   f"frame is {width}x{height}", "img_height")
         try:
             return decode_masks([self.counts[i] for i in idx], height, width)
+        except Warning:
+            raise  # a warning the user's filters turned into an error is not a data error
         except Exception as exc:  # pycocotools raises bare exceptions on corrupt strings
             first = int(idx[0]) if len(idx) else 0
             raise self._error(first, f"cannot decode the RLE of this frame ({exc})", "rle") \
@@ -253,6 +256,7 @@ def read_instances_png(folder: str | os.PathLike) -> MaskAnnotations:
     for path in files:
         if not path.stem.isdigit():
             raise DataFormatError(path, "file name must be the frame number, e.g. 000000.png")
+        check_image_header(path)
         image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise DataFormatError(path, "not a decodable png")

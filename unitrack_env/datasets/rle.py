@@ -1,21 +1,63 @@
 """COCO compressed run-length encodings of binary masks (MOTS txt files, YouTube-VIS JSON).
 
-Encoding and decoding go through ``pycocotools.mask``; :func:`rle_runs` and
-:func:`check_rle` read the run lengths without building a mask, so readers can validate a
-file cheaply.
+Encoding and decoding go through ``pycocotools.mask`` (as :data:`mask_api`, which keeps
+pycocotools' known-harmless numpy 2 warning from becoming an error under ``-W error``);
+:func:`rle_runs` and :func:`check_rle` read the run lengths without building a mask, so
+readers can validate a file cheaply.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import functools
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
+
+#: pycocotools 2.0.x's ``__array__`` lacks numpy 2's ``copy`` keyword; numpy falls back to a
+#: copy and warns. Harmless, but a user project running with ``-W error`` (or pytest's
+#: ``filterwarnings = error``) would otherwise see it as a failure of its own data.
+_COPY_KEYWORD_WARNING = r"__array__ implementation doesn't accept a copy keyword"
+
+
+@contextlib.contextmanager
+def quiet_pycocotools() -> Iterator[None]:
+    """Silence pycocotools' known-harmless numpy 2 warning (and only it) inside the block.
+
+    Wraps every pycocotools call of the readers and scorers, including TrackEval's scoring,
+    which calls pycocotools itself. Other warnings keep the user's filters.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=_COPY_KEYWORD_WARNING,
+                                category=DeprecationWarning)
+        yield
+
+
+class _MaskAPI:
+    """``pycocotools.mask`` with every function called inside :func:`quiet_pycocotools`."""
+
+    def __getattr__(self, name: str) -> Callable[..., Any]:
+        from pycocotools import mask
+
+        function = getattr(mask, name)
+
+        @functools.wraps(function)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            with quiet_pycocotools():
+                return function(*args, **kwargs)
+
+        return call
+
+
+#: Use as ``from unitrack_env.datasets.rle import mask_api as mask_utils``.
+mask_api = _MaskAPI()
 
 
 def encode_masks(masks: np.ndarray) -> list[bytes]:
     """Return the COCO compressed RLE strings of an ``(n, H, W)`` stack of binary masks."""
-    from pycocotools import mask as mask_utils
-
+    mask_utils = mask_api
     masks = np.asarray(masks)
     if masks.ndim != 3:
         raise ValueError(f"masks must be (n, H, W), got shape {masks.shape}")
@@ -27,8 +69,7 @@ def encode_masks(masks: np.ndarray) -> list[bytes]:
 
 def decode_masks(counts: Sequence[bytes], height: int, width: int) -> np.ndarray:
     """Decode COCO compressed RLE strings of ``height x width`` masks to ``(n, H, W)`` bool."""
-    from pycocotools import mask as mask_utils
-
+    mask_utils = mask_api
     if not len(counts):
         return np.zeros((0, height, width), dtype=bool)
     rles = [{"size": [int(height), int(width)], "counts": c} for c in counts]

@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from unitrack_env.datasets.limits import check_image_size, image_size
 from unitrack_env.errors import DataFormatError
 
 IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".bmp")
@@ -78,9 +79,16 @@ class SOTSequence:
 def read_image_size(path: str | Path) -> tuple[int, int]:
     """Return ``(width, height)`` of an image file.
 
+    A PNG or JPEG is measured from its header (no decoding; a decompression bomb is
+    refused, see :mod:`unitrack_env.datasets.limits`); other formats are decoded.
+
     Raises:
-        DataFormatError: the file is missing or not a decodable image.
+        DataFormatError: the file is missing, too large, or not a decodable image.
     """
+    _, size = image_size(path)
+    if size is not None and min(size) > 0:
+        check_image_size(path, size)
+        return size
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise DataFormatError(path, "missing or not a readable image")

@@ -55,7 +55,7 @@ def to_rle(segmentation: Any, height: int, width: int, path: Path, where: str) -
     Raises:
         DataFormatError: an unrecognised or inconsistent segmentation, naming ``where``.
     """
-    from pycocotools import mask as mask_utils
+    from unitrack_env.datasets.rle import mask_api as mask_utils
 
     if segmentation is None:
         return None
@@ -101,7 +101,7 @@ def rle_to_json(rle: dict | None, *, uncompressed: bool = False) -> dict | None:
     if rle is None:
         return None
     if uncompressed:
-        from pycocotools import mask as mask_utils
+        from unitrack_env.datasets.rle import mask_api as mask_utils
 
         flat = mask_utils.decode(rle).ravel(order="F").astype(np.int8)
         edges = np.flatnonzero(np.diff(flat)) + 1
@@ -306,7 +306,7 @@ def format_annotations(data: VisData, videos: list[VisVideo] | None = None) -> s
     Annotations carry ``height``/``width``/``length`` and uncompressed RLE as the 2019 train
     file does (TrackEval reads both).
     """
-    from pycocotools import mask as mask_utils
+    from unitrack_env.datasets.rle import mask_api as mask_utils
 
     videos = list(data.videos) if videos is None else videos
     keep = {v.id for v in videos}

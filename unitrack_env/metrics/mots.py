@@ -40,6 +40,7 @@ from unitrack_env.datasets.mots import (
     format_instances_txt,
     parse_instances_txt,
 )
+from unitrack_env.datasets.rle import quiet_pycocotools
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.clear_stream import FrameClear, StreamingClear
 from unitrack_env.metrics.motchallenge import (
@@ -153,10 +154,14 @@ def _run_trackeval(gt: MaskAnnotations, res: MaskAnnotations, benchmark: str, cl
         dataset_class = getattr(te_datasets, TRACKEVAL_DATASETS[benchmark])
         captured = io.StringIO()
         try:
-            data = trackeval_sequence_data(dataset_class, config, _TRACKER, seq, cls, captured)
+            with quiet_pycocotools():  # TrackEval decodes the masks with pycocotools
+                data = trackeval_sequence_data(dataset_class, config, _TRACKER, seq, cls,
+                                               captured)
         except TrackEvalException as exc:
             raise DataFormatError(source, f"TrackEval rejected the data: {exc}") from exc
-        return {metric.get_name(): metric.eval_sequence(data) for metric in trackeval_metrics()}
+        with quiet_pycocotools():
+            return {metric.get_name(): metric.eval_sequence(data)
+                    for metric in trackeval_metrics()}
 
 
 def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScore:
@@ -208,7 +213,7 @@ def score_folder(
 # ------------------------------------------------------------------ per-frame counts
 def mask_iou(rles_a: list[dict], rles_b: list[dict], *, ioa: bool = False) -> np.ndarray:
     """``(len(a), len(b))`` mask IoU of pycocotools RLEs (``ioa``: intersection / area of a)."""
-    from pycocotools import mask as mask_utils
+    from unitrack_env.datasets.rle import mask_api as mask_utils
 
     if not rles_a or not rles_b:
         return np.zeros((len(rles_a), len(rles_b)))
@@ -250,7 +255,7 @@ class MaskClearStream:
             rows, cols = linear_sum_assignment(-score)
             unmatched[cols[score[rows, cols] > EPS]] = False
         if ignore_rles and unmatched.any():
-            from pycocotools import mask as mask_utils
+            from unitrack_env.datasets.rle import mask_api as mask_utils
 
             region = mask_utils.merge(ignore_rles, intersect=False)
             idx = np.flatnonzero(unmatched)

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from unitrack_env.datasets.rle import quiet_pycocotools
 from unitrack_env.datasets.youtube_vis import (
     VisData,
     VisTrack,
@@ -104,7 +105,8 @@ def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[Vi
         captured = io.StringIO()
         per_class: dict[str, dict[str, Any]] = {}
         try:
-            with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
+            with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured), \
+                    quiet_pycocotools():  # TrackEval decodes the masks with pycocotools
                 dataset = te_datasets.YouTubeVIS(config)
                 for seq in dataset.seq_list:
                     raw = dataset.get_raw_seq_data(_TRACKER, seq)

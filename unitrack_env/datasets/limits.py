@@ -1,0 +1,158 @@
+"""Limits checked at the door: image dimensions, id ranges and id counts.
+
+Every reader checks its files against these limits when a sequence is opened, before the
+first frame is played, so that a hostile or corrupt file is refused with its name instead
+of exhausting memory mid-episode or at scoring. Each limit is far above what the real
+benchmarks hold and far below where memory runs out:
+
+* Images: :func:`image_size` reads the width and height from a PNG's ``IHDR`` chunk or a
+  JPEG's start-of-frame segment without decoding; :data:`MAX_IMAGE_PIXELS` (64 Mpx, eight
+  times a 3840x2160 DAVIS full-resolution frame, the largest frame of any supported
+  benchmark; 192 MiB decoded as RGB) bounds a frame or an annotation map. A PNG's header
+  can claim 100000x100000 pixels in 70 bytes (a "decompression bomb"): Pillow refuses it
+  with ``DecompressionBombError``, OpenCV allocates up to 1 Gpx of it.
+* Ids: :data:`MAX_ID` bounds ids read from JSON or text (int32, the ids the action space
+  and the official result files carry exactly; Python reads a JSON ``2**70`` as an int that
+  numpy cannot store).
+* Id counts: :data:`MAX_TRACKS` bounds the distinct ground-truth ids of one sequence.
+  TrackEval's HOTA keeps 20 matrices of ``gt ids x tracker ids`` doubles per sequence
+  (``trackeval/metrics/hota.py``, one per alpha plus the potential matches), 160 bytes per
+  pair: 10 million ids asked for 728 TiB. The busiest MOTChallenge sequence (MOT20-05) has
+  about 1,200 tracks, a YouTube-VIS or PoseTrack video tens; 10,000 tracks against as many
+  tracker ids is 16 GB at scoring.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitrack_env.errors import DataFormatError
+
+#: Largest image (width x height) read as a frame or an annotation map: 8192 x 8192.
+MAX_IMAGE_PIXELS = 8192 * 8192
+#: Largest id read from an annotation file (int32).
+MAX_ID = 2**31 - 1
+#: Most distinct ground-truth ids (tracks, instances) in one sequence.
+MAX_TRACKS = 10_000
+
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+_JPEG_MAGIC = b"\xff\xd8\xff"
+#: JPEG start-of-frame markers (SOF0..SOF15 but DHT C4, JPG C8 and DAC CC) hold the size.
+_SOF_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+#: Other formats recognised from their first bytes, to name what a mis-named file really is.
+_OTHER_MAGIC = ((b"GIF8", "GIF"), (b"BM", "BMP"), (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"),
+                (b"RIFF", "WebP/RIFF"))
+
+
+def image_format(head: bytes) -> str | None:
+    """``"PNG"``, ``"JPEG"`` or another format's name from a file's first bytes, or None."""
+    if head.startswith(_PNG_MAGIC):
+        return "PNG"
+    if head.startswith(_JPEG_MAGIC):
+        return "JPEG"
+    return next((name for magic, name in _OTHER_MAGIC if head.startswith(magic)), None)
+
+
+def _png_size(handle: Any) -> tuple[int, int] | None:
+    handle.seek(8)
+    chunk = handle.read(16)  # length (4), "IHDR", width (4), height (4)
+    if len(chunk) < 16 or chunk[4:8] != b"IHDR":
+        return None
+    return int.from_bytes(chunk[8:12], "big"), int.from_bytes(chunk[12:16], "big")
+
+
+def _jpeg_size(handle: Any) -> tuple[int, int] | None:
+    handle.seek(2)
+    while True:
+        marker = handle.read(2)
+        while len(marker) == 2 and marker[0] == 0xFF and marker[1] == 0xFF:  # fill bytes
+            marker = marker[1:] + handle.read(1)
+        if len(marker) < 2 or marker[0] != 0xFF or marker[1] in (0xD9, 0xDA):
+            return None  # end of image or start of scan before a frame header
+        if 0xD0 <= marker[1] <= 0xD7 or marker[1] == 0x01:
+            continue  # markers without a length
+        length = int.from_bytes(handle.read(2), "big")
+        if length < 2:
+            return None
+        if marker[1] in _SOF_MARKERS:
+            body = handle.read(5)  # precision (1), height (2), width (2)
+            if len(body) < 5:
+                return None
+            return int.from_bytes(body[3:5], "big"), int.from_bytes(body[1:3], "big")
+        handle.seek(length - 2, 1)
+
+
+def image_size(path: str | Path) -> tuple[str | None, tuple[int, int] | None]:
+    """The format and ``(width, height)`` a PNG or JPEG file's header states, not decoding.
+
+    Returns ``(format, None)`` when the format is not PNG/JPEG or its header is unreadable.
+
+    Raises:
+        DataFormatError: the file is missing or unreadable.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            kind = image_format(handle.read(8))
+            if kind == "PNG":
+                return kind, _png_size(handle)
+            if kind == "JPEG":
+                return kind, _jpeg_size(handle)
+            return kind, None
+    except FileNotFoundError:
+        raise DataFormatError(path, "missing") from None
+    except OSError as exc:
+        raise DataFormatError(path, f"unreadable ({exc})") from None
+
+
+def check_image_size(path: str | Path, size: tuple[int, int] | None) -> None:
+    """Refuse an image whose header states more than :data:`MAX_IMAGE_PIXELS` pixels."""
+    if size is None:
+        return
+    width, height = size
+    if width * height > MAX_IMAGE_PIXELS:
+        raise DataFormatError(
+            path, f"its header says {width}x{height} pixels, more than the {MAX_IMAGE_PIXELS:,} "
+                  "(8192x8192) any supported benchmark's images come near (a 'decompression "
+                  "bomb' or a corrupt header); refused before decoding")
+
+
+def check_image_header(path: str | Path) -> None:
+    """Refuse a PNG or JPEG whose header states an image too large to decode."""
+    _, size = image_size(path)
+    check_image_size(path, size)
+
+
+def check_id(value: Any, path: str | Path, *, field: str, line: int | None = None,
+             low: int = 0, what: str = "id") -> int:
+    """``value`` as an int after checking it is a whole number in ``low..MAX_ID``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise DataFormatError(path, f"{what} must be an integer, got {value!r}", line=line,
+                              field=field)
+    if isinstance(value, (float, np.floating)) and not float(value).is_integer():
+        raise DataFormatError(path, f"{what} must be an integer, got {value!r}", line=line,
+                              field=field)
+    number = int(value)
+    if not low <= number <= MAX_ID:
+        raise DataFormatError(
+            path, f"{what} {number} is out of range {low}..{MAX_ID} (int32, the ids the official "
+                  "result files and scorers store exactly); renumber the ids",
+            line=line, field=field)
+    return number
+
+
+def check_track_count(ids: Iterable[Any], path: str | Path, *, what: str = "ground-truth ids",
+                      field: str | None = None) -> None:
+    """Refuse a sequence with more than :data:`MAX_TRACKS` distinct ``ids``."""
+    count = len(set(ids))
+    if count > MAX_TRACKS:
+        raise DataFormatError(
+            path, f"{count:,} distinct {what} in one sequence, more than {MAX_TRACKS:,}: the "
+                  "official scorer (TrackEval's HOTA) holds 20 matrices of ground-truth x "
+                  "tracker ids, 160 bytes per pair (at 10 million ids, 728 TiB); the busiest "
+                  "real sequence (MOT20-05) has about 1,200. Split the sequence or renumber "
+                  "its ids", field=field)
