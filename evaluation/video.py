@@ -9,6 +9,7 @@ need no extra.
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +63,24 @@ class _MJPGWriter:
         self._writer.release()
 
 
+def _check_writable(out: Path) -> None:
+    """Refuse a video path whose folder cannot take a new file (read-only folder or disk).
+
+    Probed by creating and deleting a file where the video (or its first missing folder)
+    would go: permission bits do not tell (root ignores them; a read-only mount has them),
+    and FFmpeg failing to open its output only shows as a broken pipe after the first frame.
+    """
+    existing = next(p for p in (out.parent, *out.parent.parents) if p.exists())
+    try:
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".unitrack-probe-"):
+            pass
+    except OSError as exc:
+        raise ValueError(f"cannot write {out}: the folder {existing} is not writable "
+                         f"({exc.strerror or exc}); choose another --out") from None
+    if out.exists() and not os.access(out, os.W_OK):
+        raise ValueError(f"cannot write {out}: the file exists and is not writable")
+
+
 def check_video_path(out: str | os.PathLike) -> Path:
     """Validate the output path and the installed writer before any frame is played."""
     out = Path(out)
@@ -73,6 +92,7 @@ def check_video_path(out: str | os.PathLike) -> Path:
     blocker = file_in_the_way(out.parent)
     if blocker is not None:
         raise ValueError(f"cannot write {out}: {blocker} is a file, not a folder")
+    _check_writable(out)
     if suffix == ".mp4":
         try:
             import imageio_ffmpeg  # noqa: F401

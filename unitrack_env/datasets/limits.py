@@ -109,16 +109,23 @@ def image_size(path: str | Path) -> tuple[str | None, tuple[int, int] | None]:
         raise DataFormatError(path, f"unreadable ({exc})") from None
 
 
-def check_image_size(path: str | Path, size: tuple[int, int] | None) -> None:
-    """Refuse an image whose header states more than :data:`MAX_IMAGE_PIXELS` pixels."""
+def check_image_size(path: str | Path, size: tuple[int, int] | None, *,
+                     field: str | None = None) -> None:
+    """Refuse an image size of more than :data:`MAX_IMAGE_PIXELS` pixels.
+
+    ``size`` is ``(width, height)`` from an image header or, with ``field``, from an
+    annotation file's fields (e.g. a JSON video's width and height).
+    """
     if size is None:
         return
     width, height = size
     if width * height > MAX_IMAGE_PIXELS:
+        source = f"says {width}x{height}" if field else f"header says {width}x{height}"
         raise DataFormatError(
-            path, f"its header says {width}x{height} pixels, more than the {MAX_IMAGE_PIXELS:,} "
-                  "(8192x8192) any supported benchmark's images come near (a 'decompression "
-                  "bomb' or a corrupt header); refused before decoding")
+            path, f"{'it' if field else 'its'} {source} pixels, more than the "
+                  f"{MAX_IMAGE_PIXELS:,} (8192x8192) no supported benchmark comes near (a "
+                  "'decompression bomb' or a corrupt header); refused before decoding",
+            field=field)
 
 
 def check_image_header(path: str | Path) -> None:
@@ -148,7 +155,14 @@ def check_id(value: Any, path: str | Path, *, field: str, line: int | None = Non
 def check_track_count(ids: Iterable[Any], path: str | Path, *, what: str = "ground-truth ids",
                       field: str | None = None) -> None:
     """Refuse a sequence with more than :data:`MAX_TRACKS` distinct ``ids``."""
-    count = len(set(ids))
+    values = ids if isinstance(ids, np.ndarray) else list(ids)
+    check_track_total(len(np.unique(np.asarray(values))) if len(values) else 0, path,
+                      what=what, field=field)
+
+
+def check_track_total(count: int, path: str | Path, *, what: str = "ground-truth ids",
+                      field: str | None = None) -> None:
+    """Refuse ``count`` tracks (distinct ``what``) in one sequence above :data:`MAX_TRACKS`."""
     if count > MAX_TRACKS:
         raise DataFormatError(
             path, f"{count:,} distinct {what} in one sequence, more than {MAX_TRACKS:,}: the "

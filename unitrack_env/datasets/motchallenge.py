@@ -149,7 +149,15 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
     parser = configparser.ConfigParser(interpolation=None)
     parser.optionxform = str  # keep the keys' case (imDir, frameRate, ...)
     try:
-        parser.read_string(path.read_text(encoding="utf-8", errors="strict"))
+        raw = path.read_bytes()
+        # A byte-order mark (Windows editors write one) is skipped, not read as part of the
+        # "[Sequence]" header. Our scoring passes the length to TrackEval (SEQ_INFO); only
+        # TrackEval run by itself on the folder reads this file, and fails on a BOM.
+        if raw.startswith(b"\xef\xbb\xbf"):
+            warnings.warn(f"{path}: starts with a UTF-8 byte-order mark (BOM); read without "
+                          "it, but TrackEval run by itself on this folder would fail on it: "
+                          "save the file without a BOM", stacklevel=2)
+        parser.read_string(raw.decode("utf-8-sig", errors="strict"))
     except (configparser.Error, UnicodeDecodeError) as exc:
         raise DataFormatError(path, f"not a valid INI file ({exc})") from None
     if not parser.has_section("Sequence"):

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.limits import check_track_count
 from unitrack_env.errors import DataFormatError
 
 #: Columns of a detection row, for messages.
@@ -207,7 +208,7 @@ def _check_detection_values(path: Path, table: np.ndarray, lines: np.ndarray) ->
 
 
 def _check_gt_ids(path: Path, table: np.ndarray, lines: np.ndarray) -> None:
-    """Ground-truth ids are whole, in ``0..MAX_GT_ID``, and once per frame."""
+    """Ground-truth ids are whole, in ``0..MAX_GT_ID``, at most ``MAX_TRACKS``, once per frame."""
     frames, ids = table[:, 0], table[:, 1]
     bad_ids = ids != np.round(ids)
     if bad_ids.any():
@@ -223,6 +224,7 @@ def _check_gt_ids(path: Path, table: np.ndarray, lines: np.ndarray) -> None:
                   "ground-truth id (a negative id is scored as another object, a huge one "
                   "exhausts memory); renumber the ids",
             line=int(lines[i]), field="id")
+    check_track_count(ids, path, field="id")
     key = np.stack([frames, ids], axis=1)
     _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
     if (counts > 1).any():

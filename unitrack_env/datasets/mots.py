@@ -38,7 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.limits import check_track_count
 from unitrack_env.datasets.motchallenge import read_seqinfo
+from unitrack_env.datasets.motchallenge_tables import MAX_GT_ID
 from unitrack_env.datasets.mots_format import (
     CLASS_CAR,
     CLASS_IDS,
@@ -234,6 +236,22 @@ class MOTSDataset:
         return dets.select(dets.classes == class_id)
 
 
+def _check_ids(gt: MaskAnnotations) -> None:
+    """Refuse ground-truth ids outside ``0..MAX_GT_ID`` or more than ``MAX_TRACKS`` of them.
+
+    TrackEval allocates an array over the id range and matrices over the id count.
+    """
+    if not len(gt):
+        return
+    bad = (gt.ids < 0) | (gt.ids > MAX_GT_ID)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise gt._error(i, f"id {gt.ids[i]} is outside 0..{MAX_GT_ID}: TrackEval indexes an "
+                           "array by ground-truth id (a huge one exhausts memory); renumber "
+                           "the ids", "id")
+    check_track_count(gt.ids, gt.source or Path("<memory>"), field="id")
+
+
 def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
     """Refuse ground truth that TrackEval would refuse when scoring, naming file and line.
 
@@ -249,6 +267,7 @@ def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
     from unitrack_env.datasets.rle import mask_api as mask_utils
 
     last = info.first_frame + info.length - 1
+    _check_ids(gt)
     for i in range(len(gt)):
         if not info.first_frame <= gt.frames[i] <= last:
             raise gt._error(i, f"time_frame {gt.frames[i]} is not a frame of the sequence "

@@ -16,7 +16,7 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import check_image_header
+from unitrack_env.datasets.limits import MAX_ID, check_image_header
 from unitrack_env.datasets.rle import check_rle, decode_masks, encode_masks
 from unitrack_env.errors import DataFormatError
 
@@ -193,15 +193,18 @@ def _parse_line(
             raise DataFormatError(path, f"{parts[col]!r} is not an integer", line=lineno,
                                   field=TXT_FIELDS[col]) from None
     t, obj, cls, h, w = values
+    if not -1 <= obj <= MAX_ID:  # rows are stored as float64, then int64
+        raise DataFormatError(path, f"id {obj} is out of range -1..{MAX_ID} (int32, the ids "
+                              "the official scorer stores exactly)", line=lineno, field="id")
+    if not 0 <= t <= MAX_ID:
+        raise DataFormatError(path, f"time_frame {t} is out of range 0..{MAX_ID}", line=lineno,
+                              field="time_frame")
     if cls not in VALID_CLASSES:
         raise DataFormatError(path, f"class {cls} is not 1 (car), 2 (pedestrian) or 10 "
                               "(ignore)", line=lineno, field="class_id")
     if h < 1 or w < 1:
         raise DataFormatError(path, f"image size {h}x{w} must be positive", line=lineno,
                               field="img_height")
-    if t < 0:
-        raise DataFormatError(path, f"time_frame {t} is negative", line=lineno,
-                              field="time_frame")
     score = _score(path, lineno, parts) if len(parts) == 7 else 1.0
     rle = parts[5].encode("ascii", errors="replace")
     problem = check_rle(rle, h, w)

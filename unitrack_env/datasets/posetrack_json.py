@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from unitrack_env.datasets.limits import check_id, check_track_total
 from unitrack_env.datasets.posetrack_records import (
     FRAMES_PER_VIDEO,
     IMAGE_ID_BASE,
@@ -44,12 +45,22 @@ def _int(path: Path, value: Any, fld: str) -> int:
             isinstance(value, float) and not value.is_integer()):
         raise DataFormatError(path, f"must be an integer, got {type(value).__name__} "
                                     f"{json.dumps(value)[:60]}", field=fld)
+    if not -2**63 <= value < 2**63:  # numpy (and the scorer) hold ids as int64
+        raise DataFormatError(path, f"{json.dumps(value)[:60]} is out of range (int64)",
+                              field=fld)
     return int(value)
 
 
 def _opt_int(path: Path, entry: dict[str, Any], key: str, where: str) -> int | None:
     value = entry.get(key)
     return None if value is None else _int(path, value, f"{where}.{key}")
+
+
+def _track_id(path: Path, entry: dict[str, Any], where: str) -> int | None:
+    """A person's ``track_id``: None or an int in ``0..MAX_ID`` (ids of the result files)."""
+    value = _opt_int(path, entry, "track_id", where)
+    return None if value is None else check_id(value, path, field=f"{where}.track_id",
+                                               what="track_id")
 
 
 def _float(path: Path, value: Any, fld: str) -> float:
@@ -163,7 +174,7 @@ def _parse_person(path: Path, k: int, entry: Any) -> PoseTrackPerson:
     return PoseTrackPerson(
         image_id=_int(path, entry["image_id"], f"{where}.image_id"),
         keypoints=flat.reshape(NUM_KEYPOINTS, 3),
-        track_id=_opt_int(path, entry, "track_id", where),
+        track_id=_track_id(path, entry, where),
         scores=score_arr,
         score=None if entry.get("score") is None else _float(path, entry["score"],
                                                                  f"{where}.score"),
@@ -200,6 +211,9 @@ def parse_posetrack(data: Any, path: str | os.PathLike = "<json>") -> PoseTrackV
             raise DataFormatError(path, f"refers to image_id {person.image_id}, which is not in "
                                         "'images'", field=f"annotations[{k}].image_id")
         people[position[person.image_id]].append(person)
+    check_track_total(len({p.track_id for p in (q for ps in people for q in ps)
+                           if p.track_id is not None}), path, what="track_ids",
+                      field="annotations")
     extra = {k: v for k, v in data.items() if k not in ("images", "annotations", "categories")}
     return PoseTrackVideo(images, people, categories, extra)
 

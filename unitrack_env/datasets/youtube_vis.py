@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from unitrack_env.datasets.limits import check_id, check_image_size, check_track_total
 from unitrack_env.datasets.rle import check_rle
 from unitrack_env.errors import DataFormatError
 
@@ -182,6 +184,11 @@ def _require(obj: Any, key: str, kind: type | tuple, path: Path, where: str) -> 
     return value
 
 
+def _id(entry: dict, key: str, path: Path, where: str) -> int:
+    """An id field: an int in ``0..MAX_ID`` (JSON allows ``2**70``; numpy and TrackEval not)."""
+    return check_id(_require(entry, key, int, path, where), path, field=f"{where}.{key}")
+
+
 def _load_json(path: Path, text: str | None) -> Any:
     try:
         return json.loads(path.read_text(encoding="utf-8") if text is None else text)
@@ -219,9 +226,10 @@ def parse_vis_json(path: str | os.PathLike, *, text: str | None = None) -> VisDa
         if not names or not all(isinstance(n, str) and "/" in n for n in names):
             raise DataFormatError(path, "must be non-empty '<video>/<frame>' paths",
                                   field=f"{where}.file_names")
-        video = VisVideo(_require(v, "id", int, path, where), names[0].split("/")[0],
+        video = VisVideo(_id(v, "id", path, where), names[0].split("/")[0],
                          tuple(names), _require(v, "height", int, path, where),
                          _require(v, "width", int, path, where))
+        check_image_size(path, (video.width, video.height), field=f"{where}.width/height")
         length = v.get("length", video.length)
         if length != video.length:
             raise DataFormatError(path, f"length {length} but {video.length} file_names",
@@ -248,9 +256,14 @@ def parse_vis_json(path: str | os.PathLike, *, text: str | None = None) -> VisDa
                                       field=f"{where}.category_id")
             tracks.append(VisTrack(video_id, category,
                                    _segmentations(a, by_id[video_id], path, where),
-                                   id=_require(a, "id", int, path, where),
+                                   id=_id(a, "id", path, where),
                                    iscrowd=int(a.get("iscrowd", 0))))
         tracks = tuple(tracks)
+        per_video = Counter(t.video_id for t in tracks)  # TrackEval's matrices grow with it
+        if per_video:
+            video_id, count = per_video.most_common(1)[0]
+            check_track_total(count, path, what=f"annotations (instances) of video {video_id}",
+                              field="annotations")
     return VisData(path, tuple(videos), categories, tracks)
 
 
