@@ -1106,3 +1106,179 @@ CASES: tuple[Case, ...] = (
            data=_mot_with(_append(GT, "\n\n"))),
        "SYN-01", "gt.txt", "blank line", error="CLIFailed"),
 )
+
+
+# ------------------------------------------------------------------------------------------
+# issue 22: limits at the door, warnings
+# Each large input is a few bytes or lines that claim (or just pass) the limit: an image
+# header stating 60000x60000 pixels, 10,001 ground-truth ids, an id of 2**70.
+def _png_header(width: int, height: int) -> bytes:
+    """A PNG holding only its signature, an IHDR chunk stating ``width x height`` and IEND."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        crc = zlib.crc32(kind + body) & 0xFFFFFFFF
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 3, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IEND", b"")
+
+
+def _jpeg_header(width: int, height: int) -> bytes:
+    """A JPEG holding only a start-of-frame segment stating ``width x height``, then EOI."""
+    import struct
+
+    sof = struct.pack(">BHHB", 8, height, width, 3) + b"\x01\x22\x00\x02\x11\x01\x03\x11\x01"
+    return b"\xff\xd8\xff\xc0" + struct.pack(">H", len(sof) + 2) + sof + b"\xff\xd9"
+
+
+def _frame_bytes(rel: str, data: Callable[[], bytes]) -> Callable[[Path], None]:
+    return lambda folder: write(folder / rel, data())
+
+
+def _png_as_jpg(seq: Path) -> None:
+    import cv2
+
+    frame = seq / "img1" / "000001.jpg"
+    image = cv2.imread(str(frame))
+    ok, png = cv2.imencode(".png", image)
+    assert ok
+    write(frame, png.tobytes())
+
+
+def _many_gt_ids(seq: Path) -> None:
+    """10,001 ground-truth rows, each its own id (over MAX_TRACKS; the issue had 10 million)."""
+    rows = [f"{1 + i % 72},{i + 1},10,10,20,40,1,1,1.0" for i in range(10_001)]
+    write(seq / GT, "\n".join(rows) + "\n")
+
+
+def _many_mots_ids(seq: Path) -> None:
+    """10,001 ground-truth instances (empty masks: disjoint, cheap) in MOTS20 gt.txt."""
+    from unitrack_env.datasets.rle import encode_masks
+
+    empty = encode_masks(np.zeros((1, 480, 272), dtype=np.uint8))[0].decode()
+    lines = [f"{1 + i % 20} {2001 + i} 2 480 272 {empty}" for i in range(10_001)]
+    write(seq / GT, "\n".join(lines) + "\n")
+
+
+def _mots_id(value: int) -> Callable[[Path], None]:
+    return _at(GT, lambda content: content.replace("1 2001 ", f"1 {value} ", 1))
+
+
+def _vis_json(change: Callable[[Any], Any]) -> Callable[[Path], None]:
+    return lambda root: edit_json(root / "train.json", change)
+
+
+def _vis_many_instances(data: Any) -> None:
+    video = data["videos"][0]
+    base = dict(data["annotations"][0], segmentations=[None] * video["length"],
+                video_id=video["id"])
+    data["annotations"] += [dict(base, id=100_000 + i) for i in range(10_001)]
+
+
+def _set(key: str, value: Any, where: str = "annotations") -> Callable[[Any], None]:
+    def change(data: Any) -> None:
+        data[where][0][key] = value
+    return change
+
+
+def _vis_huge_video(data: Any) -> None:
+    data["videos"][0].update(width=60_000, height=60_000)
+
+
+def _with_deprecation_errors(run: Callable[[Path], None]) -> Callable[[Path], None]:
+    """Open as a user project running ``-W error::DeprecationWarning`` would."""
+    def strict(scratch: Path) -> None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DeprecationWarning)
+            run(scratch)
+    return strict
+
+
+def _not_writable(scratch: Path) -> Path:
+    """A folder a render cannot write into (root ignores permission bits: /sys then)."""
+    if os.geteuid() == 0:
+        return Path("/sys")
+    folder = scratch / "read-only"
+    folder.mkdir()
+    folder.chmod(0o555)
+    return folder
+
+
+def _render_into(folder_of: Callable[[Path], Path]) -> Callable[[Path], None]:
+    def run(scratch: Path) -> None:
+        out = folder_of(scratch) / "episode.mp4"
+        cli("render", "--env", "UniTrack/MOT17-v0", "--agent", "iou", "--sequence", MOT_SEQ,
+            "--out", str(out))(scratch)
+    return run
+
+
+CASES = CASES + (
+    _c("MOT-gt-10001-ids", "a gt.txt with 10,001 distinct ids (the issue's had 10 million)",
+       mot(_many_gt_ids), "gt.txt, field 'id'", "10,001 distinct ground-truth ids",
+       "more than 10,000"),
+    _c("MOT-frame-bomb", "frame 1 is a JPEG whose header claims 60000x60000 pixels",
+       mot(_frame_bytes("img1/000001.jpg", lambda: _jpeg_header(60_000, 60_000))),
+       "000001.jpg", "60000x60000", "decompression bomb"),
+    _c("MOT-frame-png-named-jpg", "frame 1 is a valid PNG saved as .jpg (decoded by content)",
+       mot(_png_as_jpg), kind="accepted"),
+    _c("MOT-frame-text-named-jpg", "frame 1 is a text file named .jpg",
+       mot(_frame_bytes("img1/000001.jpg", lambda: b"not an image\n")), "000001.jpg",
+       "not a JPEG or PNG image"),
+    _c("MOT-frame-gif-named-jpg", "frame 1 is a GIF named .jpg",
+       mot(_frame_bytes("img1/000001.jpg", lambda: b"GIF89a" + b"\0" * 40)),
+       "000001.jpg", "a GIF file named .jpg"),
+    _c("MOT-seqinfo-bom", "seqinfo.ini starts with a UTF-8 byte-order mark (read; warned)",
+       mot(_bytes(INI, lambda b: b"\xef\xbb\xbf" + b)), "seqinfo.ini", "byte-order mark",
+       kind="warning"),
+    _c("MOTS-gt-10001-ids", "a MOTS gt.txt with 10,001 distinct instance ids",
+       mots(_many_mots_ids), "gt.txt, field 'id'", "10,001 distinct ground-truth ids"),
+    _c("MOTS-gt-id-2**70", "a MOTS gt id of 2**70",
+       mots(_at(GT, lambda c: c.replace("1 2001 ", f"1 {2**70} ", 1))),
+       "gt.txt, line 1, field 'id'", "1180591620717411303424 is out of range"),
+    _c("MOTS-gt-id-2**30", "a MOTS gt id of 2**30 (TrackEval allocates an array up to it)",
+       mots(_mots_id(2**30)), "field 'id'", "outside 0..16777216"),
+    _c("MOTS-reset-deprecation-errors", "MOTS reset under -W error::DeprecationWarning "
+       "(pycocotools' numpy 2 warning is not the data's fault)",
+       _with_deprecation_errors(mots(lambda seq: None)), kind="accepted"),
+    _c("VIS-reset-deprecation-errors", "VIS reset under -W error::DeprecationWarning",
+       _with_deprecation_errors(vis(lambda root: None)), kind="accepted"),
+    _c("VIS-annotation-id-2**70", "a VIS annotation id of 2**70",
+       vis(_vis_json(_set("id", 2**70))), "train.json, field 'annotations[0].id'",
+       "1180591620717411303424 is out of range"),
+    _c("VIS-video-60000x60000", "a VIS video of 60000x60000 pixels",
+       vis(_vis_json(_vis_huge_video)), "field 'videos[0].width/height'", "60000x60000"),
+    _c("VIS-10001-instances", "a VIS video with 10,001 annotated instances",
+       vis(_vis_json(_vis_many_instances)), "train.json, field 'annotations'",
+       "10,00", "more than 10,000"),
+    _c("PoseTrack-track-id-2**70", "a PoseTrack track_id of 2**70",
+       posetrack(_set("track_id", 2**70)), "field 'annotations[0].track_id'", "out of range"),
+    _c("PoseTrack-track-id-2**40", "a PoseTrack track_id of 2**40",
+       posetrack(_set("track_id", 2**40)), "field 'annotations[0].track_id'",
+       "track_id 1099511627776 is out of range 0..2147483647"),
+    _c("DAVIS-annotation-bomb", "the first annotation PNG's header claims 100000x100000",
+       davis(lambda root: write(_davis_png(root, 0), _png_header(100_000, 100_000))),
+       "00000.png", "100000x100000", "decompression bomb"),
+    _c("DAVIS-later-annotation-bomb", "annotation 5's PNG header claims 100000x100000",
+       davis(lambda root: write(_davis_png(root, 5), _png_header(100_000, 100_000))),
+       "00005.png", "100000x100000"),
+    _c("OTB-frame-bomb", "the first frame's JPEG header claims 60000x60000",
+       otb(lambda seq: write(sorted((seq / "img").iterdir())[0], _jpeg_header(60_000, 60_000))),
+       ".jpg", "60000x60000", "decompression bomb"),
+    _c("JHMDB-frame-bomb", "the first frame's PNG header claims 100000x100000",
+       jhmdb(lambda mat, frames: write(sorted(frames.iterdir())[0],
+                                       _png_header(100_000, 100_000))),
+       ".png", "100000x100000", "decompression bomb"),
+    _c("MOTS-kitti-png-annotation-bomb", "KITTI MOTS: a png annotation whose header claims "
+       "100000x100000",
+       kitti_png(lambda folder: write(sorted(folder.iterdir())[0],
+                                      _png_header(100_000, 100_000))),
+       ".png", "100000x100000", "decompression bomb"),
+    _c("action-mot-id-2**70", "MOT17: a track id of 2**70 (numpy makes it an object array)",
+       act("UniTrack/MOT17-v0", _tracks([2**70], [BOX])),
+       "track id 1180591620717411303424 is out of range", error="InvalidActionError"),
+    _c("CLI-render-read-only-folder", "unitrack render --out into a folder it cannot write",
+       _render_into(_not_writable), "exit 2:", "episode.mp4", "not writable",
+       error="CLIFailed"),
+)
