@@ -26,6 +26,7 @@ from __future__ import annotations
 import configparser
 import contextlib
 import io
+import os
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -132,6 +133,39 @@ def trackeval_sequence_data(
         return dataset.get_preprocessed_seq_data(raw_data, cls)
 
 
+#: ``gt ids x tracker ids`` float64 matrices alive at once in TrackEval's HOTA: the potential
+#: matches, their alignment score (and two temporaries building it), one per alpha (19).
+_HOTA_MATRICES = 22
+
+
+def _memory_bytes() -> int | None:
+    """This machine's physical memory, or None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_matrix_memory(data: dict[str, Any], source: Path, seq: str) -> None:
+    """Refuse to score when TrackEval's HOTA matrices could not fit this machine's memory.
+
+    HOTA allocates about :data:`_HOTA_MATRICES` matrices of ``gt ids x tracker ids`` doubles
+    per sequence; the ground-truth id count is bounded at reset
+    (:data:`~unitrack_env.datasets.limits.MAX_TRACKS`), the tracker's only here. Refusing
+    names the culprit instead of a ``MemoryError: Unable to allocate 728. TiB``.
+    """
+    gt_ids, tracker_ids = int(data["num_gt_ids"]), int(data["num_tracker_ids"])
+    need = _HOTA_MATRICES * 8 * gt_ids * tracker_ids
+    memory = _memory_bytes()
+    if memory is not None and need > memory:
+        raise DataFormatError(
+            source, f"{seq}: {tracker_ids:,} distinct track ids against {gt_ids:,} "
+                    f"ground-truth ids; TrackEval's HOTA would allocate {need / 2**30:,.0f} GiB "
+                    f"({_HOTA_MATRICES} matrices of gt x tracker ids), more than this "
+                    f"machine's {memory / 2**30:,.0f} GiB. A tracker that starts a new id for "
+                    "(almost) every detection? Keep ids across frames")
+
+
 def flatten_results(raw: dict[str, dict[str, Any]]) -> dict[str, float]:
     """One flat dict of floats from TrackEval's per-metric results."""
     out: dict[str, float] = {}
@@ -218,13 +252,14 @@ def score_sequence(
             rows = rows.reshape(0, MIN_RESULT_COLUMNS)
     validate_tracker_rows(rows, seq_length, source, line_numbers)
 
-    raw = _run_trackeval(seq_dir, rows, name, seq_length, gt_file)
+    raw = _run_trackeval(seq_dir, rows, name, seq_length, gt_file, source)
     return SequenceScore(sequence=seq_dir.name, benchmark=name, summary=flatten_results(raw),
                          raw=raw)
 
 
 def _run_trackeval(
-    seq_dir: Path, rows: np.ndarray, benchmark: str, seq_length: int, gt_file: Path
+    seq_dir: Path, rows: np.ndarray, benchmark: str, seq_length: int, gt_file: Path,
+    source: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
     from trackeval.datasets import MotChallenge2DBox
     from trackeval.utils import TrackEvalException
@@ -261,6 +296,7 @@ def _run_trackeval(
             detail = captured.getvalue().strip().splitlines()
             hint = f" ({detail[-1]})" if detail else ""
             raise DataFormatError(gt_file, f"TrackEval rejected the data: {exc}{hint}") from exc
+        check_matrix_memory(data, source or Path(f"<results of {seq}>"), seq)
         return {metric.get_name(): metric.eval_sequence(data) for metric in trackeval_metrics()}
 
 

@@ -45,6 +45,7 @@ from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.clear_stream import FrameClear, StreamingClear
 from unitrack_env.metrics.motchallenge import (
     SequenceScore,
+    check_matrix_memory,
     flatten_results,
     trackeval_metrics,
     trackeval_sequence_data,
@@ -159,6 +160,7 @@ def _run_trackeval(gt: MaskAnnotations, res: MaskAnnotations, benchmark: str, cl
                                                captured)
         except TrackEvalException as exc:
             raise DataFormatError(source, f"TrackEval rejected the data: {exc}") from exc
+        check_matrix_memory(data, source, seq)
         with quiet_pycocotools():
             return {metric.get_name(): metric.eval_sequence(data)
                     for metric in trackeval_metrics()}
