@@ -14,6 +14,7 @@ benchmarks hold and far below where memory runs out:
 * Ids: :data:`MAX_ID` bounds ids read from JSON or text (int32, the ids the action space
   and the official result files carry exactly; Python reads a JSON ``2**70`` as an int that
   numpy cannot store).
+* Frames: :data:`MAX_FRAMES` bounds a sequence's stated length (``seqLength``).
 * Id counts: :data:`MAX_TRACKS` bounds the distinct ground-truth ids of one sequence.
   TrackEval's HOTA keeps 20 matrices of ``gt ids x tracker ids`` doubles per sequence
   (``trackeval/metrics/hota.py``, one per alpha plus the potential matches), 160 bytes per
@@ -38,6 +39,10 @@ MAX_IMAGE_PIXELS = 8192 * 8192
 MAX_ID = 2**31 - 1
 #: Most distinct ground-truth ids (tracks, instances) in one sequence.
 MAX_TRACKS = 10_000
+#: Most frames in one sequence: 9 hours at 30 fps. The longest benchmark sequences have a
+#: few thousand (MOT20-05 3,315; LaSOT's longest about 11,000); per-frame index arrays stay
+#: at megabytes, where a ``seqLength`` of 10**11 asked for 745 GiB.
+MAX_FRAMES = 1_000_000
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _JPEG_MAGIC = b"\xff\xd8\xff"

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.limits import MAX_FRAMES, check_image_size
 from unitrack_env.datasets.motchallenge_tables import (
     DET_FIELDS,
     GT_FIELDS,
@@ -184,14 +185,21 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
             return int(value)
         return value
 
+    length, width, height = (int(number(key, int)) for key in ("seqLength", "imWidth",
+                                                                 "imHeight"))
+    if length > MAX_FRAMES:
+        raise DataFormatError(path, f"{length} frames, more than {MAX_FRAMES:,} (9 hours at 30 "
+                                    "fps; the longest benchmark sequences have a few "
+                                    "thousand)", field="seqLength")
+    check_image_size(path, (width, height), field="imWidth/imHeight")
     ext = values["imExt"]
     return SequenceInfo(
         name=values["name"],
         path=seq_dir,
         frame_rate=float(number("frameRate", float)),
-        length=int(number("seqLength", int)),
-        width=int(number("imWidth", int)),
-        height=int(number("imHeight", int)),
+        length=length,
+        width=width,
+        height=height,
         image_dir=values["imDir"],
         image_ext=ext if ext.startswith(".") else f".{ext}",
     )

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.datasets.limits import check_track_count
+from unitrack_env.datasets.limits import MAX_FRAMES, check_track_count
 from unitrack_env.errors import DataFormatError
 
 #: Columns of a detection row, for messages.
@@ -167,12 +167,13 @@ def _check_frames_and_sizes(
 ) -> None:
     """Frames are whole numbers of the sequence; box sizes are not negative."""
     frames = table[:, 0]
-    bad = (frames != np.round(frames)) | (frames < 1)
+    bad = (frames != np.round(frames)) | (frames < 1) | (frames > MAX_FRAMES)
     if length is not None:
         bad |= frames > length
     if bad.any():
         i = int(np.argmax(bad))
-        limit = f" (the sequence has {length} frames)" if length is not None else ""
+        limit = (f" (the sequence has {length} frames)" if length is not None else
+                 f" (at most {MAX_FRAMES:,})")
         raise DataFormatError(
             path,
             f"frame {table[i, 0]:g} is not a frame of the sequence{limit}",
