@@ -1214,6 +1214,20 @@ def _render_into(folder_of: Callable[[Path], Path]) -> Callable[[Path], None]:
     return run
 
 
+def _results_with_id(value: int) -> Callable[[Path], Path]:
+    """A results folder: every synthetic MOT17 train gt as results, one id set to ``value``."""
+    def build(scratch: Path) -> Path:
+        folder = scratch / "results"
+        for seq in sorted((synthetic("motchallenge", "MOT17") / "train").iterdir()):
+            rows = [line.split(",")[:7] + ["-1", "-1", "-1"]
+                    for line in (seq / GT).read_text().splitlines()]
+            if seq.name == MOT_SEQ:
+                rows[0][1] = str(value)
+            write(folder / f"{seq.name}.txt", "".join(",".join(r) + "\n" for r in rows))
+        return folder
+    return build
+
+
 CASES = CASES + (
     _c("MOT-gt-10001-ids", "a gt.txt with 10,001 distinct ids (the issue's had 10 million)",
        mot(_many_gt_ids), "gt.txt, field 'id'", "10,001 distinct ground-truth ids",
@@ -1288,6 +1302,11 @@ CASES = CASES + (
     _c("action-mot-id-2**70", "MOT17: a track id of 2**70 (numpy makes it an object array)",
        act("UniTrack/MOT17-v0", _tracks([2**70], [BOX])),
        "track id 1180591620717411303424 is out of range", error="InvalidActionError"),
+    _c("CLI-score-result-id-2**70", "unitrack score on results with a track id of 2**70",
+       cli("score", "--env", "UniTrack/MOT17-v0", "--results", "{data}",
+           data=_results_with_id(2**70)),
+       "SYN-01.txt, line 1, field 'id'", "1180591620717411303424 is out of range",
+       error="CLIFailed"),
     _c("CLI-render-read-only-folder", "unitrack render --out into a folder it cannot write",
        _render_into(_not_writable), "exit 2:", "episode.mp4", "not writable",
        error="CLIFailed"),
