@@ -45,7 +45,7 @@ MAX_TRACKS = 10_000
 MAX_FRAMES = 1_000_000
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-_JPEG_MAGIC = b"\xff\xd8\xff"
+_JPEG_MAGIC = b"\xff\xd8"  # start of image (SOI)
 #: JPEG start-of-frame markers (SOF0..SOF15 but DHT C4, JPG C8 and DAC CC) hold the size.
 _SOF_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 #: Other formats recognised from their first bytes, to name what a mis-named file really is.

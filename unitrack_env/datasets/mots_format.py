@@ -16,7 +16,7 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import MAX_ID, check_image_header
+from unitrack_env.datasets.limits import MAX_FRAMES, check_image_header
 from unitrack_env.datasets.rle import check_rle, decode_masks, encode_masks
 from unitrack_env.errors import DataFormatError
 
@@ -26,6 +26,8 @@ CLASS_PEDESTRIAN = 2
 CLASS_IGNORE = 10
 #: Object id of ignore regions in the png format.
 IGNORE_ID = 10000
+#: Largest integer a float64 holds exactly (rows are built as float64 arrays).
+_MAX_EXACT = 2**53
 #: ``class_id = obj_id // ID_CLASS_DIVISOR`` in the png format.
 ID_CLASS_DIVISOR = 1000
 #: Class names (TrackEval's) and ids.
@@ -193,12 +195,13 @@ def _parse_line(
             raise DataFormatError(path, f"{parts[col]!r} is not an integer", line=lineno,
                                   field=TXT_FIELDS[col]) from None
     t, obj, cls, h, w = values
-    if not -1 <= obj <= MAX_ID:  # rows are stored as float64, then int64
-        raise DataFormatError(path, f"id {obj} is out of range -1..{MAX_ID} (int32, the ids "
-                              "the official scorer stores exactly)", line=lineno, field="id")
-    if not 0 <= t <= MAX_ID:
-        raise DataFormatError(path, f"time_frame {t} is out of range 0..{MAX_ID}", line=lineno,
-                              field="time_frame")
+    if not -1 <= obj <= _MAX_EXACT:  # rows are stored as float64, then int64
+        raise DataFormatError(path, f"id {obj} is out of range -1..2**53 (rows are read as "
+                              "doubles, which hold integers exactly only up to 2**53)",
+                              line=lineno, field="id")
+    if not 0 <= t <= MAX_FRAMES:
+        raise DataFormatError(path, f"time_frame {t} is out of range 0..{MAX_FRAMES:,}",
+                              line=lineno, field="time_frame")
     if cls not in VALID_CLASSES:
         raise DataFormatError(path, f"class {cls} is not 1 (car), 2 (pedestrian) or 10 "
                               "(ignore)", line=lineno, field="class_id")

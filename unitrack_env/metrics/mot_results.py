@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.datasets.limits import MAX_ID
 from unitrack_env.errors import DataFormatError
 
 #: Column names of a MOTChallenge result file, used in error messages.
@@ -149,11 +148,11 @@ def validate_tracker_rows(
         bad = np.flatnonzero(rows[:, col] != np.floor(rows[:, col]))
         if bad.size:
             raise _fail(source, f"{what} must be an integer", where(bad[0]), what)
-    bad = np.flatnonzero(np.abs(rows[:, 1]) > MAX_ID)
-    if bad.size:  # a float64 holds integers exactly only up to 2**53; TrackEval maps ids
-        raise _fail(source, f"id {rows[bad[0], 1]:.0f} is out of range (at most {MAX_ID}, the "
-                            "ids the action space and result files carry exactly)",
-                    where(bad[0]), "id")
+    bad = np.flatnonzero(np.abs(rows[:, 1]) > 2**53)
+    if bad.size:  # ids are relabelled for TrackEval, but a double holds them only to 2**53
+        raise _fail(source, f"id {rows[bad[0], 1]:.0f} is out of range: result rows are read "
+                            "as doubles, which hold integers exactly only up to 2**53 "
+                            "(nearby ids would merge)", where(bad[0]), "id")
     bad = np.flatnonzero((rows[:, 0] < 1) | (rows[:, 0] > seq_length))
     if bad.size:
         raise _fail(
