@@ -136,6 +136,25 @@ class Annotations:
         )
 
 
+def _read_ini(path: Path) -> configparser.ConfigParser:
+    """Parse an INI file; a UTF-8 byte-order mark is skipped, with a warning."""
+    parser = configparser.ConfigParser(interpolation=None)
+    parser.optionxform = str  # keep the keys' case (imDir, frameRate, ...)
+    try:
+        raw = path.read_bytes()
+        # A byte-order mark (Windows editors write one) is skipped, not read as part of the
+        # "[Sequence]" header. Our scoring passes the length to TrackEval (SEQ_INFO); only
+        # TrackEval run by itself on the folder reads this file, and fails on a BOM.
+        if raw.startswith(b"\xef\xbb\xbf"):
+            warnings.warn(f"{path}: starts with a UTF-8 byte-order mark (BOM); read without "
+                          "it, but TrackEval run by itself on this folder would fail on it: "
+                          "save the file without a BOM", stacklevel=3)
+        parser.read_string(raw.decode("utf-8-sig", errors="strict"))
+    except (configparser.Error, UnicodeDecodeError) as exc:
+        raise DataFormatError(path, f"not a valid INI file ({exc})") from None
+    return parser
+
+
 def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
     """Read ``<seq_dir>/seqinfo.ini``.
 
@@ -147,20 +166,7 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
     path = seq_dir / "seqinfo.ini"
     if not path.is_file():
         raise DataFormatError(path, "missing; every MOTChallenge sequence needs a seqinfo.ini")
-    parser = configparser.ConfigParser(interpolation=None)
-    parser.optionxform = str  # keep the keys' case (imDir, frameRate, ...)
-    try:
-        raw = path.read_bytes()
-        # A byte-order mark (Windows editors write one) is skipped, not read as part of the
-        # "[Sequence]" header. Our scoring passes the length to TrackEval (SEQ_INFO); only
-        # TrackEval run by itself on the folder reads this file, and fails on a BOM.
-        if raw.startswith(b"\xef\xbb\xbf"):
-            warnings.warn(f"{path}: starts with a UTF-8 byte-order mark (BOM); read without "
-                          "it, but TrackEval run by itself on this folder would fail on it: "
-                          "save the file without a BOM", stacklevel=2)
-        parser.read_string(raw.decode("utf-8-sig", errors="strict"))
-    except (configparser.Error, UnicodeDecodeError) as exc:
-        raise DataFormatError(path, f"not a valid INI file ({exc})") from None
+    parser = _read_ini(path)
     if not parser.has_section("Sequence"):
         raise DataFormatError(path, "has no [Sequence] section")
     section = parser["Sequence"]
@@ -203,8 +209,6 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
         image_dir=values["imDir"],
         image_ext=ext if ext.startswith(".") else f".{ext}",
     )
-
-
 
 
 def _annotations(table: np.ndarray, ids: np.ndarray, scores: np.ndarray,
