@@ -16,11 +16,13 @@ benchmarks hold and far below where memory runs out:
   numpy cannot store).
 * Frames: :data:`MAX_FRAMES` bounds a sequence's stated length (``seqLength``).
 * Id counts: :data:`MAX_TRACKS` bounds the distinct ground-truth ids of one sequence.
-  TrackEval's HOTA keeps 20 matrices of ``gt ids x tracker ids`` doubles per sequence
-  (``trackeval/metrics/hota.py``, one per alpha plus the potential matches), 160 bytes per
-  pair: 10 million ids asked for 728 TiB. The busiest MOTChallenge sequence (MOT20-05) has
-  about 1,200 tracks, a YouTube-VIS or PoseTrack video tens; 10,000 tracks against as many
-  tracker ids is 16 GB at scoring.
+  TrackEval's HOTA keeps about 22 matrices of ``gt ids x tracker ids`` doubles per sequence
+  (``trackeval/metrics/hota.py``: one per alpha, the potential matches, their alignment
+  score), 176 bytes per pair; 10 million ids asked for 728 TiB for one of them. The busiest
+  MOTChallenge sequence (MOT20-05) has about 1,200 tracks, a YouTube-VIS or PoseTrack video
+  tens; 10,000 tracks against 5,000 tracker ids is 9 GB at scoring. The tracker's id count
+  is only known at scoring, which checks the product against the machine's memory
+  (:func:`unitrack_env.metrics.motchallenge.check_matrix_memory`).
 """
 
 from __future__ import annotations
@@ -171,7 +173,7 @@ def check_track_total(count: int, path: str | Path, *, what: str = "ground-truth
     if count > MAX_TRACKS:
         raise DataFormatError(
             path, f"{count:,} distinct {what} in one sequence, more than {MAX_TRACKS:,}: the "
-                  "official scorer (TrackEval's HOTA) holds 20 matrices of ground-truth x "
-                  "tracker ids, 160 bytes per pair (at 10 million ids, 728 TiB); the busiest "
-                  "real sequence (MOT20-05) has about 1,200. Split the sequence or renumber "
-                  "its ids", field=field)
+                  "official scorer (TrackEval's HOTA) holds about 22 matrices of ground-truth x "
+                  "tracker ids (at 10 million ids, 728 TiB each); the busiest real sequence "
+                  "(MOT20-05) has about 1,200; split the sequence",
+            field=field)
