@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import check_image_size, image_size
+from unitrack_env.datasets.limits import check_image_size, header_size
 from unitrack_env.errors import DataFormatError
 
 #: OpenCV >= 4.11 decodes straight to RGB, which saves a full-frame colour conversion.
@@ -37,7 +37,7 @@ def check_complete(path: str | Path) -> None:
     official tools read images by content), and a ``.jpg``/``.png`` that is neither is
     refused naming what it is. The header's width and height are checked against
     :data:`~unitrack_env.datasets.limits.MAX_IMAGE_PIXELS` before anything is decoded.
-    Other suffixes are not checked. Cheap: two small reads.
+    Other suffixes are not checked. Cheap: small reads at the file's start and end.
 
     Raises:
         DataFormatError: the file is missing, empty, not an image, too large, or truncated.
@@ -46,12 +46,14 @@ def check_complete(path: str | Path) -> None:
     suffix = path.suffix.lower()
     if suffix not in (".jpg", ".jpeg", ".png"):
         return
-    kind, size = image_size(path)
     try:
         with path.open("rb") as handle:
+            kind, size = header_size(handle)
             size_bytes = handle.seek(0, 2)
             handle.seek(max(0, size_bytes - _TAIL_BYTES))
             tail = handle.read()
+    except FileNotFoundError:
+        raise DataFormatError(path, "missing") from None
     except OSError as exc:
         raise DataFormatError(path, f"unreadable ({exc})") from None
     if size_bytes == 0:

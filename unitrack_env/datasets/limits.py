@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -93,6 +93,17 @@ def _jpeg_size(handle: Any) -> tuple[int, int] | None:
         handle.seek(length - 2, 1)
 
 
+def header_size(handle: BinaryIO) -> tuple[str | None, tuple[int, int] | None]:
+    """:func:`image_size` of an open binary file (read from its start; position moves)."""
+    handle.seek(0)
+    kind = image_format(handle.read(8))
+    if kind == "PNG":
+        return kind, _png_size(handle)
+    if kind == "JPEG":
+        return kind, _jpeg_size(handle)
+    return kind, None
+
+
 def image_size(path: str | Path) -> tuple[str | None, tuple[int, int] | None]:
     """The format and ``(width, height)`` a PNG or JPEG file's header states, not decoding.
 
@@ -104,12 +115,7 @@ def image_size(path: str | Path) -> tuple[str | None, tuple[int, int] | None]:
     path = Path(path)
     try:
         with path.open("rb") as handle:
-            kind = image_format(handle.read(8))
-            if kind == "PNG":
-                return kind, _png_size(handle)
-            if kind == "JPEG":
-                return kind, _jpeg_size(handle)
-            return kind, None
+            return header_size(handle)
     except FileNotFoundError:
         raise DataFormatError(path, "missing") from None
     except OSError as exc:
