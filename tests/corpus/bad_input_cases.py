@@ -1230,7 +1230,7 @@ def _results_with_id(value: int) -> Callable[[Path], Path]:
 
 CASES = CASES + (
     _c("MOT-gt-10001-ids", "a gt.txt with 10,001 distinct ids (the issue's had 10 million)",
-       mot(_many_gt_ids), "gt.txt, field 'id'", "10,001 distinct ground-truth ids",
+       mot(_many_gt_ids), "gt.txt, line 10001, field 'id'", "10,001 distinct ground-truth ids",
        "more than 10,000"),
     _c("MOT-frame-bomb", "frame 1 is a JPEG whose header claims 60000x60000 pixels",
        mot(_frame_bytes("img1/000001.jpg", lambda: _jpeg_header(60_000, 60_000))),

@@ -174,7 +174,7 @@ def check_track_count(ids: Iterable[Any], path: str | Path, *, what: str = "grou
 
 
 def check_track_total(count: int, path: str | Path, *, what: str = "ground-truth ids",
-                      field: str | None = None) -> None:
+                      field: str | None = None, line: int | None = None) -> None:
     """Refuse ``count`` tracks (distinct ``what``) in one sequence above :data:`MAX_TRACKS`."""
     if count > MAX_TRACKS:
         raise DataFormatError(
@@ -182,4 +182,4 @@ def check_track_total(count: int, path: str | Path, *, what: str = "ground-truth
                   "official scorer (TrackEval's HOTA) holds about 22 matrices of ground-truth x "
                   "tracker ids (at 10 million ids, 728 TiB each); the busiest real sequence "
                   "(MOT20-05) has about 1,200; split the sequence",
-            field=field)
+            line=line, field=field)

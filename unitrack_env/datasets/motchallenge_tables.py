@@ -11,7 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.datasets.limits import MAX_FRAMES, check_track_count
+from unitrack_env.datasets.limits import (
+    MAX_FRAMES,
+    MAX_TRACKS,
+    check_track_count,
+    check_track_total,
+)
 from unitrack_env.errors import DataFormatError
 
 #: Columns of a detection row, for messages.
@@ -42,6 +47,8 @@ def parse_table(
         The table and the 1-based file line of each row (blank lines are skipped).
     """
     lines = _data_lines(path, _read_text(path, official), official)
+    if official:  # ground truth: refuse 10 million ids before parsing 10 million rows
+        _count_ids_early(path, lines)
     if not lines:
         return np.zeros((0, min_columns)), np.zeros(0, dtype=np.int64)
     rows = [_cells(line) for _, line in lines]
@@ -97,6 +104,27 @@ def _data_lines(path: Path, text: str, official: bool) -> list[tuple[int, str]]:
                       "cannot read a file with blank lines (it fails when scoring); delete them",
                 line=blank[0])
     return [(i, line) for i, line in numbered if line.strip()]
+
+
+def _count_ids_early(path: Path, lines: list[tuple[int, str]]) -> None:
+    """Refuse a ground-truth file at its first id beyond ``MAX_TRACKS`` distinct ones.
+
+    A streaming pass over the id column (the second), so that a file with millions of ids
+    is refused at the line that crosses the limit instead of after parsing every row (10
+    million rows take minutes and gigabytes). Unparsable ids are left to the full parse.
+    """
+    seen: set[float] = set()
+    for lineno, line in lines:
+        cells = line.split(",", 2)
+        if len(cells) < 3:
+            continue
+        try:
+            seen.add(float(cells[1]))
+        except ValueError:
+            continue
+        if len(seen) > MAX_TRACKS:
+            check_track_total(len(seen), path, what="ground-truth ids up to this line",
+                              field="id", line=lineno)
 
 
 def _cells(line: str) -> list[str]:
