@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.datasets.limits import check_track_count
+from unitrack_env.datasets.limits import MAX_TRACKS, check_track_count
 from unitrack_env.datasets.motchallenge import read_seqinfo
 from unitrack_env.datasets.motchallenge_tables import MAX_GT_ID
 from unitrack_env.datasets.mots_format import (
@@ -210,7 +210,8 @@ class MOTSDataset:
         if not self.has_ground_truth(name):
             return None
         path = self.gt_path(name)
-        gt = read_instances_png(path) if path.is_dir() else parse_instances_txt(path)
+        gt = read_instances_png(path) if path.is_dir() else parse_instances_txt(
+            path, max_ids=MAX_TRACKS)
         check_ground_truth(gt, self.info(name))
         return gt
 

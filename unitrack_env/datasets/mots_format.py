@@ -16,7 +16,7 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import MAX_FRAMES, check_image_header
+from unitrack_env.datasets.limits import MAX_FRAMES, check_image_header, check_track_total
 from unitrack_env.datasets.rle import check_rle, decode_masks, encode_masks
 from unitrack_env.errors import DataFormatError
 
@@ -138,7 +138,8 @@ def _build(rows: list[tuple], counts: list[bytes], lines: list[int], source: Pat
 
 
 def parse_instances_txt(
-    path: str | os.PathLike, *, allow_score: bool = False, text: str | None = None
+    path: str | os.PathLike, *, allow_score: bool = False, text: str | None = None,
+    max_ids: int | None = None,
 ) -> MaskAnnotations:
     """Read a MOTS txt file (``time_frame id class_id img_height img_width rle``).
 
@@ -146,6 +147,8 @@ def parse_instances_txt(
         path: the file (also named in errors when ``text`` is given).
         allow_score: accept a 7th field, the detection score (detection files).
         text: the file's contents, if already read.
+        max_ids: refuse the file at the line that brings more distinct ids (ground truth:
+            :data:`~unitrack_env.datasets.limits.MAX_TRACKS`), before parsing the rest.
 
     Raises:
         DataFormatError: naming the file, the 1-based line and the field of the first
@@ -157,11 +160,17 @@ def parse_instances_txt(
     rows: list[tuple] = []
     counts: list[bytes] = []
     lines: list[int] = []
+    seen: set[int] = set()
     for lineno, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
         if not parts:
             continue
         row, rle = _parse_line(path, lineno, parts, allow_score)
+        if max_ids is not None:
+            seen.add(row[1])
+            if len(seen) > max_ids:
+                check_track_total(len(seen), path, what="ids up to this line", field="id",
+                                  line=lineno)
         rows.append(row)
         counts.append(rle)
         lines.append(lineno)
