@@ -134,3 +134,14 @@ def test_score_sequence_names_the_results_file_when_the_matrices_cannot_fit(tmp_
     monkeypatch.setattr(motchallenge, "_memory_bytes", lambda: 1024)
     with pytest.raises(DataFormatError, match=r"SYN-01\.txt: SYN-01: 400 distinct track ids"):
         motchallenge.score_sequence(seq, results, benchmark="MOT17")
+
+
+def test_action_ids_beyond_int64_are_out_of_range_and_object_ints_still_work():
+    from unitrack_env.errors import InvalidActionError
+    from unitrack_env.spaces.limits import checked_ids
+
+    with pytest.raises(InvalidActionError, match="track id 1180591620717411303424 is out of"):
+        checked_ids(np.array([3, 2**70], dtype=object), 2)
+    assert checked_ids(np.array([3, 4], dtype=object), 2).tolist() == [3, 4]
+    with pytest.raises(InvalidActionError, match="above"):
+        checked_ids(np.array([3, 2**40], dtype=object), 2)

@@ -50,10 +50,13 @@ def checked_ids(ids: np.ndarray, k: int, *, low: int = 1) -> np.ndarray:
     if ids.dtype == object and ids.size and all(
             isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in ids.flat):
         # Python ints beyond int64 (e.g. 2**70) make numpy fall back to an object array
-        worst = max(ids.flat, key=lambda v: abs(int(v)))
-        raise InvalidActionError(
-            f"track id {int(worst)} is out of range {low}..{ID_MAX}, the ids of the action "
-            "space (ids must survive the official result files, which store them as floats)")
+        huge = [int(v) for v in ids.flat if not -2**63 <= int(v) < 2**63]
+        if huge:
+            raise InvalidActionError(
+                f"track id {huge[0]} is out of range {low}..{ID_MAX}, the ids of the action "
+                "space (ids must survive the official result files, which store them as "
+                "floats)")
+        ids = ids.astype(np.int64)
     if not np.issubdtype(ids.dtype, np.integer):
         if ids.size and not (np.issubdtype(ids.dtype, np.floating)
                              and np.all(np.isfinite(ids)) and np.all(ids == np.round(ids))):
