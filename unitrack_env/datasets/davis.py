@@ -114,8 +114,13 @@ def read_png_palette(path: str | Path) -> np.ndarray:
     """Return the palette of a palette PNG as ``(n, 3)`` uint8 (n = entries stored)."""
     image_mod = _pil_image()
     check_image_header(path)
-    with image_mod.open(path) as image:
-        palette = image.getpalette()
+    try:
+        with image_mod.open(path) as image:
+            palette = image.getpalette()
+    except (image_mod.DecompressionBombError, image_mod.DecompressionBombWarning) as err:
+        raise DataFormatError(path, f"image too large to decode ({err})") from None
+    except OSError as err:
+        raise DataFormatError(path, f"missing or unreadable PNG ({err})") from err
     if palette is None:
         raise DataFormatError(path, "PNG has no palette")
     return np.asarray(palette, dtype=np.uint8).reshape(-1, 3)
