@@ -106,7 +106,7 @@ def cache_info(cache: Any, runs: int = 10) -> dict[str, Any]:
 
 
 def _print_info(cache: Any, console: Console, runs: int) -> None:
-    from unitrack_env.agents.appearance.feature_cache import format_size
+    from unitrack_env.agents.appearance.cache_config import format_size
 
     info = cache_info(cache, runs)
     share = info["bytes"] / info["max_size"] if info["max_size"] else float("inf")
@@ -145,7 +145,7 @@ def _print_info(cache: Any, console: Console, runs: int) -> None:
 
 def run_cache_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack cache <info|prune|clear>``."""
-    from unitrack_env.agents.appearance.feature_cache import format_size
+    from unitrack_env.agents.appearance.cache_config import format_size
 
     cache = _cache(args)
     if args.cache_command == "info":

@@ -91,7 +91,7 @@ def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    from unitrack_env.agents import agent_class
+    from unitrack_env.agents.base import agent_class
     from unitrack_env.agents.options import parse_options
 
     return parse_options(agent_class(args.agent), args.agent_arg or [], agent=args.agent)
@@ -105,13 +105,13 @@ def _feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
     Yields a function that returns the summary line once the run is over (None without a
     cache: other agents do not pay for importing the appearance stack).
     """
-    from unitrack_env.agents import agent_class
+    from unitrack_env.agents.base import agent_class
     from unitrack_env.agents.options import agent_options
 
     if "feature_cache" not in agent_options(agent_class(agent)):
         yield lambda: None
         return
-    from unitrack_env.agents.appearance import track_cache_run
+    from unitrack_env.agents.appearance.cache_runs import track_cache_run
 
     folder = agent_kwargs.get("feature_cache")
     root = folder if isinstance(folder, (str, os.PathLike)) else None
@@ -233,7 +233,7 @@ def _cmd_render(args: argparse.Namespace, console: Console) -> int:
 def _cmd_list(args: argparse.Namespace, console: Console) -> int:
     from rich.table import Table
 
-    from unitrack_env.agents import agent_class, available_agents
+    from unitrack_env.agents.base import agent_class, available_agents
     from unitrack_env.agents.loading import entry_point_agents
     from unitrack_env.registration import variants
 

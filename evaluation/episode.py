@@ -12,7 +12,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from unitrack_env.benchmarks import Benchmark
+from unitrack_env.benchmarks.base import Benchmark
 
 
 @dataclass

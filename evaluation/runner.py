@@ -41,7 +41,8 @@ import unitrack_env
 from unitrack_env.agents.base import agent_class, close_agent
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
-from unitrack_env.benchmarks import Benchmark, benchmark_for
+from unitrack_env.benchmarks import benchmark_for
+from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
 from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
 from unitrack_env.evaluation.workers import (
@@ -193,7 +194,7 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int
     task = unitrack_env.task_of(env_id)
     tasks = getattr(cls, "tasks", ())
     if tasks and task not in tasks:
-        from unitrack_env.agents import agents_for_task
+        from unitrack_env.agents.base import agents_for_task
 
         raise ValueError(f"agent '{name}' plays {', '.join(tasks)}, not {task} ({env_id}); "
                          f"agents for {task}: {', '.join(agents_for_task(task)) or 'none'}")

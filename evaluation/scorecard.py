@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import Any
 
 import unitrack_env
-from unitrack_env.evaluation.scorecard_report import merge_cards as merge_cards
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
 

@@ -29,7 +29,7 @@ from gymnasium.vector.utils.shared_memory import (
     write_to_shared_memory,
 )
 
-from unitrack_env.spaces import Image, LabelMap, MaskStack
+from unitrack_env.spaces.arrays import Image, LabelMap, MaskStack
 
 #: Header of a slot: the number of dimensions, then up to three sizes (int64 each).
 _HEADER = 4

@@ -23,13 +23,16 @@ from unitrack_env.agents.appearance.architectures import (
     DEFAULT_LAYERS,
     FEATURE_STRIDE,
 )
+from unitrack_env.agents.appearance.cache_config import default_cache_dir
+from unitrack_env.agents.appearance.cache_files import FeatureCacheWarning
+from unitrack_env.agents.appearance.cache_keys import CacheKey, content_key
+from unitrack_env.agents.appearance.cache_runs import CacheStats, track_cache_run
 from unitrack_env.agents.appearance.checkpoints import (
     CIFAR_MEAN,
     CIFAR_STD,
     DEFAULT_REMAPS,
     IMAGENET_MEAN,
     IMAGENET_STD,
-    CheckpointError,
     KeyRemap,
     LoadReport,
     load_checkpoint,
@@ -37,14 +40,8 @@ from unitrack_env.agents.appearance.checkpoints import (
 from unitrack_env.agents.appearance.efficientnet_lite import EfficientNetLite0
 from unitrack_env.agents.appearance.feature_cache import (
     CachedAppearanceModel,
-    CacheKey,
-    CacheStats,
     FeatureCache,
-    FeatureCacheWarning,
-    content_key,
-    default_cache_dir,
     resolve_cache,
-    track_cache_run,
 )
 from unitrack_env.agents.appearance.identity import ModelIdentity, weights_digest
 from unitrack_env.agents.appearance.letterboxing import (
@@ -63,6 +60,7 @@ from unitrack_env.agents.appearance.weights import (
     load_weights,
     resolve_weights,
 )
+from unitrack_env.errors import CheckpointError
 
 __all__ = [
     "ARCHITECTURES",

@@ -71,16 +71,9 @@ import torch
 
 from unitrack_env.agents.appearance.cache_config import (
     _OFF_VALUES,
-    APP_NAME,
     CACHE_DIR_ENV,
-    CACHE_MAX_ENV,
-    DATA_ENV,
     DEFAULT_CACHE_DTYPE,
-    DEFAULT_MAX_SIZE,
     default_cache_dir,
-    default_max_size,
-    format_size,
-    parse_size,
 )
 from unitrack_env.agents.appearance.cache_files import (
     FeatureCacheWarning,
@@ -89,39 +82,11 @@ from unitrack_env.agents.appearance.cache_files import (
     _load_entry,
     _to_stored,
 )
-from unitrack_env.agents.appearance.cache_folder import (
-    EVICT_TO,
-    LAYOUT_VERSION,
-    STALE_TEMP_SECONDS,
-    CacheFolder,
-    CacheUsage,
-    NamespaceUsage,
-)
-from unitrack_env.agents.appearance.cache_keys import (
-    CONTENT_DIGEST_BYTES,
-    CONTENT_HASH,
-    CacheKey,
-    content_key,
-)
-from unitrack_env.agents.appearance.cache_runs import (
-    RUN_ENV,
-    CacheRun,
-    CacheStats,
-    RunRecord,
-    read_runs,
-    track_cache_run,
-)
+from unitrack_env.agents.appearance.cache_folder import CacheFolder
+from unitrack_env.agents.appearance.cache_keys import CacheKey
+from unitrack_env.agents.appearance.cache_runs import RUN_ENV, CacheStats, RunRecord, read_runs
 
-__all__ = [  # the names this module has always offered
-    "APP_NAME", "CACHE_DIR_ENV", "CACHE_MAX_ENV", "CONTENT_DIGEST_BYTES", "CONTENT_HASH",
-    "DATA_ENV", "DEFAULT_CACHE_DTYPE", "DEFAULT_MAX_SIZE", "EVICT_TO", "LAYOUT_VERSION",
-    "MAX_RUN_FILES", "RUN_ENV", "STALE_TEMP_SECONDS",
-    "CacheKey", "CacheRun", "CacheStats", "CacheUsage", "FeatureCache", "FeatureCacheWarning",
-    "NamespaceUsage", "RunRecord",
-    "CachedAppearanceModel",  # noqa: F822 - imported on first use (__getattr__ below)
-    "content_key", "default_cache_dir", "default_max_size", "format_size", "parse_size",
-    "read_runs", "resolve_cache", "track_cache_run",
-]
+__all__ = ["MAX_RUN_FILES", "FeatureCache", "resolve_cache"]
 
 MAX_RUN_FILES: int = 200
 """Process statistics files kept in ``<root>/runs`` (oldest removed first)."""

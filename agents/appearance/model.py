@@ -36,25 +36,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.architectures import (
-    ARCHITECTURES,
-    DEFAULT_LAYERS,
-    EFFICIENTNET_LITE0,
-    FEATURE_STRIDE,
-    LAYER_SEPARATOR,
-    NORM_EPS,
-    combine_layers,
-    split_layers,
-)
+from unitrack_env.agents.appearance.architectures import FEATURE_STRIDE, combine_layers
 from unitrack_env.agents.appearance.checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
-from unitrack_env.agents.appearance.identity import DIGEST_LENGTH, ModelIdentity, weights_digest
-from unitrack_env.agents.appearance.letterboxing import (
-    LETTERBOX_PAD_VALUE,
-    MOT_INPUT_SIZE,
-    Letterbox,
-    letterbox,
-    letterbox_layout,
-)
+from unitrack_env.agents.appearance.identity import ModelIdentity, weights_digest
 from unitrack_env.agents.appearance.runtime import (
     TORCH,
     CompiledBackbone,
@@ -63,22 +47,13 @@ from unitrack_env.agents.appearance.runtime import (
 )
 from unitrack_env.agents.appearance.weights import (
     DEFAULT_WEIGHT_LOADERS,
-    RANDOM_DEFAULT_ARCH,
-    TORCHVISION_PREFIX,
     LoadedWeights,
     WeightsLoader,
-    WeightsSource,
     check_arch,
     load_weights,
 )
 
-__all__ = [  # the names this module has always offered
-    "ARCHITECTURES", "DEFAULT_LAYERS", "DEFAULT_WEIGHT_LOADERS", "DIGEST_LENGTH",
-    "EFFICIENTNET_LITE0", "FEATURE_STRIDE", "LAYER_SEPARATOR", "LETTERBOX_PAD_VALUE",
-    "MOT_INPUT_SIZE", "NORM_EPS", "RANDOM_DEFAULT_ARCH", "TORCHVISION_PREFIX",
-    "AppearanceModel", "Letterbox", "ModelIdentity", "WeightsLoader", "WeightsSource",
-    "letterbox", "letterbox_layout", "split_layers", "torch_threads", "weights_digest",
-]
+__all__ = ["AppearanceModel", "torch_threads"]
 
 
 @contextlib.contextmanager

@@ -51,7 +51,6 @@ from unitrack_env.agents.appearance.checkpoints import (
     DEFAULT_REMAPS,
     IMAGENET_MEAN,
     IMAGENET_STD,
-    CheckpointError,
     KeyRemap,
     LoadReport,
     choose_remap,
@@ -62,6 +61,7 @@ from unitrack_env.agents.appearance.checkpoints import (
 )
 from unitrack_env.agents.appearance.efficientnet_lite import LITE0_MEAN, LITE0_STD
 from unitrack_env.agents.appearance.resnet import ResNet, infer_resnet_arch
+from unitrack_env.errors import CheckpointError
 
 RANDOM_DEFAULT_ARCH: str = "resnet18"
 """Architecture of ``weights="random"`` when none is given (the paper's baseline is R18)."""

@@ -23,16 +23,14 @@ from unitrack_env.agents.primitives.adapters import (
     former_capacity_constants,
 )
 from unitrack_env.agents.primitives.overlap import (
-    OKS_SIGMAS,
     BoxOverlap,
     MaskOverlap,
     OverlapMeasure,
     PoseOverlap,
-    object_keypoint_similarity,
 )
 from unitrack_env.agents.primitives.overlap_tracker import OverlapTracker
 
-__all__ = ["OKS_SIGMAS", "IoUAgent", "IoUConfig", "object_keypoint_similarity"]
+__all__ = ["IoUAgent", "IoUConfig"]
 
 # Former constants: the environments' default capacities (read from the environments).
 __getattr__ = former_capacity_constants(

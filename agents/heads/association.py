@@ -51,27 +51,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import (
-    AppearanceModel,
-    CachedAppearanceModel,
-    Letterbox,
-    resolve_cache,
-    torch_threads,
-)
+from unitrack_env.agents.appearance import CachedAppearanceModel
+from unitrack_env.agents.appearance.feature_cache import resolve_cache
+from unitrack_env.agents.appearance.letterboxing import Letterbox
+from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.region_features import RegionFeatures
-from unitrack_env.agents.heads.unitrack_config import (
-    MASK_BOX_MODES,
-    MOT_OUTPUT_MAX_ASPECT,
-    MOT_OUTPUT_MIN_AREA,
-    MOT_PIXEL_ORIGIN,
-    ROI_OUTPUT_SIZE,
-    TASK_DEFAULTS,
-    TASKS,
-    TaskDefaults,
-    TaskSettings,
-    UniTrackConfig,
-)
+from unitrack_env.agents.heads.unitrack_config import TASKS, UniTrackConfig
 from unitrack_env.agents.primitives.adapters import (
     Detections,
     ObservationAdapter,
@@ -80,25 +66,13 @@ from unitrack_env.agents.primitives.adapters import (
     former_capacity_constants,
     reset_task,
 )
-from unitrack_env.agents.primitives.association import Associator, TrackOutput
+from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
 from unitrack_env.agents.primitives.mask_features import LocalMask, mask_to_box, pose_to_mask
 from unitrack_env.agents.primitives.similarity import SIMILARITIES, ObjectFeatures
+from unitrack_env.agents.primitives.tracks import TrackOutput
 
-__all__ = [
-    "MASK_BOX_MODES",
-    "MOT_OUTPUT_MAX_ASPECT",
-    "MOT_OUTPUT_MIN_AREA",
-    "MOT_PIXEL_ORIGIN",
-    "ROI_OUTPUT_SIZE",
-    "TASKS",
-    "TASK_DEFAULTS",
-    "TaskDefaults",
-    "TaskSettings",
-    "UniTrackAgent",
-    "UniTrackConfig",
-    "detect_task",
-]
+__all__ = ["UniTrackAgent"]
 
 # Former constants: the environments' default capacities (read from the environments).
 __getattr__ = former_capacity_constants(

@@ -13,13 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 from unitrack_env.agents.heads.association import UniTrackAgent
-from unitrack_env.agents.heads.unitrack_config import (
-    MOT_OUTPUT_MAX_ASPECT,
-    MOT_OUTPUT_MIN_AREA,
-    MOT_PIXEL_ORIGIN,
-    ROI_OUTPUT_SIZE,
-    UniTrackConfig,
-)
+from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
 from unitrack_env.agents.primitives.adapters import default_max_tracks
 
 UniTrackMOTAgent = UniTrackAgent
@@ -28,14 +22,7 @@ UniTrackMOTAgent = UniTrackAgent
 UniTrackMOTConfig = UniTrackConfig
 """Options of the ``unitrack`` agent; its MOT name."""
 
-__all__ = [
-    "MOT_OUTPUT_MAX_ASPECT",
-    "MOT_OUTPUT_MIN_AREA",
-    "MOT_PIXEL_ORIGIN",
-    "ROI_OUTPUT_SIZE",
-    "UniTrackMOTAgent",
-    "UniTrackMOTConfig",
-]
+__all__ = ["UniTrackMOTAgent", "UniTrackMOTConfig"]
 
 
 def __getattr__(name: str) -> Any:

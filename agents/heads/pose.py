@@ -37,7 +37,8 @@ import cv2
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
+from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
+from unitrack_env.agents.appearance.spec import AppearanceSpec
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.vos import make_propagation_config
 from unitrack_env.agents.primitives.label_propagation import LabelPropagator

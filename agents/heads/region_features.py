@@ -19,15 +19,15 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance import (
-    AppearanceModel,
-    CachedAppearanceModel,
+from unitrack_env.agents.appearance import CachedAppearanceModel
+from unitrack_env.agents.appearance.cache_keys import content_key
+from unitrack_env.agents.appearance.letterboxing import (
+    LETTERBOX_PAD_VALUE,
     Letterbox,
-    content_key,
     letterbox,
     letterbox_layout,
 )
-from unitrack_env.agents.appearance.model import LETTERBOX_PAD_VALUE
+from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.primitives.mask_features import LocalMask, mask_location_features
 from unitrack_env.agents.primitives.roi_align import roi_align
 from unitrack_env.agents.primitives.similarity import ObjectFeatures

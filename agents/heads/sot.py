@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
+from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
+from unitrack_env.agents.appearance.spec import AppearanceSpec
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.vos import build_model
 from unitrack_env.agents.primitives.box_propagation import (

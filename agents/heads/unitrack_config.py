@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
-from unitrack_env.agents.appearance import MOT_INPUT_SIZE
+from unitrack_env.agents.appearance.letterboxing import MOT_INPUT_SIZE
 from unitrack_env.agents.appearance.spec import AppearanceSpec
 from unitrack_env.agents.primitives.association_config import (
     MOT_ASSOCIATION,

@@ -26,7 +26,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
+from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
+from unitrack_env.agents.appearance.spec import AppearanceSpec
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
 

@@ -38,13 +38,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from unitrack_env.spaces import (
-    pack_mask_ids,
-    pack_pose_tracks,
-    pack_tracks,
-    unpack_detections,
-    unpack_poses,
-)
+from unitrack_env.spaces.boxes import pack_tracks, unpack_detections
+from unitrack_env.spaces.masks import pack_mask_ids
+from unitrack_env.spaces.poses import pack_pose_tracks, unpack_poses
 
 
 @dataclass(frozen=True)

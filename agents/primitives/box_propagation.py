@@ -43,7 +43,6 @@ from unitrack_env.agents.primitives.box_response import (
     DCFHead,
     XCorrHead,
     crop_windows,
-    gaussian_label,
     hann_window,
     response_peak,
 )
@@ -65,14 +64,8 @@ __all__ = [
     "BoxPropagationConfig",
     "BoxPropagator",
     "BoxState",
-    "DCFHead",
     "FeatureFn",
-    "XCorrHead",
-    "crop_windows",
     "feature_size",
-    "gaussian_label",
-    "hann_window",
-    "response_peak",
 ]
 
 CROP_SIZE: int = 520

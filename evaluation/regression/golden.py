@@ -13,9 +13,9 @@ from typing import Any
 import gymnasium as gym
 
 import unitrack_env
-from unitrack_env.agents import make_agent
-from unitrack_env.agents.base import close_agent
-from unitrack_env.benchmarks import Benchmark, benchmark_for
+from unitrack_env.agents.base import close_agent, make_agent
+from unitrack_env.benchmarks import benchmark_for
+from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.evaluation.episode import play_episode
 from unitrack_env.evaluation.identity import option_changes
 from unitrack_env.io import atomic_write_text

@@ -231,8 +231,8 @@ def test_hard_synthetic_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path
 def test_mot_defaults_are_the_paper_plus_documented_departures() -> None:
     from dataclasses import replace
 
-    from unitrack_env.agents.heads.association import UniTrackConfig
-    from unitrack_env.agents.primitives.association import MOT_ASSOCIATION, AssociationConfig
+    from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
+    from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION, AssociationConfig
 
     paper = UniTrackConfig(paper_settings=True).association_config("mot")
     default = UniTrackConfig().association_config("mot")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from pycocotools import mask as mask_utils
 
-from unitrack_env.datasets.mots import check_rle, rle_runs
+from unitrack_env.datasets.rle import check_rle, rle_runs
 
 
 def reference_runs(mask: np.ndarray) -> list[int]:

@@ -11,7 +11,7 @@ import pytest
 from pycocotools import mask as mask_utils
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from unitrack_env.datasets.mots import encode_masks
+from unitrack_env.datasets.rle import encode_masks
 from unitrack_env.datasets.youtube_vis import (
     VisData,
     VisTrack,

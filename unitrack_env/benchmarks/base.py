@@ -37,7 +37,7 @@ def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
     path = resolve_root(root, folder)
     if path is not None:
         return path, False
-    from unitrack_env.datasets.synthetic import ensure_synthetic
+    from unitrack_env.datasets.synthetic.cache import ensure_synthetic
 
     return Path(ensure_synthetic(*synthetic_args, **synthetic_kwargs)), True
 

@@ -75,7 +75,7 @@ class MOTChallengeBenchmark(Benchmark):
 
     def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
         """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows."""
-        from unitrack_env.metrics.motchallenge import read_result_file
+        from unitrack_env.metrics.mot_results import read_result_file
 
         return read_result_file(Path(folder) / f"{sequence}.txt")
 

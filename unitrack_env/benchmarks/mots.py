@@ -7,11 +7,10 @@ from pathlib import Path
 from typing import Any
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, text_digest
-from unitrack_env.datasets.mots import (
-    BENCHMARKS,
+from unitrack_env.datasets.mots import BENCHMARKS, MOTSDataset
+from unitrack_env.datasets.mots_format import (
     CLASS_IDS,
     MaskAnnotations,
-    MOTSDataset,
     format_instances_txt,
     parse_instances_txt,
 )

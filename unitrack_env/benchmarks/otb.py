@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
-from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
+from unitrack_env.datasets.otb import OTBDataset
+from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import COMBINED, ScoreReport

@@ -10,14 +10,12 @@ from typing import Any
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root
-from unitrack_env.datasets.posetrack import (
-    PoseTrackDataset,
-    PoseTrackVideo,
-    read_posetrack_json,
-    write_posetrack_json,
-)
+from unitrack_env.datasets.posetrack import PoseTrackDataset
+from unitrack_env.datasets.posetrack_json import read_posetrack_json, write_posetrack_json
+from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.errors import DataFormatError
-from unitrack_env.metrics.posetrack import POSEVAL_DROPS_LAST_FRAME, evaluate_video, summarise
+from unitrack_env.metrics.posetrack import evaluate_video, summarise
+from unitrack_env.metrics.posetrack_frames import POSEVAL_DROPS_LAST_FRAME
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: Name of the rule set in score reports (and the data folder under ``$UNITRACK_DATA``).

@@ -33,7 +33,7 @@ import numpy as np
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
-from unitrack_env.spaces import COORD_MAX
+from unitrack_env.spaces.limits import COORD_MAX
 
 JHMDB_JOINT_NAMES: tuple[str, ...] = (
     "neck",

@@ -27,14 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.datasets.motchallenge_tables import (
-    DET_FIELDS,
-    GT_FIELDS,
-    MAX_GT_ID,
-    VALID_GT_CLASSES,
-    check_rows,
-    parse_table,
-)
+from unitrack_env.datasets.motchallenge_tables import DET_FIELDS, GT_FIELDS, check_rows, parse_table
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
 #: Benchmarks whose ground truth has the 9-column class/visibility layout.
@@ -49,11 +42,7 @@ _SEQINFO_FIELDS = ("name", "imDir", "frameRate", "seqLength", "imWidth", "imHeig
 __all__ = [
     "BENCHMARKS",
     "CLASS_COLUMN_BENCHMARKS",
-    "DET_FIELDS",
-    "GT_FIELDS",
-    "MAX_GT_ID",
     "PEDESTRIAN_CLASS",
-    "VALID_GT_CLASSES",
     "Annotations",
     "MOTChallengeDataset",
     "MOTSequence",

@@ -41,54 +41,20 @@ import numpy as np
 
 from unitrack_env.datasets.motchallenge import read_seqinfo
 from unitrack_env.datasets.mots_format import (
-    CLASS_CAR,
-    CLASS_IDS,
-    CLASS_IGNORE,
-    CLASS_PEDESTRIAN,
-    ID_CLASS_DIVISOR,
     IGNORE_ID,
-    TXT_FIELDS,
-    VALID_CLASSES,
     MaskAnnotations,
-    format_instances_txt,
     parse_instances_txt,
     read_instances_png,
-    write_instances_png,
-)
-from unitrack_env.datasets.rle import (
-    check_rle,
-    decode_masks,
-    encode_masks,
-    resolve_overlaps,
-    rle_runs,
 )
 from unitrack_env.errors import DataFormatError
 
 __all__ = [
     "BENCHMARKS",
-    "CLASS_CAR",
-    "CLASS_IDS",
-    "CLASS_IGNORE",
-    "CLASS_PEDESTRIAN",
-    "ID_CLASS_DIVISOR",
-    "IGNORE_ID",
     "KITTI_FRAME_RATE",
     "KITTI_SPLITS",
-    "TXT_FIELDS",
-    "VALID_CLASSES",
     "MOTSDataset",
     "MOTSSequenceInfo",
-    "MaskAnnotations",
     "check_ground_truth",
-    "check_rle",
-    "decode_masks",
-    "encode_masks",
-    "format_instances_txt",
-    "parse_instances_txt",
-    "read_instances_png",
-    "resolve_overlaps",
-    "rle_runs",
-    "write_instances_png",
 ]
 
 #: Benchmarks (layouts) read by :class:`MOTSDataset`.

@@ -44,10 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.base import SequenceDataset
-from unitrack_env.datasets.lasot import GOT10kDataset, LaSOTDataset
 from unitrack_env.datasets.sot import (
     BOX_FIELDS,
-    IMAGE_EXTENSIONS,
     SOTSequence,
     numbered_images,
     read_box_file,
@@ -56,18 +54,7 @@ from unitrack_env.datasets.sot import (
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
-__all__ = [
-    "IMAGE_EXTENSIONS",
-    "OTB_GT_PATTERN",
-    "GOT10kDataset",
-    "LaSOTDataset",
-    "OTBDataset",
-    "OTBSequenceSpec",
-    "SOTSequence",
-    "canonical_otb_name",
-    "read_box_file",
-    "read_image_size",
-]
+__all__ = ["OTB_GT_PATTERN", "OTBDataset", "OTBSequenceSpec", "canonical_otb_name"]
 
 
 OTB_GT_PATTERN = re.compile(r"^groundtruth_rect(?:\.(\d+))?\.txt$")
@@ -152,7 +139,7 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
     non-positive size: the OTB toolkit leaves such frames out of the evaluation.
     (Rows are file lines here: :func:`read_box_file` refuses blank lines inside the list.)
     """
-    from unitrack_env.spaces import COORD_MAX
+    from unitrack_env.spaces.limits import COORD_MAX
 
     init = boxes[first]
     if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):

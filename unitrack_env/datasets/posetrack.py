@@ -42,54 +42,17 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from unitrack_env.datasets.posetrack_json import (
-    image_id,
-    parse_posetrack,
-    read_posetrack_json,
-    video_number,
-    video_to_json,
-    write_posetrack_json,
-)
+from unitrack_env.datasets.posetrack_json import image_id, read_posetrack_json, video_number
 from unitrack_env.datasets.posetrack_records import (
     DATA_FOLDER,
-    FRAMES_PER_VIDEO,
     IMAGE_ID_BASE,
-    NUM_KEYPOINTS,
-    PERSON_CATEGORY,
-    PERSONS_PER_IMAGE,
-    POSETRACK_KEYPOINTS,
-    POSETRACK_SKELETON,
     SPLITS,
     PoseTrackImage,
-    PoseTrackPerson,
     PoseTrackVideo,
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
-__all__ = [
-    "DATA_FOLDER",
-    "FRAMES_PER_VIDEO",
-    "IMAGE_ID_BASE",
-    "NUM_KEYPOINTS",
-    "PERSONS_PER_IMAGE",
-    "PERSON_CATEGORY",
-    "POSETRACK_KEYPOINTS",
-    "POSETRACK_SKELETON",
-    "SPLITS",
-    "PoseTrackDataset",
-    "PoseTrackImage",
-    "PoseTrackPerson",
-    "PoseTrackSequence",
-    "PoseTrackVideo",
-    "image_id",
-    "images_from_files",
-    "locate_data_folder",
-    "parse_posetrack",
-    "read_posetrack_json",
-    "video_number",
-    "video_to_json",
-    "write_posetrack_json",
-]
+__all__ = ["PoseTrackDataset", "PoseTrackSequence", "images_from_files", "locate_data_folder"]
 
 
 @dataclass(frozen=True)

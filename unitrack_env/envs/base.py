@@ -25,8 +25,6 @@ from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import ScoreReport
 
 # Data roots live in unitrack_env.roots; the old names stay importable from here.
-from unitrack_env.roots import DATA_ENV_VAR as DATA_ENV_VAR
-from unitrack_env.roots import DataRootNotFound as DataRootNotFound
 from unitrack_env.roots import resolve_root
 
 if TYPE_CHECKING:
@@ -163,7 +161,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         path = resolve_root(root, folder)
         self.synthetic = path is None
         if path is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
+            from unitrack_env.datasets.synthetic.cache import ensure_synthetic
 
             path = ensure_synthetic(*synthetic_args, **synthetic_kwargs)
         return path

@@ -18,7 +18,6 @@ from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.metrics.vos import VOSScores, davis_statistics, frame_scores
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
-from unitrack_env.render import OVERLAY_ALPHA as OVERLAY_ALPHA
 from unitrack_env.render import overlay_labels
 
 #: Largest object label: labels are uint8 and 255 is void.

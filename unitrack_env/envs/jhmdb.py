@@ -10,18 +10,14 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.jhmdb import RESULT_FILE as RESULT_FILE
 from unitrack_env.benchmarks.jhmdb import JHMDBBenchmark
-from unitrack_env.benchmarks.jhmdb import pose_mat_bytes as pose_mat_bytes
 from unitrack_env.datasets.jhmdb import JHMDB_SKELETON, NUM_JOINTS, JHMDBDataset, PoseSequence
-from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import InvalidActionError
 from unitrack_env.metrics.pose import NORMALISERS, PAPER_PCK_THRESHOLDS, frame_pck
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import draw_skeleton
-from unitrack_env.render import joint_colours as joint_colours
 
 #: PCK threshold of the per-step reward.
 REWARD_ALPHA = 0.1

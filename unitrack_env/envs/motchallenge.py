@@ -11,16 +11,13 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.motchallenge import RESULT_FORMAT as RESULT_FORMAT
 from unitrack_env.benchmarks.motchallenge import MOTChallengeBenchmark, result_rows
-from unitrack_env.benchmarks.motchallenge import format_mot_results as format_mot_results
 from unitrack_env.datasets.motchallenge import (
     BENCHMARKS,
     Annotations,
     MOTChallengeDataset,
     MOTSequence,
 )
-from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.clear_stream import StreamingClear
 from unitrack_env.metrics.mot_preprocess import preprocess_frame

@@ -12,22 +12,13 @@ from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.mots import DATA_FOLDERS, DEFAULT_SPLITS, MOTSBenchmark
-from unitrack_env.datasets.mots import (
-    BENCHMARKS,
-    CLASS_IDS,
-    CLASS_IGNORE,
-    MaskAnnotations,
-    MOTSDataset,
-    MOTSSequenceInfo,
-    encode_masks,
-    resolve_overlaps,
-)
-from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
+from unitrack_env.datasets.mots import BENCHMARKS, MOTSDataset, MOTSSequenceInfo
+from unitrack_env.datasets.mots_format import CLASS_IDS, CLASS_IGNORE, MaskAnnotations
+from unitrack_env.datasets.rle import encode_masks, resolve_overlaps
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.mots import MaskClearStream
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
-from unitrack_env.render import MASK_ALPHA as MASK_ALPHA
 from unitrack_env.render import draw_masks
 
 #: Default capacity of the detection arrays.

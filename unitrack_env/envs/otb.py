@@ -12,9 +12,8 @@ from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.otb import BENCHMARK, BENCHMARK_FOLDER, OTBBenchmark, format_box_value
-from unitrack_env.benchmarks.otb import format_otb_results as format_otb_results
-from unitrack_env.datasets.otb import OTBDataset, SOTSequence
-from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
+from unitrack_env.datasets.otb import OTBDataset
+from unitrack_env.datasets.sot import SOTSequence
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.metrics.sot import frame_iou

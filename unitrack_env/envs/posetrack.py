@@ -12,27 +12,23 @@ from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.posetrack import BENCHMARK, PoseTrackBenchmark
-from unitrack_env.datasets.posetrack import (
+from unitrack_env.datasets.posetrack import PoseTrackDataset, PoseTrackSequence
+from unitrack_env.datasets.posetrack_json import read_posetrack_json
+from unitrack_env.datasets.posetrack_records import (
     NUM_KEYPOINTS,
     PERSON_CATEGORY,
     POSETRACK_SKELETON,
-    PoseTrackDataset,
     PoseTrackPerson,
-    PoseTrackSequence,
     PoseTrackVideo,
-    read_posetrack_json,
 )
-from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError
-from unitrack_env.metrics.posetrack import (
+from unitrack_env.metrics.posetrack import PosevalSequence, evaluated_frames, summarise
+from unitrack_env.metrics.posetrack_frames import (
     POSEVAL_DROPS_LAST_FRAME,
     PoseFrame,
-    PosevalSequence,
-    evaluated_frames,
-    summarise,
+    remove_ignored,
 )
-from unitrack_env.metrics.posetrack_frames import remove_ignored
 from unitrack_env.render import draw_poses
 
 #: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).

@@ -15,7 +15,6 @@ from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.vis import BENCHMARK, VISBenchmark
 from unitrack_env.datasets.rle import decode_masks
 from unitrack_env.datasets.youtube_vis import FRAME_RATE, VisTrack, VisVideo, YouTubeVISDataset
-from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_SIZE
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.mots import MaskClearStream
 from unitrack_env.render import draw_masks

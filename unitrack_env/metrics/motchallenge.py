@@ -37,29 +37,20 @@ import numpy as np
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.mot_preprocess import normalize_benchmark
 from unitrack_env.metrics.mot_results import (
-    DEFAULT_CONFIDENCE,
-    MAX_TRACKER_CLASS,
     MIN_RESULT_COLUMNS,
-    RESULT_FIELDS,
     parse_result_file,
-    read_result_file,
     validate_tracker_rows,
     write_for_trackeval,
 )
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 __all__ = [
-    "DEFAULT_CONFIDENCE",
-    "MAX_TRACKER_CLASS",
     "METRIC_NAMES",
-    "MIN_RESULT_COLUMNS",
-    "RESULT_FIELDS",
     "RESULT_SUFFIX",
     "SequenceScore",
     "combine_sequence_scores",
     "combine_sequences",
     "flatten_results",
-    "read_result_file",
     "score_folder",
     "score_sequence",
     "trackeval_metrics",

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from unitrack_env.datasets.mots import (
+from unitrack_env.datasets.mots_format import (
     CLASS_IDS,
     MaskAnnotations,
     format_instances_txt,

@@ -54,47 +54,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unitrack_env.datasets.posetrack import (
-    PoseTrackVideo,
-)
+from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.metrics.posetrack_frames import (
     BODY_PARTS,
     DIST_THRESHOLD,
     DUMMY_GT_ID,
     DUMMY_PRED_ID,
-    HEAD_SIZE_FACTOR,
-    KEYPOINT_OF_JOINT,
     NUM_JOINTS,
     POSEVAL_DROPS_LAST_FRAME,
     POSEVAL_JOINTS,
     PoseFrame,
-    head_sizes,
     joint_distances,
     remove_ignored,
 )
-from unitrack_env.metrics.posetrack_joint import ClearAccumulator, JointFrameCounts
+from unitrack_env.metrics.posetrack_joint import ClearAccumulator
 
 __all__ = [
-    "BODY_PARTS",
-    "DIST_THRESHOLD",
-    "DUMMY_GT_ID",
-    "DUMMY_PRED_ID",
-    "HEAD_SIZE_FACTOR",
-    "KEYPOINT_OF_JOINT",
-    "NUM_JOINTS",
-    "POSEVAL_DROPS_LAST_FRAME",
-    "POSEVAL_JOINTS",
-    "ClearAccumulator",
     "FrameCounts",
-    "JointFrameCounts",
-    "PoseFrame",
     "PosevalSequence",
     "SequenceCounts",
     "evaluate_video",
     "evaluated_frames",
-    "head_sizes",
-    "joint_distances",
-    "remove_ignored",
     "summarise",
 ]
 

@@ -29,12 +29,8 @@ import cv2
 import numpy as np
 
 from unitrack_env.datasets.davis import DAVIS_VOID_LABEL, write_label_png
-from unitrack_env.datasets.synthetic.scene import (
-    ObjectRole,
-    SceneConfig,
-    SyntheticVideo,
-    render_scene,
-)
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 #: Benchmarks whose layout :func:`write_davis` writes.
 BENCHMARKS = ("DAVIS-2017",)

@@ -30,7 +30,8 @@ from unitrack_env.datasets.synthetic.poses import (
     select_joints,
     skeleton_pixels,
 )
-from unitrack_env.datasets.synthetic.scene import SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import SceneConfig
 
 #: The tracked person of every synthetic JHMDB scene.
 PUPPET_ID = 1

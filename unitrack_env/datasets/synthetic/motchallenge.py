@@ -42,12 +42,12 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.synthetic.scene import (
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import (
     ObjectAnnotation,
     ObjectRole,
     SceneConfig,
     SyntheticFrame,
-    render_scene,
 )
 from unitrack_env.geometry import box_iou
 

@@ -31,19 +31,19 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.mots import (
+from unitrack_env.datasets.mots_format import (
     CLASS_IGNORE,
     CLASS_PEDESTRIAN,
     ID_CLASS_DIVISOR,
     IGNORE_ID,
     MaskAnnotations,
-    encode_masks,
     format_instances_txt,
-    resolve_overlaps,
     write_instances_png,
 )
+from unitrack_env.datasets.rle import encode_masks, resolve_overlaps
 from unitrack_env.datasets.synthetic.motchallenge import SequenceSpec
-from unitrack_env.datasets.synthetic.scene import ObjectRole, SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 #: Benchmarks (layouts) written by :func:`write_mots`.
 BENCHMARKS = ("MOTS20", "KITTI-MOTS")

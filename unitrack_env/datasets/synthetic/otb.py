@@ -28,12 +28,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.synthetic.scene import (
-    ObjectRole,
-    SceneConfig,
-    SyntheticVideo,
-    render_scene,
-)
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 #: Benchmarks whose layout :func:`write_otb` writes.
 BENCHMARKS = ("OTB",)

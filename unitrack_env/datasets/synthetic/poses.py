@@ -33,11 +33,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-from unitrack_env.datasets.synthetic.scene import (
-    HEAD_RADIUS,
-    ObjectRole,
-    SceneObject,
-)
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneObject
+from unitrack_env.datasets.synthetic.sprites import HEAD_RADIUS
 
 SKELETON_JOINTS: tuple[str, ...] = (
     "head_top",

@@ -34,7 +34,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.posetrack import (
+from unitrack_env.datasets.posetrack_json import image_id, write_posetrack_json
+from unitrack_env.datasets.posetrack_records import (
     DATA_FOLDER,
     NUM_KEYPOINTS,
     PERSON_CATEGORY,
@@ -42,8 +43,6 @@ from unitrack_env.datasets.posetrack import (
     PoseTrackImage,
     PoseTrackPerson,
     PoseTrackVideo,
-    image_id,
-    write_posetrack_json,
 )
 from unitrack_env.datasets.synthetic.poses import (
     POSETRACK_FROM_SKELETON,
@@ -52,13 +51,8 @@ from unitrack_env.datasets.synthetic.poses import (
     select_joints,
     skeleton_pixels,
 )
-from unitrack_env.datasets.synthetic.scene import (
-    ObjectAnnotation,
-    ObjectRole,
-    SceneConfig,
-    SyntheticVideo,
-    render_scene,
-)
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectAnnotation, ObjectRole, SceneConfig
 
 #: Benchmarks (cache names) this writer produces.
 BENCHMARKS = ("PoseTrack2018",)

@@ -44,47 +44,13 @@ import numpy as np
 from unitrack_env.datasets.synthetic.layout import build_objects
 from unitrack_env.datasets.synthetic.scene_model import (
     ObjectAnnotation,
-    ObjectRole,
-    Pattern,
     SceneConfig,
     SceneObject,
-    Silhouette,
     SyntheticFrame,
-    Texture,
-    Trajectory,
 )
-from unitrack_env.datasets.synthetic.sprites import (
-    BODY_TOP,
-    EDGE_SHADING,
-    HEAD_COLOUR,
-    HEAD_RADIUS,
-    LEG_GAP_HALF_WIDTH,
-    LEG_GAP_TOP,
-    Sprite,
-    person_silhouette,
-    render_sprite,
-)
+from unitrack_env.datasets.synthetic.sprites import Sprite, render_sprite
 
-__all__ = [
-    "BODY_TOP",
-    "EDGE_SHADING",
-    "HEAD_COLOUR",
-    "HEAD_RADIUS",
-    "LEG_GAP_HALF_WIDTH",
-    "LEG_GAP_TOP",
-    "ObjectAnnotation",
-    "ObjectRole",
-    "Pattern",
-    "SceneConfig",
-    "SceneObject",
-    "Silhouette",
-    "SyntheticFrame",
-    "SyntheticVideo",
-    "Texture",
-    "Trajectory",
-    "person_silhouette",
-    "render_scene",
-]
+__all__ = ["SyntheticVideo", "render_scene"]
 
 #: Seed-stream index for object layout, textures and trajectories.
 _STREAM_OBJECTS = 0

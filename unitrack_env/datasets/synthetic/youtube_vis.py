@@ -27,7 +27,8 @@ import numpy as np
 from unitrack_env.datasets.rle import encode_masks
 from unitrack_env.datasets.synthetic.motchallenge import SequenceSpec
 from unitrack_env.datasets.synthetic.mots import MaskNoise, simulate_frame
-from unitrack_env.datasets.synthetic.scene import ObjectRole, SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 from unitrack_env.datasets.youtube_vis import (
     VisData,
     VisTrack,
