@@ -27,6 +27,7 @@ from unitrack_env.agents.appearance.cache_config import default_cache_dir
 from unitrack_env.agents.appearance.cache_files import FeatureCacheWarning
 from unitrack_env.agents.appearance.cache_keys import CacheKey, content_key
 from unitrack_env.agents.appearance.cache_runs import CacheStats, track_cache_run
+from unitrack_env.agents.appearance.cached_model import CachedAppearanceModel
 from unitrack_env.agents.appearance.checkpoints import (
     CIFAR_MEAN,
     CIFAR_STD,
@@ -38,11 +39,7 @@ from unitrack_env.agents.appearance.checkpoints import (
     load_checkpoint,
 )
 from unitrack_env.agents.appearance.efficientnet_lite import EfficientNetLite0
-from unitrack_env.agents.appearance.feature_cache import (
-    CachedAppearanceModel,
-    FeatureCache,
-    resolve_cache,
-)
+from unitrack_env.agents.appearance.feature_cache import FeatureCache, resolve_cache
 from unitrack_env.agents.appearance.identity import ModelIdentity, weights_digest
 from unitrack_env.agents.appearance.letterboxing import (
     MOT_INPUT_SIZE,

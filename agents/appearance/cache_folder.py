@@ -4,8 +4,7 @@
 under ``<root>/v2/<model key>-<H>x<W>-<dtype>/<ab>/``, stores them atomically under the
 inter-process lock while keeping ``<root>/usage.json`` exact, evicts the least recently used
 entries when the total exceeds the cap, and scans, prunes and clears the folder
-(:class:`CacheUsage`). Part of :mod:`~unitrack_env.agents.appearance.feature_cache`, which
-re-exports the public names.
+(:class:`CacheUsage`). Part of the feature cache.
 """
 
 from __future__ import annotations

@@ -2,9 +2,7 @@
 
 :class:`CachedAppearanceModel` (what the heads build) wraps an :class:`AppearanceModel`: it
 looks every frame up by its content key and runs the backbone once, batched, on the frames not
-in the cache. Part of :mod:`~unitrack_env.agents.appearance.feature_cache`, which re-exports
-it (lazily: this module builds its cache with
-:func:`~unitrack_env.agents.appearance.feature_cache.resolve_cache`).
+in the cache (built by :func:`~unitrack_env.agents.appearance.feature_cache.resolve_cache`).
 """
 
 from __future__ import annotations

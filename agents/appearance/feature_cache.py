@@ -42,15 +42,16 @@ full, read-only) is reported once and the features are used uncached.
 features served through the cache are the stored values converted back to float32 on a hit
 and on a miss alike, so results do not depend on whether the cache was warm.
 
-Use :class:`CachedAppearanceModel` (what the heads build) or :meth:`FeatureCache.get_or_compute`
-for any array-producing function. Hit statistics: :attr:`FeatureCache.stats` in the process,
-:func:`track_cache_run` across the worker processes of a run, and ``unitrack cache info``.
+Use :class:`~.cached_model.CachedAppearanceModel` (what the heads build) or
+:meth:`FeatureCache.get_or_compute` for any array-producing function. Hit statistics:
+:attr:`FeatureCache.stats` in the process, :func:`track_cache_run` across the worker processes
+of a run, and ``unitrack cache info``.
 
-The pieces live beside this module, which re-exports their names (they were all defined here
-before issue 14): settings and sizes in :mod:`.cache_config`, keys in :mod:`.cache_keys`, hit
-statistics and runs in :mod:`.cache_runs`, the entry file format, atomic writes and the lock
-in :mod:`.cache_files`, the folder layout, accounting and eviction in :mod:`.cache_folder`
-(:class:`FeatureCache`'s base), and :class:`CachedAppearanceModel` in :mod:`.cached_model`.
+The pieces live beside this module: settings and sizes in :mod:`.cache_config`, keys in
+:mod:`.cache_keys`, hit statistics and runs in :mod:`.cache_runs`, the entry file format,
+atomic writes and the lock in :mod:`.cache_files`, the folder layout, accounting and eviction
+in :mod:`.cache_folder` (:class:`FeatureCache`'s base), and :class:`CachedAppearanceModel` in
+:mod:`.cached_model`.
 """
 
 from __future__ import annotations
@@ -90,22 +91,6 @@ __all__ = ["MAX_RUN_FILES", "FeatureCache", "resolve_cache"]
 
 MAX_RUN_FILES: int = 200
 """Process statistics files kept in ``<root>/runs`` (oldest removed first)."""
-
-_LAZY = frozenset({"CachedAppearanceModel", "AppearanceModel"})
-
-
-def __getattr__(name: str) -> Any:
-    """``CachedAppearanceModel`` (and the ``AppearanceModel`` it wraps), imported on first use.
-
-    :mod:`.cached_model` builds its cache with :func:`resolve_cache`, so it imports this
-    module; importing it here only when asked keeps the imports free of cycles.
-    """
-    if name in _LAZY:
-        from unitrack_env.agents.appearance import cached_model
-
-        return getattr(cached_model, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 def resolve_cache(
     spec: FeatureCache | str | os.PathLike[str] | bool | None,

@@ -18,10 +18,6 @@ resolves ``weights=`` / ``arch=`` / ``remap=`` to a network with its weights loa
 :mod:`~unitrack_env.agents.appearance.weights` docstring gives the order in which weights
 names are resolved), the model places the network on its device, and
 :func:`~unitrack_env.agents.appearance.identity.weights_digest` names what was loaded.
-
-This module also re-exports the names that used to live here (architectures, letterbox,
-identity, weights table), so ``from unitrack_env.agents.appearance.model import ...`` keeps
-working.
 """
 
 from __future__ import annotations

@@ -20,7 +20,6 @@ from unitrack_env.agents.primitives.adapters import (
     ObservationAdapter,
     detect_task,
     episode_adapter,
-    former_capacity_constants,
 )
 from unitrack_env.agents.primitives.overlap import (
     BoxOverlap,
@@ -31,10 +30,6 @@ from unitrack_env.agents.primitives.overlap import (
 from unitrack_env.agents.primitives.overlap_tracker import OverlapTracker
 
 __all__ = ["IoUAgent", "IoUConfig"]
-
-# Former constants: the environments' default capacities (read from the environments).
-__getattr__ = former_capacity_constants(
-    __name__, {"DEFAULT_MAX_TRACKS": "mot", "POSE_MAX_TRACKS": "posetrack"})
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import CachedAppearanceModel
+from unitrack_env.agents.appearance.cached_model import CachedAppearanceModel
 from unitrack_env.agents.appearance.feature_cache import resolve_cache
 from unitrack_env.agents.appearance.letterboxing import Letterbox
 from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
@@ -63,7 +63,6 @@ from unitrack_env.agents.primitives.adapters import (
     ObservationAdapter,
     adapter_for,
     detect_task,
-    former_capacity_constants,
     reset_task,
 )
 from unitrack_env.agents.primitives.association import Associator
@@ -73,10 +72,6 @@ from unitrack_env.agents.primitives.similarity import SIMILARITIES, ObjectFeatur
 from unitrack_env.agents.primitives.tracks import TrackOutput
 
 __all__ = ["UniTrackAgent"]
-
-# Former constants: the environments' default capacities (read from the environments).
-__getattr__ = former_capacity_constants(
-    __name__, {"DEFAULT_MAX_TRACKS": "mot", "POSETRACK_MAX_TRACKS": "posetrack"})
 
 
 @dataclass(frozen=True)

@@ -19,8 +19,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance import CachedAppearanceModel
 from unitrack_env.agents.appearance.cache_keys import content_key
+from unitrack_env.agents.appearance.cached_model import CachedAppearanceModel
 from unitrack_env.agents.appearance.letterboxing import (
     LETTERBOX_PAD_VALUE,
     Letterbox,

@@ -24,6 +24,7 @@ from unitrack_env.agents.appearance import (
     resolve_cache,
     track_cache_run,
 )
+from unitrack_env.agents.appearance import cache_config as cc
 from unitrack_env.agents.appearance import feature_cache as fc
 
 KEY = CacheKey(model="abc123", input_size=(16, 24), content=content_key(np.zeros(3, np.uint8)))
@@ -215,7 +216,7 @@ def test_default_folder_and_switches(tmp_path: Path, monkeypatch: pytest.MonkeyP
     assert default_cache_dir() == tmp_path / "feats"
     cache = resolve_cache(True)
     assert cache is not None and cache.root == tmp_path / "feats"
-    assert cache.max_size == fc.DEFAULT_MAX_SIZE == 10 * 2**30
+    assert cache.max_size == cc.DEFAULT_MAX_SIZE == 10 * 2**30
     assert resolve_cache(False) is None and resolve_cache(None) is None
     assert resolve_cache("off") is None
     assert resolve_cache(tmp_path / "x", max_size="1MiB").max_size == 2**20
@@ -234,19 +235,19 @@ def test_default_folder_and_switches(tmp_path: Path, monkeypatch: pytest.MonkeyP
 
 
 def test_sizes(monkeypatch: pytest.MonkeyPatch) -> None:
-    assert fc.parse_size("10GiB") == 10 * 2**30 == fc.parse_size("10G") == fc.parse_size("10 gib")
-    assert fc.parse_size("500MB") == 500 * 10**6
-    assert fc.parse_size("1.5k") == 1536 and fc.parse_size(123) == 123 == fc.parse_size("123")
+    assert cc.parse_size("10GiB") == 10 * 2**30 == cc.parse_size("10G") == cc.parse_size("10 gib")
+    assert cc.parse_size("500MB") == 500 * 10**6
+    assert cc.parse_size("1.5k") == 1536 and cc.parse_size(123) == 123 == cc.parse_size("123")
     for bad in ("ten", "5 parsecs", "-1", "1e3"):
         with pytest.raises(ValueError, match="size"):
-            fc.parse_size(bad)
-    assert fc.format_size(512) == "512 B" and fc.format_size(1536) == "1.5 KiB"
-    assert fc.format_size(3 * 2**30) == "3.0 GiB"
-    monkeypatch.setenv(fc.CACHE_MAX_ENV, "2MiB")
-    assert fc.default_max_size() == 2 * 2**20
-    monkeypatch.setenv(fc.CACHE_MAX_ENV, "lots")
-    with pytest.raises(ValueError, match=fc.CACHE_MAX_ENV):
-        fc.default_max_size()
+            cc.parse_size(bad)
+    assert cc.format_size(512) == "512 B" and cc.format_size(1536) == "1.5 KiB"
+    assert cc.format_size(3 * 2**30) == "3.0 GiB"
+    monkeypatch.setenv(cc.CACHE_MAX_ENV, "2MiB")
+    assert cc.default_max_size() == 2 * 2**20
+    monkeypatch.setenv(cc.CACHE_MAX_ENV, "lots")
+    with pytest.raises(ValueError, match=cc.CACHE_MAX_ENV):
+        cc.default_max_size()
 
 
 def test_the_test_suite_never_writes_to_the_user_cache() -> None:
@@ -359,7 +360,7 @@ def test_four_writer_processes_on_the_same_frames(tmp_path: Path, capped: bool) 
     entry = FeatureCache(tmp_path / "probe").put(_key(0), _writer_value(0))
     entry_bytes = FeatureCache(tmp_path / "probe").path(_key(0)).stat().st_size
     assert entry.nbytes < entry_bytes
-    max_size = 10 * entry_bytes if capped else fc.DEFAULT_MAX_SIZE
+    max_size = 10 * entry_bytes if capped else cc.DEFAULT_MAX_SIZE
     root = tmp_path / "shared"
     results = _run_writers(root, n_keys, rounds, max_size)
     assert [r["wrong"] for r in results] == [0, 0, 0, 0]  # never a partial or foreign entry

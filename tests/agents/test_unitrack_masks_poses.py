@@ -21,7 +21,6 @@ from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.agents.baselines.iou import IoUAgent
 from unitrack_env.agents.heads.association import UniTrackAgent
-from unitrack_env.agents.heads.mot import UniTrackMOTAgent
 from unitrack_env.agents.heads.unitrack_config import TASK_DEFAULTS
 from unitrack_env.agents.primitives.adapters import detect_task
 from unitrack_env.agents.primitives.association import Associator
@@ -247,7 +246,7 @@ def test_task_detection_and_defaults(model: AppearanceModel) -> None:
     with pytest.raises(ValueError, match="task="):
         detect_task({"frame": 0})
     agent = make_agent("unitrack", appearance_model=model)
-    assert isinstance(agent, UniTrackAgent) and UniTrackMOTAgent is UniTrackAgent
+    assert isinstance(agent, UniTrackAgent)
     assert set(agent.tasks) == {"mot", "mots", "vis", "posetrack"}
     cfg = agent.associator.config  # MOT until an observation says otherwise
     assert (cfg.gate_threshold, cfg.output_min_area, cfg.confirm_iou_threshold) == \

@@ -15,8 +15,6 @@ from unitrack_env.datasets.jhmdb import JHMDB_SKELETON, NUM_JOINTS, JHMDBDataset
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import InvalidActionError
 from unitrack_env.metrics.pose import NORMALISERS, PAPER_PCK_THRESHOLDS, frame_pck
-
-# Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import draw_skeleton
 
 #: PCK threshold of the per-step reward.
@@ -160,9 +158,6 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         if not self._predictions:
             return np.zeros((0, NUM_JOINTS, 2))
         return np.stack(self._predictions)
-
-    #: The older name of :meth:`episode_results`.
-    episode_predictions = episode_results
 
     def episode_metrics(self) -> dict[str, float]:
         """PCK at every threshold of the recorded video (frame 1 not scored)."""
