@@ -43,15 +43,16 @@ from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
-from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
-from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
-from unitrack_env.evaluation.workers import (
+from unitrack_env.io import atomic_write_text, file_in_the_way
+from unitrack_env.metrics.report import ScoreReport
+
+from .episode import SequenceRecord, play_episode, recorded_results
+from .identity import RunIdentity, option_changes, result_digest
+from .workers import (
     SequenceFailure,
     play_in_workers,
     refuse_unguarded_script,
 )
-from unitrack_env.io import atomic_write_text, file_in_the_way
-from unitrack_env.metrics.report import ScoreReport
 
 
 class RunFailed(RuntimeError):
@@ -396,7 +397,7 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     lengths, failures = _sequence_lengths(bench, [n for n in names if n not in skipped])
     todo = list(lengths)
 
-    from unitrack_env.evaluation.progress import RunProgress
+    from .progress import RunProgress
 
     causes: dict[str, BaseException] = {}
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:

@@ -245,7 +245,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     Runs where the backend puts it (another process or machine); nothing is written to the
     driver's output folder from here.
     """
-    from unitrack_env.evaluation.runner import run
+    from .runner import run
 
     if threads:
         import torch
@@ -285,7 +285,7 @@ def _finite(value: Any) -> float | None:
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from unitrack_env.evaluation.runner import RunMismatch, run
+    from .runner import RunMismatch, run
 
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
@@ -321,13 +321,13 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
 
 def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank") -> list[Path]:
     """``scorecard.json``, ``.csv``, ``.md`` and (with matplotlib) the radar chart PNG/SVG."""
-    from unitrack_env.evaluation.scorecard_report import markdown_table, rows_csv
+    from .scorecard_report import markdown_table, rows_csv
 
     atomic_write_text(out / "scorecard.json", json.dumps(card, indent=2, allow_nan=False))
     atomic_write_text(out / "scorecard.csv", rows_csv(card))
     atomic_write_text(out / "scorecard.md", markdown_table(card))
     written = [out / "scorecard.json", out / "scorecard.csv", out / "scorecard.md"]
-    from unitrack_env.evaluation.radar import draw_radar
+    from .radar import draw_radar
 
     written += draw_radar(card, out / "scorecard", scale=radar_scale)
     return written
@@ -358,9 +358,9 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
 def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
               on_progress: Callable[[int, int, Cell | None], None] | None) -> None:
     """Play and store every cell not done yet; each warning of the cells is shown once."""
-    from unitrack_env.evaluation.backends import make_backend
-    from unitrack_env.evaluation.runner import RunFailed
-    from unitrack_env.evaluation.workers import SequenceFailure
+    from .backends import make_backend
+    from .runner import RunFailed
+    from .workers import SequenceFailure
 
     todo = [c for c in cells if not cell_done(out, c)]
     done = len(cells) - len(todo)
@@ -408,11 +408,11 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
     """
-    from unitrack_env.evaluation.runner import check_out_folder
+    from .runner import check_out_folder
 
     names, data_path = _checked_request(models, tasks, data)
     if backend == "pool" and workers > 1:
-        from unitrack_env.evaluation.workers import refuse_unguarded_script
+        from .workers import refuse_unguarded_script
 
         refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime

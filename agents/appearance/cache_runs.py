@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from unitrack_env.agents.appearance.cache_config import default_cache_dir, format_size
+from .cache_config import default_cache_dir, format_size
 
 RUN_ENV: str = "UNITRACK_FEATURE_CACHE_RUN"
 """Environment variable naming the current run in the statistics (set by

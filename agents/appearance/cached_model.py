@@ -15,11 +15,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.cache_config import CACHE_DIR_ENV
-from unitrack_env.agents.appearance.cache_files import _as_float32
-from unitrack_env.agents.appearance.cache_keys import CacheKey, content_key
-from unitrack_env.agents.appearance.feature_cache import FeatureCache, resolve_cache
-from unitrack_env.agents.appearance.model import AppearanceModel
+from .cache_config import CACHE_DIR_ENV
+from .cache_files import _as_float32
+from .cache_keys import CacheKey, content_key
+from .feature_cache import FeatureCache, resolve_cache
+from .model import AppearanceModel
 
 
 class CachedAppearanceModel:

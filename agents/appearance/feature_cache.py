@@ -70,22 +70,22 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.cache_config import (
+from .cache_config import (
     _OFF_VALUES,
     CACHE_DIR_ENV,
     DEFAULT_CACHE_DTYPE,
     default_cache_dir,
 )
-from unitrack_env.agents.appearance.cache_files import (
+from .cache_files import (
     FeatureCacheWarning,
     _as_float32,
     _atomic_write,
     _load_entry,
     _to_stored,
 )
-from unitrack_env.agents.appearance.cache_folder import CacheFolder
-from unitrack_env.agents.appearance.cache_keys import CacheKey
-from unitrack_env.agents.appearance.cache_runs import RUN_ENV, CacheStats, RunRecord, read_runs
+from .cache_folder import CacheFolder
+from .cache_keys import CacheKey
+from .cache_runs import RUN_ENV, CacheStats, RunRecord, read_runs
 
 __all__ = ["MAX_RUN_FILES", "FeatureCache", "resolve_cache"]
 

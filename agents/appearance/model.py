@@ -32,16 +32,16 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.architectures import FEATURE_STRIDE, combine_layers
-from unitrack_env.agents.appearance.checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
-from unitrack_env.agents.appearance.identity import ModelIdentity, weights_digest
-from unitrack_env.agents.appearance.runtime import (
+from .architectures import FEATURE_STRIDE, combine_layers
+from .checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
+from .identity import ModelIdentity, weights_digest
+from .runtime import (
     TORCH,
     CompiledBackbone,
     FeatureNetwork,
     resolve_runtime,
 )
-from unitrack_env.agents.appearance.weights import (
+from .weights import (
     DEFAULT_WEIGHT_LOADERS,
     LoadedWeights,
     WeightsLoader,

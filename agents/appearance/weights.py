@@ -39,7 +39,9 @@ from typing import Any
 import torch
 from torch import nn
 
-from unitrack_env.agents.appearance.architectures import (
+from unitrack_env.errors import CheckpointError
+
+from .architectures import (
     ARCHITECTURES,
     DEFAULT_LAYERS,
     EFFICIENTNET_LITE0,
@@ -47,7 +49,7 @@ from unitrack_env.agents.appearance.architectures import (
     required_prefixes,
     split_layers,
 )
-from unitrack_env.agents.appearance.checkpoints import (
+from .checkpoints import (
     DEFAULT_REMAPS,
     IMAGENET_MEAN,
     IMAGENET_STD,
@@ -59,9 +61,8 @@ from unitrack_env.agents.appearance.checkpoints import (
     load_state_into,
     read_checkpoint,
 )
-from unitrack_env.agents.appearance.efficientnet_lite import LITE0_MEAN, LITE0_STD
-from unitrack_env.agents.appearance.resnet import ResNet, infer_resnet_arch
-from unitrack_env.errors import CheckpointError
+from .efficientnet_lite import LITE0_MEAN, LITE0_STD
+from .resnet import ResNet, infer_resnet_arch
 
 RANDOM_DEFAULT_ARCH: str = "resnet18"
 """Architecture of ``weights="random"`` when none is given (the paper's baseline is R18)."""

@@ -15,19 +15,19 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.primitives.adapters import (
+from ..base import Agent
+from ..primitives.adapters import (
     ObservationAdapter,
     detect_task,
     episode_adapter,
 )
-from unitrack_env.agents.primitives.overlap import (
+from ..primitives.overlap import (
     BoxOverlap,
     MaskOverlap,
     OverlapMeasure,
     PoseOverlap,
 )
-from unitrack_env.agents.primitives.overlap_tracker import OverlapTracker
+from ..primitives.overlap_tracker import OverlapTracker
 
 __all__ = ["IoUAgent", "IoUConfig"]
 

@@ -51,25 +51,25 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.cached_model import CachedAppearanceModel
-from unitrack_env.agents.appearance.feature_cache import resolve_cache
-from unitrack_env.agents.appearance.letterboxing import Letterbox
-from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.heads.region_features import RegionFeatures
-from unitrack_env.agents.heads.unitrack_config import TASKS, UniTrackConfig
-from unitrack_env.agents.primitives.adapters import (
+from ..appearance.cached_model import CachedAppearanceModel
+from ..appearance.feature_cache import resolve_cache
+from ..appearance.letterboxing import Letterbox
+from ..appearance.model import AppearanceModel, torch_threads
+from ..base import Agent
+from ..primitives.adapters import (
     Detections,
     ObservationAdapter,
     adapter_for,
     detect_task,
     reset_task,
 )
-from unitrack_env.agents.primitives.association import Associator
-from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
-from unitrack_env.agents.primitives.mask_features import LocalMask, mask_to_box, pose_to_mask
-from unitrack_env.agents.primitives.similarity import SIMILARITIES, ObjectFeatures
-from unitrack_env.agents.primitives.tracks import TrackOutput
+from ..primitives.association import Associator
+from ..primitives.category_gating import CategoryGatedAssociator
+from ..primitives.mask_features import LocalMask, mask_to_box, pose_to_mask
+from ..primitives.similarity import SIMILARITIES, ObjectFeatures
+from ..primitives.tracks import TrackOutput
+from .region_features import RegionFeatures
+from .unitrack_config import TASKS, UniTrackConfig
 
 __all__ = ["UniTrackAgent"]
 

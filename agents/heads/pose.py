@@ -37,11 +37,11 @@ import cv2
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
-from unitrack_env.agents.appearance.spec import AppearanceSpec
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.heads.vos import make_propagation_config
-from unitrack_env.agents.primitives.label_propagation import LabelPropagator
+from ..appearance.model import AppearanceModel, torch_threads
+from ..appearance.spec import AppearanceSpec
+from ..base import Agent
+from ..primitives.label_propagation import LabelPropagator
+from .vos import make_propagation_config
 
 POSE_INPUT_SIZE: tuple[int, int] = (320, 320)
 """(width, height) frames are resized to (appendix B.2 table, "Pose: 320 x 320")."""

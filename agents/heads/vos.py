@@ -26,10 +26,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
-from unitrack_env.agents.appearance.spec import AppearanceSpec
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
+from ..appearance.model import AppearanceModel, torch_threads
+from ..appearance.spec import AppearanceSpec
+from ..base import Agent
+from ..primitives.label_propagation import LabelPropagationConfig, LabelPropagator
 
 VOID_LABEL: int = 255
 """DAVIS's void label (ambiguous pixels of the annotation); treated as background."""

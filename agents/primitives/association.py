@@ -52,18 +52,19 @@ from typing import Any, Generic
 
 import numpy as np
 
-from unitrack_env.agents.primitives.appearance_memory import remember
-from unitrack_env.agents.primitives.association_config import AssociationConfig
-from unitrack_env.agents.primitives.kalman import KalmanFilter, xywh_to_xyah
-from unitrack_env.agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
-from unitrack_env.agents.primitives.tracks import (
+from unitrack_env.geometry import box_iou
+
+from .appearance_memory import remember
+from .association_config import AssociationConfig
+from .kalman import KalmanFilter, xywh_to_xyah
+from .matching import fuse_motion, iou_cost, linear_assignment
+from .tracks import (
     P,
     StepRecord,
     Track,
     TrackOutput,
     TrackState,
 )
-from unitrack_env.geometry import box_iou
 
 __all__ = ["HEIGHT_VELOCITY_INDEX", "Associator", "SimilarityFn"]
 

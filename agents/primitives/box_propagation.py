@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from unitrack_env.agents.primitives.box_response import (
+from .box_response import (
     DCFHead,
     XCorrHead,
     crop_windows,

@@ -15,9 +15,9 @@ from typing import Any, Generic
 
 import numpy as np
 
-from unitrack_env.agents.primitives.association import Associator, SimilarityFn
-from unitrack_env.agents.primitives.association_config import AssociationConfig
-from unitrack_env.agents.primitives.tracks import P, TrackOutput
+from .association import Associator, SimilarityFn
+from .association_config import AssociationConfig
+from .tracks import P, TrackOutput
 
 
 class CategoryGatedAssociator(Generic[P]):

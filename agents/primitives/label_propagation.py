@@ -44,15 +44,15 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.primitives.label_search import (
+from .label_search import (
     MemorySearch,
     grid_positions,
     merge_topk,
     search_dense,
     stage,
 )
-from unitrack_env.agents.primitives.label_search_tiled import TiledSearch
-from unitrack_env.agents.primitives.label_windows import WindowSearch
+from .label_search_tiled import TiledSearch
+from .label_windows import WindowSearch
 
 MEMORY_SIZE: int = 6
 """``M``: frames in the memory bank, the first frame plus the ``M - 1`` latest (appendix B.2)."""

@@ -21,7 +21,7 @@ import torch
 import torch.nn.functional as F
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
+    from .label_propagation import LabelPropagationConfig
 
 STAGE_PREFIX: str = "label_propagation."
 """Prefix of the ``torch.profiler`` labels of :func:`stage`."""

@@ -31,8 +31,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.primitives.roi_align import roi_align
-from unitrack_env.agents.primitives.similarity import ObjectFeatures
+from .roi_align import roi_align
+from .similarity import ObjectFeatures
 
 MAX_MASK_AREA_MOTS: int = 200
 """Most location features kept per mask on MOTS (authors' ``max_mask_area``)."""

@@ -31,7 +31,7 @@ from typing import Generic
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from unitrack_env.agents.primitives.overlap import OverlapMeasure, S
+from .overlap import OverlapMeasure, S
 
 
 @dataclass(eq=False)

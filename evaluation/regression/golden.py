@@ -16,9 +16,10 @@ import unitrack_env
 from unitrack_env.agents.base import close_agent, make_agent
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
-from unitrack_env.evaluation.episode import play_episode
-from unitrack_env.evaluation.identity import option_changes
 from unitrack_env.io import atomic_write_text
+
+from ..episode import play_episode
+from ..identity import option_changes
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
 DEFAULT_TOLERANCE = 1e-6
