@@ -105,7 +105,7 @@ def _to_stored(array: np.ndarray | torch.Tensor, dtype: np.dtype) -> np.ndarray:
 
 
 def _as_float32(array: np.ndarray) -> torch.Tensor:
-    """Stored values as a float32 tensor (exact; torch converts float16 ~20x faster than numpy)."""
+    """Stored values as a float32 tensor (exact; torch converts float16 faster than numpy)."""
     if not array.flags.writeable:
         array = array.copy()
     return torch.from_numpy(array).to(torch.float32)

@@ -9,9 +9,8 @@ JDE-style letterbox used for MOT (whole frame to 1088 x 608), and an :class:`Mod
 
 The network runs in eager torch (the reference, and the only runtime on CUDA) or, with
 ``runtime="openvino"`` / ``"onnxruntime"`` / ``"auto"`` (or ``$UNITRACK_RUNTIME``), exported
-to ONNX and compiled for the CPU: measured here at 1088 x 608 on 2 threads, OpenVINO ~3.9x and
-ONNX Runtime ~2.6x eager torch, features cosine 1.0000000 (see
-:mod:`~unitrack_env.agents.appearance.runtime` and ``benchmarks/runtime.py``).
+to ONNX and compiled for the CPU (:mod:`~unitrack_env.agents.appearance.runtime`; speed-ups in
+docs/design-decisions.md).
 
 Building it takes three steps: :func:`~unitrack_env.agents.appearance.weights.load_weights`
 resolves ``weights=`` / ``arch=`` / ``remap=`` to a network with its weights loaded (the

@@ -104,10 +104,9 @@ class LabelPropagationConfig:
         max_affinity_elements: Memory bound: most affinity values held at once (per block
             of queries or tiles; fewer, larger blocks mean fewer parallel regions).
         affinity_dtype: ``"float32"`` (default, exact) or ``"bfloat16"``: dtype of the stored
-            features and of the affinity matmuls (accumulated in float32 by oneDNN). On CPUs
-            with AVX512-BF16 the matmuls run several times faster (measured here: 3.4x for
-            the 480p first-frame affinity) at the cost of ~3 significant digits in the
-            affinities; on CPUs without native bfloat16 it can be much slower.
+            features and of the affinity matmuls (accumulated in float32 by oneDNN): faster
+            on CPUs with AVX512-BF16, ~3 significant digits lost, slower on CPUs without
+            (docs/design-decisions.md).
     """
 
     memory_size: int = MEMORY_SIZE

@@ -12,7 +12,7 @@ Search (per step, by blocks of tiles bounded by ``max_affinity_elements``):
 
 1. affinity: one batched matmul ``(t^2, C) x (C, R slots g)`` per tile; one masking pass
    (radius, map border, dummy keys: a cached ``-inf`` bias shared by the frames, added in
-   one pass: 5x cheaper here than ``masked_fill`` with a boolean mask);
+   one pass, cheaper than ``masked_fill`` with a boolean mask: docs/design-decisions.md);
 2. grouped top-k: the candidates of a query form ``slots g`` groups of ``R`` (one group per
    frame and column of the ``R x g`` layout); the top-k of a query lies in the ``k`` groups
    of largest maximum (any other group's best is beaten by ``k`` group maxima), so a
