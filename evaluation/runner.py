@@ -41,8 +41,7 @@ import unitrack_env
 from unitrack_env.agents.base import agent_class, close_agent
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
-from unitrack_env.benchmarks import benchmark_for
-from unitrack_env.benchmarks.base import Benchmark
+from unitrack_env.benchmarks.base import Benchmark, select_sequences
 from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
@@ -120,10 +119,6 @@ class RunSpec:
         """Build the environment."""
         unitrack_env.register_all()
         return gym.make(self.env_id, **self.env_kwargs)
-
-    def make_benchmark(self) -> Benchmark:
-        """Build the id's benchmark (writes, scores) for the same environment arguments."""
-        return benchmark_for(self.env_id, **self.env_kwargs)
 
 
 @dataclass
@@ -367,9 +362,8 @@ def run(
     env = spec.make_env()
     try:
         base = env.unwrapped
-        names = base._select_sequences(list(sequences) if sequences is not None else None,
-                                       list(base.sequence_names), env_id)
-        bench = spec.make_benchmark()
+        names = select_sequences(sequences, base.sequence_names, env_id)
+        bench = base.scoring
         agent_obj = cls(**agent_kwargs)
     except BaseException:
         env.close()

@@ -82,7 +82,7 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any
     try:
         env = spec.make_env()
         agent = spec.make_agent()
-        bench = spec.make_benchmark()
+        bench = env.unwrapped.scoring
         record, _ = play_episode(env, agent, sequence, benchmark=bench)
         record.inputs = inputs
         save_episode(Path(out), env, record, bench)

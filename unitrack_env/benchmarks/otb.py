@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -45,10 +44,10 @@ class OTBBenchmark(Benchmark):
     columns = ("AUC", "Precision@20px", "AverageOverlap")
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, **_: Any) -> OTBBenchmark:
+    def build(cls, root: str | os.PathLike | None = None) -> OTBBenchmark:
         """The benchmark of ``OTBEnv(root=)``."""
-        path, _synthetic = data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
-        return cls(OTBDataset(path))
+        path, synthetic = data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
+        return cls(OTBDataset(path), synthetic=synthetic)
 
     @property
     def name(self) -> str:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -34,17 +33,17 @@ class PoseTrackBenchmark(Benchmark):
     columns = ("MOTA", "IDF1", "IDSW", "MOTP", "Precision", "Recall")
 
     def __init__(self, dataset: PoseTrackDataset,
-                 drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME) -> None:
-        super().__init__(dataset)
+                 drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME, *,
+                 synthetic: bool = False) -> None:
+        super().__init__(dataset, synthetic=synthetic)
         self.drop_last_frame = bool(drop_last_frame)
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, split: str = "val",
-                    drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME,
-                    **_: Any) -> PoseTrackBenchmark:
+    def build(cls, root: str | os.PathLike | None = None, split: str = "val",
+              drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME) -> PoseTrackBenchmark:
         """The benchmark of ``PoseTrackEnv(root=, split=, drop_last_frame=)``."""
-        path, _synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
-        return cls(PoseTrackDataset(path, split), drop_last_frame)
+        path, synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
+        return cls(PoseTrackDataset(path, split), drop_last_frame, synthetic=synthetic)
 
     @property
     def name(self) -> str:

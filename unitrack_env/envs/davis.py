@@ -11,11 +11,11 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.davis import BENCHMARK, BENCHMARK_FOLDER, DAVISBenchmark
-from unitrack_env.datasets.davis import DAVIS_VOID_LABEL, DAVISDataset, VOSSequence
+from unitrack_env.benchmarks.davis import BENCHMARK, DAVISBenchmark
+from unitrack_env.datasets.davis import DAVIS_VOID_LABEL, VOSSequence
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
-from unitrack_env.metrics.vos import VOSScores, davis_statistics, frame_scores
+from unitrack_env.metrics.vos import VOSScores, frame_scores, scores_from_frames
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import overlay_labels
@@ -71,33 +71,7 @@ def validate_labels(action: Any, shape: tuple[int, int], object_ids: tuple[int, 
     return labels
 
 
-def scores_from_frames(
-    j: np.ndarray, f: np.ndarray, object_ids: tuple[int, ...], sequence_name: str
-) -> VOSScores:
-    """Build a sequence's DAVIS scores from per-object, per-frame J and F of its scored frames.
-
-    The same statistics as :func:`unitrack_env.metrics.vos.evaluate_vos_sequence`, for
-    values computed frame by frame during an episode.
-
-    Args:
-        j: ``(objects, frames)`` J of the scored frames.
-        f: ``(objects, frames)`` F of the scored frames.
-        object_ids: the sequence's object labels.
-        sequence_name: names the objects ``"<sequence>_<id>"``.
-    """
-    n = len(object_ids)
-    j_stats = np.array([davis_statistics(row) for row in j]).reshape(n, 3)
-    f_stats = np.array([davis_statistics(row) for row in f]).reshape(n, 3)
-    return VOSScores(
-        object_names=tuple(f"{sequence_name}_{obj}" for obj in object_ids),
-        j_per_frame=tuple(j),
-        f_per_frame=tuple(f),
-        j_mean=j_stats[:, 0], j_recall=j_stats[:, 1], j_decay=j_stats[:, 2],
-        f_mean=f_stats[:, 0], f_recall=f_stats[:, 1], f_decay=f_stats[:, 2],
-    )
-
-
-class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
+class DAVISEnv(SequenceEnv[VOSSequence]):
     """Semi-supervised video object segmentation by mask propagation on DAVIS-2017 data.
 
     ## Description
@@ -202,12 +176,8 @@ class DAVISEnv(SequenceEnv[VOSSequence], task="vos"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        data_root = self._data_root(root, BENCHMARK_FOLDER, BENCHMARK, "davis")
-        self.dataset = DAVISDataset(data_root, split, resolution, year)
-        self.scoring = DAVISBenchmark(self.dataset)
-        self.sequence_names = self._select_sequences(
-            sequences, self.dataset.sequence_names, f"split {split!r} of {data_root}"
-        )
+        bench = DAVISBenchmark.build(root, split, resolution, year)
+        self._use_benchmark(bench, sequences, f"split {split!r} of {bench.dataset.root}")
         self.observation_space = spaces.Dict({
             "frame": ut_spaces.Image(*self.max_frame_size),
             "init_labels": ut_spaces.LabelMap(*self.max_frame_size, max_label=255),

@@ -11,17 +11,17 @@ from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.jhmdb import JHMDBBenchmark
-from unitrack_env.datasets.jhmdb import JHMDB_SKELETON, NUM_JOINTS, JHMDBDataset, PoseSequence
+from unitrack_env.datasets.jhmdb import JHMDB_SKELETON, NUM_JOINTS, PoseSequence
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import InvalidActionError
-from unitrack_env.metrics.pose import NORMALISERS, PAPER_PCK_THRESHOLDS, frame_pck
+from unitrack_env.metrics.pose import PAPER_PCK_THRESHOLDS, frame_pck
 from unitrack_env.render import draw_skeleton
 
 #: PCK threshold of the per-step reward.
 REWARD_ALPHA = 0.1
 
 
-class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
+class JHMDBEnv(SequenceEnv[PoseSequence]):
     """Pose propagation: follow one person's 15 joints through a JHMDB video.
 
     ## Description
@@ -107,14 +107,8 @@ class JHMDBEnv(SequenceEnv[PoseSequence], task="pose-prop"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        if normaliser not in NORMALISERS:
-            raise ValueError(f"normaliser must be one of {NORMALISERS}; got {normaliser!r}")
-        data_root = self._data_root(root, "JHMDB", "JHMDB", kind="jhmdb")
-        self.dataset = JHMDBDataset(data_root, split, split_index, split_dir)
-        self.scoring = JHMDBBenchmark(self.dataset, normaliser, thresholds)
-        self.sequence_names = self._select_sequences(
-            sequences, self.dataset.sequence_names, data_root
-        )
+        bench = JHMDBBenchmark.build(root, split, split_index, split_dir, normaliser, thresholds)
+        self._use_benchmark(bench, sequences, bench.dataset.root)
         self.normaliser = normaliser
         self.thresholds = tuple(float(t) for t in thresholds)
         joints = spaces.Box(-ut_spaces.COORD_MAX, ut_spaces.COORD_MAX, (NUM_JOINTS, 2),

@@ -13,9 +13,7 @@ from typing_extensions import Unpack
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.motchallenge import MOTChallengeBenchmark, result_rows
 from unitrack_env.datasets.motchallenge import (
-    BENCHMARKS,
     Annotations,
-    MOTChallengeDataset,
     MOTSequence,
 )
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
@@ -29,7 +27,7 @@ DEFAULT_MAX_DETECTIONS = 512
 DEFAULT_MAX_TRACKS = 512
 
 
-class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
+class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     """Multi-object tracking by association on a MOTChallenge-layout data set.
 
     ## Description
@@ -125,13 +123,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        self.benchmark = self._one_of("benchmark", benchmark, sorted(BENCHMARKS))
-        data_root = self._data_root(root, benchmark, benchmark)
-        self.dataset = MOTChallengeDataset(data_root, benchmark, split, detections)
-        self.scoring = MOTChallengeBenchmark(self.dataset)
-        self.sequence_names = self._select_sequences(
-            sequences, self.dataset.sequence_names, self.dataset.split_dir
-        )
+        self.benchmark = benchmark
+        bench = MOTChallengeBenchmark.build(benchmark, root, split, detections)
+        self._use_benchmark(bench, sequences, bench.dataset.split_dir)
         self.min_score = min_score
         self.max_detections = int(max_detections)
         self.max_tracks = int(max_tracks)

@@ -11,8 +11,8 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.mots import DATA_FOLDERS, DEFAULT_SPLITS, MOTSBenchmark
-from unitrack_env.datasets.mots import BENCHMARKS, MOTSDataset, MOTSSequenceInfo
+from unitrack_env.benchmarks.mots import MOTSBenchmark
+from unitrack_env.datasets.mots import MOTSSequenceInfo
 from unitrack_env.datasets.mots_format import CLASS_IDS, CLASS_IGNORE, MaskAnnotations
 from unitrack_env.datasets.rle import encode_masks, resolve_overlaps
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
@@ -25,7 +25,7 @@ from unitrack_env.render import draw_masks
 DEFAULT_MAX_DETECTIONS = 128
 
 
-class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
+class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
     """Multi-object tracking and segmentation by associating detection masks.
 
     ## Description
@@ -126,20 +126,10 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        self.benchmark = self._one_of("benchmark", benchmark, BENCHMARKS)
-        valid = ["pedestrian"] if benchmark == "MOTS20" else list(CLASS_IDS)
-        if object_class not in valid:
-            raise ValueError(f"object_class={object_class!r} is not a {benchmark} class; "
-                             f"valid: {valid}")
-        self.object_class = object_class
+        bench = MOTSBenchmark.build(benchmark, root, split, detections, object_class)
+        self._use_benchmark(bench, sequences, bench.dataset.split_dir)
+        self.benchmark, self.object_class = benchmark, object_class
         self.class_id = CLASS_IDS[object_class]
-        data_root = self._data_root(root, DATA_FOLDERS[benchmark], benchmark, kind="mots")
-        self.dataset = MOTSDataset(data_root, benchmark, split or DEFAULT_SPLITS[benchmark],
-                                   detections)
-        self.scoring = MOTSBenchmark(self.dataset, object_class)
-        self.sequence_names = self._select_sequences(
-            sequences, self.dataset.sequence_names, self.dataset.split_dir
-        )
         self.min_score = min_score
         self.max_detections = int(max_detections)
         self.observation_space = ut_spaces.mask_observation_space(

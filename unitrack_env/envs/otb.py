@@ -11,8 +11,7 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.otb import BENCHMARK, BENCHMARK_FOLDER, OTBBenchmark, format_box_value
-from unitrack_env.datasets.otb import OTBDataset
+from unitrack_env.benchmarks.otb import BENCHMARK, OTBBenchmark, format_box_value
 from unitrack_env.datasets.sot import SOTSequence
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
@@ -64,7 +63,7 @@ def validate_box(action: Any) -> np.ndarray:
     return box
 
 
-class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
+class OTBEnv(SequenceEnv[SOTSequence]):
     """Single object tracking by box propagation on an OTB-2015-layout data set.
 
     ## Description
@@ -155,9 +154,8 @@ class OTBEnv(SequenceEnv[SOTSequence], task="sot"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        data_root = self._data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
-        self.dataset = OTBDataset(data_root)
-        self.scoring = OTBBenchmark(self.dataset)
+        self.scoring = OTBBenchmark.build(root)
+        self.dataset = self.scoring.dataset
         if sequences is not None:
             self.sequence_names = [self.dataset.resolve(s) for s in sequences]
         else:

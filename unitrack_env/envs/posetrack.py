@@ -11,8 +11,8 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.posetrack import BENCHMARK, PoseTrackBenchmark
-from unitrack_env.datasets.posetrack import PoseTrackDataset, PoseTrackSequence
+from unitrack_env.benchmarks.posetrack import PoseTrackBenchmark
+from unitrack_env.datasets.posetrack import PoseTrackSequence
 from unitrack_env.datasets.posetrack_json import read_posetrack_json
 from unitrack_env.datasets.posetrack_records import (
     NUM_KEYPOINTS,
@@ -43,7 +43,7 @@ ORACLE = "oracle"
 _LIMBS = tuple((a - 1, b - 1) for a, b in POSETRACK_SKELETON)
 
 
-class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
+class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
     """Multi-person pose tracking by association on PoseTrack 2018 data.
 
     ## Description
@@ -155,17 +155,14 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
-        self.dataset = PoseTrackDataset(data_root, split)
-        self.sequence_names = self._select_sequences(
-            sequences, self.dataset.sequence_names, f"{self.dataset.data_dir} ({split})"
-        )
-        self.detection_source, self.detection_dir = self._detection_source(data_root, detections)
+        bench = PoseTrackBenchmark.build(root, split, drop_last_frame)
+        self._use_benchmark(bench, sequences, f"{bench.dataset.data_dir} ({split})")
+        self.detection_source, self.detection_dir = self._detection_source(
+            self.dataset.data_dir.parent, detections)
         self.min_score = min_score
         self.max_people = int(max_people)
         self.max_tracks = int(max_tracks)
         self.drop_last_frame = bool(drop_last_frame)
-        self.scoring = PoseTrackBenchmark(self.dataset, self.drop_last_frame)
         self.observation_space = spaces.Dict({
             "frame": ut_spaces.Image(*self.max_frame_size),
             "keypoints": ut_spaces.keypoint_array_space(self.max_people, NUM_KEYPOINTS),

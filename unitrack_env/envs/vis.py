@@ -14,7 +14,7 @@ from typing_extensions import Unpack
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.vis import BENCHMARK, VISBenchmark
 from unitrack_env.datasets.rle import decode_masks
-from unitrack_env.datasets.youtube_vis import FRAME_RATE, VisTrack, VisVideo, YouTubeVISDataset
+from unitrack_env.datasets.youtube_vis import FRAME_RATE, VisTrack, VisVideo
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.mots import MaskClearStream
 from unitrack_env.render import draw_masks
@@ -23,7 +23,7 @@ from unitrack_env.render import draw_masks
 DEFAULT_MAX_DETECTIONS = 128
 
 
-class VISEnv(SequenceEnv[VisVideo], task="vis"):
+class VISEnv(SequenceEnv[VisVideo]):
     """Video instance segmentation by associating per-frame detection masks.
 
     ## Description
@@ -109,12 +109,8 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        data_root = self._data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
-        self.dataset = YouTubeVISDataset(data_root, split, detections, annotation_file)
-        self.scoring = VISBenchmark(self.dataset)
-        self.sequence_names = self._select_sequences(
-            sequences, self.dataset.sequence_names, self.dataset.annotation_path
-        )
+        bench = VISBenchmark.build(root, split, detections, annotation_file)
+        self._use_benchmark(bench, sequences, bench.dataset.annotation_path)
         self.categories = dict(self.dataset.data.categories)
         self.min_score = min_score
         self.max_detections = int(max_detections)

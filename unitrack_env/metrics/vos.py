@@ -342,19 +342,7 @@ def evaluate_vos_sequence(
         j[:, col], f[:, col] = frame_scores(
             gt_labels[t], pred_labels[t], object_ids, void_label=void_label, bound_th=bound_th
         )
-    j_stats = np.array([davis_statistics(row) for row in j]).reshape(n_obj, 3)
-    f_stats = np.array([davis_statistics(row) for row in f]).reshape(n_obj, 3)
-    return VOSScores(
-        object_names=tuple(f"{sequence_name}_{obj}" for obj in object_ids),
-        j_per_frame=tuple(j),
-        f_per_frame=tuple(f),
-        j_mean=j_stats[:, 0],
-        j_recall=j_stats[:, 1],
-        j_decay=j_stats[:, 2],
-        f_mean=f_stats[:, 0],
-        f_recall=f_stats[:, 1],
-        f_decay=f_stats[:, 2],
-    )
+    return scores_from_frames(j, f, object_ids, sequence_name)
 
 
 def aggregate_vos(scores: Sequence[VOSScores]) -> VOSScores:
@@ -375,4 +363,30 @@ def aggregate_vos(scores: Sequence[VOSScores]) -> VOSScores:
         f_mean=cat("f_mean"),
         f_recall=cat("f_recall"),
         f_decay=cat("f_decay"),
+    )
+
+
+def scores_from_frames(
+    j: np.ndarray, f: np.ndarray, object_ids: Sequence[int], sequence_name: str
+) -> VOSScores:
+    """A sequence's DAVIS scores from per-object, per-frame J and F of its scored frames.
+
+    :func:`evaluate_vos_sequence` computes J and F from label maps; an episode computes them
+    frame by frame.
+
+    Args:
+        j: ``(objects, frames)`` J of the scored frames.
+        f: ``(objects, frames)`` F of the scored frames.
+        object_ids: the sequence's object labels.
+        sequence_name: names the objects ``"<sequence>_<id>"``.
+    """
+    n = len(object_ids)
+    j_stats = np.array([davis_statistics(row) for row in j]).reshape(n, 3)
+    f_stats = np.array([davis_statistics(row) for row in f]).reshape(n, 3)
+    return VOSScores(
+        object_names=tuple(f"{sequence_name}_{obj}" for obj in object_ids),
+        j_per_frame=tuple(j),
+        f_per_frame=tuple(f),
+        j_mean=j_stats[:, 0], j_recall=j_stats[:, 1], j_decay=j_stats[:, 2],
+        f_mean=f_stats[:, 0], f_recall=f_stats[:, 1], f_decay=f_stats[:, 2],
     )
