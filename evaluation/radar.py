@@ -1,19 +1,6 @@
 """The radar chart of a scorecard (the UniTrack paper's Figure 1), as PNG and SVG.
 
-One axis per task, labelled with its metric; one polygon per appearance model; the
-appearance-free baselines as a grey dashed polygon (the paper draws its reference model the
-same way). Axis scales:
-
-* ``rank`` (the paper's: "a higher rank corresponds to a vertex nearer to the outer
-  circle"): on every axis the polygons are ranked, the best at radius 1, the worst at 1/n;
-  ties share a rank.
-* ``value``: the metric itself (all axis metrics are fractions in [0, 1]).
-
-Axes whose task ran on synthetic data say so in their label, and their vertices are drawn
-hollow, so that no one mistakes them for benchmark numbers. A scorecard of one or two tasks
-has no polygon to draw (a point, a line): it is drawn as grouped bars on the same scale, one
-group per task, hollow bars for synthetic data. Needs matplotlib (the ``plots`` extra);
-without it no chart is drawn and :func:`draw_radar` says so.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,27 +1,6 @@
 """Play an agent over every sequence of an environment, write official results, score them.
 
-Output folder layout (TrackEval's tracker layout, so the folder can be scored again with
-``unitrack score`` or TrackEval itself)::
-
-    <out>/run.json                 what was run (env id and arguments, agent and its import
-                                   reference, agent arguments)
-    <out>/data/...                 results in the task's official format (MOT:
-                                   ``<sequence>.txt``), written atomically by the benchmark
-    <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, action digest,
-                                   fingerprint of the inputs, digest of the result files
-    <out>/metrics.json             per-sequence and combined official metrics
-
-The runner knows no task: the environment plays, and the id's benchmark
-(:class:`unitrack_env.benchmarks.Benchmark`, named by the registration table) writes the
-results, knows which sequences can be scored and scores the folder. A sequence counts as
-finished once its record exists; the record is written after the results, and every file is
-written with write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and
-never loses a finished sequence. Running again with the same ``out`` resumes: a finished
-sequence is kept only when its inputs (data files, agent and options) still have the
-recorded fingerprint and its result files still have the recorded digest; otherwise it is
-played again and the report says why. A sequence that fails (bad data, an agent error) does
-not stop the others; the run then raises :class:`RunFailed` naming each failure, after
-keeping every finished sequence.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -5,23 +5,7 @@ row (one row per ``--model``), plus each task's appearance-free baseline as a re
 over every sequence of the data it finds, and reports the metrics of the UniTrack paper's
 Table 2 (and a radar chart, :mod:`unitrack_env.evaluation.radar`).
 
-The work is split into cells, one per (model, task, head, sequence). A cell is played by
-:func:`play_cell` in a worker (a local process pool, or a Ray task on a cluster: the
-:mod:`~unitrack_env.evaluation.backends`), which returns the sequence's result files and
-record as bytes; the driver writes them into ``<out>/cells/<model>/<task>/<head>/`` (the
-runner's layout), so a finished cell is kept when the run is interrupted, and results from
-other machines reach the driver through the backend, not a shared file system. The driver
-then lets :func:`~unitrack_env.evaluation.runner.run` score each (model, task, head) folder:
-it reuses every cell whose inputs and files are unchanged, so the numbers are exactly those of
-``unitrack evaluate`` with the same arguments.
-
-As in the paper's Table 2 protocol, the association heads run without motion cues
-(``use_motion=False``: "motion cues are discarded to better highlight distinctions between
-different representations"); ``motion=True`` keeps them.
-
-``runtime`` picks the inference runtime of every appearance model (``"auto"``: the fastest
-installed, e.g. OpenVINO; see :mod:`~unitrack_env.agents.appearance.runtime`). It changes the
-speed, not the representation: features agree with torch's to float rounding.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

