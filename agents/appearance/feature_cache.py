@@ -98,22 +98,6 @@ class FeatureCache(CacheFolder):
         self._session_base = CacheStats()
         self._flushed = CacheStats()
 
-    # -- backward-compatible counters
-    @property
-    def hits(self) -> int:
-        """Entries read from disk (``stats.hits``)."""
-        return self.stats.hits
-
-    @property
-    def misses(self) -> int:
-        """Entries computed because absent (``stats.misses``)."""
-        return self.stats.misses
-
-    @property
-    def recomputed(self) -> int:
-        """Entries recomputed because corrupt (``stats.corrupt``)."""
-        return self.stats.corrupt
-
     # -- warnings
     def _warn(self, what: str, message: str) -> None:
         if what not in self._reported:

@@ -60,7 +60,7 @@ def test_miss_then_hit(tmp_path: Path) -> None:
     first = cache.get_or_compute(KEY, compute)
     second = cache.get_or_compute(KEY, compute)
     assert compute.calls == 1 and (cache.stats.misses, cache.stats.hits) == (1, 1)
-    assert (cache.misses, cache.hits, cache.recomputed) == (1, 1, 0)
+    assert (cache.stats.misses, cache.stats.hits, cache.stats.corrupt) == (1, 1, 0)
     assert first.dtype == torch.float32 and first.shape == SHAPE
     torch.testing.assert_close(first, second)  # same values warm or cold
     np.testing.assert_allclose(first.numpy(), _features(), rtol=1e-3, atol=1e-3)  # float16
@@ -86,7 +86,7 @@ def test_other_keys_miss(tmp_path: Path) -> None:
         CacheKey(KEY.model, KEY.input_size, content_key(np.ones(3, np.uint8))),
     ):
         cache.get_or_compute(other, compute)
-    assert compute.calls == 4 and cache.hits == 0
+    assert compute.calls == 4 and cache.stats.hits == 0
     # Another dtype is another entry folder, never a corrupt entry.
     exact = FeatureCache(tmp_path, dtype=np.float32)
     with warnings.catch_warnings():
@@ -133,7 +133,7 @@ def test_corrupt_entries_are_reported_once_and_recomputed(tmp_path: Path, damage
         np.save(path, np.array([{"a": 1}], dtype=object), allow_pickle=True)
     with pytest.warns(FeatureCacheWarning, match=path.name):
         again = cache.get_or_compute(KEY, compute, expected_shape=SHAPE)
-    assert compute.calls == 2 and cache.recomputed == 1
+    assert compute.calls == 2 and cache.stats.corrupt == 1
     np.testing.assert_allclose(again.numpy(), _features(), rtol=1e-3, atol=1e-3)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # repaired in place: no further warning
@@ -451,7 +451,7 @@ def test_cached_model_runs_the_backbone_only_on_misses(tmp_path: Path) -> None:
     # Another model (different weights) does not see these entries.
     other = CachedAppearanceModel(AppearanceModel("random", seed=1), tmp_path)
     other.features(frames[:1])
-    assert other.cache.misses == 1 and other.cache.hits == 0
+    assert other.cache.stats.misses == 1 and other.cache.stats.hits == 0
     with pytest.raises(ValueError, match="keys"):
         cached.features(frames, keys=["ab"])
     assert cached.describe()["cache"] == str(tmp_path)
@@ -465,9 +465,9 @@ def test_the_same_frame_in_two_sequences_is_one_entry(tmp_path: Path) -> None:
     b = np.full((64, 64, 3), 200, np.uint8)
     first = cached.features(a)
     other = cached.features(b)
-    assert cached.cache.misses == 2 and not torch.allclose(first, other)
+    assert cached.cache.stats.misses == 2 and not torch.allclose(first, other)
     again = cached.features(a.copy())  # e.g. MOT17-02-DPM after MOT17-02-FRCNN
-    assert cached.cache.hits == 1 and torch.equal(again, first)
+    assert cached.cache.stats.hits == 1 and torch.equal(again, first)
     assert len(_entries(tmp_path)) == 2
 
 

@@ -117,7 +117,7 @@ def test_feature_cache_gives_identical_actions(model: AppearanceModel, tmp_path:
             obs, *_ = env.step(action)
         runs.append(actions)
     cache = agent.model.cache
-    assert cache.hits == 5 and cache.misses == 0  # the second agent read every frame
+    assert cache.stats.hits == 5 and cache.stats.misses == 0  # the second agent read every frame
     for a, b in zip(*runs, strict=True):
         np.testing.assert_array_equal(a["ids"], b["ids"])
         np.testing.assert_array_equal(a["boxes"], b["boxes"])
