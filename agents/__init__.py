@@ -6,7 +6,7 @@
 'IoUAgent'
 """
 
-from unitrack_env.agents.base import (
+from .base import (
     AGENTS,
     Agent,
     agent_class,

@@ -20,7 +20,7 @@ import abc
 import importlib
 from typing import Any, ClassVar
 
-from unitrack_env.agents.loading import entry_point_agents, is_reference, load_reference
+from .loading import entry_point_agents, is_reference, load_reference
 
 #: Registered agent classes by name (built-ins appear once their module is imported).
 AGENTS: dict[str, type[Agent]] = {}

@@ -2,20 +2,7 @@
 
 An agent spec is one of
 
-* a registered name (``"iou"``, or any name a subclass of :class:`~unitrack_env.agents.Agent`
-  registered with ``name=``);
-* ``"package.module:ClassName"``: the module is imported (it must be importable, e.g. from
-  the working directory or an installed distribution);
-* ``"path/to/file.py:ClassName"``: the file is loaded as a module;
-* a name published by an installed distribution in the ``unitrack_env.agents`` entry-point
-  group, e.g. in the plug-in's ``pyproject.toml``::
-
-      [project.entry-points."unitrack_env.agents"]
-      my-tracker = "my_package.tracker:MyTracker"
-
-:func:`agent_reference` turns a class back into an importable ``module:Class`` string; the
-runner stores it in ``run.json`` so that worker processes and resumed runs rebuild the same
-class without the user's registry state.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -27,12 +27,10 @@ import torch
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
-from unitrack_env.agents.primitives.association import (
-    AssociationConfig,
-    Associator,
-    StepRecord,
-)
+from unitrack_env.agents.primitives.association import Associator
+from unitrack_env.agents.primitives.association_config import AssociationConfig
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
+from unitrack_env.agents.primitives.tracks import StepRecord
 from unitrack_env.geometry import box_iou
 from unitrack_env.metrics.motchallenge import SequenceScore, score_sequence
 from unitrack_env.spaces import unpack_detections

@@ -41,7 +41,7 @@ import torch
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel, letterbox
-from unitrack_env.agents.heads.association import UniTrackConfig
+from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
 from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
 from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motchallenge

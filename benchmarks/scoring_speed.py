@@ -21,7 +21,8 @@ from unitrack_env.datasets.motchallenge import read_seqinfo
 from unitrack_env.evaluation.crosscheck import motmetrics_summary
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.mot_preprocess import gt_frames_from_rows, tracker_frames_from_rows
-from unitrack_env.metrics.motchallenge import read_result_file, score_sequence
+from unitrack_env.metrics.mot_results import read_result_file
+from unitrack_env.metrics.motchallenge import score_sequence
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -28,7 +28,7 @@ Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]
 @contextlib.contextmanager
 def pool_backend(workers: int = 1) -> Iterator[Runner]:
     """Local worker processes (``workers`` <= 1: in this process)."""
-    from unitrack_env.evaluation.workers import worker_pool
+    from .workers import worker_pool
 
     workers = max(1, int(workers))
     threads = max(1, (os.cpu_count() or 1) // workers)

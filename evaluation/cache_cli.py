@@ -52,13 +52,14 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _cache(args: argparse.Namespace) -> Any:
-    from unitrack_env.agents.appearance import feature_cache as fc
+    from unitrack_env.agents.appearance.cache_config import CACHE_DIR_ENV, default_cache_dir
+    from unitrack_env.agents.appearance.feature_cache import FeatureCache
 
-    root = Path(args.dir).expanduser() if args.dir else fc.default_cache_dir()
+    root = Path(args.dir).expanduser() if args.dir else default_cache_dir()
     if root is None:
-        raise ValueError(f"the feature cache is turned off (${fc.CACHE_DIR_ENV}="
-                         f"{os.environ.get(fc.CACHE_DIR_ENV)}); pass --dir to manage a folder")
-    return fc.FeatureCache(root)
+        raise ValueError(f"the feature cache is turned off (${CACHE_DIR_ENV}="
+                         f"{os.environ.get(CACHE_DIR_ENV)}); pass --dir to manage a folder")
+    return FeatureCache(root)
 
 
 def _when(timestamp: float) -> str:
@@ -106,7 +107,7 @@ def cache_info(cache: Any, runs: int = 10) -> dict[str, Any]:
 
 
 def _print_info(cache: Any, console: Console, runs: int) -> None:
-    from unitrack_env.agents.appearance.feature_cache import format_size
+    from unitrack_env.agents.appearance.cache_config import format_size
 
     info = cache_info(cache, runs)
     share = info["bytes"] / info["max_size"] if info["max_size"] else float("inf")
@@ -145,7 +146,7 @@ def _print_info(cache: Any, console: Console, runs: int) -> None:
 
 def run_cache_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack cache <info|prune|clear>``."""
-    from unitrack_env.agents.appearance.feature_cache import format_size
+    from unitrack_env.agents.appearance.cache_config import format_size
 
     cache = _cache(args)
     if args.cache_command == "info":

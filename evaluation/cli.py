@@ -19,8 +19,8 @@ from typing import Any
 
 from rich.console import Console
 
-from unitrack_env.evaluation.cli_types import names, positive_float, positive_int
-from unitrack_env.evaluation.progress import one_line_warnings
+from .cli_types import names, positive_float, positive_int
+from .progress import one_line_warnings
 
 #: gym.make's own keyword arguments, accepted by every environment.
 GYM_MAKE_OPTIONS: dict[str, Any] = {
@@ -91,7 +91,7 @@ def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    from unitrack_env.agents import agent_class
+    from unitrack_env.agents.base import agent_class
     from unitrack_env.agents.options import parse_options
 
     return parse_options(agent_class(args.agent), args.agent_arg or [], agent=args.agent)
@@ -105,13 +105,13 @@ def _feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
     Yields a function that returns the summary line once the run is over (None without a
     cache: other agents do not pay for importing the appearance stack).
     """
-    from unitrack_env.agents import agent_class
+    from unitrack_env.agents.base import agent_class
     from unitrack_env.agents.options import agent_options
 
     if "feature_cache" not in agent_options(agent_class(agent)):
         yield lambda: None
         return
-    from unitrack_env.agents.appearance import track_cache_run
+    from unitrack_env.agents.appearance.cache_runs import track_cache_run
 
     folder = agent_kwargs.get("feature_cache")
     root = folder if isinstance(folder, (str, os.PathLike)) else None
@@ -121,7 +121,7 @@ def _feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
 
 def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
                    task: str, fmt: str, fps: dict | None = None) -> None:
-    from unitrack_env.evaluation.tables import metrics_csv, metrics_json, metrics_table
+    from .tables import metrics_csv, metrics_json, metrics_table
 
     if fmt == "json":
         console.print(metrics_json(per_sequence, combined), markup=False, soft_wrap=True)
@@ -143,7 +143,8 @@ def _defined(value: Any) -> bool:
 
 def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
     import unitrack_env
-    from unitrack_env.evaluation.runner import run
+
+    from .runner import run
 
     env_kwargs = _env_kwargs(args)
     agent_kwargs = _agent_kwargs(args)
@@ -210,8 +211,9 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     _print_metrics(console, report.per_sequence, report.combined, str(args.results), task,
                    args.format)
     if args.out:
-        from unitrack_env.evaluation.runner import json_safe
         from unitrack_env.io import atomic_write_text
+
+        from .runner import json_safe
 
         atomic_write_text(args.out, json.dumps(json_safe(json.loads(report.to_json())),
                                                indent=2))
@@ -220,7 +222,7 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
 
 
 def _cmd_render(args: argparse.Namespace, console: Console) -> int:
-    from unitrack_env.evaluation.video import check_video_path, render_episode
+    from .video import check_video_path, render_episode
 
     check_video_path(args.out)
     frames = render_episode(args.env, args.agent, args.sequence, args.out,
@@ -233,7 +235,7 @@ def _cmd_render(args: argparse.Namespace, console: Console) -> int:
 def _cmd_list(args: argparse.Namespace, console: Console) -> int:
     from rich.table import Table
 
-    from unitrack_env.agents import agent_class, available_agents
+    from unitrack_env.agents.base import agent_class, available_agents
     from unitrack_env.agents.loading import entry_point_agents
     from unitrack_env.registration import variants
 
@@ -260,7 +262,7 @@ def _cmd_list(args: argparse.Namespace, console: Console) -> int:
 
 
 def _cmd_doctor(args: argparse.Namespace, console: Console) -> int:
-    from unitrack_env.evaluation.doctor import diagnose
+    from .doctor import diagnose
 
     findings = diagnose()
     marks = {"ok": "ok     ", "warn": "note   ", "problem": "PROBLEM"}
@@ -342,7 +344,7 @@ def _add_render(rd: argparse.ArgumentParser) -> None:
 
 
 def _add_commands(sub: Any) -> None:
-    from unitrack_env.evaluation.cli_scorecard import add_options as add_scorecard_options
+    from .cli_scorecard import add_options as add_scorecard_options
 
     def command(name: str, help_text: str) -> argparse.ArgumentParser:
         return sub.add_parser(name, help=help_text, description=help_text,
@@ -374,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_commands(sub)
-    from unitrack_env.evaluation.cache_cli import add_parser as add_cache_parser
+    from .cache_cli import add_parser as add_cache_parser
 
     add_cache_parser(sub)  # unitrack cache info|prune|clear
     return parser
@@ -403,7 +405,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         errors = _console(stderr=True)
         if args.debug:
             errors.print("".join(traceback.format_exception(exc)), markup=False)
-        from unitrack_env.evaluation.runner import RunFailed
+        from .runner import RunFailed
 
         errors.print(f"error: {_error_text(exc)}", markup=False)
         if not args.debug:

@@ -11,7 +11,7 @@ from typing import Any
 
 from rich.console import Console
 
-from unitrack_env.evaluation.cli_types import positive_int
+from .cli_types import positive_int
 
 
 def add_options(card: argparse.ArgumentParser) -> None:
@@ -45,8 +45,8 @@ def add_options(card: argparse.ArgumentParser) -> None:
 
 def run_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
-    from unitrack_env.evaluation import scorecard as sc
-    from unitrack_env.evaluation.scorecard_report import merge_cards
+    from . import scorecard as sc
+    from .scorecard_report import merge_cards
 
     out = Path(args.out)
     if args.compare:

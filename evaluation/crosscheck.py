@@ -1,26 +1,6 @@
 """Cross-check of MOTChallenge scores with py-motmetrics 1.4.0.
 
-py-motmetrics (C. Heindl, J. Valmadre et al., https://github.com/cheind/py-motmetrics, MIT
-licence) is an independent implementation of CLEAR MOT and the ID measures.  We feed it exactly
-the frames TrackEval scores: each frame goes through our
-:func:`~unitrack_env.metrics.mot_preprocess.preprocess_frame` (TrackEval's MOTChallenge
-preprocessing) first, and the distance matrix is ``1 - IoU`` with pairs below ``0.5 - eps`` IoU
-marked NaN (do not pair), the threshold TrackEval's CLEAR uses.  We pass our own distances
-because motmetrics 1.4.0's ``iou_matrix`` calls ``np.asfarray``, which NumPy 2 removed; and we
-compute on a single accumulator because ``merge_event_dataframes`` breaks on pandas 2.
-
-Where the two libraries can legitimately differ (none of these happens on the real MOT17 clips
-or PETS09-S2L1 with the perturbed trackers of our tests, where they agree exactly):
-
-* Track continuation: motmetrics first keeps every gt-hypothesis pair that was matched at *any*
-  earlier frame if it is still within the threshold; TrackEval only favours the pair matched in
-  the *previous* timestep (via a score bonus).  After a gap in which a gt was missed, a better
-  overlapping hypothesis can win in TrackEval but not in motmetrics.
-* Assignment objective: motmetrics maximises the number of matches, then minimises the summed
-  ``1 - IoU``; TrackEval maximises the summed IoU.  In crowded chains of boxes that all overlap
-  by more than 0.5 the two can pick matchings of different size.
-* IDF1: TrackEval's Identity metric counts pairs with ``IoU >= 0.5`` exactly; the accumulator
-  here admits ``IoU >= 0.5 - eps`` (one unit in the last place of 0.5).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

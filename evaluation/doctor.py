@@ -123,7 +123,7 @@ def check_cache_folder() -> Finding:
 
 def check_data_roots() -> Finding:
     """Benchmark folders found under ``$UNITRACK_DATA``."""
-    from unitrack_env.envs.base import DATA_ENV_VAR
+    from unitrack_env.roots import DATA_ENV_VAR
 
     base = os.environ.get(DATA_ENV_VAR)
     if not base:

@@ -12,7 +12,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from unitrack_env.benchmarks import Benchmark
+from unitrack_env.benchmarks.base import Benchmark
 
 
 @dataclass
@@ -45,10 +45,7 @@ class SequenceRecord:
 
 def recorded_results(env: gym.Env) -> Any:
     """What the environment recorded in its episode, in its benchmark's ``results`` form."""
-    base = env.unwrapped
-    if hasattr(base, "episode_results"):
-        return base.episode_results()
-    return base.episode_predictions()
+    return env.unwrapped.episode_results()
 
 
 def play_episode(

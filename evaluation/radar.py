@@ -1,19 +1,6 @@
 """The radar chart of a scorecard (the UniTrack paper's Figure 1), as PNG and SVG.
 
-One axis per task, labelled with its metric; one polygon per appearance model; the
-appearance-free baselines as a grey dashed polygon (the paper draws its reference model the
-same way). Axis scales:
-
-* ``rank`` (the paper's: "a higher rank corresponds to a vertex nearer to the outer
-  circle"): on every axis the polygons are ranked, the best at radius 1, the worst at 1/n;
-  ties share a rank.
-* ``value``: the metric itself (all axis metrics are fractions in [0, 1]).
-
-Axes whose task ran on synthetic data say so in their label, and their vertices are drawn
-hollow, so that no one mistakes them for benchmark numbers. A scorecard of one or two tasks
-has no polygon to draw (a point, a line): it is drawn as grouped bars on the same scale, one
-group per task, hollow bars for synthetic data. Needs matplotlib (the ``plots`` extra);
-without it no chart is drawn and :func:`draw_radar` says so.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -29,7 +16,7 @@ SOURCE_NOTES = {"benchmark": "", "fixture": "\n(fixture)", "synthetic": "\n[synt
 
 def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     """(task, head, metric, label) of every radar axis."""
-    from unitrack_env.evaluation.scorecard import TASKS
+    from .scorecard import TASKS
 
     out = []
     for task in card["tasks"]:
@@ -44,7 +31,7 @@ def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
 
 def radii(card: dict[str, Any], scale: str = "rank") -> dict[str, list[float | None]]:
     """Each polygon's radius on each axis (None: no value)."""
-    from unitrack_env.evaluation.scorecard_report import polygon_values
+    from .scorecard_report import polygon_values
 
     values = polygon_values(card, axes(card))
     if scale == "value":
@@ -93,7 +80,7 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
 
 def _style(plt: Any, name: str, index: int) -> dict[str, Any]:
     """Line style of one polygon: the baselines grey and dashed, the models in tab10."""
-    from unitrack_env.evaluation.scorecard import BASELINE
+    from .scorecard import BASELINE
 
     if name == BASELINE:
         return {"color": "0.5", "linestyle": "--", "linewidth": 1.2}
@@ -108,7 +95,7 @@ def _title(scale: str, better: str = "outer") -> str:
 def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
               data: dict[str, list[float | None]], scale: str) -> Any:
     """The radar proper (three axes or more)."""
-    from unitrack_env.evaluation.scorecard import BASELINE
+    from .scorecard import BASELINE
 
     angles = [2 * math.pi * i / len(spokes) for i in range(len(spokes))]
     figure, ax = plt.subplots(figsize=(6.4, 6.4), subplot_kw={"projection": "polar"})
@@ -151,7 +138,7 @@ def _bars(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]
     """One or two tasks: grouped bars (no radar polygon has fewer than three vertices)."""
     from matplotlib.patches import Patch
 
-    from unitrack_env.evaluation.scorecard import BASELINE
+    from .scorecard import BASELINE
 
     figure, ax = plt.subplots(figsize=(3.2 + 1.6 * len(spokes), 4.8))
     width = 0.8 / len(data)

@@ -1,27 +1,6 @@
 """Play an agent over every sequence of an environment, write official results, score them.
 
-Output folder layout (TrackEval's tracker layout, so the folder can be scored again with
-``unitrack score`` or TrackEval itself)::
-
-    <out>/run.json                 what was run (env id and arguments, agent and its import
-                                   reference, agent arguments)
-    <out>/data/...                 results in the task's official format (MOT:
-                                   ``<sequence>.txt``), written atomically by the benchmark
-    <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, action digest,
-                                   fingerprint of the inputs, digest of the result files
-    <out>/metrics.json             per-sequence and combined official metrics
-
-The runner knows no task: the environment plays, and the id's benchmark
-(:class:`unitrack_env.benchmarks.Benchmark`, named by the registration table) writes the
-results, knows which sequences can be scored and scores the folder. A sequence counts as
-finished once its record exists; the record is written after the results, and every file is
-written with write-to-temp-then-rename, so a crash or Ctrl-C never leaves a half file and
-never loses a finished sequence. Running again with the same ``out`` resumes: a finished
-sequence is kept only when its inputs (data files, agent and options) still have the
-recorded fingerprint and its result files still have the recorded digest; otherwise it is
-played again and the report says why. A sequence that fails (bad data, an agent error) does
-not stop the others; the run then raises :class:`RunFailed` naming each failure, after
-keeping every finished sequence.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -41,16 +20,17 @@ import unitrack_env
 from unitrack_env.agents.base import agent_class, close_agent
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
-from unitrack_env.benchmarks import Benchmark, benchmark_for
-from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
-from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
-from unitrack_env.evaluation.workers import (
+from unitrack_env.benchmarks.base import Benchmark, select_sequences
+from unitrack_env.io import atomic_write_text, file_in_the_way
+from unitrack_env.metrics.report import ScoreReport
+
+from .episode import SequenceRecord, play_episode, recorded_results
+from .identity import RunIdentity, option_changes, result_digest
+from .workers import (
     SequenceFailure,
     play_in_workers,
     refuse_unguarded_script,
 )
-from unitrack_env.io import atomic_write_text, file_in_the_way
-from unitrack_env.metrics.report import ScoreReport
 
 
 class RunFailed(RuntimeError):
@@ -118,10 +98,6 @@ class RunSpec:
         """Build the environment."""
         unitrack_env.register_all()
         return gym.make(self.env_id, **self.env_kwargs)
-
-    def make_benchmark(self) -> Benchmark:
-        """Build the id's benchmark (writes, scores) for the same environment arguments."""
-        return benchmark_for(self.env_id, **self.env_kwargs)
 
 
 @dataclass
@@ -193,7 +169,7 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int
     task = unitrack_env.task_of(env_id)
     tasks = getattr(cls, "tasks", ())
     if tasks and task not in tasks:
-        from unitrack_env.agents import agents_for_task
+        from unitrack_env.agents.base import agents_for_task
 
         raise ValueError(f"agent '{name}' plays {', '.join(tasks)}, not {task} ({env_id}); "
                          f"agents for {task}: {', '.join(agents_for_task(task)) or 'none'}")
@@ -365,9 +341,8 @@ def run(
     env = spec.make_env()
     try:
         base = env.unwrapped
-        names = base._select_sequences(list(sequences) if sequences is not None else None,
-                                       list(base.sequence_names), env_id)
-        bench = spec.make_benchmark()
+        names = select_sequences(sequences, base.sequence_names, env_id)
+        bench = base.scoring
         agent_obj = cls(**agent_kwargs)
     except BaseException:
         env.close()
@@ -395,7 +370,7 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     lengths, failures = _sequence_lengths(bench, [n for n in names if n not in skipped])
     todo = list(lengths)
 
-    from unitrack_env.evaluation.progress import RunProgress
+    from .progress import RunProgress
 
     causes: dict[str, BaseException] = {}
     with RunProgress(sum(lengths.values()), enabled=progress) as bar:

@@ -5,23 +5,7 @@ row (one row per ``--model``), plus each task's appearance-free baseline as a re
 over every sequence of the data it finds, and reports the metrics of the UniTrack paper's
 Table 2 (and a radar chart, :mod:`unitrack_env.evaluation.radar`).
 
-The work is split into cells, one per (model, task, head, sequence). A cell is played by
-:func:`play_cell` in a worker (a local process pool, or a Ray task on a cluster: the
-:mod:`~unitrack_env.evaluation.backends`), which returns the sequence's result files and
-record as bytes; the driver writes them into ``<out>/cells/<model>/<task>/<head>/`` (the
-runner's layout), so a finished cell is kept when the run is interrupted, and results from
-other machines reach the driver through the backend, not a shared file system. The driver
-then lets :func:`~unitrack_env.evaluation.runner.run` score each (model, task, head) folder:
-it reuses every cell whose inputs and files are unchanged, so the numbers are exactly those of
-``unitrack evaluate`` with the same arguments.
-
-As in the paper's Table 2 protocol, the association heads run without motion cues
-(``use_motion=False``: "motion cues are discarded to better highlight distinctions between
-different representations"); ``motion=True`` keeps them.
-
-``runtime`` picks the inference runtime of every appearance model (``"auto"``: the fastest
-installed, e.g. OpenVINO; see :mod:`~unitrack_env.agents.appearance.runtime`). It changes the
-speed, not the representation: features agree with torch's to float rounding.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -37,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import unitrack_env
-from unitrack_env.evaluation.scorecard_report import merge_cards as merge_cards
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
 
@@ -246,7 +229,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     Runs where the backend puts it (another process or machine); nothing is written to the
     driver's output folder from here.
     """
-    from unitrack_env.evaluation.runner import run
+    from .runner import run
 
     if threads:
         import torch
@@ -286,7 +269,7 @@ def _finite(value: Any) -> float | None:
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from unitrack_env.evaluation.runner import RunMismatch, run
+    from .runner import RunMismatch, run
 
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
@@ -322,13 +305,13 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
 
 def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank") -> list[Path]:
     """``scorecard.json``, ``.csv``, ``.md`` and (with matplotlib) the radar chart PNG/SVG."""
-    from unitrack_env.evaluation.scorecard_report import markdown_table, rows_csv
+    from .scorecard_report import markdown_table, rows_csv
 
     atomic_write_text(out / "scorecard.json", json.dumps(card, indent=2, allow_nan=False))
     atomic_write_text(out / "scorecard.csv", rows_csv(card))
     atomic_write_text(out / "scorecard.md", markdown_table(card))
     written = [out / "scorecard.json", out / "scorecard.csv", out / "scorecard.md"]
-    from unitrack_env.evaluation.radar import draw_radar
+    from .radar import draw_radar
 
     written += draw_radar(card, out / "scorecard", scale=radar_scale)
     return written
@@ -359,9 +342,9 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
 def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
               on_progress: Callable[[int, int, Cell | None], None] | None) -> None:
     """Play and store every cell not done yet; each warning of the cells is shown once."""
-    from unitrack_env.evaluation.backends import make_backend
-    from unitrack_env.evaluation.runner import RunFailed
-    from unitrack_env.evaluation.workers import SequenceFailure
+    from .backends import make_backend
+    from .runner import RunFailed
+    from .workers import SequenceFailure
 
     todo = [c for c in cells if not cell_done(out, c)]
     done = len(cells) - len(todo)
@@ -409,11 +392,11 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
     """
-    from unitrack_env.evaluation.runner import check_out_folder
+    from .runner import check_out_folder
 
     names, data_path = _checked_request(models, tasks, data)
     if backend == "pool" and workers > 1:
-        from unitrack_env.evaluation.workers import refuse_unguarded_script
+        from .workers import refuse_unguarded_script
 
         refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime

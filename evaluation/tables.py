@@ -11,11 +11,8 @@ import csv
 import io
 import json
 from collections.abc import Mapping
-from typing import Any
 
 from rich.table import Table
-
-from unitrack_env.registration import variants
 
 #: Metrics that are counts (printed as integers, not percentages).
 COUNT_METRICS = frozenset({"IDSW", "CLR_FP", "CLR_FN", "CLR_TP", "MT", "ML", "PT", "Frag"})
@@ -25,20 +22,6 @@ FALLBACK_COLUMNS = 8
 _COLUMN_OVERHEAD = 3
 
 Rows = Mapping[str, Mapping[str, float]]
-
-
-def __getattr__(name: str) -> Any:
-    # TASK_COLUMNS (before the benchmarks named their columns): derived, read-only use.
-    if name == "TASK_COLUMNS":
-        return task_column_table()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def task_column_table() -> dict[str, tuple[str, ...]]:
-    """Every registered task's result columns, from its benchmark, most important first."""
-    from unitrack_env.benchmarks import task_columns
-
-    return {task: task_columns(task) for task in dict.fromkeys(v.task for v in variants())}
 
 
 def table_columns(task: str, rows: list[Mapping[str, float]]) -> list[str]:
@@ -123,7 +106,7 @@ def metrics_table(
 
 def metrics_json(per_sequence: Rows, combined: Mapping[str, float] | None) -> str:
     """The metrics as JSON (NaN as null): ``{"per_sequence": ..., "combined": ...}``."""
-    from unitrack_env.evaluation.runner import json_safe
+    from .runner import json_safe
 
     return json.dumps(json_safe({"per_sequence": dict(per_sequence),
                                  "combined": dict(combined or {})}), indent=2)

@@ -130,9 +130,9 @@ def render_episode(
     import gymnasium as gym
 
     import unitrack_env
-    from unitrack_env.agents import make_agent
-    from unitrack_env.agents.base import close_agent
-    from unitrack_env.evaluation.episode import play_episode
+    from unitrack_env.agents.base import close_agent, make_agent
+
+    from .episode import play_episode
 
     out = check_video_path(out)
     unitrack_env.register_all()

@@ -26,7 +26,7 @@ from multiprocessing import current_process, get_context
 from pathlib import Path
 from typing import Any
 
-from unitrack_env.evaluation.progress import format_warning
+from .progress import format_warning
 
 #: Seconds between a worker's checks that its parent is alive.
 WATCHDOG_PERIOD = 0.5
@@ -74,14 +74,15 @@ def _init_worker(parent: int, threads: int) -> None:
 def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any]:
     """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``."""
     from unitrack_env.agents.base import close_agent
-    from unitrack_env.evaluation.episode import play_episode
-    from unitrack_env.evaluation.runner import OutputError, save_episode
+
+    from .episode import play_episode
+    from .runner import OutputError, save_episode
 
     env = agent = None
     try:
         env = spec.make_env()
         agent = spec.make_agent()
-        bench = spec.make_benchmark()
+        bench = env.unwrapped.scoring
         record, _ = play_episode(env, agent, sequence, benchmark=bench)
         record.inputs = inputs
         save_episode(Path(out), env, record, bench)
@@ -156,7 +157,7 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str
                     lengths: dict[str, int], workers: int,
                     bar: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """Play ``todo`` in ``workers`` processes; return (records, failures) by sequence."""
-    from unitrack_env.evaluation.episode import SequenceRecord
+    from .episode import SequenceRecord
 
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}

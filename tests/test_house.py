@@ -4,7 +4,11 @@
   :data:`MAX_FUNCTION_LINES` (``end_lineno - lineno + 1``, decorators excluded);
 * no block of :data:`MIN_BLOCK` or more lines repeated, with the same shape (names, strings and
   numbers aside), between two environments or between two heads: sibling modules that share
-  logic share one piece of code.
+  logic share one piece of code;
+* no re-export (issue 25): outside the package ``__init__`` files that define the public API
+  (:data:`PUBLIC_API`), no ``import X as X``, no module ``__getattr__``, no ``__all__`` naming
+  what the module does not define, and no ``former_*`` name; inside ``agents/`` and
+  ``evaluation/``, their own modules are imported relatively.
 """
 
 from __future__ import annotations
@@ -25,6 +29,10 @@ MAX_FUNCTION_LINES = 60
 MIN_BLOCK = 6
 #: Sibling groups whose modules must not repeat each other.
 SIBLINGS = ("unitrack_env/envs", "agents/heads")
+#: The package ``__init__`` files that define the public API (docs/architecture.md lists it).
+PUBLIC_API = ("unitrack_env/__init__.py", "agents/__init__.py", "agents/appearance/__init__.py",
+              "unitrack_env/benchmarks/__init__.py", "unitrack_env/spaces/__init__.py",
+              "unitrack_env/datasets/synthetic/__init__.py", "evaluation/regression/__init__.py")
 #: String tokens (Python 3.12 splits f-strings into three kinds).
 STRING_TOKENS = {tokenize.STRING} | {getattr(tokenize, name) for name in (
     "FSTRING_START", "FSTRING_MIDDLE", "FSTRING_END") if hasattr(tokenize, name)}
@@ -120,3 +128,54 @@ def test_siblings_do_not_repeat_each_other(folder):
     paths = sorted(p for p in (REPO / folder).glob("*.py") if p.name != "__init__.py")
     repeats = repeated_blocks(paths)
     assert not repeats, f"move the shared logic of {folder} into one place: {repeats}"
+
+
+def reexports(path: Path) -> list[str]:
+    """What ``path`` offers that it does not define (see the module docstring)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    where = str(path.relative_to(REPO))
+    names = [(node, getattr(node, "id", getattr(node, "name", ""))) for node in ast.walk(tree)
+             if isinstance(node, ast.Name | ast.FunctionDef | ast.ClassDef)]
+    found = [f"{where}:{node.lineno} former name {name}" for node, name in names
+             if name.startswith("former_")]
+    if where in PUBLIC_API:
+        return found
+    defined: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            found += [f"{where}:{node.lineno} import {alias.name} as {alias.asname}"
+                      for alias in node.names if alias.asname
+                      and alias.asname == alias.name.rpartition(".")[2]]
+        elif isinstance(node, ast.FunctionDef | ast.ClassDef):
+            defined.add(node.name)
+        elif isinstance(node, ast.Assign | ast.AnnAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            defined.update(t.id for t in targets if isinstance(t, ast.Name))
+    if "__getattr__" in defined:
+        found.append(f"{where}: module __getattr__")
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+                isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
+            found += [f"{where}: __all__ names {elt.value!r}, defined elsewhere"
+                      for elt in node.value.elts  # type: ignore[attr-defined]
+                      if isinstance(elt, ast.Constant) and elt.value not in defined]
+    return found
+
+
+def test_no_reexports():
+    found = [entry for path in library_files() for entry in reexports(path)]
+    assert not found, ("import each name from the module that defines it; only the public "
+                       f"__init__ files {PUBLIC_API} re-export: {found}")
+
+
+@pytest.mark.parametrize("folder", ["agents", "evaluation"])
+def test_own_modules_are_imported_relatively(folder):
+    own = f"unitrack_env.{folder}"
+    absolute = [f"{path.relative_to(REPO)}:{node.lineno}" for path in library_files()
+                if path.relative_to(REPO).parts[0] == folder
+                for node in ast.walk(ast.parse(path.read_text()))
+                if (isinstance(node, ast.ImportFrom) and node.level == 0
+                    and (node.module == own or (node.module or "").startswith(own + ".")))
+                or (isinstance(node, ast.Import)
+                    and any(a.name.startswith(own + ".") for a in node.names))]
+    assert not absolute, f"import {folder}'s own modules relatively (from .x import y): {absolute}"

@@ -2,9 +2,10 @@
 
 Gymnasium 1.x has no plugin auto-discovery, so ``import unitrack_env`` registers these ids
 (or use ``gym.make("unitrack_env:UniTrack/MOT16-v0")``, which imports the package first).
-Each row is one id: ``(name, entry point, default keyword arguments, task)``, the data folder
-and its benchmark (``scoring``: the ``module:Class`` of its
-:class:`~unitrack_env.benchmarks.base.Benchmark`, which writes, reads and scores results).
+Each row is one id: ``(name, entry point, default keyword arguments)``, the data folder and
+its benchmark (``scoring``: the ``module:Class`` of its
+:class:`~unitrack_env.benchmarks.base.Benchmark`, which writes, reads and scores results and
+states the task).
 Adding a task is one env module, one benchmark module and one row; a project outside this
 package adds its row with :func:`register_variant`.
 """
@@ -27,13 +28,21 @@ class Variant:
     name: str
     entry_point: str
     kwargs: dict[str, Any] = field(default_factory=dict)
-    task: str = ""
     version: int = 0
     #: The folder name under ``$UNITRACK_DATA`` that the id reads (None: ``root=`` only).
     folder: str | None = None
     #: The id's benchmark, ``"module:Class"`` of a :class:`unitrack_env.benchmarks.Benchmark`
     #: (built from the env's keyword arguments by :func:`unitrack_env.benchmarks.benchmark_for`).
     scoring: str = ""
+
+    @property
+    def task(self) -> str:
+        """The task family, stated by the id's benchmark ("" for a row without one)."""
+        if not self.scoring:
+            return ""
+        from unitrack_env.benchmarks import benchmark_class
+
+        return benchmark_class(self).task
 
     @property
     def env_id(self) -> str:
@@ -46,23 +55,23 @@ _B = "unitrack_env.benchmarks."
 _MOT_SCORING = _B + "motchallenge:MOTChallengeBenchmark"
 
 VARIANTS: tuple[Variant, ...] = (
-    Variant("MOT15", _MOT, {"benchmark": "MOT15"}, "mot", folder="MOT15", scoring=_MOT_SCORING),
-    Variant("MOT16", _MOT, {"benchmark": "MOT16"}, "mot", folder="MOT16", scoring=_MOT_SCORING),
-    Variant("MOT17", _MOT, {"benchmark": "MOT17"}, "mot", folder="MOT17", scoring=_MOT_SCORING),
-    Variant("MOT20", _MOT, {"benchmark": "MOT20"}, "mot", folder="MOT20", scoring=_MOT_SCORING),
+    Variant("MOT15", _MOT, {"benchmark": "MOT15"}, folder="MOT15", scoring=_MOT_SCORING),
+    Variant("MOT16", _MOT, {"benchmark": "MOT16"}, folder="MOT16", scoring=_MOT_SCORING),
+    Variant("MOT17", _MOT, {"benchmark": "MOT17"}, folder="MOT17", scoring=_MOT_SCORING),
+    Variant("MOT20", _MOT, {"benchmark": "MOT20"}, folder="MOT20", scoring=_MOT_SCORING),
     # Custom data in the MOTChallenge layout; pass root= and the benchmark= rule set.
-    Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, "mot", scoring=_MOT_SCORING),
-    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, "sot", folder="OTB",
+    Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, scoring=_MOT_SCORING),
+    Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, folder="OTB",
             scoring=_B + "otb:OTBBenchmark"),
-    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, "vos", folder="DAVIS",
+    Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, folder="DAVIS",
             scoring=_B + "davis:DAVISBenchmark"),
-    Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"}, "mots",
+    Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"},
             folder="MOTS20", scoring=_B + "mots:MOTSBenchmark"),
-    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, "vis", folder="YouTube-VIS-2019",
+    Variant("VIS", "unitrack_env.envs.vis:VISEnv", {}, folder="YouTube-VIS-2019",
             scoring=_B + "vis:VISBenchmark"),
-    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, "pose-prop", folder="JHMDB",
+    Variant("JHMDB", "unitrack_env.envs.jhmdb:JHMDBEnv", {}, folder="JHMDB",
             scoring=_B + "jhmdb:JHMDBBenchmark"),
-    Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {}, "posetrack",
+    Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {},
             folder="PoseTrack2018", scoring=_B + "posetrack:PoseTrackBenchmark"),
 )
 

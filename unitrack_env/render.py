@@ -11,7 +11,7 @@ import colorsys
 import cv2
 import numpy as np
 
-from unitrack_env.spaces import mask_boxes
+from unitrack_env.spaces.masks import mask_boxes
 
 #: Colour of detections that are drawn underneath the tracks.
 DETECTION_COLOUR = (200, 200, 200)

@@ -1,18 +1,6 @@
 """Gymnasium vector environments with shared memory for the variable-size spaces.
 
-``AsyncVectorEnv`` (``gym.make_vec(..., vectorization_mode="async")``) passes observations
-from its workers through shared memory by default, which needs, per space type, a buffer
-layout (``create_shared_memory``), a writer (``write_to_shared_memory``, in the worker) and
-a reader (``read_from_shared_memory``, in the parent). The frames (:class:`Image`), mask
-stacks (:class:`MaskStack`) and label maps (:class:`LabelMap`) vary in size, so each
-environment gets one slot sized for the space's bounds: a small header with the array's
-shape, then the bytes. The slots live in an anonymous memory-mapped file whose pages are
-only allocated when written (a 4K frame bound costs nothing while frames are 1080p).
-
-The parent reads the buffer once and keeps the result (Gymnasium's design); the result here
-is :class:`LiveSlots`, a sequence that reads each slot when indexed, so it always shows the
-latest step, and that becomes a plain tuple of copies under ``copy.deepcopy`` (what the
-vector env returns with its default ``copy=True``).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -29,7 +17,7 @@ from gymnasium.vector.utils.shared_memory import (
     write_to_shared_memory,
 )
 
-from unitrack_env.spaces import Image, LabelMap, MaskStack
+from unitrack_env.spaces.arrays import Image, LabelMap, MaskStack
 
 #: Header of a slot: the number of dimensions, then up to three sizes (int64 each).
 _HEADER = 4

@@ -18,45 +18,41 @@ Public API:
 * Architectures: :class:`ResNet`, :class:`EfficientNetLite0`.
 """
 
-from unitrack_env.agents.appearance.architectures import (
+from unitrack_env.errors import CheckpointError
+
+from .architectures import (
     ARCHITECTURES,
     DEFAULT_LAYERS,
     FEATURE_STRIDE,
 )
-from unitrack_env.agents.appearance.checkpoints import (
+from .cache_config import default_cache_dir
+from .cache_files import FeatureCacheWarning
+from .cache_keys import CacheKey, content_key
+from .cache_runs import CacheStats, track_cache_run
+from .cached_model import CachedAppearanceModel
+from .checkpoints import (
     CIFAR_MEAN,
     CIFAR_STD,
     DEFAULT_REMAPS,
     IMAGENET_MEAN,
     IMAGENET_STD,
-    CheckpointError,
     KeyRemap,
     LoadReport,
     load_checkpoint,
 )
-from unitrack_env.agents.appearance.efficientnet_lite import EfficientNetLite0
-from unitrack_env.agents.appearance.feature_cache import (
-    CachedAppearanceModel,
-    CacheKey,
-    CacheStats,
-    FeatureCache,
-    FeatureCacheWarning,
-    content_key,
-    default_cache_dir,
-    resolve_cache,
-    track_cache_run,
-)
-from unitrack_env.agents.appearance.identity import ModelIdentity, weights_digest
-from unitrack_env.agents.appearance.letterboxing import (
+from .efficientnet_lite import EfficientNetLite0
+from .feature_cache import FeatureCache, resolve_cache
+from .identity import ModelIdentity, weights_digest
+from .letterboxing import (
     MOT_INPUT_SIZE,
     Letterbox,
     letterbox,
     letterbox_layout,
 )
-from unitrack_env.agents.appearance.model import AppearanceModel, torch_threads
-from unitrack_env.agents.appearance.resnet import ResNet, infer_resnet_arch
-from unitrack_env.agents.appearance.spec import AppearanceSpec
-from unitrack_env.agents.appearance.weights import (
+from .model import AppearanceModel, torch_threads
+from .resnet import ResNet, infer_resnet_arch
+from .spec import AppearanceSpec
+from .weights import (
     DEFAULT_WEIGHT_LOADERS,
     LoadedWeights,
     WeightsSource,

@@ -16,8 +16,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from unitrack_env.agents.appearance.efficientnet_lite import LITE0_LAYERS, EfficientNetLite0
-from unitrack_env.agents.appearance.resnet import RESNET_SPECS, ResNet
+from .efficientnet_lite import LITE0_LAYERS, EfficientNetLite0
+from .resnet import RESNET_SPECS, ResNet
 
 FEATURE_STRIDE: int = 8
 """Stride of every feature map this model produces (UniTrack's r = 8)."""

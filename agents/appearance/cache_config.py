@@ -3,8 +3,8 @@
 The folder (:func:`default_cache_dir`: ``$UNITRACK_FEATURE_CACHE``, ``$UNITRACK_CACHE`` or
 the platform's user cache folder), the cap (:func:`default_max_size`:
 ``$UNITRACK_FEATURE_CACHE_MAX`` or :data:`DEFAULT_MAX_SIZE`), the on-disk dtype, and the
-parsing and printing of sizes such as ``"10GiB"``. Part of
-:mod:`~unitrack_env.agents.appearance.feature_cache`, which re-exports these names.
+parsing and printing of sizes such as ``"10GiB"``. Part of the feature cache
+(:mod:`~unitrack_env.agents.appearance.feature_cache`).
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ An entry is one ``.npy`` file in the on-disk dtype, written to a temporary sibli
 renamed into place (:func:`_atomic_write`), so a reader sees a complete file or none;
 :func:`_load_entry` reads one back and names what is wrong with a corrupt one (truncated,
 bad header, wrong dtype or shape). :func:`_file_lock` is the inter-process lock
-(``fcntl.flock`` on POSIX, ``msvcrt.locking`` on Windows). Part of
-:mod:`~unitrack_env.agents.appearance.feature_cache`, which re-exports the public names.
+(``fcntl.flock`` on POSIX, ``msvcrt.locking`` on Windows). Part of the feature cache
+(:mod:`~unitrack_env.agents.appearance.feature_cache`).
 """
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ def _to_stored(array: np.ndarray | torch.Tensor, dtype: np.dtype) -> np.ndarray:
 
 
 def _as_float32(array: np.ndarray) -> torch.Tensor:
-    """Stored values as a float32 tensor (exact; torch converts float16 ~20x faster than numpy)."""
+    """Stored values as a float32 tensor (exact; torch converts float16 faster than numpy)."""
     if not array.flags.writeable:
         array = array.copy()
     return torch.from_numpy(array).to(torch.float32)

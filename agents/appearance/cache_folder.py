@@ -4,8 +4,7 @@
 under ``<root>/v2/<model key>-<H>x<W>-<dtype>/<ab>/``, stores them atomically under the
 inter-process lock while keeping ``<root>/usage.json`` exact, evicts the least recently used
 entries when the total exceeds the cap, and scans, prunes and clears the folder
-(:class:`CacheUsage`). Part of :mod:`~unitrack_env.agents.appearance.feature_cache`, which
-re-exports the public names.
+(:class:`CacheUsage`). Part of the feature cache.
 """
 
 from __future__ import annotations
@@ -23,20 +22,20 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.appearance.cache_config import (
+from .cache_config import (
     DEFAULT_CACHE_DTYPE,
     default_max_size,
     parse_size,
 )
-from unitrack_env.agents.appearance.cache_files import (
+from .cache_files import (
     _ENTRY_SUFFIX,
     _atomic_write,
     _Entry,
     _file_lock,
     _subdirs,
 )
-from unitrack_env.agents.appearance.cache_keys import CacheKey
-from unitrack_env.agents.appearance.cache_runs import CacheStats
+from .cache_keys import CacheKey
+from .cache_runs import CacheStats
 
 LAYOUT_VERSION: int = 2
 """Version of the on-disk layout (the ``v2`` folder); bumped when keys or formats change."""

@@ -2,8 +2,8 @@
 
 :func:`content_key` hashes every byte of a decoded frame (with its shape, dtype and the
 transform that turns it into the network input); :class:`CacheKey` joins it with the model
-identity and the network input size. Part of
-:mod:`~unitrack_env.agents.appearance.feature_cache`, which re-exports these names.
+identity and the network input size. Part of the feature cache
+(:mod:`~unitrack_env.agents.appearance.feature_cache`).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 Each process records its counters in ``<root>/runs`` (:meth:`FeatureCache.flush_stats`);
 :func:`read_runs` sums them per run (:class:`RunRecord`), and :func:`track_cache_run` gives
 the caches of a block, worker processes included, one run id (:class:`CacheRun`). Part of
-:mod:`~unitrack_env.agents.appearance.feature_cache`, which re-exports these names.
+the feature cache (:mod:`~unitrack_env.agents.appearance.feature_cache`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from unitrack_env.agents.appearance.cache_config import default_cache_dir, format_size
+from .cache_config import default_cache_dir, format_size
 
 RUN_ENV: str = "UNITRACK_FEATURE_CACHE_RUN"
 """Environment variable naming the current run in the statistics (set by

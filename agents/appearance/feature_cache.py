@@ -1,56 +1,6 @@
 """A content-addressed, size-bounded on-disk cache of frame feature maps, on by default.
 
-Comparing heads or hyper-parameters on the same frames should not recompute the backbone.
-An entry is addressed by *what determines the features*, never by where the frame came from:
-
-* the model identity (:meth:`ModelIdentity.key`: architecture, layer, weights digest,
-  normalisation, and whatever else the model counts as its identity),
-* the network input geometry ``H x W`` and the on-disk dtype, and
-* a full hash of the decoded frame (:func:`content_key`: SHA-256 of every byte, its shape and
-  dtype, and a tag naming the transform that turns it into the network input; 128 bits kept).
-
-So identical frames share one entry across sequences, MOT17's detector variants
-(``MOT17-02-DPM`` / ``-FRCNN`` / ``-SDP``), data sets and tasks. Layout::
-
-    <root>/CACHEDIR.TAG                       marks the folder as a cache for backup tools
-    <root>/.lock                              inter-process lock (accounting, eviction)
-    <root>/usage.json                         total bytes and entries (kept under the lock)
-    <root>/v2/<model key>-<H>x<W>-<dtype>/model.json          the model, readable
-    <root>/v2/<model key>-<H>x<W>-<dtype>/<ab>/<content>.npy  one entry per frame
-    <root>/runs/<start>-<pid>-<nonce>.json    hit statistics of recent processes
-
-**On by default.** ``feature_cache=True`` (the heads' default) uses :func:`default_cache_dir`:
-``$UNITRACK_FEATURE_CACHE``, else ``$UNITRACK_CACHE/features``, else the platform's user
-cache folder (``platformdirs.user_cache_dir("unitrack-env")/features``, e.g.
-``~/.cache/unitrack-env/features``). ``UNITRACK_FEATURE_CACHE=off`` turns the default off;
-``feature_cache=False`` turns it off for one agent.
-
-**Bounded.** The cap (:data:`DEFAULT_MAX_SIZE`, 10 GiB; ``$UNITRACK_FEATURE_CACHE_MAX`` or
-``max_size=``) is enforced on every write: when the total exceeds it, the least recently used
-entries (a hit refreshes an entry's modification time) are removed until the total is at most
-:data:`EVICT_TO` of the cap.
-
-**Safe with many writers.** An entry is written to a temporary file in its final folder and
-renamed into place, so a reader sees a complete entry or none. Renames, the size accounting
-and eviction happen under an exclusive lock on ``<root>/.lock`` (``fcntl.flock`` on POSIX,
-``msvcrt.locking`` on Windows), so the total stays exact with any number of processes. A
-corrupt entry (truncated, bad header, wrong dtype or shape) is reported once with a
-:class:`FeatureCacheWarning`, recomputed and replaced; a cache that cannot be written (disk
-full, read-only) is reported once and the features are used uncached.
-
-**Same values warm or cold.** Values are stored as float16 (:data:`DEFAULT_CACHE_DTYPE`);
-features served through the cache are the stored values converted back to float32 on a hit
-and on a miss alike, so results do not depend on whether the cache was warm.
-
-Use :class:`CachedAppearanceModel` (what the heads build) or :meth:`FeatureCache.get_or_compute`
-for any array-producing function. Hit statistics: :attr:`FeatureCache.stats` in the process,
-:func:`track_cache_run` across the worker processes of a run, and ``unitrack cache info``.
-
-The pieces live beside this module, which re-exports their names (they were all defined here
-before issue 14): settings and sizes in :mod:`.cache_config`, keys in :mod:`.cache_keys`, hit
-statistics and runs in :mod:`.cache_runs`, the entry file format, atomic writes and the lock
-in :mod:`.cache_files`, the folder layout, accounting and eviction in :mod:`.cache_folder`
-(:class:`FeatureCache`'s base), and :class:`CachedAppearanceModel` in :mod:`.cached_model`.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -69,78 +19,27 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.cache_config import (
+from .cache_config import (
     _OFF_VALUES,
-    APP_NAME,
     CACHE_DIR_ENV,
-    CACHE_MAX_ENV,
-    DATA_ENV,
     DEFAULT_CACHE_DTYPE,
-    DEFAULT_MAX_SIZE,
     default_cache_dir,
-    default_max_size,
-    format_size,
-    parse_size,
 )
-from unitrack_env.agents.appearance.cache_files import (
+from .cache_files import (
     FeatureCacheWarning,
     _as_float32,
     _atomic_write,
     _load_entry,
     _to_stored,
 )
-from unitrack_env.agents.appearance.cache_folder import (
-    EVICT_TO,
-    LAYOUT_VERSION,
-    STALE_TEMP_SECONDS,
-    CacheFolder,
-    CacheUsage,
-    NamespaceUsage,
-)
-from unitrack_env.agents.appearance.cache_keys import (
-    CONTENT_DIGEST_BYTES,
-    CONTENT_HASH,
-    CacheKey,
-    content_key,
-)
-from unitrack_env.agents.appearance.cache_runs import (
-    RUN_ENV,
-    CacheRun,
-    CacheStats,
-    RunRecord,
-    read_runs,
-    track_cache_run,
-)
+from .cache_folder import CacheFolder
+from .cache_keys import CacheKey
+from .cache_runs import RUN_ENV, CacheStats, RunRecord, read_runs
 
-__all__ = [  # the names this module has always offered
-    "APP_NAME", "CACHE_DIR_ENV", "CACHE_MAX_ENV", "CONTENT_DIGEST_BYTES", "CONTENT_HASH",
-    "DATA_ENV", "DEFAULT_CACHE_DTYPE", "DEFAULT_MAX_SIZE", "EVICT_TO", "LAYOUT_VERSION",
-    "MAX_RUN_FILES", "RUN_ENV", "STALE_TEMP_SECONDS",
-    "CacheKey", "CacheRun", "CacheStats", "CacheUsage", "FeatureCache", "FeatureCacheWarning",
-    "NamespaceUsage", "RunRecord",
-    "CachedAppearanceModel",  # noqa: F822 - imported on first use (__getattr__ below)
-    "content_key", "default_cache_dir", "default_max_size", "format_size", "parse_size",
-    "read_runs", "resolve_cache", "track_cache_run",
-]
+__all__ = ["MAX_RUN_FILES", "FeatureCache", "resolve_cache"]
 
 MAX_RUN_FILES: int = 200
 """Process statistics files kept in ``<root>/runs`` (oldest removed first)."""
-
-_LAZY = frozenset({"CachedAppearanceModel", "AppearanceModel"})
-
-
-def __getattr__(name: str) -> Any:
-    """``CachedAppearanceModel`` (and the ``AppearanceModel`` it wraps), imported on first use.
-
-    :mod:`.cached_model` builds its cache with :func:`resolve_cache`, so it imports this
-    module; importing it here only when asked keeps the imports free of cycles.
-    """
-    if name in _LAZY:
-        from unitrack_env.agents.appearance import cached_model
-
-        return getattr(cached_model, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 def resolve_cache(
     spec: FeatureCache | str | os.PathLike[str] | bool | None,
@@ -198,22 +97,6 @@ class FeatureCache(CacheFolder):
         self._session_started = 0.0
         self._session_base = CacheStats()
         self._flushed = CacheStats()
-
-    # -- backward-compatible counters
-    @property
-    def hits(self) -> int:
-        """Entries read from disk (``stats.hits``)."""
-        return self.stats.hits
-
-    @property
-    def misses(self) -> int:
-        """Entries computed because absent (``stats.misses``)."""
-        return self.stats.misses
-
-    @property
-    def recomputed(self) -> int:
-        """Entries recomputed because corrupt (``stats.corrupt``)."""
-        return self.stats.corrupt
 
     # -- warnings
     def _warn(self, what: str, message: str) -> None:

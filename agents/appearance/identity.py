@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from unitrack_env.agents.appearance.runtime import TORCH
+from .runtime import TORCH
 
 DIGEST_LENGTH: int = 16
 """Hex characters of the SHA-256 weights digest kept in :class:`ModelIdentity`."""

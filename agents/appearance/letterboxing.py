@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from unitrack_env.agents.appearance.architectures import FEATURE_STRIDE
+from .architectures import FEATURE_STRIDE
 
 MOT_INPUT_SIZE: tuple[int, int] = (1088, 608)
 """(width, height) that MOT frames are letterboxed to (JDE / UniTrack MOT setting)."""

@@ -7,21 +7,7 @@ batched inference under ``torch.inference_mode()``, a thread and device setting,
 JDE-style letterbox used for MOT (whole frame to 1088 x 608), and an :class:`ModelIdentity`
 (architecture, layer, weights digest, runtime) that keys on-disk feature caches.
 
-The network runs in eager torch (the reference, and the only runtime on CUDA) or, with
-``runtime="openvino"`` / ``"onnxruntime"`` / ``"auto"`` (or ``$UNITRACK_RUNTIME``), exported
-to ONNX and compiled for the CPU: measured here at 1088 x 608 on 2 threads, OpenVINO ~3.9x and
-ONNX Runtime ~2.6x eager torch, features cosine 1.0000000 (see
-:mod:`~unitrack_env.agents.appearance.runtime` and ``benchmarks/runtime.py``).
-
-Building it takes three steps: :func:`~unitrack_env.agents.appearance.weights.load_weights`
-resolves ``weights=`` / ``arch=`` / ``remap=`` to a network with its weights loaded (the
-:mod:`~unitrack_env.agents.appearance.weights` docstring gives the order in which weights
-names are resolved), the model places the network on its device, and
-:func:`~unitrack_env.agents.appearance.identity.weights_digest` names what was loaded.
-
-This module also re-exports the names that used to live here (architectures, letterbox,
-identity, weights table), so ``from unitrack_env.agents.appearance.model import ...`` keeps
-working.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -36,49 +22,24 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance.architectures import (
-    ARCHITECTURES,
-    DEFAULT_LAYERS,
-    EFFICIENTNET_LITE0,
-    FEATURE_STRIDE,
-    LAYER_SEPARATOR,
-    NORM_EPS,
-    combine_layers,
-    split_layers,
-)
-from unitrack_env.agents.appearance.checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
-from unitrack_env.agents.appearance.identity import DIGEST_LENGTH, ModelIdentity, weights_digest
-from unitrack_env.agents.appearance.letterboxing import (
-    LETTERBOX_PAD_VALUE,
-    MOT_INPUT_SIZE,
-    Letterbox,
-    letterbox,
-    letterbox_layout,
-)
-from unitrack_env.agents.appearance.runtime import (
+from .architectures import FEATURE_STRIDE, combine_layers
+from .checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
+from .identity import ModelIdentity, weights_digest
+from .runtime import (
     TORCH,
     CompiledBackbone,
     FeatureNetwork,
     resolve_runtime,
 )
-from unitrack_env.agents.appearance.weights import (
+from .weights import (
     DEFAULT_WEIGHT_LOADERS,
-    RANDOM_DEFAULT_ARCH,
-    TORCHVISION_PREFIX,
     LoadedWeights,
     WeightsLoader,
-    WeightsSource,
     check_arch,
     load_weights,
 )
 
-__all__ = [  # the names this module has always offered
-    "ARCHITECTURES", "DEFAULT_LAYERS", "DEFAULT_WEIGHT_LOADERS", "DIGEST_LENGTH",
-    "EFFICIENTNET_LITE0", "FEATURE_STRIDE", "LAYER_SEPARATOR", "LETTERBOX_PAD_VALUE",
-    "MOT_INPUT_SIZE", "NORM_EPS", "RANDOM_DEFAULT_ARCH", "TORCHVISION_PREFIX",
-    "AppearanceModel", "Letterbox", "ModelIdentity", "WeightsLoader", "WeightsSource",
-    "letterbox", "letterbox_layout", "split_layers", "torch_threads", "weights_digest",
-]
+__all__ = ["AppearanceModel", "torch_threads"]
 
 
 @contextlib.contextmanager

@@ -6,28 +6,7 @@ architecture, layer or hypercolumn, with the loaded weights) is exported to ONNX
 input size and run by that engine; the preprocessing (uint8 -> normalised float) stays in
 torch and the features come back as torch tensors, so the heads see no difference.
 
-* **Export.** The network is traced per input ``(height, width)`` (EfficientNet-Lite0's
-  TensorFlow "SAME" padding depends on the size, so the traced graph is size-specific) with a
-  dynamic batch axis. The ONNX file is cached on disk, keyed by the model identity (weights
-  digest, architecture, layer), the input size and the torch version:
-  ``<cache dir>/<identity key>-<H>x<W>-<torch version>.onnx``, written atomically. The cache
-  directory is ``$UNITRACK_RUNTIME_CACHE``, else ``$XDG_CACHE_HOME/unitrack_env/runtime``,
-  else ``~/.cache/unitrack_env/runtime``. Exporting needs the PyPI package ``onnx``.
-* **Compile.** OpenVINO compiles per full input shape (batch included; a static shape is what
-  it optimises best), ONNX Runtime keeps one session per input size. Both are kept in memory
-  for the life of the model.
-* **Precision.** Float32 throughout. OpenVINO's CPU plugin would pick bfloat16 by itself on a
-  CPU with AVX512-BF16 (this project's CPU has it: about 2x faster again, but features
-  cosine ~0.9993, max abs diff ~1); we pin ``INFERENCE_PRECISION_HINT=f32`` (cosine
-  1.0000000, max abs diff ~6e-5 against eager torch).
-* **Threads.** Each engine gets the model's ``num_threads`` (None: torch's current
-  setting at build time), so 2 cores run 2 threads, without oversubscription; ONNX Runtime
-  runs one inter-op thread.
-
-Choice of runtime: :func:`resolve_runtime` maps ``None`` to ``$UNITRACK_RUNTIME`` (default
-``"torch"``) and ``"auto"`` to the fastest installed engine (:data:`AUTO_ORDER`: OpenVINO, then
-ONNX Runtime, then torch; measured on the project's 2-core CPU at 1088 x 608: ~4x and ~2x eager
-torch). Only torch runs on CUDA; ``"auto"`` on a CUDA device is torch.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

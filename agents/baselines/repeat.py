@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.base import Agent
+from ..base import Agent
 
 #: DAVIS's void label; it marks ambiguous pixels of the ground truth and is no prediction.
 VOID_LABEL = 255

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.base import Agent
+from ..base import Agent
 
 
 class RepeatPoseAgent(Agent, name="repeat-pose", tasks=("pose-prop",)):

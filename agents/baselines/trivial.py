@@ -6,8 +6,9 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.base import Agent
-from unitrack_env.spaces import pack_tracks, unpack_detections
+from unitrack_env.spaces.boxes import pack_tracks, unpack_detections
+
+from ..base import Agent
 
 
 class FreshIdsAgent(Agent, name="fresh-ids", tasks=("mot",)):

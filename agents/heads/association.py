@@ -51,58 +51,27 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import (
-    AppearanceModel,
-    CachedAppearanceModel,
-    Letterbox,
-    resolve_cache,
-    torch_threads,
-)
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.heads.region_features import RegionFeatures
-from unitrack_env.agents.heads.unitrack_config import (
-    MASK_BOX_MODES,
-    MOT_OUTPUT_MAX_ASPECT,
-    MOT_OUTPUT_MIN_AREA,
-    MOT_PIXEL_ORIGIN,
-    ROI_OUTPUT_SIZE,
-    TASK_DEFAULTS,
-    TASKS,
-    TaskDefaults,
-    TaskSettings,
-    UniTrackConfig,
-)
-from unitrack_env.agents.primitives.adapters import (
+from ..appearance.cached_model import CachedAppearanceModel
+from ..appearance.feature_cache import resolve_cache
+from ..appearance.letterboxing import Letterbox
+from ..appearance.model import AppearanceModel, torch_threads
+from ..base import Agent
+from ..primitives.adapters import (
     Detections,
     ObservationAdapter,
     adapter_for,
     detect_task,
-    former_capacity_constants,
     reset_task,
 )
-from unitrack_env.agents.primitives.association import Associator, TrackOutput
-from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
-from unitrack_env.agents.primitives.mask_features import LocalMask, mask_to_box, pose_to_mask
-from unitrack_env.agents.primitives.similarity import SIMILARITIES, ObjectFeatures
+from ..primitives.association import Associator
+from ..primitives.category_gating import CategoryGatedAssociator
+from ..primitives.mask_features import LocalMask, mask_to_box, pose_to_mask
+from ..primitives.similarity import SIMILARITIES, ObjectFeatures
+from ..primitives.tracks import TrackOutput
+from .region_features import RegionFeatures
+from .unitrack_config import TASKS, UniTrackConfig
 
-__all__ = [
-    "MASK_BOX_MODES",
-    "MOT_OUTPUT_MAX_ASPECT",
-    "MOT_OUTPUT_MIN_AREA",
-    "MOT_PIXEL_ORIGIN",
-    "ROI_OUTPUT_SIZE",
-    "TASKS",
-    "TASK_DEFAULTS",
-    "TaskDefaults",
-    "TaskSettings",
-    "UniTrackAgent",
-    "UniTrackConfig",
-    "detect_task",
-]
-
-# Former constants: the environments' default capacities (read from the environments).
-__getattr__ = former_capacity_constants(
-    __name__, {"DEFAULT_MAX_TRACKS": "mot", "POSETRACK_MAX_TRACKS": "posetrack"})
+__all__ = ["UniTrackAgent"]
 
 
 @dataclass(frozen=True)

@@ -2,30 +2,7 @@
 
 UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E.
 
-Per video:
-
-1. The frame is resized to ``input_size`` (the paper's 320 x 320 for JHMDB; None keeps the
-   native size) and goes once through the backbone: a ``(C, h, w)`` stride-8 map.
-2. At reset, each of the ``J`` first-frame joints becomes a Gaussian belief map on the
-   feature grid, ``exp(-d^2 / (2 sigma^2))`` around the joint's position in feature
-   pixels, with ``sigma = max(eta * s_body, 0.5)``, ``eta = 0.01`` and ``s_body`` the larger
-   side of the joints' bounding box (appendix B.2, eq. sbody), all in feature pixels
-   (image pixels / stride; the floor 0.5 is a half feature pixel, so the maps are as sharp
-   as the grid allows for any real body size).
-3. Later frames: the ``J`` maps are propagated together (one affinity, ``J`` label
-   channels) with :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator` (first
-   frame + 5 latest predictions, radius 12, top-10, temperature 0.05; soft maps reused).
-4. Decoding: **argmax of each map, refined by a soft-argmax** (the map-weighted mean
-   position) over the ``(2 refine_radius + 1)^2`` neighbourhood of the argmax, on the
-   feature grid; mapped back to frame pixels. The local soft-argmax gives sub-cell
-   positions (one cell is 8 input pixels) without being pulled by far-away secondary modes
-   as a global soft-argmax would. A map whose peak falls below ``min_peak`` (the joint has
-   no support left, e.g. it left the frame) keeps the joint's previous position.
-
-Coordinates: keypoints are ``(x, y)`` in 0-based pixels whose centres are integers (the
-environment's convention). Feature cell ``j`` of a map of ``n`` cells over ``N`` pixels is
-centred at pixel ``(j + 0.5) * N / n - 0.5`` (the bilinear, ``align_corners=False``
-correspondence).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -37,10 +14,11 @@ import cv2
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.heads.vos import make_propagation_config
-from unitrack_env.agents.primitives.label_propagation import LabelPropagator
+from ..appearance.model import AppearanceModel, torch_threads
+from ..appearance.spec import AppearanceSpec
+from ..base import Agent
+from ..primitives.label_propagation import LabelPropagator
+from .vos import make_propagation_config
 
 POSE_INPUT_SIZE: tuple[int, int] = (320, 320)
 """(width, height) frames are resized to (appendix B.2 table, "Pose: 320 x 320")."""

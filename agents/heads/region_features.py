@@ -19,19 +19,20 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance import (
-    AppearanceModel,
-    CachedAppearanceModel,
+from unitrack_env.geometry import xywh_to_xyxy
+
+from ..appearance.cache_keys import content_key
+from ..appearance.cached_model import CachedAppearanceModel
+from ..appearance.letterboxing import (
+    LETTERBOX_PAD_VALUE,
     Letterbox,
-    content_key,
     letterbox,
     letterbox_layout,
 )
-from unitrack_env.agents.appearance.model import LETTERBOX_PAD_VALUE
-from unitrack_env.agents.primitives.mask_features import LocalMask, mask_location_features
-from unitrack_env.agents.primitives.roi_align import roi_align
-from unitrack_env.agents.primitives.similarity import ObjectFeatures
-from unitrack_env.geometry import xywh_to_xyxy
+from ..appearance.model import AppearanceModel
+from ..primitives.mask_features import LocalMask, mask_location_features
+from ..primitives.roi_align import roi_align
+from ..primitives.similarity import ObjectFeatures
 
 
 class RegionFeatures:

@@ -20,14 +20,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.heads.vos import build_model
-from unitrack_env.agents.primitives.box_propagation import (
+from ..appearance.model import AppearanceModel, torch_threads
+from ..appearance.spec import AppearanceSpec
+from ..base import Agent
+from ..primitives.box_propagation import (
     BoxPropagationConfig,
     BoxPropagator,
     BoxState,
 )
+from .vos import build_model
 
 OTB_PIXEL_ORIGIN: float = 1.0
 """OTB boxes are 1-based: ``x - 1`` is the left edge in continuous 0-based coordinates."""

@@ -37,13 +37,13 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
-from unitrack_env.agents.appearance import MOT_INPUT_SIZE
-from unitrack_env.agents.appearance.spec import AppearanceSpec
-from unitrack_env.agents.primitives.association_config import (
+from ..appearance.letterboxing import MOT_INPUT_SIZE
+from ..appearance.spec import AppearanceSpec
+from ..primitives.association_config import (
     MOT_ASSOCIATION,
     AssociationConfig,
 )
-from unitrack_env.agents.primitives.mask_features import MAX_MASK_AREA_MOTS, MAX_MASK_AREA_VIS
+from ..primitives.mask_features import MAX_MASK_AREA_MOTS, MAX_MASK_AREA_VIS
 
 ROI_OUTPUT_SIZE: tuple[int, int] = (10, 4)
 """(rows, columns) of the RoIAlign grid per box: 40 location features (tall, for people)."""

@@ -1,20 +1,6 @@
 """The UniTrack VOS head: mask propagation with the shared appearance model (``unitrack-vos``).
 
-Per video (UniTrack paper, section 2.3 and appendix B.2; ``OFFICIAL-CODE-FACTS.md``, "Mask
-and pose propagation"):
-
-1. At reset, the first frame's label map (0 background, ``k`` object ``k``, 255 void) becomes
-   one-hot channels ``[background, object_1, ...]`` (void counts as background), downsampled
-   bilinearly to the feature grid ``(ceil(H/8), ceil(W/8))``; the first frame's features
-   and these soft labels start the memory bank of
-   :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`.
-2. The first step answers the first frame itself with the given labels (void as background).
-3. Every later frame: one backbone pass at full resolution (DAVIS 480p), propagation of the
-   soft labels (first frame + 5 latest predictions, radius 12, top-10, temperature 0.05),
-   bilinear upsampling of the soft labels to the frame size, argmax, channel -> object label.
-
-Features are computed once per frame (the first frame's at reset) under
-``torch.inference_mode()``.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -26,9 +12,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
-from unitrack_env.agents.base import Agent
-from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig, LabelPropagator
+from ..appearance.model import AppearanceModel, torch_threads
+from ..appearance.spec import AppearanceSpec
+from ..base import Agent
+from ..primitives.label_propagation import LabelPropagationConfig, LabelPropagator
 
 VOID_LABEL: int = 255
 """DAVIS's void label (ambiguous pixels of the annotation); treated as background."""

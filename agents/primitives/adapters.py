@@ -31,20 +31,16 @@ Example:
 from __future__ import annotations
 
 import abc
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
 
-from unitrack_env.spaces import (
-    pack_mask_ids,
-    pack_pose_tracks,
-    pack_tracks,
-    unpack_detections,
-    unpack_poses,
-)
+from unitrack_env.spaces.boxes import pack_tracks, unpack_detections
+from unitrack_env.spaces.masks import pack_mask_ids
+from unitrack_env.spaces.poses import pack_pose_tracks, unpack_poses
 
 
 @dataclass(frozen=True)
@@ -216,20 +212,6 @@ def default_max_tracks(task: str) -> int:
     from unitrack_env.envs.motchallenge import DEFAULT_MAX_TRACKS as BOX_TRACKS
 
     return int(BOX_TRACKS)
-
-
-def former_capacity_constants(module: str, names: Mapping[str, str]) -> Callable[[str], int]:
-    """A module ``__getattr__`` serving removed capacity constants (``name`` -> its task).
-
-    Modules that used to define ``DEFAULT_MAX_TRACKS``-style constants keep the names
-    importable; the value is read from the environments by :func:`default_max_tracks`.
-    """
-    def __getattr__(name: str) -> int:
-        if name in names:
-            return default_max_tracks(names[name])
-        raise AttributeError(f"module {module!r} has no attribute {name!r}")
-
-    return __getattr__
 
 
 def detect_task(observation: Mapping[str, Any]) -> str:

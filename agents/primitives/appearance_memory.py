@@ -1,19 +1,6 @@
 """What a track remembers of its appearance: the last observation, or a moving average.
 
-The UniTrack paper and the authors' code compare a track by the payload of its *last*
-matched observation (``curr_feat``). One wrong match then replaces the track's appearance by
-another object's, and the track follows that object from then on (on the synthetic MOT16
-set, tracks captured by a persistent false detection this way account for most of the
-appearance-only errors). JDE (Wang et al., "Towards Real-Time Multi-Object Tracking", 2020),
-whose association UniTrack's MOT head follows, keeps an exponential moving average of the
-track's embedding instead (``smooth_feat``, momentum 0.9), so that one observation moves the
-memory by a tenth.
-
-:func:`remember` applies that average to UniTrack's payloads, which are *sets* of location
-features: a box pooled into a 10 x 4 grid has the same 40 locations in every frame, so the
-average is taken location by location, each location L2-normalised before and after.
-Payloads of different shapes (masks of different sizes) cannot be averaged that way; the
-newest one is kept, as in the paper.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

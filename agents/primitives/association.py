@@ -8,40 +8,7 @@ later of a mask or a pose), and it compares payloads with an injected similarity
 ``similarity(track_payloads, detection_payloads) -> (n, m) similarity``; the appearance
 cost is ``1 - similarity`` (for RSM this is the paper's ``1 - (cos_fwd + cos_bwd) / 2``).
 
-One call to :meth:`Associator.step` per frame:
-
-1. Predict every live track with the Kalman filter (lost tracks with their height velocity
-   frozen, see :attr:`AssociationConfig.freeze_lost_height_velocity`).
-2. Stage 1 (appearance): confirmed and lost tracks against all detections. Cost
-   ``lambda * (1 - sim) + (1 - lambda) * Mahalanobis^2``, pairs outside the chi-square 0.95
-   gate set to ``inf``; a match is accepted when the cost is ``< appearance_threshold``.
-   Without motion (the paper's "w/o motion" / appearance-only ablation) the cost is
-   ``1 - sim`` alone and nothing is gated.
-3. Stage 2 (IoU): the remaining *confirmed* tracks (not lost ones, as in the authors' code)
-   against the remaining detections, IoU of the Kalman-predicted boxes, accepted when
-   ``IoU > iou_threshold``. This stage runs with and without motion: the authors' "without
-   motion" configurations still run it.
-4. Tentative tracks (born on the previous frame) against the remaining detections, accepted
-   when ``IoU > confirm_iou_threshold``; a match confirms the track, a miss removes it.
-5. Confirmed tracks left unmatched become lost; lost tracks unmatched for more than
-   ``round(lost_seconds * frame_rate)`` frames are removed.
-6. Each remaining detection with ``score >= new_track_score`` starts a tentative track
-   (confirmed at once on the first frame of an episode, as in the authors' code).
-7. Duplicates: an active track and a lost track whose boxes overlap with
-   ``IoU > duplicate_iou`` are the same object; the younger of the two is removed.
-
-The output of a frame is the confirmed tracks matched in that frame (optionally filtered by
-box area and width/height ratio, the MOTChallenge output filter of the authors' code).
-
-Tracks keep the payload of their LAST matched observation (paper; authors' code
-``curr_feat``) unless :attr:`AssociationConfig.appearance_momentum` asks for a moving average
-(:mod:`~unitrack_env.agents.primitives.appearance_memory`).
-
-Where this engine departs from the letter of Algorithm 1, it follows the authors' code:
-gated pairs are excluded *before* the Hungarian step (the paper filters them after it,
-which lets an impossible pair block a valid one), and lost tracks skip the IoU stage.
-One deliberate difference from the code: public ids are assigned when a track is
-confirmed, so reported ids are consecutive (the code numbers tentative tracks too).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -52,31 +19,21 @@ from typing import Any, Generic
 
 import numpy as np
 
-from unitrack_env.agents.primitives.appearance_memory import remember
-from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION, AssociationConfig
-from unitrack_env.agents.primitives.kalman import KalmanFilter, xywh_to_xyah
-from unitrack_env.agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
-from unitrack_env.agents.primitives.tracks import (
+from unitrack_env.geometry import box_iou
+
+from .appearance_memory import remember
+from .association_config import AssociationConfig
+from .kalman import KalmanFilter, xywh_to_xyah
+from .matching import fuse_motion, iou_cost, linear_assignment
+from .tracks import (
     P,
     StepRecord,
     Track,
     TrackOutput,
     TrackState,
 )
-from unitrack_env.geometry import box_iou
 
-__all__ = [
-    "HEIGHT_VELOCITY_INDEX",
-    "MOT_ASSOCIATION",
-    "AssociationConfig",
-    "Associator",
-    "P",
-    "SimilarityFn",
-    "StepRecord",
-    "Track",
-    "TrackOutput",
-    "TrackState",
-]
+__all__ = ["HEIGHT_VELOCITY_INDEX", "Associator", "SimilarityFn"]
 
 SimilarityFn = Callable[[Sequence[Any], Sequence[Any]], Any]
 """``similarity(track_payloads, detection_payloads)`` -> ``(n, m)`` array-like similarity.

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.agents.primitives.kalman import CHI2_95_4DOF, KalmanConfig
-from unitrack_env.agents.primitives.matching import APPEARANCE_WEIGHT_PAPER
+from .kalman import CHI2_95_4DOF, KalmanConfig
+from .matching import APPEARANCE_WEIGHT_PAPER
 
 
 @dataclass(frozen=True)

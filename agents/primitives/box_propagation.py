@@ -1,33 +1,6 @@
 """Box propagation (UniTrack level 2, SOT): Siamese cross-correlation and a correlation filter.
 
-UniTrack (Wang et al., NeurIPS 2021), section 2.3 and appendix B.1, propagates a box with
-the shared appearance model ``phi`` in one of two ways:
-
-* **XCorr** (SiamFC, Bertinetto et al. 2016): the response map is the cross-correlation of
-  a template (the central ``14 x 14`` of the first frame's crop features; never updated) with
-  the search features, ``g = x * z``.
-* **DCF** (DCFNet, Wang et al. 2017; CFNet): the template is replaced by the ridge-regression
-  filter ``w = argmin ||w * x - y||^2 + lambda ||w||^2`` solved in the Fourier domain,
-  ``w^ = x^ . y^* / (x^ . x^* + lambda)``, with a Gaussian ideal response ``y``; numerator
-  and denominator are updated online by a moving average with momentum ``alpha``.
-
-Common machinery (appendix B.1 table; ``OFFICIAL-CODE-FACTS.md``, "Box propagation"):
-
-* crops of ``context = 4.5`` times the target's width and height (the box "expanded by
-  k = 4.5"), resized to ``520 x 520`` (feature map ``65 x 65`` at stride 8), padded with the
-  image's mean colour outside the frame;
-* a Hann (cosine) window multiplied onto the crop features (suppresses the crop border and,
-  for DCF, the circular-boundary artefacts); the DCF filter itself is trained on features
-  under a tighter window of 1.5 target sizes (:data:`DCF_TEMPLATE_WINDOW`), so that it
-  describes the target rather than the 4.5x context around it;
-* 3 scales ``1.0275^{-1, 0, 1}`` with peak penalties ``0.985^{1, 0, 1}``; the best-scoring
-  scale wins, the box size is multiplied by it and clamped to ``[0.2, 5] x`` the initial size;
-* the displacement of the response peak, in feature pixels, is converted to image pixels
-  with ``stride * window / crop_size`` = ``window / 65`` per feature pixel. (The authors'
-  code divides by 52 instead of 65, moving the box 25% too far; we use the exact scale.)
-
-Coordinates: boxes are ``(cx, cy, w, h)`` in continuous image coordinates where pixel
-``(i, j)`` (0-based row, column) covers ``[j, j + 1) x [i, i + 1)``.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -39,11 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from unitrack_env.agents.primitives.box_response import (
+from .box_response import (
     DCFHead,
     XCorrHead,
     crop_windows,
-    gaussian_label,
     hann_window,
     response_peak,
 )
@@ -65,14 +37,8 @@ __all__ = [
     "BoxPropagationConfig",
     "BoxPropagator",
     "BoxState",
-    "DCFHead",
     "FeatureFn",
-    "XCorrHead",
-    "crop_windows",
     "feature_size",
-    "gaussian_label",
-    "hann_window",
-    "response_peak",
 ]
 
 CROP_SIZE: int = 520

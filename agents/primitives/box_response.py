@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.primitives.box_propagation import BoxPropagationConfig
+    from .box_propagation import BoxPropagationConfig
 
 
 def crop_windows(

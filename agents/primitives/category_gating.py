@@ -15,13 +15,9 @@ from typing import Any, Generic
 
 import numpy as np
 
-from unitrack_env.agents.primitives.association import (
-    AssociationConfig,
-    Associator,
-    P,
-    SimilarityFn,
-    TrackOutput,
-)
+from .association import Associator, SimilarityFn
+from .association_config import AssociationConfig
+from .tracks import P, TrackOutput
 
 
 class CategoryGatedAssociator(Generic[P]):

@@ -8,18 +8,7 @@ and UniTrack (paper, appendix C.1): the state is the eight-dimensional vector
 where ``(u, v)`` is the box centre, ``a = w / h`` the aspect ratio, ``h`` the height, and the
 last four entries their velocities (per frame). Measurements are ``(u, v, a, h)``.
 
-Note on the aspect ratio: the UniTrack paper's text writes ``gamma = h / w``, but the DeepSORT
-filter it cites (and the authors' code) uses ``a = w / h``; the absolute noise levels chosen
-for the aspect ratio below (``1e-2``, ``1e-1``) are calibrated for ``w / h``, so we use
-``w / h``.
-
-Noise model (DeepSORT): position and velocity standard deviations are proportional to the
-current box height, with weights ``std_weight_position = 1/20`` and
-``std_weight_velocity = 1/160``; the aspect ratio, being unit-less, gets fixed standard
-deviations instead. All of these are fields of :class:`KalmanConfig`.
-
-Every method is batched over tracks and vectorised: ``mean`` is ``(n, 8)``, ``covariance``
-``(n, 8, 8)``, measurements ``(n, 4)``. All arithmetic is ``float64``.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

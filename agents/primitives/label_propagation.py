@@ -1,39 +1,6 @@
 """Label propagation with a memory bank (UniTrack level 2: mask and pose propagation).
 
-UniTrack (Wang et al., NeurIPS 2021), section 2.3 and appendix B.2, propagates a label map
-``z`` (one channel per object, or one Gaussian belief map per joint) from a memory of past
-frames to the current one through the affinity of their stride-8 feature maps:
-
-* ``K_m^t[i, j] = softmax_j(<x_t^i, x_m^j> / tau)`` over the memory locations ``j`` of the
-  query location ``i``, keeping only the ``k`` largest affinities of each query (top-k, as
-  in CRW) and taking the softmax over those ``k`` (the authors' code: top-10, then
-  ``softmax(A / 0.05)`` over them);
-* ``z_t = K_m^t z_m``: each query location receives the convex combination of its top-k
-  memory labels, so labels stay in ``[0, 1]`` and per-location sums are preserved;
-* the memory bank holds the first frame (the given ground truth) and the ``M - 1`` latest
-  predictions (``M = 6``); predicted *soft* labels are written back (recurrent);
-* local attention (MAST / CRW): a query only sees memory locations of the *recent* frames
-  within Euclidean radius ``r = 12`` feature pixels of its own position. The first frame
-  has no radius limit (``OFFICIAL-CODE-FACTS.md``, "Mask and pose propagation").
-
-Features are L2-normalised per location (the inner product of the paper is then a cosine,
-the scale the temperature 0.05 is meant for).
-
-Implementation (CPU-friendly, memory bounded, float32; details in
-:mod:`unitrack_env.agents.primitives.label_windows`): the top-k of a union of candidate sets
-is the top-k of the union of each set's top-k, so the recent frames and the first frame are
-searched apart and merged exactly. Recent frames: every tile of queries meets the same keys
-(its square grown by the radius) in every recent frame; those windows are cut out of a frame
-once, when it enters the memory (im2col), so each step is one batched matmul and a grouped
-top-k per block of tiles. First frame: a dense matmul by blocks of queries, keeping only the
-keys at or above the query's ``k``-th best recent affinity (nothing below can enter the
-merged top-k).
-
-:func:`propagate_dense` is the plain (slow, memory-hungry) definition used as the
-reference in the tests; :class:`LabelPropagator` is the fast stateful version the heads use
-(``reference=True``: the formulation it replaced,
-:mod:`unitrack_env.agents.primitives.label_search_tiled`, kept for the benchmark and the
-equality tests).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -44,15 +11,15 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.primitives.label_search import (
+from .label_search import (
     MemorySearch,
     grid_positions,
     merge_topk,
     search_dense,
     stage,
 )
-from unitrack_env.agents.primitives.label_search_tiled import TiledSearch
-from unitrack_env.agents.primitives.label_windows import WindowSearch
+from .label_search_tiled import TiledSearch
+from .label_windows import WindowSearch
 
 MEMORY_SIZE: int = 6
 """``M``: frames in the memory bank, the first frame plus the ``M - 1`` latest (appendix B.2)."""
@@ -104,10 +71,9 @@ class LabelPropagationConfig:
         max_affinity_elements: Memory bound: most affinity values held at once (per block
             of queries or tiles; fewer, larger blocks mean fewer parallel regions).
         affinity_dtype: ``"float32"`` (default, exact) or ``"bfloat16"``: dtype of the stored
-            features and of the affinity matmuls (accumulated in float32 by oneDNN). On CPUs
-            with AVX512-BF16 the matmuls run several times faster (measured here: 3.4x for
-            the 480p first-frame affinity) at the cost of ~3 significant digits in the
-            affinities; on CPUs without native bfloat16 it can be much slower.
+            features and of the affinity matmuls (accumulated in float32 by oneDNN): faster
+            on CPUs with AVX512-BF16, ~3 significant digits lost, slower on CPUs without
+            (docs/design-decisions.md).
     """
 
     memory_size: int = MEMORY_SIZE

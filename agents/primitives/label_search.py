@@ -21,7 +21,7 @@ import torch
 import torch.nn.functional as F
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
+    from .label_propagation import LabelPropagationConfig
 
 STAGE_PREFIX: str = "label_propagation."
 """Prefix of the ``torch.profiler`` labels of :func:`stage`."""
@@ -44,8 +44,8 @@ def grid_positions(h: int, w: int, device: torch.device) -> torch.Tensor:
 class Workspace:
     """Scratch tensors reused from step to step.
 
-    A fresh tensor of tens of MiB costs page faults on every step (measured here: 31 ms to
-    gather the windows of a 480p frame into a new tensor, 4 ms into a reused one).
+    A fresh tensor of tens of MiB costs page faults on every step
+    (docs/design-decisions.md).
     """
 
     def __init__(self) -> None:

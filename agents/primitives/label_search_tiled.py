@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.primitives.label_search import (
+from .label_search import (
     MemorySearch,
     merge_topk,
     search_dense,
@@ -31,7 +31,7 @@ from unitrack_env.agents.primitives.label_search import (
 )
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
+    from .label_propagation import LabelPropagationConfig
 
 
 @dataclass(frozen=True)

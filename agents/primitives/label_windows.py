@@ -8,23 +8,7 @@ frame enters the recent memory, every tile's ``L`` keys are copied out of it onc
 are laid out as ``R`` rows of ``g`` (padded with dummy keys). A tile's keys in *all* recent
 frames are then one contiguous ``(R slots g, C)`` matrix: no gather at search time.
 
-Search (per step, by blocks of tiles bounded by ``max_affinity_elements``):
-
-1. affinity: one batched matmul ``(t^2, C) x (C, R slots g)`` per tile; one masking pass
-   (radius, map border, dummy keys: a cached ``-inf`` bias shared by the frames, added in
-   one pass: 5x cheaper here than ``masked_fill`` with a boolean mask);
-2. grouped top-k: the candidates of a query form ``slots g`` groups of ``R`` (one group per
-   frame and column of the ``R x g`` layout); the top-k of a query lies in the ``k`` groups
-   of largest maximum (any other group's best is beaten by ``k`` group maxima), so a
-   strided max over ``R``, a top-k over the group maxima and a top-k over the ``k R``
-   candidates of the chosen groups replace a top-k over all ``R slots g`` candidates;
-3. first frame (no radius): a dense matmul by blocks of queries, but instead of a top-k
-   over every key, only the keys at or above the ``k``-th best recent affinity of the query
-   are kept (:func:`~unitrack_env.agents.primitives.label_search.search_above`): nothing
-   below it can enter the merged top-k.
-
-Equal to the reference (:mod:`unitrack_env.agents.primitives.label_search_tiled`) up to the
-order of equal affinities: the same candidates, the same top-k, the same softmax.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -37,7 +21,7 @@ from typing import TYPE_CHECKING
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.primitives.label_search import (
+from .label_search import (
     MemorySearch,
     Workspace,
     kth_best,
@@ -48,7 +32,7 @@ from unitrack_env.agents.primitives.label_search import (
 )
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
+    from .label_propagation import LabelPropagationConfig
 
 
 @dataclass(frozen=True)

@@ -1,23 +1,6 @@
 """Object features and Kalman boxes of mask and pose observations (UniTrack appendix C).
 
-Association compares *sets* of location features (see
-:mod:`unitrack_env.agents.primitives.similarity`).
-A box gives a fixed RoIAlign grid; a mask gives the feature-map cells it covers, a set whose
-size varies with the object; a pose is first drawn as a mask. This module holds those
-conversions, independent of any environment:
-
-* :class:`LocalMask` -- a binary mask stored as its tight crop plus the crop's offset in the
-  frame (a full-frame ``(H, W)`` array per person would cost megabytes per frame).
-* :func:`mask_to_box` -- the paper's mask -> box conversion for the Kalman filter (appendix
-  C.1): centre = mean in-mask pixel, half extent = 2 x mean absolute deviation.
-* :func:`pose_to_mask` -- the paper's pose -> mask conversion (appendix C.2): skeleton limbs
-  of width ``max(body size / 20, 8)`` pixels plus the filled torso polygon.
-* :func:`mask_grid` / :func:`mask_location_features` -- the in-mask cells of a stride-8
-  feature map as a variable-size set, capped at ``max_area`` locations by rescaling (the
-  authors' ``max_mask_area``: 200 for MOTS, 1000 for VIS).
-
-Coordinates are continuous pixels of the frame: pixel ``(row r, column c)`` covers
-``[c, c + 1) x [r, r + 1)``, so a mask's tight box is pycocotools' ``toBbox`` box.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -31,8 +14,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from unitrack_env.agents.primitives.roi_align import roi_align
-from unitrack_env.agents.primitives.similarity import ObjectFeatures
+from .roi_align import roi_align
+from .similarity import ObjectFeatures
 
 MAX_MASK_AREA_MOTS: int = 200
 """Most location features kept per mask on MOTS (authors' ``max_mask_area``)."""

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from unitrack_env.agents.primitives.kalman import CHI2_95_4DOF
 from unitrack_env.geometry import box_iou
+
+from .kalman import CHI2_95_4DOF
 
 APPEARANCE_WEIGHT_PAPER = 0.99
 """Weight ``lambda`` of the appearance cost in the fused cost (paper, appendix C.1).

@@ -24,7 +24,7 @@ import numpy as np
 from unitrack_env.geometry import box_iou
 
 if TYPE_CHECKING:
-    from unitrack_env.agents.primitives.overlap_tracker import OverlapTrack
+    from .overlap_tracker import OverlapTrack
 
 S = TypeVar("S")
 """Type of a detection's (and a track's) state under one measure."""

@@ -1,25 +1,6 @@
 """An appearance-free track life cycle: Hungarian matching on an overlap measure.
 
-:class:`OverlapTracker` is the engine of the ``iou`` baseline (SORT-style, without a Kalman
-filter). Per frame:
-
-1. Match the tracks' predicted states to the detections with the Hungarian algorithm on the
-   measure's overlap (box IoU, mask IoU or OKS,
-   :mod:`~unitrack_env.agents.primitives.overlap`); a pair is kept when its overlap is at
-   least ``threshold``.
-2. Tracks left unmatched count one more lost frame.
-3. An unmatched detection that overlaps a matched one by at least ``duplicate_threshold`` is
-   a duplicate and starts no track; every other unmatched detection starts one.
-4. Tracks lost more than ``round(max_lost_seconds * frame_rate)`` frames (at least 1) are
-   dropped.
-5. The tracks matched or born in this frame are reported once they have ``min_hits``
-   matches (during the first ``min_hits`` frames of an episode every one of them is).
-
-It differs from :class:`~unitrack_env.agents.primitives.association.Associator` with
-``similarity=None`` on purpose (that engine keeps a Kalman filter, tentative tracks that
-must be confirmed on the next frame, and removes duplicates among tracks rather than
-detections); this one is the baseline's own, simpler life cycle, shared by its three
-observation formats.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -31,7 +12,7 @@ from typing import Generic
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from unitrack_env.agents.primitives.overlap import OverlapMeasure, S
+from .overlap import OverlapMeasure, S
 
 
 @dataclass(eq=False)

@@ -1,20 +1,6 @@
 """RoIAlign in pure, vectorised torch (no torchvision).
 
-RoIAlign (He et al., "Mask R-CNN", ICCV 2017) pools a fixed ``output_size`` grid of
-features from an arbitrary box by averaging bilinear samples inside each bin. This module
-follows the semantics of torchvision's ``roi_align`` operator exactly:
-
-* with ``aligned=True`` a box coordinate ``u`` (continuous, pixel ``i`` spanning
-  ``[i, i + 1)``) is shifted by -0.5 to index space, so that pixel centres sit on integers;
-  with ``aligned=False`` there is no shift and boxes are at least 1 x 1;
-* each bin averages ``grid_h x grid_w`` regularly spaced samples, ``grid = sampling_ratio``
-  when positive, else ``ceil(box_size / output_size)`` per box (adaptive);
-* a sample more than one pixel outside the map contributes 0 (but still counts in the
-  average); samples in ``[-1, 0)`` are clamped to 0 and samples past the last row/column
-  use the border value.
-
-UniTrack (code facts, "Association") pools each detection box from the stride-8 feature
-map into a tall 10 x 4 grid, giving 40 location features per box.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -8,18 +8,7 @@ similarity matrix (float64 numpy, higher = more alike; the association cost is
 return ``(N, 0)`` / ``(0, M)`` arrays for empty inputs. By default every location feature is
 L2-normalised first (``normalize=True``), as UniTrack does before computing RSM.
 
-Metrics (UniTrack, Wang et al., NeurIPS 2021):
-
-* ``"rsm"`` -- Reconstruction Similarity Metric, section 2.4, eq. (rsm); see :func:`rsm`.
-* ``"cf"`` -- Center Feature, appendix D: cosine of the point feature at each object's
-  centre of mass; see :func:`center_feature_similarity`.
-* ``"gf"`` -- Global Feature, appendix D: cosine of the concatenation of all point features
-  (equal sizes only); see :func:`global_feature_similarity`.
-* ``"gpf"`` -- Global-Pooled Feature, appendix D: cosine of the average of the point
-  features; see :func:`global_pooled_feature_similarity`.
-
-:data:`SIMILARITIES` maps these names to the functions; an unknown name raises a
-``KeyError`` that lists the valid ones.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

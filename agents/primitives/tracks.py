@@ -8,7 +8,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from unitrack_env.agents.primitives.kalman import xyah_to_xywh
+from .kalman import xyah_to_xywh
 
 P = TypeVar("P")
 """Type of the per-observation payload (opaque to the engine)."""

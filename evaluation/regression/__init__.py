@@ -22,7 +22,7 @@ def __getattr__(name: str) -> Any:
     # Lazy: the pytest plugin (a submodule) loads in every pytest session of the environment
     # and must not import the environments and agents until a test uses them.
     if name in __all__:
-        from unitrack_env.evaluation.regression import golden
+        from . import golden
 
         return getattr(golden, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -13,12 +13,11 @@ from typing import Any
 import gymnasium as gym
 
 import unitrack_env
-from unitrack_env.agents import make_agent
-from unitrack_env.agents.base import close_agent
-from unitrack_env.benchmarks import Benchmark, benchmark_for
-from unitrack_env.evaluation.episode import play_episode
-from unitrack_env.evaluation.identity import option_changes
+from unitrack_env.agents.base import close_agent, make_agent
 from unitrack_env.io import atomic_write_text
+
+from ..episode import play_episode
+from ..identity import option_changes
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
 DEFAULT_TOLERANCE = 1e-6
@@ -68,8 +67,8 @@ def record_episode(
 ) -> EpisodeRecord:
     """Play one episode and return its record.
 
-    The metrics are the env's final ``info``; the action digest is the id's benchmark's digest
-    of the recorded results (an id outside the registration table: the env's own digest).
+    The metrics are the env's final ``info``; the action digest is the env's benchmark's
+    digest of the recorded results.
     """
     unitrack_env.register_all()
     env_kwargs = dict(env_kwargs or {})
@@ -77,7 +76,7 @@ def record_episode(
     env = gym.make(env_id, **env_kwargs)
     tracker = make_agent(agent, **agent_kwargs)
     try:
-        bench = _benchmark(env_id, env_kwargs)
+        bench = getattr(env.unwrapped, "scoring", None)
         record, info = play_episode(env, tracker, sequence, benchmark=bench)
     finally:
         close_agent(tracker)
@@ -92,15 +91,6 @@ def record_episode(
         agent_kwargs=json.loads(json.dumps(agent_kwargs, default=str)),
         env_kwargs=json.loads(json.dumps(stored_kwargs, default=str)),
     )
-
-
-def _benchmark(env_id: str, env_kwargs: dict[str, Any]) -> Benchmark | None:
-    """The benchmark of a registered id with a ``scoring`` row, else None."""
-    try:
-        row = unitrack_env.variant(env_id)
-    except KeyError:
-        return None
-    return benchmark_for(row, **env_kwargs) if row.scoring else None
 
 
 def metric_tolerance(tolerance: float | dict[str, float], name: str) -> float:

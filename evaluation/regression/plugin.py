@@ -47,8 +47,9 @@ class EpisodeRegression:
         root is missing, so a clone without the benchmark data passes.
         """
         __tracebackhide__ = True
-        from unitrack_env.envs.base import DataRootNotFound
-        from unitrack_env.evaluation.regression.golden import GoldenMismatch, check_episode
+        from unitrack_env.roots import DataRootNotFound
+
+        from .golden import GoldenMismatch, check_episode
 
         try:
             return check_episode(env_id, agent, sequence, self.golden_path(golden),

@@ -6,13 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from unitrack_env.agents.primitives.association import (
-    AssociationConfig,
-    Associator,
-    TrackState,
-)
+from unitrack_env.agents.primitives.association import Associator
+from unitrack_env.agents.primitives.association_config import AssociationConfig
 from unitrack_env.agents.primitives.kalman import CHI2_95_4DOF
 from unitrack_env.agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
+from unitrack_env.agents.primitives.tracks import TrackState
 
 RED = np.array([1.0, 0.0, 0.0])
 GREEN = np.array([0.0, 1.0, 0.0])
@@ -287,7 +285,7 @@ def test_appearance_keeps_ids_where_iou_only_swaps(use_motion: bool) -> None:
 
 # ---------------------------------------------------------------------- issue 11 knobs
 def test_reported_box_is_the_detection_by_default_in_mot_but_filtered_in_the_paper() -> None:
-    from unitrack_env.agents.primitives.association import MOT_ASSOCIATION
+    from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION
 
     paper = Associator(dot_similarity)
     assert paper.config.report_filtered_box  # authors' code: the Kalman state

@@ -24,6 +24,7 @@ from unitrack_env.agents.appearance import (
     resolve_cache,
     track_cache_run,
 )
+from unitrack_env.agents.appearance import cache_config as cc
 from unitrack_env.agents.appearance import feature_cache as fc
 
 KEY = CacheKey(model="abc123", input_size=(16, 24), content=content_key(np.zeros(3, np.uint8)))
@@ -59,7 +60,7 @@ def test_miss_then_hit(tmp_path: Path) -> None:
     first = cache.get_or_compute(KEY, compute)
     second = cache.get_or_compute(KEY, compute)
     assert compute.calls == 1 and (cache.stats.misses, cache.stats.hits) == (1, 1)
-    assert (cache.misses, cache.hits, cache.recomputed) == (1, 1, 0)
+    assert (cache.stats.misses, cache.stats.hits, cache.stats.corrupt) == (1, 1, 0)
     assert first.dtype == torch.float32 and first.shape == SHAPE
     torch.testing.assert_close(first, second)  # same values warm or cold
     np.testing.assert_allclose(first.numpy(), _features(), rtol=1e-3, atol=1e-3)  # float16
@@ -85,7 +86,7 @@ def test_other_keys_miss(tmp_path: Path) -> None:
         CacheKey(KEY.model, KEY.input_size, content_key(np.ones(3, np.uint8))),
     ):
         cache.get_or_compute(other, compute)
-    assert compute.calls == 4 and cache.hits == 0
+    assert compute.calls == 4 and cache.stats.hits == 0
     # Another dtype is another entry folder, never a corrupt entry.
     exact = FeatureCache(tmp_path, dtype=np.float32)
     with warnings.catch_warnings():
@@ -132,7 +133,7 @@ def test_corrupt_entries_are_reported_once_and_recomputed(tmp_path: Path, damage
         np.save(path, np.array([{"a": 1}], dtype=object), allow_pickle=True)
     with pytest.warns(FeatureCacheWarning, match=path.name):
         again = cache.get_or_compute(KEY, compute, expected_shape=SHAPE)
-    assert compute.calls == 2 and cache.recomputed == 1
+    assert compute.calls == 2 and cache.stats.corrupt == 1
     np.testing.assert_allclose(again.numpy(), _features(), rtol=1e-3, atol=1e-3)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # repaired in place: no further warning
@@ -215,7 +216,7 @@ def test_default_folder_and_switches(tmp_path: Path, monkeypatch: pytest.MonkeyP
     assert default_cache_dir() == tmp_path / "feats"
     cache = resolve_cache(True)
     assert cache is not None and cache.root == tmp_path / "feats"
-    assert cache.max_size == fc.DEFAULT_MAX_SIZE == 10 * 2**30
+    assert cache.max_size == cc.DEFAULT_MAX_SIZE == 10 * 2**30
     assert resolve_cache(False) is None and resolve_cache(None) is None
     assert resolve_cache("off") is None
     assert resolve_cache(tmp_path / "x", max_size="1MiB").max_size == 2**20
@@ -234,19 +235,19 @@ def test_default_folder_and_switches(tmp_path: Path, monkeypatch: pytest.MonkeyP
 
 
 def test_sizes(monkeypatch: pytest.MonkeyPatch) -> None:
-    assert fc.parse_size("10GiB") == 10 * 2**30 == fc.parse_size("10G") == fc.parse_size("10 gib")
-    assert fc.parse_size("500MB") == 500 * 10**6
-    assert fc.parse_size("1.5k") == 1536 and fc.parse_size(123) == 123 == fc.parse_size("123")
+    assert cc.parse_size("10GiB") == 10 * 2**30 == cc.parse_size("10G") == cc.parse_size("10 gib")
+    assert cc.parse_size("500MB") == 500 * 10**6
+    assert cc.parse_size("1.5k") == 1536 and cc.parse_size(123) == 123 == cc.parse_size("123")
     for bad in ("ten", "5 parsecs", "-1", "1e3"):
         with pytest.raises(ValueError, match="size"):
-            fc.parse_size(bad)
-    assert fc.format_size(512) == "512 B" and fc.format_size(1536) == "1.5 KiB"
-    assert fc.format_size(3 * 2**30) == "3.0 GiB"
-    monkeypatch.setenv(fc.CACHE_MAX_ENV, "2MiB")
-    assert fc.default_max_size() == 2 * 2**20
-    monkeypatch.setenv(fc.CACHE_MAX_ENV, "lots")
-    with pytest.raises(ValueError, match=fc.CACHE_MAX_ENV):
-        fc.default_max_size()
+            cc.parse_size(bad)
+    assert cc.format_size(512) == "512 B" and cc.format_size(1536) == "1.5 KiB"
+    assert cc.format_size(3 * 2**30) == "3.0 GiB"
+    monkeypatch.setenv(cc.CACHE_MAX_ENV, "2MiB")
+    assert cc.default_max_size() == 2 * 2**20
+    monkeypatch.setenv(cc.CACHE_MAX_ENV, "lots")
+    with pytest.raises(ValueError, match=cc.CACHE_MAX_ENV):
+        cc.default_max_size()
 
 
 def test_the_test_suite_never_writes_to_the_user_cache() -> None:
@@ -359,7 +360,7 @@ def test_four_writer_processes_on_the_same_frames(tmp_path: Path, capped: bool) 
     entry = FeatureCache(tmp_path / "probe").put(_key(0), _writer_value(0))
     entry_bytes = FeatureCache(tmp_path / "probe").path(_key(0)).stat().st_size
     assert entry.nbytes < entry_bytes
-    max_size = 10 * entry_bytes if capped else fc.DEFAULT_MAX_SIZE
+    max_size = 10 * entry_bytes if capped else cc.DEFAULT_MAX_SIZE
     root = tmp_path / "shared"
     results = _run_writers(root, n_keys, rounds, max_size)
     assert [r["wrong"] for r in results] == [0, 0, 0, 0]  # never a partial or foreign entry
@@ -450,7 +451,7 @@ def test_cached_model_runs_the_backbone_only_on_misses(tmp_path: Path) -> None:
     # Another model (different weights) does not see these entries.
     other = CachedAppearanceModel(AppearanceModel("random", seed=1), tmp_path)
     other.features(frames[:1])
-    assert other.cache.misses == 1 and other.cache.hits == 0
+    assert other.cache.stats.misses == 1 and other.cache.stats.hits == 0
     with pytest.raises(ValueError, match="keys"):
         cached.features(frames, keys=["ab"])
     assert cached.describe()["cache"] == str(tmp_path)
@@ -464,9 +465,9 @@ def test_the_same_frame_in_two_sequences_is_one_entry(tmp_path: Path) -> None:
     b = np.full((64, 64, 3), 200, np.uint8)
     first = cached.features(a)
     other = cached.features(b)
-    assert cached.cache.misses == 2 and not torch.allclose(first, other)
+    assert cached.cache.stats.misses == 2 and not torch.allclose(first, other)
     again = cached.features(a.copy())  # e.g. MOT17-02-DPM after MOT17-02-FRCNN
-    assert cached.cache.hits == 1 and torch.equal(again, first)
+    assert cached.cache.stats.hits == 1 and torch.equal(again, first)
     assert len(_entries(tmp_path)) == 2
 
 

@@ -135,7 +135,7 @@ def test_an_installed_package_already_imported_is_named_when_it_hides_the_users(
 @pytest.mark.parametrize(("spec", "message"), [
     ("no_such_module_xyz:Tracker", "cannot import module 'no_such_module_xyz'"),
     ("unitrack_env.agents.baselines.iou:Nope", "has no attribute 'Nope'"),
-    ("unitrack_env.agents.baselines.iou:DEFAULT_MAX_TRACKS", "is not a class"),
+    ("unitrack_env.envs.motchallenge:DEFAULT_MAX_TRACKS", "is not a class"),
     ("unitrack_env.spaces:Image", r"no reset\(observation, info\)"),
     ("/nonexistent/file.py:Tracker", "does not exist"),
 ])

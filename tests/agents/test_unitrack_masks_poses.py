@@ -19,13 +19,10 @@ import torch
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel
-from unitrack_env.agents.baselines.iou import IoUAgent, object_keypoint_similarity
-from unitrack_env.agents.heads.association import (
-    TASK_DEFAULTS,
-    UniTrackAgent,
-    detect_task,
-)
-from unitrack_env.agents.heads.mot import UniTrackMOTAgent
+from unitrack_env.agents.baselines.iou import IoUAgent
+from unitrack_env.agents.heads.association import UniTrackAgent
+from unitrack_env.agents.heads.unitrack_config import TASK_DEFAULTS
+from unitrack_env.agents.primitives.adapters import detect_task
 from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
 from unitrack_env.agents.primitives.mask_features import (
@@ -37,6 +34,7 @@ from unitrack_env.agents.primitives.mask_features import (
     mask_to_box,
     pose_to_mask,
 )
+from unitrack_env.agents.primitives.overlap import object_keypoint_similarity
 from unitrack_env.agents.primitives.roi_align import roi_align
 from unitrack_env.agents.primitives.similarity import rsm
 from unitrack_env.spaces import unpack_mask_ids, unpack_pose_tracks
@@ -248,7 +246,7 @@ def test_task_detection_and_defaults(model: AppearanceModel) -> None:
     with pytest.raises(ValueError, match="task="):
         detect_task({"frame": 0})
     agent = make_agent("unitrack", appearance_model=model)
-    assert isinstance(agent, UniTrackAgent) and UniTrackMOTAgent is UniTrackAgent
+    assert isinstance(agent, UniTrackAgent)
     assert set(agent.tasks) == {"mot", "mots", "vis", "posetrack"}
     cfg = agent.associator.config  # MOT until an observation says otherwise
     assert (cfg.gate_threshold, cfg.output_min_area, cfg.confirm_iou_threshold) == \

@@ -12,7 +12,7 @@ import pytest
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel
-from unitrack_env.agents.heads.mot import UniTrackMOTAgent
+from unitrack_env.agents.heads.association import UniTrackAgent
 from unitrack_env.spaces import unpack_tracks
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
@@ -51,12 +51,12 @@ def observation(frame: np.ndarray, boxes: list[list[float]], scores: list[float]
 
 def test_registered_under_unitrack(model: AppearanceModel) -> None:
     agent = make_agent("unitrack", appearance_model=model, **ONE)
-    assert isinstance(agent, UniTrackMOTAgent)
+    assert isinstance(agent, UniTrackAgent)
     assert agent.associator.config.output_min_area == 200.0
 
 
 def test_empty_frames_and_filtered_detections(model: AppearanceModel) -> None:
-    agent = UniTrackMOTAgent(max_tracks=8, appearance_model=model, input_size=HALF_SIZE,
+    agent = UniTrackAgent(max_tracks=8, appearance_model=model, input_size=HALF_SIZE,
                              min_score=0.3, **ONE)
     rng = np.random.default_rng(0)
     frame = rng.integers(0, 255, (240, 320, 3), dtype=np.uint8)
@@ -77,18 +77,18 @@ def test_empty_frames_and_filtered_detections(model: AppearanceModel) -> None:
 
 def test_options_are_validated(model: AppearanceModel) -> None:
     with pytest.raises(KeyError, match="rsm"):
-        UniTrackMOTAgent(appearance_model=model, similarity="nope")
+        UniTrackAgent(appearance_model=model, similarity="nope")
     with pytest.raises(TypeError, match="valid options"):
-        UniTrackMOTAgent(appearance_model=model, simlarity="rsm")
-    agent = UniTrackMOTAgent(appearance_model=model, association={"appearance_weight": 0.98})
+        UniTrackAgent(appearance_model=model, simlarity="rsm")
+    agent = UniTrackAgent(appearance_model=model, association={"appearance_weight": 0.98})
     assert agent.associator.config.appearance_weight == 0.98
     with pytest.raises(TypeError, match="valid fields"):
-        UniTrackMOTAgent(appearance_model=model, association={"lamda": 0.98})
+        UniTrackAgent(appearance_model=model, association={"lamda": 0.98})
 
 
 @pytest.mark.parametrize("similarity", ["cf", "gf", "gpf"])
 def test_baseline_similarities_run(model: AppearanceModel, similarity: str) -> None:
-    agent = UniTrackMOTAgent(max_tracks=8, appearance_model=model, similarity=similarity,
+    agent = UniTrackAgent(max_tracks=8, appearance_model=model, similarity=similarity,
                              input_size=HALF_SIZE, **ONE)
     frame = np.full((240, 320, 3), 90, np.uint8)
     frame[30:110, 20:50] = (200, 30, 30)
@@ -106,7 +106,7 @@ def test_feature_cache_gives_identical_actions(model: AppearanceModel, tmp_path:
     sequence = env.unwrapped.sequence_names[0]
     runs = []
     for _ in range(2):
-        agent = UniTrackMOTAgent(appearance_model=model, input_size=(272, 152),
+        agent = UniTrackAgent(appearance_model=model, input_size=(272, 152),
                                  feature_cache=tmp_path, **ONE)
         obs, info = env.reset(options={"sequence": sequence})
         agent.reset(obs, info)
@@ -117,7 +117,7 @@ def test_feature_cache_gives_identical_actions(model: AppearanceModel, tmp_path:
             obs, *_ = env.step(action)
         runs.append(actions)
     cache = agent.model.cache
-    assert cache.hits == 5 and cache.misses == 0  # the second agent read every frame
+    assert cache.stats.hits == 5 and cache.stats.misses == 0  # the second agent read every frame
     for a, b in zip(*runs, strict=True):
         np.testing.assert_array_equal(a["ids"], b["ids"])
         np.testing.assert_array_equal(a["boxes"], b["boxes"])
@@ -231,8 +231,8 @@ def test_hard_synthetic_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path
 def test_mot_defaults_are_the_paper_plus_documented_departures() -> None:
     from dataclasses import replace
 
-    from unitrack_env.agents.heads.association import UniTrackConfig
-    from unitrack_env.agents.primitives.association import MOT_ASSOCIATION, AssociationConfig
+    from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
+    from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION, AssociationConfig
 
     paper = UniTrackConfig(paper_settings=True).association_config("mot")
     default = UniTrackConfig().association_config("mot")

@@ -79,7 +79,7 @@ def _error_type(name: str) -> type[BaseException]:
     if name == "CLIFailed":
         return CLIFailed
     if name == "CheckpointError":
-        from unitrack_env.agents.appearance.checkpoints import CheckpointError
+        from unitrack_env.errors import CheckpointError
 
         return CheckpointError
     return {"ValueError": ValueError, "TypeError": TypeError, "KeyError": KeyError}[name]

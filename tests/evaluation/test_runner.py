@@ -12,7 +12,7 @@ import pytest
 
 from unitrack_env.evaluation.cli import main
 from unitrack_env.evaluation.runner import run
-from unitrack_env.metrics.motchallenge import read_result_file
+from unitrack_env.metrics.mot_results import read_result_file
 
 ENV = "UniTrack/MOT16-v0"
 

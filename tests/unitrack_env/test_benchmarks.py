@@ -35,7 +35,7 @@ def _results(env) -> object:
     """What the environment recorded in the episode (JHMDB names it predictions)."""
     if hasattr(env, "episode_results"):
         return env.episode_results()
-    return env.episode_predictions()
+    return env.episode_results()
 
 
 def _same(a: dict, b: dict) -> None:

@@ -14,7 +14,7 @@ from PIL import Image as PILImage
 import unitrack_env
 from unitrack_env.datasets.davis import DAVIS_PALETTE, DAVISDataset, read_label_png
 from unitrack_env.datasets.synthetic import davis as synthetic_davis
-from unitrack_env.datasets.synthetic.scene import SceneConfig
+from unitrack_env.datasets.synthetic.scene_model import SceneConfig
 from unitrack_env.envs.davis import DAVISEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.metrics.vos import evaluate_vos_sequence

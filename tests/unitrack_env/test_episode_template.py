@@ -29,7 +29,7 @@ class _DotBenchmark(Benchmark):
     columns = ("Error",)
 
     @classmethod
-    def from_kwargs(cls, **_):
+    def build(cls):
         return cls(_Dots())
 
     @property
@@ -59,12 +59,12 @@ class _DotBenchmark(Benchmark):
         return ScoreReport("Dots", per, {}, per)
 
 
-class DotEnv(SequenceEnv, task="dot"):
+class DotEnv(SequenceEnv):
     """A toy task written against the template: only hooks, no reset/step."""
 
     def __init__(self, **options):
         super().__init__(**options)
-        self.scoring = _DotBenchmark.from_kwargs()
+        self.scoring = _DotBenchmark.build()
         self.sequence_names = self.scoring.sequence_names
         self.observation_space = spaces.Dict({"point": spaces.Box(-1e4, 1e4, (2,), np.float32)})
         self.action_space = spaces.Box(-1e4, 1e4, (2,), np.float32)
@@ -181,21 +181,6 @@ def test_terminal_observation_repeats_the_last_one_with_fresh_arrays(env_id):
 
 def test_toy_env_passes_check_env():
     check_env(_toy(), skip_render_check=True)
-
-
-@pytest.mark.parametrize(("module", "names"), [
-    ("unitrack_env.envs.mots", ["draw_masks", "MASK_ALPHA"]),
-    ("unitrack_env.envs.jhmdb", ["draw_skeleton", "joint_colours", "pose_mat_bytes",
-                                 "RESULT_FILE"]),
-    ("unitrack_env.envs.davis", ["overlay_labels", "OVERLAY_ALPHA"]),
-    ("unitrack_env.envs.otb", ["format_otb_results"]),
-    ("unitrack_env.envs.motchallenge", ["format_mot_results", "RESULT_FORMAT"]),
-    ("unitrack_env.envs.base", ["resolve_root", "DataRootNotFound", "DATA_ENV_VAR"]),
-])
-def test_moved_names_stay_importable(module, names):
-    loaded = importlib.import_module(module)
-    for name in names:
-        assert hasattr(loaded, name), f"{module}.{name}"
 
 
 def test_envs_do_not_import_each_other():

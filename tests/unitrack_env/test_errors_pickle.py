@@ -7,13 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from unitrack_env.agents.appearance.checkpoints import CheckpointError as ReExported
 from unitrack_env.errors import (
     CheckpointError,
     DataFormatError,
     InvalidActionError,
     UnknownSequenceError,
 )
+from unitrack_env.errors import CheckpointError as ReExported
 
 
 @pytest.mark.parametrize("error", [

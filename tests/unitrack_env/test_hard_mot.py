@@ -18,7 +18,8 @@ from unitrack_env.datasets.synthetic.hard_mot import (
     write_hard_motchallenge,
 )
 from unitrack_env.datasets.synthetic.motchallenge import SequenceSpec
-from unitrack_env.datasets.synthetic.scene import ObjectRole, SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 
 def _tiny(camera: CameraMotion | None = None, lookalikes: int = 2) -> HardSequenceSpec:

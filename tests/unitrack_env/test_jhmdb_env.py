@@ -140,7 +140,7 @@ def test_invalid_actions_raise(action):
     env.reset(seed=0)
     with pytest.raises(InvalidActionError):
         env.step(action)
-    assert env.unwrapped.episode_predictions().shape == (0, 15, 2)
+    assert env.unwrapped.episode_results().shape == (0, 15, 2)
     env.close()
 
 

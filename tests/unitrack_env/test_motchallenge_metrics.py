@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from unitrack_env.errors import DataFormatError
+from unitrack_env.metrics.mot_results import read_result_file
 from unitrack_env.metrics.motchallenge import (
     SequenceScore,
     combine_sequence_scores,
     combine_sequences,
-    read_result_file,
     score_sequence,
 )
 

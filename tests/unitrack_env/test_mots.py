@@ -9,17 +9,15 @@ import numpy as np
 import pytest
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from unitrack_env.datasets.mots import (
+from unitrack_env.datasets.mots import MOTSDataset
+from unitrack_env.datasets.mots_format import (
     MaskAnnotations,
-    MOTSDataset,
-    decode_masks,
-    encode_masks,
     format_instances_txt,
     parse_instances_txt,
     read_instances_png,
-    resolve_overlaps,
     write_instances_png,
 )
+from unitrack_env.datasets.rle import decode_masks, encode_masks, resolve_overlaps
 from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.synthetic import ensure_synthetic
 from unitrack_env.errors import DataFormatError, InvalidActionError

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 import unitrack_env
-from unitrack_env.datasets.otb import OTBDataset, read_box_file
-from unitrack_env.envs.otb import ACTION_COLOUR, OTBEnv, format_otb_results
+from unitrack_env.benchmarks.otb import format_otb_results
+from unitrack_env.datasets.otb import OTBDataset
+from unitrack_env.datasets.sot import read_box_file
+from unitrack_env.envs.otb import ACTION_COLOUR, OTBEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError, UnknownSequenceError
 from unitrack_env.metrics.sot import evaluate_sot_sequence, overlap_per_frame
 

@@ -9,30 +9,30 @@ import numpy as np
 import pytest
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from unitrack_env.datasets.posetrack import (
-    NUM_KEYPOINTS,
-    POSETRACK_KEYPOINTS,
-    PoseTrackDataset,
-    PoseTrackImage,
-    PoseTrackPerson,
-    PoseTrackVideo,
+from unitrack_env.datasets.posetrack import PoseTrackDataset
+from unitrack_env.datasets.posetrack_json import (
     parse_posetrack,
     read_posetrack_json,
     video_to_json,
     write_posetrack_json,
 )
+from unitrack_env.datasets.posetrack_records import (
+    NUM_KEYPOINTS,
+    POSETRACK_KEYPOINTS,
+    PoseTrackImage,
+    PoseTrackPerson,
+    PoseTrackVideo,
+)
 from unitrack_env.datasets.synthetic.posetrack import labeled_frames
 from unitrack_env.errors import DataFormatError, InvalidActionError
 from unitrack_env.metrics.posetrack import (
-    NUM_JOINTS,
-    POSEVAL_JOINTS,
-    ClearAccumulator,
-    PoseFrame,
     PosevalSequence,
     SequenceCounts,
     evaluate_video,
     summarise,
 )
+from unitrack_env.metrics.posetrack_frames import NUM_JOINTS, POSEVAL_JOINTS, PoseFrame
+from unitrack_env.metrics.posetrack_joint import ClearAccumulator
 from unitrack_env.spaces import pack_pose_tracks, unpack_poses
 
 HEAD = np.array([[0.0, 0.0, 30.0, 40.0]])  # diagonal 50 -> head size 30 -> threshold 15 px

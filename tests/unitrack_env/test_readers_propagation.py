@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from unitrack_env.datasets import davis, jhmdb, otb
+from unitrack_env.datasets import davis, jhmdb, lasot, otb
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
 DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
@@ -161,7 +161,7 @@ def test_lasot_reader(tmp_path):
     (seq / "out_of_view.txt").write_text("0,0,1")
     split = tmp_path / "testing_set.txt"
     split.write_text("airplane-1\n")
-    ds = otb.LaSOTDataset(tmp_path, split_file=split)
+    ds = lasot.LaSOTDataset(tmp_path, split_file=split)
     s = ds.load("airplane-1")
     assert s.benchmark == "LaSOT" and s.num_frames == 3
     assert s.absent.tolist() == [False, True, True]
@@ -178,9 +178,9 @@ def test_got10k_reader(tmp_path):
     test = tmp_path / "test" / "GOT-10k_Test_000001"
     _images(test, range(1, 4), digits=8)
     (test / "groundtruth.txt").write_text("1,2,3,4\n")
-    s = otb.GOT10kDataset(tmp_path, "val").load("GOT-10k_Val_000001")
+    s = lasot.GOT10kDataset(tmp_path, "val").load("GOT-10k_Val_000001")
     assert s.absent.tolist() == [False, False, True] and s.has_ground_truth
-    t = otb.GOT10kDataset(tmp_path, "test").load("GOT-10k_Test_000001")
+    t = lasot.GOT10kDataset(tmp_path, "test").load("GOT-10k_Test_000001")
     assert t.num_frames == 3 and not t.has_ground_truth
     assert t.init_box.tolist() == [1, 2, 3, 4] and np.isnan(t.boxes[1:]).all()
 

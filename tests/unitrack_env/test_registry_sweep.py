@@ -121,7 +121,7 @@ def test_async_vector_env_with_shared_memory(env_id):
 
 @pytest.mark.parametrize("env_id", [i for i in ALL_IDS if unitrack_env.variant(i).folder])
 def test_registered_data_folder_is_the_one_the_env_reads(env_id, tmp_path, monkeypatch):
-    from unitrack_env.envs.base import DataRootNotFound
+    from unitrack_env.roots import DataRootNotFound
 
     monkeypatch.setenv("UNITRACK_DATA", str(tmp_path))
     with pytest.raises(DataRootNotFound) as missing:

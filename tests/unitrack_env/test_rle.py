@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from unitrack_env.datasets.mots import check_rle, rle_runs
+from unitrack_env.datasets.rle import check_rle, rle_runs
 from unitrack_env.datasets.rle import mask_api as mask_utils
 
 

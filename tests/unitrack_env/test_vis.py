@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import unitrack_env  # noqa: F401  (registers the ids)
-from unitrack_env.datasets.mots import encode_masks
+from unitrack_env.datasets.rle import encode_masks
 from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.youtube_vis import (
     VisData,

@@ -8,6 +8,7 @@ table names each id's benchmark class (:attr:`unitrack_env.registration.Variant.
 from __future__ import annotations
 
 import importlib
+import inspect
 from typing import Any
 
 from unitrack_env.benchmarks.base import Benchmark
@@ -36,11 +37,13 @@ def benchmark_for(env_id: str | Variant, **env_kwargs: Any) -> Benchmark:
     """The benchmark of ``gym.make(env_id, **env_kwargs)``, without making the environment.
 
     The row's default arguments (e.g. MOT's ``benchmark=`` rule set) apply first, then
-    ``env_kwargs``; arguments that only concern playing (capacities, frame decoding,
-    rendering, ...) are ignored.
+    ``env_kwargs``; the benchmark's :meth:`~Benchmark.build` takes those its signature names
+    (arguments that only concern playing, such as capacities or rendering, are not).
     """
     row = env_id if isinstance(env_id, Variant) else variant(env_id)
-    return benchmark_class(row).from_kwargs(**{**row.kwargs, **env_kwargs})
+    cls = benchmark_class(row)
+    names = inspect.signature(cls.build).parameters
+    return cls.build(**{k: v for k, v in {**row.kwargs, **env_kwargs}.items() if k in names})
 
 
 def task_columns(task: str) -> tuple[str, ...]:

@@ -32,14 +32,36 @@ def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
 
     ``root`` wins, then ``$UNITRACK_DATA/<folder>``; otherwise the synthetic data set is
     built (once, cached) by :func:`unitrack_env.datasets.synthetic.ensure_synthetic` with
-    ``synthetic_args`` and ``synthetic_kwargs``, as the environments do.
+    ``synthetic_args`` and ``synthetic_kwargs``.
     """
     path = resolve_root(root, folder)
     if path is not None:
         return path, False
-    from unitrack_env.datasets.synthetic import ensure_synthetic
+    from unitrack_env.datasets.synthetic.cache import ensure_synthetic
 
     return Path(ensure_synthetic(*synthetic_args, **synthetic_kwargs)), True
+
+
+def select_sequences(requested: Iterable[str] | None, available: Iterable[str],
+                     where: object) -> list[str]:
+    """Validate a user's ``sequences=`` against the data set (None: all of them)."""
+    available = list(available)
+    if requested is None:
+        return available
+    requested = [requested] if isinstance(requested, str) else list(requested)
+    missing = [s for s in requested if s not in available]
+    if missing:
+        raise ValueError(
+            f"sequences {missing} are not in {where}; available: {', '.join(available)}")
+    return requested
+
+
+def one_of(label: str, value: str, valid: Iterable[str]) -> str:
+    """``value`` if it is one of ``valid`` (e.g. a rule set), else a ValueError naming them."""
+    valid = list(valid)
+    if value not in valid:
+        raise ValueError(f"unknown {label} '{value}'; valid: {valid}")
+    return value
 
 
 #: A sequence record type of a data set reader.
@@ -59,12 +81,14 @@ def text_digest(text: str) -> str:
 class Benchmark(ABC):
     """One task's evaluation: ground-truth facts, official result files, folder scoring.
 
-    Subclasses set :attr:`task` and :attr:`columns` and implement the abstract methods;
-    :meth:`from_kwargs` builds one from an environment's keyword arguments (``root``,
-    ``split``, the rule set, ...; arguments that only concern playing are ignored).
+    Subclasses set :attr:`task` and :attr:`columns` and implement the abstract methods.
+    :meth:`build` is the task's one builder: its environment builds its benchmark with it
+    (and reads its data set from it), and :func:`unitrack_env.benchmarks.benchmark_for`
+    passes it the environment arguments its signature names.
 
     Attributes:
         dataset: the data set reader whose ground truth is scored against.
+        synthetic: whether the data set is the embedded synthetic default.
     """
 
     #: The task family (``"mot"``, ``"vos"``, ...), as in the registration table.
@@ -72,8 +96,9 @@ class Benchmark(ABC):
     #: Result columns of tables (the metrics' official names), most important first.
     columns: ClassVar[tuple[str, ...]] = ()
 
-    def __init__(self, dataset: Any) -> None:
+    def __init__(self, dataset: Any, *, synthetic: bool = False) -> None:
         self.dataset = dataset
+        self.synthetic = synthetic
         self._loaded: dict[str, Any] = {}
 
     def _load_once(self, name: str, read: Callable[[str], SequenceT]) -> SequenceT:
@@ -84,8 +109,11 @@ class Benchmark(ABC):
 
     @classmethod
     @abstractmethod
-    def from_kwargs(cls, **env_kwargs: Any) -> Benchmark:
-        """Build the benchmark of an environment made with ``env_kwargs``."""
+    def build(cls, *args: Any, **kwargs: Any) -> Benchmark:
+        """Build the benchmark: resolve the data root and read the data set.
+
+        Its named parameters are the environment's data arguments (``root``, ``split``, ...).
+        """
 
     @property
     @abstractmethod

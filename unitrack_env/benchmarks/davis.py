@@ -5,7 +5,6 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -37,12 +36,11 @@ class DAVISBenchmark(Benchmark):
     columns = ("J&F-Mean", "J-Mean", "F-Mean", "J-Recall", "F-Recall", "J-Decay", "F-Decay")
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, split: str | None = "val",
-                    resolution: str = "480p", year: str = "2017",
-                    **_: Any) -> DAVISBenchmark:
+    def build(cls, root: str | os.PathLike | None = None, split: str | None = "val",
+              resolution: str = "480p", year: str = "2017") -> DAVISBenchmark:
         """The benchmark of ``DAVISEnv(root=, split=, resolution=, year=)``."""
-        path, _synthetic = data_root(root, BENCHMARK_FOLDER, BENCHMARK, "davis")
-        return cls(DAVISDataset(path, split, resolution, year))
+        path, synthetic = data_root(root, BENCHMARK_FOLDER, BENCHMARK, "davis")
+        return cls(DAVISDataset(path, split, resolution, year), synthetic=synthetic)
 
     @property
     def name(self) -> str:

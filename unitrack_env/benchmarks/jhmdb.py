@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -37,22 +36,23 @@ class JHMDBBenchmark(Benchmark):
     columns = ("PCK@0.1", "PCK@0.2")
 
     def __init__(self, dataset: JHMDBDataset, normaliser: str = "box_diagonal",
-                 thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS) -> None:
-        super().__init__(dataset)
+                 thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS, *,
+                 synthetic: bool = False) -> None:
+        super().__init__(dataset, synthetic=synthetic)
         if normaliser not in NORMALISERS:
             raise ValueError(f"normaliser must be one of {NORMALISERS}; got {normaliser!r}")
         self.normaliser = normaliser
         self.thresholds = tuple(float(t) for t in thresholds)
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, split: str | None = None,
-                    split_index: int = 1, split_dir: str | os.PathLike | None = None,
-                    normaliser: str = "box_diagonal",
-                    thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS,
-                    **_: Any) -> JHMDBBenchmark:
+    def build(cls, root: str | os.PathLike | None = None, split: str | None = None,
+              split_index: int = 1, split_dir: str | os.PathLike | None = None,
+              normaliser: str = "box_diagonal",
+              thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS) -> JHMDBBenchmark:
         """The benchmark of ``JHMDBEnv(root=, split=, normaliser=, thresholds=, ...)``."""
-        path, _synthetic = data_root(root, "JHMDB", "JHMDB", kind="jhmdb")
-        return cls(JHMDBDataset(path, split, split_index, split_dir), normaliser, thresholds)
+        path, synthetic = data_root(root, "JHMDB", "JHMDB", kind="jhmdb")
+        return cls(JHMDBDataset(path, split, split_index, split_dir), normaliser, thresholds,
+                   synthetic=synthetic)
 
     @property
     def name(self) -> str:

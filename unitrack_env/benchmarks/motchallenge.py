@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
+from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
 from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import ScoreReport
@@ -47,14 +46,13 @@ class MOTChallengeBenchmark(Benchmark):
                "MT", "ML")
 
     @classmethod
-    def from_kwargs(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
-                    split: str = "train", detections: str | os.PathLike = "public",
-                    **_: Any) -> MOTChallengeBenchmark:
+    def build(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
+              split: str = "train", detections: str | os.PathLike = "public",
+              ) -> MOTChallengeBenchmark:
         """The benchmark of ``MOTChallengeEnv(benchmark=, root=, split=, detections=)``."""
-        if benchmark not in BENCHMARKS:
-            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
-        path, _synthetic = data_root(root, benchmark, benchmark)
-        return cls(MOTChallengeDataset(path, benchmark, split, detections))
+        one_of("benchmark", benchmark, sorted(BENCHMARKS))
+        path, synthetic = data_root(root, benchmark, benchmark)
+        return cls(MOTChallengeDataset(path, benchmark, split, detections), synthetic=synthetic)
 
     @property
     def name(self) -> str:
@@ -75,7 +73,7 @@ class MOTChallengeBenchmark(Benchmark):
 
     def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
         """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows."""
-        from unitrack_env.metrics.motchallenge import read_result_file
+        from unitrack_env.metrics.mot_results import read_result_file
 
         return read_result_file(Path(folder) / f"{sequence}.txt")
 

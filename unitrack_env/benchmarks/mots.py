@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
-from unitrack_env.benchmarks.base import Benchmark, data_root, text_digest
-from unitrack_env.datasets.mots import (
-    BENCHMARKS,
+from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, text_digest
+from unitrack_env.datasets.mots import BENCHMARKS, MOTSDataset
+from unitrack_env.datasets.mots_format import (
     CLASS_IDS,
     MaskAnnotations,
-    MOTSDataset,
     format_instances_txt,
     parse_instances_txt,
 )
@@ -36,8 +34,9 @@ class MOTSBenchmark(Benchmark):
     columns = ("HOTA", "sMOTSA", "IDF1", "IDSW", "DetA", "AssA", "MOTSA", "MOTSP", "CLR_FP",
                "CLR_FN")
 
-    def __init__(self, dataset: MOTSDataset, object_class: str = "pedestrian") -> None:
-        super().__init__(dataset)
+    def __init__(self, dataset: MOTSDataset, object_class: str = "pedestrian", *,
+                 synthetic: bool = False) -> None:
+        super().__init__(dataset, synthetic=synthetic)
         valid = ["pedestrian"] if dataset.benchmark == "MOTS20" else list(CLASS_IDS)
         if object_class not in valid:
             raise ValueError(f"object_class={object_class!r} is not a {dataset.benchmark} "
@@ -45,15 +44,14 @@ class MOTSBenchmark(Benchmark):
         self.object_class = object_class
 
     @classmethod
-    def from_kwargs(cls, benchmark: str = "MOTS20", root: str | os.PathLike | None = None,
-                    split: str | None = None, detections: str | os.PathLike = "public",
-                    object_class: str = "pedestrian", **_: Any) -> MOTSBenchmark:
+    def build(cls, benchmark: str = "MOTS20", root: str | os.PathLike | None = None,
+              split: str | None = None, detections: str | os.PathLike = "public",
+              object_class: str = "pedestrian") -> MOTSBenchmark:
         """The benchmark of ``MOTSEnv(benchmark=, root=, split=, object_class=)``."""
-        if benchmark not in BENCHMARKS:
-            raise ValueError(f"unknown benchmark '{benchmark}'; valid: {list(BENCHMARKS)}")
-        path, _synthetic = data_root(root, DATA_FOLDERS[benchmark], benchmark, kind="mots")
+        one_of("benchmark", benchmark, BENCHMARKS)
+        path, synthetic = data_root(root, DATA_FOLDERS[benchmark], benchmark, kind="mots")
         dataset = MOTSDataset(path, benchmark, split or DEFAULT_SPLITS[benchmark], detections)
-        return cls(dataset, object_class)
+        return cls(dataset, object_class, synthetic=synthetic)
 
     @property
     def name(self) -> str:

@@ -5,12 +5,12 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
-from unitrack_env.datasets.otb import OTBDataset, SOTSequence, read_box_file
+from unitrack_env.datasets.otb import OTBDataset
+from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import COMBINED, ScoreReport
@@ -44,10 +44,10 @@ class OTBBenchmark(Benchmark):
     columns = ("AUC", "Precision@20px", "AverageOverlap")
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, **_: Any) -> OTBBenchmark:
+    def build(cls, root: str | os.PathLike | None = None) -> OTBBenchmark:
         """The benchmark of ``OTBEnv(root=)``."""
-        path, _synthetic = data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
-        return cls(OTBDataset(path))
+        path, synthetic = data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
+        return cls(OTBDataset(path), synthetic=synthetic)
 
     @property
     def name(self) -> str:

@@ -5,19 +5,16 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root
-from unitrack_env.datasets.posetrack import (
-    PoseTrackDataset,
-    PoseTrackVideo,
-    read_posetrack_json,
-    write_posetrack_json,
-)
+from unitrack_env.datasets.posetrack import PoseTrackDataset
+from unitrack_env.datasets.posetrack_json import read_posetrack_json, write_posetrack_json
+from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.errors import DataFormatError
-from unitrack_env.metrics.posetrack import POSEVAL_DROPS_LAST_FRAME, evaluate_video, summarise
+from unitrack_env.metrics.posetrack import evaluate_video, summarise
+from unitrack_env.metrics.posetrack_frames import POSEVAL_DROPS_LAST_FRAME
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: Name of the rule set in score reports (and the data folder under ``$UNITRACK_DATA``).
@@ -36,17 +33,17 @@ class PoseTrackBenchmark(Benchmark):
     columns = ("MOTA", "IDF1", "IDSW", "MOTP", "Precision", "Recall")
 
     def __init__(self, dataset: PoseTrackDataset,
-                 drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME) -> None:
-        super().__init__(dataset)
+                 drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME, *,
+                 synthetic: bool = False) -> None:
+        super().__init__(dataset, synthetic=synthetic)
         self.drop_last_frame = bool(drop_last_frame)
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, split: str = "val",
-                    drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME,
-                    **_: Any) -> PoseTrackBenchmark:
+    def build(cls, root: str | os.PathLike | None = None, split: str = "val",
+              drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME) -> PoseTrackBenchmark:
         """The benchmark of ``PoseTrackEnv(root=, split=, drop_last_frame=)``."""
-        path, _synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
-        return cls(PoseTrackDataset(path, split), drop_last_frame)
+        path, synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="posetrack")
+        return cls(PoseTrackDataset(path, split), drop_last_frame, synthetic=synthetic)
 
     @property
     def name(self) -> str:

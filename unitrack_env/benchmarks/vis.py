@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, text_digest
 from unitrack_env.datasets.youtube_vis import (
@@ -33,13 +32,13 @@ class VISBenchmark(Benchmark):
     columns = ("AP", "AP50", "AP75", "AR")
 
     @classmethod
-    def from_kwargs(cls, root: str | os.PathLike | None = None, split: str = "train",
-                    detections: str | os.PathLike = "public",
-                    annotation_file: str | os.PathLike | None = None,
-                    **_: Any) -> VISBenchmark:
+    def build(cls, root: str | os.PathLike | None = None, split: str = "train",
+              detections: str | os.PathLike = "public",
+              annotation_file: str | os.PathLike | None = None) -> VISBenchmark:
         """The benchmark of ``VISEnv(root=, split=, annotation_file=)``."""
-        path, _synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
-        return cls(YouTubeVISDataset(path, split, detections, annotation_file))
+        path, synthetic = data_root(root, BENCHMARK, BENCHMARK, kind="youtube_vis")
+        return cls(YouTubeVISDataset(path, split, detections, annotation_file),
+                   synthetic=synthetic)
 
     @property
     def name(self) -> str:

@@ -6,15 +6,7 @@ Layout read, exactly as the benchmark ships it::
     <root>/Annotations/480p/<seq>/00000.png ...     palette PNGs (test-dev: first frame only)
     <root>/ImageSets/2017/{train,val,test-dev}.txt   one sequence name per line
 
-Annotation PNGs are 8-bit palette ("P") images whose *indices* are labels: 0 = background,
-``k`` = object ``k``, 255 = void (ambiguous border pixels, not scored). OpenCV cannot return
-palette indices (``cv2.IMREAD_UNCHANGED`` expands a palette PNG to BGR, checked on the
-fixture), so PNGs are read and written with Pillow (imported lazily; ``pip install pillow``).
-
-The objects of a sequence are the labels present in its first annotation other than 0 and
-255 (DAVIS-2017 labels are consecutive, ``1..n``, so this equals the official evaluation's
-``1..max``). Results are palette PNGs with the DAVIS palette, one per frame, named like the
-frames (``<out>/<seq>/00000.png``), which is what the official evaluation reads.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

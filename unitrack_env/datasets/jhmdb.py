@@ -7,19 +7,7 @@ Layout read, exactly as the benchmark ships it::
     <root>/splits/<action>_test_split<k>.txt          optional; "<video>.avi <1|2>" per line
                                                       (1 = train, 2 = test, HMDB51 format)
 
-``joint_positions.mat`` (MATLAB 5) holds ``pos_img`` of shape ``(2, 15, T)``: x/y image
-coordinates of 15 puppet joints in every frame, in MATLAB's 1-based pixel convention (the
-centre of the top-left pixel is ``(1, 1)``), sub-pixel values such as ``286.5``.
-
-Origin decision: the reader returns **0-based** coordinates (``pos_img - 1``; the centre of
-the top-left pixel is ``(0, 0)``, the same as numpy indexing), because that is what the
-UniTrack/CRW/TimeCycle loaders and evaluation script use (``lbls_coord = pos_img - 1``) and
-what an agent needs to sample feature maps. PCK only depends on differences, so the choice
-does not change scores as long as predictions use the same frame.
-
-Sequences are named ``"<action>/<video>"``. Every annotated joint is treated as visible
-(JHMDB annotates occluded joints too). When a video folder holds more images than ``T``
-annotated frames, the sequence is the first ``T`` frames; fewer images is an error.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -33,7 +21,7 @@ import numpy as np
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
-from unitrack_env.spaces import COORD_MAX
+from unitrack_env.spaces.limits import COORD_MAX
 
 JHMDB_JOINT_NAMES: tuple[str, ...] = (
     "neck",

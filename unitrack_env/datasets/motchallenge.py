@@ -7,14 +7,7 @@ Layout read, exactly as the benchmark ships it::
     <root>/<split>/<sequence>/det/det.txt      public detections
     <root>/<split>/<sequence>/gt/gt.txt        ground truth (train splits only)
 
-Quirks accepted (all seen in real releases): ``det.txt`` with 10 columns
-(``frame,-1,x,y,w,h,score,-1,-1,-1``) or 7 (``frame,-1,x,y,w,h,score``), rows in any
-order, unbounded detector scores (MOT15's are 0-100 and more); ``gt.txt`` with 9 columns
-(``frame,id,x,y,w,h,flag,class,visibility``) for MOT16/17/20 or 10 columns with no class
-(``frame,id,x,y,w,h,flag,wx,wy,wz``) for MOT15; sorted by id or by frame.
-
-Columns are read by position. Every problem is reported as a
-:class:`~unitrack_env.errors.DataFormatError` naming the file, the line and the field.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -28,14 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.limits import MAX_FRAMES, check_image_size
-from unitrack_env.datasets.motchallenge_tables import (
-    DET_FIELDS,
-    GT_FIELDS,
-    MAX_GT_ID,
-    VALID_GT_CLASSES,
-    check_rows,
-    parse_table,
-)
+from unitrack_env.datasets.motchallenge_tables import DET_FIELDS, GT_FIELDS, check_rows, parse_table
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
 #: Benchmarks whose ground truth has the 9-column class/visibility layout.
@@ -50,11 +36,7 @@ _SEQINFO_FIELDS = ("name", "imDir", "frameRate", "seqLength", "imWidth", "imHeig
 __all__ = [
     "BENCHMARKS",
     "CLASS_COLUMN_BENCHMARKS",
-    "DET_FIELDS",
-    "GT_FIELDS",
-    "MAX_GT_ID",
     "PEDESTRIAN_CLASS",
-    "VALID_GT_CLASSES",
     "Annotations",
     "MOTChallengeDataset",
     "MOTSequence",

@@ -220,7 +220,7 @@ def _check_frames_and_sizes(
 
 def _check_detection_values(path: Path, table: np.ndarray, lines: np.ndarray) -> None:
     """Detection boxes and scores fit the observation space."""
-    from unitrack_env.spaces import COORD_MAX, FLOAT_MAX
+    from unitrack_env.spaces.limits import COORD_MAX, FLOAT_MAX
 
     outside = np.abs(table[:, 2:6]) > COORD_MAX
     if outside.any():

@@ -1,33 +1,6 @@
 """Readers and writers of the MOTS formats: MOTS Challenge (MOTS20) and KITTI MOTS.
 
-Format (Voigtlaender et al., "MOTS: Multi-Object Tracking and Segmentation", CVPR 2019;
-https://www.vision.rwth-aachen.de/page/mots, restated in TrackEval's ``docs/MOTS-format.txt``):
-
-* **txt** (``instances_txt``): one line per object and frame,
-  ``time_frame id class_id img_height img_width rle``, space-separated, where ``rle`` is a
-  COCO compressed run-length encoding (``pycocotools.mask``) of the ``img_height x
-  img_width`` mask. Object ids are ``class_id * 1000 + instance``; class ids are 1 (car) and
-  2 (pedestrian); id 10000 with class 10 is an ignore region. Masks of one frame never
-  overlap (TrackEval rejects overlapping ground truth and results).
-* **png** (``instances/<seq>/<frame>.png``): one 16-bit single-channel image per frame whose
-  pixel values are the object ids (0 = background, 10000 = ignore).
-
-On-disk layouts read here:
-
-* MOTS Challenge (MOTS20, the MOTChallenge layout): ``<root>/<split>/<seq>/seqinfo.ini``,
-  ``img1/000001.jpg`` ..., ground truth ``gt/gt.txt`` (txt format, 1-based ``time_frame``;
-  TrackEval's ``MOTSChallenge`` reads ``{gt_folder}/{seq}/gt/gt.txt``).
-* KITTI MOTS: frames ``<root>/<split>/image_02/<seq>/000000.png`` (KITTI tracking's
-  ``training`` / ``testing`` folders), ground truth ``<root>/instances_txt/<seq>.txt`` or
-  ``<root>/instances/<seq>/000000.png`` (0-based ``time_frame``, as TrackEval's ``KittiMOTS``
-  reads it); 10 frames per second.
-
-Detections. Neither benchmark ships public mask detections; detection files use the txt line
-format with an optional 7th field, the detection score (1.0 when absent); the ``id`` field
-is ignored. ``"public"`` means ``<seq>/det/det.txt`` (MOTS20 layout) or
-``<root>/<split>/det_02/<seq>.txt`` (KITTI layout), the places where the embedded synthetic
-data sets put theirs; any folder of ``<seq>.txt`` files can be given instead, and ``"gt"``
-turns the ground-truth masks of the tracked class into detections (an oracle, with score 1).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -42,55 +15,21 @@ from unitrack_env.datasets.limits import MAX_TRACKS, check_track_count
 from unitrack_env.datasets.motchallenge import read_seqinfo
 from unitrack_env.datasets.motchallenge_tables import MAX_GT_ID
 from unitrack_env.datasets.mots_format import (
-    CLASS_CAR,
-    CLASS_IDS,
-    CLASS_IGNORE,
-    CLASS_PEDESTRIAN,
-    ID_CLASS_DIVISOR,
     IGNORE_ID,
-    TXT_FIELDS,
-    VALID_CLASSES,
     MaskAnnotations,
-    format_instances_txt,
     parse_instances_txt,
     read_instances_png,
-    write_instances_png,
-)
-from unitrack_env.datasets.rle import (
-    check_rle,
-    decode_masks,
-    encode_masks,
-    resolve_overlaps,
-    rle_runs,
 )
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError
 
 __all__ = [
     "BENCHMARKS",
-    "CLASS_CAR",
-    "CLASS_IDS",
-    "CLASS_IGNORE",
-    "CLASS_PEDESTRIAN",
-    "ID_CLASS_DIVISOR",
-    "IGNORE_ID",
     "KITTI_FRAME_RATE",
     "KITTI_SPLITS",
-    "TXT_FIELDS",
-    "VALID_CLASSES",
     "MOTSDataset",
     "MOTSSequenceInfo",
-    "MaskAnnotations",
     "check_ground_truth",
-    "check_rle",
-    "decode_masks",
-    "encode_masks",
-    "format_instances_txt",
-    "parse_instances_txt",
-    "read_instances_png",
-    "resolve_overlaps",
-    "rle_runs",
-    "write_instances_png",
 ]
 
 #: Benchmarks (layouts) read by :class:`MOTSDataset`.

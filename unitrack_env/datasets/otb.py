@@ -1,37 +1,6 @@
 """Readers for single object tracking layouts: OTB-2015 (main), LaSOT and GOT-10k.
 
-Layouts read, exactly as the benchmarks ship them::
-
-    OTB:     <root>/<Seq>/img/0001.jpg ...            (Board: 00001.jpg; some sets .png)
-             <root>/<Seq>/groundtruth_rect.txt        (or groundtruth_rect.1.txt / .2.txt)
-    LaSOT:   <root>/<class>/<class>-<n>/img/00000001.jpg ...
-             <root>/<class>/<class>-<n>/groundtruth.txt, full_occlusion.txt, out_of_view.txt
-    GOT-10k: <root>/<split>/<seq>/00000001.jpg ..., groundtruth.txt, absence.label
-             <root>/<split>/list.txt                  (optional sequence list)
-
-Boxes stay as written: ``(x, y, w, h)`` with the file's 1-based pixel origin (the top-left
-pixel is ``(1, 1)``), so that results written back round-trip to the official files.
-
-OTB quirks handled (facts from the OTB toolkit's sequence configuration, jwlim/
-tracker_benchmark ``matlab/util/MakeSequenceConfigVer10.m``/``Ver11.m``, and the OTB-2015
-table in visionml/pytracking ``pytracking/evaluation/otbdataset.py``; the table below is our
-own encoding of those facts):
-
-* Ground-truth separators: commas, tabs or spaces, mixed within a file (Crossing uses tabs);
-  a last line without a newline (Human3).
-* Several targets in one folder: ``Jogging.1``/``Jogging.2`` and ``Skating2.1``/
-  ``Skating2.2`` read ``groundtruth_rect.1.txt``/``.2.txt``; ``Human4.2`` reads only
-  ``groundtruth_rect.2.txt`` (the ``.1`` file is empty in the release). ``Jogging_1`` and
-  ``Jogging-1`` are accepted as aliases of ``Jogging.1``.
-* Sequences whose evaluated range is not "frame 1 to the number of images": David 300-770,
-  BlurCar1 247-988, BlurCar3 3-359, BlurCar4 18-397 (their image files are numbered from the
-  start frame), Football1 1-74 (81 images), Freeman3 1-460 (474 images), Freeman4 1-283
-  (297 images), Diving 1-215, and Tiger1 whose first 5 frames are omitted (``initOmit``:
-  tracking starts at frame 6, the first 5 ground-truth rows are dropped).
-
-A copy whose ground truth has *fewer* rows than the table's range (a trimmed fixture, e.g.
-the first 199 of Human3's 1698 frames) is read with a warning; more rows than the range is
-an error.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -44,10 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.base import SequenceDataset
-from unitrack_env.datasets.lasot import GOT10kDataset, LaSOTDataset
 from unitrack_env.datasets.sot import (
     BOX_FIELDS,
-    IMAGE_EXTENSIONS,
     SOTSequence,
     numbered_images,
     read_box_file,
@@ -56,18 +23,7 @@ from unitrack_env.datasets.sot import (
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
-__all__ = [
-    "IMAGE_EXTENSIONS",
-    "OTB_GT_PATTERN",
-    "GOT10kDataset",
-    "LaSOTDataset",
-    "OTBDataset",
-    "OTBSequenceSpec",
-    "SOTSequence",
-    "canonical_otb_name",
-    "read_box_file",
-    "read_image_size",
-]
+__all__ = ["OTB_GT_PATTERN", "OTBDataset", "OTBSequenceSpec", "canonical_otb_name"]
 
 
 OTB_GT_PATTERN = re.compile(r"^groundtruth_rect(?:\.(\d+))?\.txt$")
@@ -152,7 +108,7 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
     non-positive size: the OTB toolkit leaves such frames out of the evaluation.
     (Rows are file lines here: :func:`read_box_file` refuses blank lines inside the list.)
     """
-    from unitrack_env.spaces import COORD_MAX
+    from unitrack_env.spaces.limits import COORD_MAX
 
     init = boxes[first]
     if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):

@@ -6,33 +6,7 @@ Layout read, exactly as the benchmark ships it (``root`` is the folder holding
     posetrack_data/annotations/{train,val}/<sequence>.json    one file per video
     posetrack_data/images/{train,val,test}/<sequence>/000000.jpg ...
 
-A sequence file is COCO-like (PoseTrack 2018 release; field meanings from poseval's
-``convert.py``, leonid-pishchulin/poseval):
-
-* ``images``: one entry per frame: ``id`` (``1`` + 6-digit video id + 4-digit frame index,
-  e.g. ``10034180000``), ``file_name`` (``images/val/<sequence>/000000.jpg``, relative to
-  ``posetrack_data/``), ``is_labeled``, ``nframes``, ``frame_id``, ``vid_id``, optional
-  ``width``/``height``, optional ``ignore_regions_x``/``ignore_regions_y`` (lists of polygons,
-  one list of x and one of y coordinates per polygon) and others (``has_no_densepose``,
-  ``mask_file``), which are kept as read.
-* ``annotations``: one per person and labelled frame: ``image_id``, ``track_id`` (0-based per
-  video), ``keypoints`` (17 x ``(x, y, v)`` flattened, COCO order; an unannotated keypoint is
-  ``0, 0, 0``), ``bbox_head`` ``(x, y, w, h)`` (the PCKh reference), ``bbox``, ``scores``
-  (per-keypoint scores, empty in ground truth), ``id``, ``category_id``, ``iscrowd``,
-  ``num_keypoints``.
-* ``categories``: one ``person`` category whose ``keypoints`` are
-  :data:`POSETRACK_KEYPOINTS` (``head_bottom``/``head_top`` sit in COCO's eye slots; the ear
-  slots are never annotated) and whose ``skeleton`` is :data:`POSETRACK_SKELETON`.
-
-Result files (what a tracker submits) use the same schema with ``track_id`` and ``scores``
-per person and the ``images`` of the ground-truth file in the same order. Pose detections
-(the observations of :class:`~unitrack_env.envs.posetrack.PoseTrackEnv`) are stored in that
-result format without ``track_id``.
-
-Coordinates are kept exactly as written (PoseTrack keypoints are floating-point pixels); the
-reader never shifts them. :func:`video_to_json` writes back every field read, so
-``video_to_json(read_posetrack_json(p))`` equals the file's JSON (numbers compare equal;
-integral floats are written as integers like the official files).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -42,54 +16,17 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from unitrack_env.datasets.posetrack_json import (
-    image_id,
-    parse_posetrack,
-    read_posetrack_json,
-    video_number,
-    video_to_json,
-    write_posetrack_json,
-)
+from unitrack_env.datasets.posetrack_json import image_id, read_posetrack_json, video_number
 from unitrack_env.datasets.posetrack_records import (
     DATA_FOLDER,
-    FRAMES_PER_VIDEO,
     IMAGE_ID_BASE,
-    NUM_KEYPOINTS,
-    PERSON_CATEGORY,
-    PERSONS_PER_IMAGE,
-    POSETRACK_KEYPOINTS,
-    POSETRACK_SKELETON,
     SPLITS,
     PoseTrackImage,
-    PoseTrackPerson,
     PoseTrackVideo,
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
-__all__ = [
-    "DATA_FOLDER",
-    "FRAMES_PER_VIDEO",
-    "IMAGE_ID_BASE",
-    "NUM_KEYPOINTS",
-    "PERSONS_PER_IMAGE",
-    "PERSON_CATEGORY",
-    "POSETRACK_KEYPOINTS",
-    "POSETRACK_SKELETON",
-    "SPLITS",
-    "PoseTrackDataset",
-    "PoseTrackImage",
-    "PoseTrackPerson",
-    "PoseTrackSequence",
-    "PoseTrackVideo",
-    "image_id",
-    "images_from_files",
-    "locate_data_folder",
-    "parse_posetrack",
-    "read_posetrack_json",
-    "video_number",
-    "video_to_json",
-    "write_posetrack_json",
-]
+__all__ = ["PoseTrackDataset", "PoseTrackSequence", "images_from_files", "locate_data_folder"]
 
 
 @dataclass(frozen=True)

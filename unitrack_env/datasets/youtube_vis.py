@@ -1,28 +1,6 @@
 """Reader and writer of YouTube-VIS 2019 (video instance segmentation) JSON files.
 
-Format (Yang et al., "Video Instance Segmentation", ICCV 2019; the CodaLab page's
-definition, restated in TrackEval's ``docs/YouTube-VIS-format.txt``), MS-COCO style::
-
-    {"info": ..., "videos": [video], "annotations": [annotation], "categories": [category]}
-    video      {"id", "width", "height", "length", "file_names": ["<video>/00000.jpg", ...]}
-    annotation {"id", "video_id", "category_id", "segmentations": [RLE | [polygon] | None],
-                "areas": [float | None], "bboxes": [[x, y, w, h] | None], "iscrowd": 0 | 1}
-    category   {"id", "name", "supercategory"}
-
-with one segmentation per frame of the video (None where the object is absent). Results
-("results.json") are a list of ``{"video_id", "category_id", "segmentations", "score"}``.
-
-Layout read here (the 2019 release): ``<root>/{train,valid,test}.json`` and frames
-``<root>/<split>/JPEGImages/<file_name>``; ``valid`` and ``test`` JSONs have no annotations.
-A video's name is the folder of its frames (the first path component of ``file_names``, as
-TrackEval names sequences).
-
-Detections use the results format: every non-null ``(entry, frame)`` segmentation is one
-detection of that frame with the entry's ``category_id`` and ``score`` (a per-frame
-detector writes one entry per detection, non-null on one frame). ``"public"`` means
-``<root>/detections/<split>.json``, where the embedded synthetic data set puts its own (the
-benchmark ships none); any such file can be given instead, and ``"gt"`` turns the ground
-truth into detections (score 1).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

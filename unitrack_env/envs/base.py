@@ -10,27 +10,19 @@ environment supplies its data set, observations, recording and scoring through a
 from __future__ import annotations
 
 import abc
-import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypedDict, TypeVar
+from typing import Any, ClassVar, Generic, TypedDict, TypeVar
 
 import gymnasium as gym
 import numpy as np
 
+from unitrack_env.benchmarks.base import Benchmark, select_sequences
 from unitrack_env.dependencies import require
 from unitrack_env.errors import DataFormatError, InvalidActionError, UnknownSequenceError
 from unitrack_env.fingerprint import sequence_files
 from unitrack_env.frames import FramePrefetcher
 from unitrack_env.metrics.report import ScoreReport
-
-# Data roots live in unitrack_env.roots; the old names stay importable from here.
-from unitrack_env.roots import DATA_ENV_VAR as DATA_ENV_VAR
-from unitrack_env.roots import DataRootNotFound as DataRootNotFound
-from unitrack_env.roots import resolve_root
-
-if TYPE_CHECKING:
-    from unitrack_env.benchmarks.base import Benchmark
 
 #: Default bound of the frame space (height, width): 4K.
 DEFAULT_MAX_FRAME_SIZE = (2160, 3840)
@@ -93,8 +85,6 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
 
     #: Frame decoder of the current episode (opened by :meth:`reset`; :meth:`close` stops it).
     _frames: FramePrefetcher | None = None
-    #: Whether the data set is the embedded synthetic default (set by :meth:`_data_root`).
-    synthetic: bool = False
     #: The sequence of the current episode (None before the first reset).
     _sequence: SequenceT | None = None
     #: Decode frames (False: observations carry a 1x1 black placeholder instead).
@@ -107,22 +97,12 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     #: when it is made (:func:`unitrack_env.dependencies.require`).
     requires: ClassVar[tuple[str, ...]] = ()
 
-    #: The task family this environment poses (``"mot"``, ``"vos"``, ...; see
-    #: :func:`unitrack_env.task_of`), set by the ``task=`` class keyword. Reset infos carry it
-    #: as ``info["task"]``, with the action capacities as ``info["capacities"]``.
-    task: ClassVar[str] = ""
-
     #: The bound ``(height, width)`` of the frame space when ``max_frame_size`` is not given.
     default_max_frame_size: ClassVar[tuple[int, int]] = DEFAULT_MAX_FRAME_SIZE
 
     #: What states the frame size that decoded frames are checked against (named in the
     #: error of a frame of another size).
     frame_size_source: ClassVar[str] = "the sequence's first frame"
-
-    def __init_subclass__(cls, task: str | None = None, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        if task is not None:
-            cls.task = task
 
     def __init__(self, *, max_frame_size: tuple[int, int] | None = None,
                  decode_frames: bool = True, prefetch: bool = True, shuffle: bool = False,
@@ -153,41 +133,12 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         self._answer: Any = None
         self._answer_frame: np.ndarray | None = None
 
-    def _data_root(self, root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
-                   **synthetic_kwargs: Any) -> Path:
-        """The folder to read: ``root``, ``$UNITRACK_DATA/<folder>``, or the synthetic default.
-
-        ``synthetic_args`` go to :func:`unitrack_env.datasets.synthetic.ensure_synthetic`
-        (benchmark and kind) when the synthetic default is used; sets :attr:`synthetic`.
-        """
-        path = resolve_root(root, folder)
-        self.synthetic = path is None
-        if path is None:
-            from unitrack_env.datasets.synthetic import ensure_synthetic
-
-            path = ensure_synthetic(*synthetic_args, **synthetic_kwargs)
-        return path
-
-    @staticmethod
-    def _one_of(label: str, value: str, valid: Iterable[str]) -> str:
-        """``value`` if it is one of ``valid`` (e.g. a rule set), else a ValueError naming them."""
-        valid = list(valid)
-        if value not in valid:
-            raise ValueError(f"unknown {label} '{value}'; valid: {valid}")
-        return value
-
-    @staticmethod
-    def _select_sequences(requested: list[str] | tuple[str, ...] | None, available: list[str],
-                          where: object) -> list[str]:
-        """Validate a user's ``sequences=`` against the data set (None: all of them)."""
-        if requested is None:
-            return list(available)
-        missing = [s for s in requested if s not in available]
-        if missing:
-            raise ValueError(
-                f"sequences {missing} are not in {where}; available: {', '.join(available)}"
-            )
-        return list(requested)
+    def _use_benchmark(self, benchmark: Benchmark, sequences: Iterable[str] | None,
+                       where: object) -> None:
+        """Play ``benchmark``'s data set (:attr:`dataset`): ``sequences`` of it, None for all."""
+        self.scoring = benchmark
+        self.dataset = benchmark.dataset
+        self.sequence_names = select_sequences(sequences, self.dataset.sequence_names, where)
 
     def close(self) -> None:
         """Stop the frame prefetching thread (if any) and end the episode: reset() next."""
@@ -316,6 +267,20 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         Returns:
             The step's reward and the info keys it adds (e.g. ``{"clear": ...}``).
         """
+
+    @property
+    def task(self) -> str:
+        """The task family (its benchmark's), as :func:`unitrack_env.task_of` names it.
+
+        Reset infos carry it as ``info["task"]``, with the action capacities as
+        ``info["capacities"]``.
+        """
+        return self.scoring.task
+
+    @property
+    def synthetic(self) -> bool:
+        """Whether the data set is the embedded synthetic default."""
+        return self.scoring.synthetic
 
     def capacities(self) -> dict[str, int]:
         """The environment's size limits (its ``max_*`` settings, e.g. ``max_tracks``)."""

@@ -1,22 +1,6 @@
 """CLEAR MOT counts frame by frame, with TrackEval 1.3.0's matching (our own implementation).
 
-The rules restate ``trackeval/metrics/clear.py`` (``CLEAR.eval_sequence``); the CLEAR metrics
-are from Bernardin & Stiefelhagen, "Evaluating multiple object tracking performance: the CLEAR
-MOT metrics", EURASIP JIVP 2008.  For each frame with both ground truth and tracker boxes:
-
-* score = ``1000 * [tracker id == the id matched to this gt in the previous timestep] + IoU``,
-  zeroed where ``IoU < 0.5 - eps``; Hungarian assignment maximising the score; pairs with score
-  ``<= eps`` are not matches.  The bonus makes continuing a track win over any IoU gain.
-* TP = matches, FN = unmatched gt, FP = unmatched tracker boxes.
-* IDSW = matched gt whose tracker id differs from the tracker id it was *last* matched to, any
-  number of frames earlier.
-* The "previous timestep" record is replaced by this frame's matches.  Frames without ground
-  truth (all tracker boxes FP) or without tracker boxes (all gt FN) leave it untouched, exactly
-  as TrackEval's early ``continue`` does.
-
-Summed over a sequence, ``tp``, ``fp``, ``fn`` and ``idsw`` equal TrackEval's ``CLR_TP``,
-``CLR_FP``, ``CLR_FN`` and ``IDSW`` on the same preprocessed frames, and
-``(tp - fp - idsw) / (tp + fn)`` equals its MOTA.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,23 +1,6 @@
 """MOTChallenge per-frame preprocessing, exactly as the official evaluation does it.
 
-This is our own numpy implementation of the semantics of TrackEval 1.3.0's
-``MotChallenge2DBox.get_preprocessed_seq_data`` (J. Luiten et al., ``trackeval/datasets/
-mot_challenge_2d_box.py``), restated per frame so that an environment can score every step:
-
-1. The tracker's boxes are matched to *all* ground-truth boxes of the frame (any class) with the
-   Hungarian algorithm on IoU, pairs below ``0.5 - eps`` excluded.  Tracker boxes matched to a
-   ground-truth box of a distractor class (person on vehicle 2, static person 7, distractor 8,
-   reflection 12, and for MOT20 also non-MOT vehicle 6) are removed: they are neither true nor
-   false positives.
-2. Only pedestrian ground truth (class 1) whose "consider" flag (``zero_marked``, column 7 of
-   ``gt.txt``) is non-zero is kept.
-
-MOT15 (2D MOT 2015) files have no class column: step 1 is skipped and step 2 keeps every box
-whose flag is non-zero.
-
-Data contract: boxes are ``(n, 4)`` ``(x, y, w, h)`` arrays, ids are integer arrays, one frame
-at a time; the output keeps the input order of the surviving rows (the order matters only for
-Hungarian tie-breaking, and keeping it makes our sums equal TrackEval's to the last count).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

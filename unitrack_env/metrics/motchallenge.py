@@ -7,18 +7,7 @@ licence) is the scorer behind the MOTChallenge leaderboards.  This adapter uses 
 ``eval_sequence`` / ``combine_sequences`` directly, so that nothing is printed, plotted or
 written (TrackEval's defaults would write into its own ``site-packages`` folder).
 
-Data contract:
-
-* ``gt_seq_dir`` is one MOTChallenge sequence folder holding ``gt/gt.txt`` and (unless
-  ``seq_length`` is given) ``seqinfo.ini``.
-* tracker output is a ``(k, >=6)`` array in MOTChallenge result format
-  ``frame, id, bb_left, bb_top, bb_width, bb_height[, conf, x, y, z]`` with 1-based frames, or
-  the path of such a file.  The rows are written to a private temporary folder for TrackEval;
-  track ids are relabelled to ``1..K`` on the way (TrackEval relabels too, but it indexes an
-  array by the raw id, so huge or negative ids would exhaust memory or alias).
-* Scores are TrackEval's numbers (fractions in ``[0, 1]``, not percent), keyed by TrackEval's
-  field names.  The HOTA family (HOTA, DetA, AssA, LocA, ...) is the mean over the 19 alpha
-  thresholds, which is what TrackEval's summary reports.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -38,29 +27,20 @@ import numpy as np
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.mot_preprocess import normalize_benchmark
 from unitrack_env.metrics.mot_results import (
-    DEFAULT_CONFIDENCE,
-    MAX_TRACKER_CLASS,
     MIN_RESULT_COLUMNS,
-    RESULT_FIELDS,
     parse_result_file,
-    read_result_file,
     validate_tracker_rows,
     write_for_trackeval,
 )
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 __all__ = [
-    "DEFAULT_CONFIDENCE",
-    "MAX_TRACKER_CLASS",
     "METRIC_NAMES",
-    "MIN_RESULT_COLUMNS",
-    "RESULT_FIELDS",
     "RESULT_SUFFIX",
     "SequenceScore",
     "combine_sequence_scores",
     "combine_sequences",
     "flatten_results",
-    "read_result_file",
     "score_folder",
     "score_sequence",
     "trackeval_metrics",

@@ -8,18 +8,7 @@ MOTChallenge adapter (:mod:`unitrack_env.metrics.motchallenge`) does, this one u
 set class's loading and preprocessing and each metric's ``eval_sequence`` /
 ``combine_sequences``, never the ``Evaluator``, so nothing is printed, plotted or written.
 
-Data contract: ground truth and results are :class:`~unitrack_env.datasets.mots.MaskAnnotations`
-(or MOTS txt files) whose ``time_frame`` uses the benchmark's numbering (MOTS20 1-based, KITTI
-0-based); results carry the tracked class id; masks of one frame must not overlap. Track
-ids are relabelled to ``1..K`` before TrackEval sees them (TrackEval indexes an array by the
-raw id). Scores are fractions keyed by TrackEval's names, plus the aliases ``MOTSA``,
-``MOTSP`` and ``sMOTSA``; HOTA-family arrays are averaged over the 19 alpha thresholds.
-
-Per-frame counts (the environment's reward): :class:`MaskClearStream` applies TrackEval's
-MOTS preprocessing to one frame (unmatched tracker masks lying more than half inside the
-ignore region are dropped; matching is Hungarian on mask IoU >= 0.5) and then CLEAR's
-matching with :class:`~unitrack_env.metrics.clear_stream.StreamingClear`. Summed over a
-sequence, ``tp - fp - idsw`` over ``tp + fn`` is TrackEval's MOTSA.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -34,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from unitrack_env.datasets.mots import (
+from unitrack_env.datasets.mots_format import (
     CLASS_IDS,
     MaskAnnotations,
     format_instances_txt,

@@ -5,23 +5,7 @@ prediction and the ground truth must use the same origin (the JHMDB reader retur
 coordinates). A joint is correct when ``||pred - gt|| <= alpha * s`` where ``s`` is the
 frame's normaliser. Scores are fractions in ``[0, 1]`` (papers print percentages).
 
-Normalisers (both computed from the *ground-truth* joints of the frame):
-
-* ``"box_diagonal"`` (default): ``0.6 x`` the diagonal of the box enclosing the GT joints.
-  This is what the UniTrack JHMDB evaluation script uses (a copy of the CRW / TimeCycle
-  ``eval_pck`` script: ``now_boxes[k] = 0.6 * norm([maxx, maxy] - [minx, miny])``), and the
-  UniTrack paper's JHMDB table (TimeCycle 57.3/78.1, UVC 58.6/79.6, CRW 59.0/83.2,
-  I18 58.3/80.5 at PCK@0.1/0.2) compares numbers produced by that script family, so the
-  environment reports it by default.
-* ``"box_max_side"``: ``max(w, h)`` of the same GT joint box, the alternative left commented
-  out in that script and the usual "normalised by person size" JHMDB convention
-  (Jhuang et al. 2013 use the person box; we only have joints, so this is the joint box).
-
-The authors' script also skips the first frame of every video (it is given), pools the
-distances of each joint over all frames of all videos, computes a PCK per joint and reports
-the **mean over the 15 joints**; :class:`PCKCounts` does the same and can be merged across
-videos. (Their script also drops joints whose *predicted* x is negative from both the box
-and the score; we do not copy that: it rewards predicting off-image coordinates.)
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -6,46 +6,7 @@ Definitions restated from poseval (leonid-pishchulin/poseval, ``py/eval_helpers.
 py-motmetrics' ``MOTAccumulator.update`` (the library poseval calls). Nothing is imported from
 them; ``tests/unitrack_env/test_posetrack.py`` cross-checks the counts with motmetrics 1.4.0.
 
-**Joints.** poseval scores 15 joints (:data:`POSEVAL_JOINTS`, its ``Joint`` order), read from
-the 17 PoseTrack 2018 keypoints by name (``convert.py``: ``head_bottom``, ``nose``,
-``head_top``, shoulders ... ankles; the ear slots are ignored). A keypoint exists unless it is
-``(0, 0, 0)``; the same rule applies to ground truth and predictions.
-
-**Frames.** Only ground-truth frames with at least one person are evaluated (poseval's
-``cleanupData``); predictions are paired with them by position. poseval then drops the
-**last** of those frames in every sequence (``imgidxs = imgidxs[:-1]``); we reproduce it
-(:data:`POSEVAL_DROPS_LAST_FRAME`, switchable). Where a frame has ignore regions, keypoints
-strictly inside a polygon are removed from ground truth and predictions, and persons left
-without keypoints are removed (``removeIgnoredPoints``).
-
-**Matching, per joint and frame.** ``d = ||gt - pred|| / head_size`` with
-``head_size = 0.6 * ||(x2, y2) - (x1, y1)||`` of the ground-truth ``bbox_head``
-(``getHeadSize``); a pair is a candidate when both joints exist and ``d <= 0.5``
-(``distThresh``). Ground-truth persons with the joint are the objects, predicted persons with
-the joint the hypotheses, and py-motmetrics' rule assigns them: (1) a ground truth keeps the
-hypothesis it was last matched to if that hypothesis is present and a candidate; (2) the rest
-are assigned by a minimum-distance linear assignment (non-candidates excluded); a match whose
-ground truth was last matched to another hypothesis is an ID switch; (3) unmatched ground
-truths are misses, unmatched hypotheses false positives. When a frame has no predicted or no
-ground-truth person at all, poseval records one dummy miss and one dummy false positive per
-joint (``trackidxGT = trackidxPr = [0]``, distance NaN); we do the same with dummy ids that
-cannot collide with real ones (poseval's ``0`` can coincide with a real track 0 in the first
-sequence it globs, which only affects IDF1 there, by design-free accident).
-
-**Scores.** Per joint, counts are summed over sequences, then
-``MOTA = 1 - (misses + switches + false_positives) / objects``,
-``MOTP = 1 - sum(matched d) / detections`` (``detections = matches + switches``; 0, not
-undefined, for a joint without detections, and averaged over the joints as such, as poseval
-does: a sequence may therefore score below the pooled set),
-``precision = detections / (detections + false_positives)``,
-``recall = detections / objects``; per joint ``IDF1`` (py-motmetrics' global min-cost identity
-assignment, ``2 IDTP / (objects + predictions)``) is computed per sequence and **averaged over
-sequences** (UniTrack's ``idf1 / nSeq``). The reported totals are the means over the joints
-whose value is defined, and ``IDSW`` is the **sum** over joints (the UniTrack paper: "averaged
-for IDF-1 and MOTA, and summed for ID-switch, over 15 key points"). poseval prints percent;
-we return fractions. poseval's MOTP with py-motmetrics >= 1.2 also sums the distances of
-unmatched candidate pairs (``events['D']`` then holds RAW rows); we keep its original meaning,
-the matched distances.
+More in docs/module-notes.md.
 """
 from __future__ import annotations
 
@@ -54,47 +15,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unitrack_env.datasets.posetrack import (
-    PoseTrackVideo,
-)
+from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.metrics.posetrack_frames import (
     BODY_PARTS,
     DIST_THRESHOLD,
     DUMMY_GT_ID,
     DUMMY_PRED_ID,
-    HEAD_SIZE_FACTOR,
-    KEYPOINT_OF_JOINT,
     NUM_JOINTS,
     POSEVAL_DROPS_LAST_FRAME,
     POSEVAL_JOINTS,
     PoseFrame,
-    head_sizes,
     joint_distances,
     remove_ignored,
 )
-from unitrack_env.metrics.posetrack_joint import ClearAccumulator, JointFrameCounts
+from unitrack_env.metrics.posetrack_joint import ClearAccumulator
 
 __all__ = [
-    "BODY_PARTS",
-    "DIST_THRESHOLD",
-    "DUMMY_GT_ID",
-    "DUMMY_PRED_ID",
-    "HEAD_SIZE_FACTOR",
-    "KEYPOINT_OF_JOINT",
-    "NUM_JOINTS",
-    "POSEVAL_DROPS_LAST_FRAME",
-    "POSEVAL_JOINTS",
-    "ClearAccumulator",
     "FrameCounts",
-    "JointFrameCounts",
-    "PoseFrame",
     "PosevalSequence",
     "SequenceCounts",
     "evaluate_video",
     "evaluated_frames",
-    "head_sizes",
-    "joint_distances",
-    "remove_ignored",
     "summarise",
 ]
 

@@ -14,10 +14,7 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.posetrack import (
-    POSETRACK_KEYPOINTS,
-    PoseTrackPerson,
-)
+from unitrack_env.datasets.posetrack_records import POSETRACK_KEYPOINTS, PoseTrackPerson
 
 POSEVAL_JOINTS: tuple[str, ...] = (
     "right_ankle", "right_knee", "right_hip", "left_hip", "left_knee", "left_ankle",

@@ -5,32 +5,7 @@ arrays of ``(x, y, w, h)`` boxes in the benchmark file's own pixel frame (OTB is
 both arrays must use the same origin, which then cancels out), row ``i`` = frame ``i`` of
 the sequence, row 0 = the initialisation frame.
 
-What the OTB-2015 toolkit does (``tracker_benchmark_v1.0``, ``util/calcSeqErrRobust.m`` and
-``perfPlot.m``/``OPE_perfmat.m``; the Python port in visionml/pytracking
-``pytracking/analysis/extract_results.py`` agrees on the points marked *):
-
-* The prediction of frame 1 is replaced by the ground truth (``rectMat(1,:) = rect_anno(1,:)``)*.
-* A prediction that is NaN or has ``w <= 0`` or ``h <= 0`` is replaced by the previous frame's
-  prediction (when that frame's ground truth is not NaN). pytracking does this for zero sizes
-  only and rejects NaN or negative sizes.
-* Overlap = intersection over union with ``x2 = x + w - 1`` and ``+1`` on the intersection
-  side (``calcRectInt.m``), which equals the continuous IoU with ``x2 = x + w`` used by
-  :func:`unitrack_env.geometry.box_iou` and TrackEval.
-* Centre = ``x + (w - 1) / 2``; the ``-1`` cancels in a difference of centres, so the centre
-  error is the Euclidean distance between ``x + w / 2`` centres.
-* A ground-truth row is valid only when all four numbers are ``> 0`` (``rect_anno > 0``,
-  ``sum(index, 2) == 4``; NaN compares false, so NaN rows are invalid too). Invalid frames get
-  overlap ``-1`` and centre error ``-1`` and stay in the denominator: they *fail* every success
-  threshold but *pass* every precision threshold. :data:`INVALID_GT_TOOLKIT` reproduces this.
-  pytracking instead drops invalid frames (valid = ``w > 0 and h > 0``) from the denominator;
-  that is :data:`INVALID_GT_EXCLUDE`.
-* Success at threshold ``t`` counts overlaps ``> t`` (strictly greater)*, thresholds
-  ``0:0.05:1`` (21 values)*; precision at threshold ``d`` counts centre errors ``<= d``,
-  thresholds ``0:50`` px (51 values)*. AUC = mean of the 21 success rates, so a perfect
-  tracker scores 20/21 = 0.952 (no overlap is ``> 1``); precision@20px is the precision curve
-  at 20 px. The toolkit divides by ``len + eps``; we divide by ``len`` exactly.
-* Over a data set the per-sequence curves are averaged with equal weight per sequence
-  (:func:`aggregate_sot`).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -8,14 +8,7 @@ points, per category, then over categories. As the MOTChallenge adapter does, th
 TrackEval's data set class and metric directly (no ``Evaluator``: nothing is printed,
 plotted or written), in a private temporary folder.
 
-Data contract: ground truth is a :class:`~unitrack_env.datasets.youtube_vis.VisData`, results
-a list of :class:`~unitrack_env.datasets.youtube_vis.VisTrack` (results format). Scores are
-TrackEval's fields averaged over the IoU thresholds (``AP_all``, ``AR_all``, and the area
-ranges ``AP_area_s`` ... ``AR_area_l``, set as TrackEval's YouTube-VIS script sets them),
-plus ``AP`` (= ``AP_all``, the challenge's mAP), ``AP50``, ``AP75`` and ``AR`` (=
-``AR_all``). Per-video numbers are the metric over that video alone; the combined row
-accumulates all videos before averaging, as the leaderboard does. Undefined values (no
-ground truth and no prediction of any category) are -1, TrackEval's convention.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -5,30 +5,7 @@ palette PNGs: 0 = background, ``k`` = object ``k``, 255 = void. Ground truth and
 of a frame have the same shape. Object ``k`` of the prediction is compared with object ``k``
 of the ground truth (semi-supervised: the ids are given in the first frame, no matching).
 
-Definitions (davisvideochallenge/davis2017-evaluation, ``davis2017/metrics.py`` and
-``evaluation.py``; TrackEval 1.3.0 ``trackeval/metrics/j_and_f.py`` has the same J and F):
-
-* **J** (region similarity) = ``|gt & pred| / |gt | pred|`` counted over non-void pixels;
-  1 when the union is empty (object absent and not predicted).
-* **F** (boundary measure): boundaries are the one-pixel ``seg2bmap`` maps of both masks
-  (void pixels removed from each mask first); a boundary pixel matches when the other
-  boundary lies within a disk of radius ``ceil(0.008 * image diagonal)`` pixels (8 px at
-  854x480); precision/recall from the match counts; F = their harmonic mean. Empty boundary
-  conventions: no predicted and no GT boundary -> P = R = 1; only GT -> P = 1, R = 0;
-  only prediction -> P = 0, R = 1; P + R = 0 -> F = 0.
-* Per object: mean (``nanmean`` over frames), recall (fraction of frames with value
-  ``> 0.5``), decay (mean of the first quarter minus mean of the last quarter, four bins
-  from ``round(linspace(1, n, 5))``).
-* The semi-supervised evaluation drops the first frame (given) and the last frame
-  (``all_gt_masks[:, 1:-1]``) of every sequence; ``exclude_first_last=True`` does the same.
-* **J&F** = (J-mean + F-mean) / 2, where J-mean and F-mean are averaged over objects (over
-  all objects of all sequences for a data set, not per sequence first).
-
-TrackEval's ``JAndF`` metric differs from the DAVIS semi-supervised evaluation in three ways
-that matter for this benchmark: it matches predicted to GT ids with the Hungarian algorithm,
-it keeps the first and last frames, and it has no void label. So this module implements the
-DAVIS procedure and the tests check its per-frame J and F against TrackEval's
-``JAndF._compute_j``/``_compute_f`` on the same masks.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -342,19 +319,7 @@ def evaluate_vos_sequence(
         j[:, col], f[:, col] = frame_scores(
             gt_labels[t], pred_labels[t], object_ids, void_label=void_label, bound_th=bound_th
         )
-    j_stats = np.array([davis_statistics(row) for row in j]).reshape(n_obj, 3)
-    f_stats = np.array([davis_statistics(row) for row in f]).reshape(n_obj, 3)
-    return VOSScores(
-        object_names=tuple(f"{sequence_name}_{obj}" for obj in object_ids),
-        j_per_frame=tuple(j),
-        f_per_frame=tuple(f),
-        j_mean=j_stats[:, 0],
-        j_recall=j_stats[:, 1],
-        j_decay=j_stats[:, 2],
-        f_mean=f_stats[:, 0],
-        f_recall=f_stats[:, 1],
-        f_decay=f_stats[:, 2],
-    )
+    return scores_from_frames(j, f, object_ids, sequence_name)
 
 
 def aggregate_vos(scores: Sequence[VOSScores]) -> VOSScores:
@@ -375,4 +340,30 @@ def aggregate_vos(scores: Sequence[VOSScores]) -> VOSScores:
         f_mean=cat("f_mean"),
         f_recall=cat("f_recall"),
         f_decay=cat("f_decay"),
+    )
+
+
+def scores_from_frames(
+    j: np.ndarray, f: np.ndarray, object_ids: Sequence[int], sequence_name: str
+) -> VOSScores:
+    """A sequence's DAVIS scores from per-object, per-frame J and F of its scored frames.
+
+    :func:`evaluate_vos_sequence` computes J and F from label maps; an episode computes them
+    frame by frame.
+
+    Args:
+        j: ``(objects, frames)`` J of the scored frames.
+        f: ``(objects, frames)`` F of the scored frames.
+        object_ids: the sequence's object labels.
+        sequence_name: names the objects ``"<sequence>_<id>"``.
+    """
+    n = len(object_ids)
+    j_stats = np.array([davis_statistics(row) for row in j]).reshape(n, 3)
+    f_stats = np.array([davis_statistics(row) for row in f]).reshape(n, 3)
+    return VOSScores(
+        object_names=tuple(f"{sequence_name}_{obj}" for obj in object_ids),
+        j_per_frame=tuple(j),
+        f_per_frame=tuple(f),
+        j_mean=j_stats[:, 0], j_recall=j_stats[:, 1], j_decay=j_stats[:, 2],
+        f_mean=f_stats[:, 0], f_recall=f_stats[:, 1], f_decay=f_stats[:, 2],
     )

@@ -24,7 +24,8 @@ from unitrack_env.datasets.synthetic.motchallenge import (
     simulate_detections,
     write_motchallenge,
 )
-from unitrack_env.datasets.synthetic.scene import (
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import (
     ObjectAnnotation,
     ObjectRole,
     Pattern,
@@ -32,10 +33,8 @@ from unitrack_env.datasets.synthetic.scene import (
     SceneObject,
     Silhouette,
     SyntheticFrame,
-    SyntheticVideo,
     Texture,
     Trajectory,
-    render_scene,
 )
 
 __all__ = [

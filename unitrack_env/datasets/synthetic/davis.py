@@ -8,16 +8,7 @@ reads::
     <root>/Annotations/480p/<seq>/00000.png ...    palette PNGs with the DAVIS palette
     <root>/ImageSets/2017/{train,val,test-dev}.txt one sequence name per line
 
-Annotations come from the scene's instance map after occlusion: the labelled objects of a
-sequence are the first ``num_objects`` walking people (by scene id, so the pair forced to
-cross, which occlude each other, comes first) that are visible in frame 0, numbered
-``1..n`` as DAVIS numbers objects; everything else (other people, the occluder, the
-background) is 0. A sequence may mark a void band (label 255) along every label boundary,
-as DAVIS marks ambiguous border pixels. A ``test-dev`` sequence ships only its first
-annotation, as the DAVIS test-dev release does.
-
-The resolution folder is named ``480p`` as in DAVIS although the synthetic frames are
-smaller (the benchmark's frames are 854x480; the environments accept any size).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -29,12 +20,8 @@ import cv2
 import numpy as np
 
 from unitrack_env.datasets.davis import DAVIS_VOID_LABEL, write_label_png
-from unitrack_env.datasets.synthetic.scene import (
-    ObjectRole,
-    SceneConfig,
-    SyntheticVideo,
-    render_scene,
-)
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 #: Benchmarks whose layout :func:`write_davis` writes.
 BENCHMARKS = ("DAVIS-2017",)

@@ -38,14 +38,13 @@ from unitrack_env.datasets.synthetic.motchallenge import (
     SequenceSpec,
     write_sequence,
 )
-from unitrack_env.datasets.synthetic.scene import (
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import (
     ObjectAnnotation,
     ObjectRole,
     SceneConfig,
     SyntheticFrame,
-    SyntheticVideo,
     Texture,
-    render_scene,
 )
 
 #: Seed-stream index of the look-alike and camera draws (the scene uses 0, 1; detections 2).

@@ -7,12 +7,7 @@
                                                                  1-based x/y (scipy.io.savemat)
     <root>/splits/<action>_test_split1.txt                      "<video>.avi <1|2>" lines
 
-Each video follows one walking person (object 1 of the scene, the "puppet") whose 15 JHMDB
-joints come from the shared stick figure of :mod:`unitrack_env.datasets.synthetic.poses`;
-a second person crosses it (in front or behind, by the scene's depth order), so the joints
-are briefly occluded, as in a real clip. JHMDB annotates every joint in every frame,
-occluded or not, and so does this writer. Frames are 0-based in the scene and 1-based in
-file names (``00001.png`` is scene frame 0).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -30,7 +25,8 @@ from unitrack_env.datasets.synthetic.poses import (
     select_joints,
     skeleton_pixels,
 )
-from unitrack_env.datasets.synthetic.scene import SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import SceneConfig
 
 #: The tracked person of every synthetic JHMDB scene.
 PUPPET_ID = 1

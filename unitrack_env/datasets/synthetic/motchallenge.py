@@ -1,35 +1,6 @@
 """Synthetic MOTChallenge data sets (MOT15, MOT16, MOT17, MOT20 layouts).
 
-:func:`write_motchallenge` renders the scenes of a :class:`MotChallengeSpec` and writes them
-in the exact MOTChallenge layout::
-
-    <root>/train/<SEQ>/img1/000001.jpg ...   JPEG (quality 90), BGR on disk as cv2 writes it
-    <root>/train/<SEQ>/gt/gt.txt              ground truth (train split only)
-    <root>/train/<SEQ>/det/det.txt            noisy public detections
-    <root>/train/<SEQ>/seqinfo.ini
-    <root>/test/<SEQ>/{img1/, det/det.txt, seqinfo.ini}
-
-Sequence names are plain (``SYN-01``, ``SYN-02``, ``SYN-03``) for every benchmark: MOT17's
-detector suffix (``-FRCNN``) names one of three public detection sets, and the synthetic
-data set has one, so a suffix would only suggest variants that do not exist.
-
-Ground truth, in MOTChallenge's 1-based pixel coordinates (``x = x0 + 1``):
-
-* MOT16/17/20, 9 columns ``frame,id,x,y,w,h,flag,class,visibility``, sorted by id then
-  frame as the official files are. Walking persons are class 1 (pedestrian) with flag 1; a
-  standing person is class 7 (static_person, a distractor class) and an occluder is class 9
-  (occluder), both with flag 0 as in the official MOT17 files; so that the official
-  preprocessing (distractor removal, zero-marked filtering) has work to do. Visibility is the
-  visible fraction of the object's silhouette after occlusion and truncation, from the
-  rendered instance map.
-* MOT15, 10 columns ``frame,id,x,y,w,h,1,-1,-1,-1`` (no classes), sorted by frame. Persons
-  (walking or standing) are written; occluders are not.
-
-Detections, 10 columns ``frame,-1,x,y,w,h,score,-1,-1,-1`` sorted by frame, come from
-:func:`simulate_detections`: jittered copies of the persons' boxes, missed more often the
-less visible a person is, plus false positives (random boxes and clutter near persons).
-Scores lie in [0, 1] and grow with box quality; MOT15's are scaled to 0-100 like the PETS
-detector's unbounded scores.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -42,12 +13,12 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.synthetic.scene import (
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import (
     ObjectAnnotation,
     ObjectRole,
     SceneConfig,
     SyntheticFrame,
-    render_scene,
 )
 from unitrack_env.geometry import box_iou
 

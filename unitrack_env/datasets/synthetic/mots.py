@@ -5,22 +5,7 @@
     <root>/train/<SEQ>/{seqinfo.ini, img1/000001.jpg ..., gt/gt.txt, det/det.txt}
     <root>/test/<SEQ>/{seqinfo.ini, img1/, det/det.txt}
 
-and for ``KITTI-MOTS``::
-
-    <root>/training/image_02/<SEQ>/000000.png ...   <root>/training/det_02/<SEQ>.txt
-    <root>/instances_txt/<SEQ>.txt   <root>/instances/<SEQ>/000000.png  (training only)
-    <root>/testing/image_02/<SEQ>/...  <root>/testing/det_02/<SEQ>.txt
-
-Ground truth comes from the rendered instance map (so masks never overlap): every person
-(walking or standing) is a pedestrian (class 2, id ``2000 + object id``) with its visible
-pixels; the occluder is an ignore region (class 10, id 10000). Objects with fewer than
-``min_pixels`` visible pixels are not annotated.
-
-Detections (txt lines plus a score field, see :mod:`unitrack_env.datasets.mots`) are noisy
-copies of the persons' visible masks: missed more often the less visible a person is,
-dilated or eroded by a few pixels and shifted by up to ``max_shift`` pixels; plus false
-positives (elliptic blobs, some of them on the occluder, i.e. inside the ignore region).
-Overlaps between detections are resolved in favour of the higher score, as MOTS requires.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -31,19 +16,19 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.mots import (
+from unitrack_env.datasets.mots_format import (
     CLASS_IGNORE,
     CLASS_PEDESTRIAN,
     ID_CLASS_DIVISOR,
     IGNORE_ID,
     MaskAnnotations,
-    encode_masks,
     format_instances_txt,
-    resolve_overlaps,
     write_instances_png,
 )
+from unitrack_env.datasets.rle import encode_masks, resolve_overlaps
 from unitrack_env.datasets.synthetic.motchallenge import SequenceSpec
-from unitrack_env.datasets.synthetic.scene import ObjectRole, SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 #: Benchmarks (layouts) written by :func:`write_mots`.
 BENCHMARKS = ("MOTS20", "KITTI-MOTS")

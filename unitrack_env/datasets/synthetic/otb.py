@@ -6,18 +6,7 @@ OTB-2015 layout, which :class:`unitrack_env.datasets.otb.OTBDataset` reads::
     <root>/<Seq>/img/0001.jpg ...            JPEG (quality 90); a sequence may start later
     <root>/<Seq>/groundtruth_rect.txt        x,y,w,h per frame, 1-based integer pixels
 
-The default set exercises the OTB quirks the reader handles: one ground-truth file is
-tab-separated (like Crossing), one has no newline after its last line (like Human3), one
-sequence is grayscale (like Car4) and one has image files numbered from a later frame
-(like BlurCar1, whose first image is ``0247.jpg``). Sequence names are not OTB-100 names,
-so the reader treats them as plain folders (frames start at the first numbered image).
-
-The target of a sequence is the walking person that stays fully inside the image in every
-frame and is the most occluded at some frame (lowest visible fraction; ties by id): it
-moves, changes scale slightly, and is hidden partly or wholly when it crosses another
-person or passes behind the occluder. Its ground truth is its amodal box (the full
-silhouette, also while hidden, as OTB annotates occluded targets), shifted to OTB's 1-based
-pixel coordinates (``x = x0 + 1``).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -28,12 +17,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.synthetic.scene import (
-    ObjectRole,
-    SceneConfig,
-    SyntheticVideo,
-    render_scene,
-)
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 
 #: Benchmarks whose layout :func:`write_otb` writes.
 BENCHMARKS = ("OTB",)

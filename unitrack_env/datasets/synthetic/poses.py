@@ -1,30 +1,6 @@
 """Keypoints of the synthetic people: one walking stick figure, two benchmark joint sets.
 
-Every person of the scene engine (:mod:`unitrack_env.datasets.synthetic.scene`) is drawn as
-a silhouette inside its placement box: a round head at the top centre (radius
-``HEAD_RADIUS * h``), an elliptic body from ``v = BODY_TOP`` to the feet, and a gap between
-the legs. :data:`SKELETON_JOINTS` places an underlying skeleton inside that silhouette, in
-the box's normalised coordinates ``(u, v)`` (``u = 0`` left edge, ``v = 0`` top edge), so
-that the joints move exactly with the textured sprite:
-
-* the person faces the camera, so its **right** side is on the image **left** (``u < 0.5``),
-  as in JHMDB and PoseTrack annotations of frontal people;
-* walking swings the legs and (in anti-phase) the arms along the walking direction with a
-  phase that advances with the distance walked (:data:`STRIDE_HEIGHTS` body heights per gait
-  cycle); standing people do not swing.
-
-Two joint sets are read off the same skeleton: the 15 JHMDB puppet joints
-(:data:`JHMDB_FROM_SKELETON`, in ``pos_img`` order) and the 17 PoseTrack 2018 keypoints in
-COCO order (:data:`POSETRACK_FROM_SKELETON`; PoseTrack stores ``head_bottom`` and
-``head_top`` in COCO's eye slots and leaves the ear slots unannotated).
-
-Visibility comes from the rendered instance map (:func:`joint_visibility`): a joint is
-*truncated* outside the image, *occluded* where the pixel belongs to another object, and
-visible otherwise (joints drawn just outside the silhouette, e.g. a wrist beside the body,
-land on background pixels and stay visible).
-
-Coordinates are 0-based pixel centres (the top-left pixel's centre is ``(0, 0)``), like the
-scene engine's boxes.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -33,11 +9,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-from unitrack_env.datasets.synthetic.scene import (
-    HEAD_RADIUS,
-    ObjectRole,
-    SceneObject,
-)
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneObject
+from unitrack_env.datasets.synthetic.sprites import HEAD_RADIUS
 
 SKELETON_JOINTS: tuple[str, ...] = (
     "head_top",

@@ -6,24 +6,7 @@
     <root>/posetrack_data/images/{train,val,test}/<seq>/000000.jpg ...   every frame
     <root>/detections/{train,val,test}/<seq>.json              simulated pose detections
 
-Ground truth (train and val only), as in the release: ``images`` lists every frame with
-``is_labeled`` true on the annotated ones (every :data:`LABEL_EVERY`-th frame plus a dense
-block of :data:`DENSE_LABELED_FRAMES` in the middle, like PoseTrack's val videos);
-``annotations`` hold, on labelled frames, every walking person with at least one visible
-keypoint: ``track_id`` (object id - 1, 0-based like the release), 17 keypoints whose visible
-ones are ``(x, y, 1)`` and whose occluded or out-of-image ones are ``(0, 0, 0)`` (PoseTrack
-annotates visible joints only), ``bbox_head`` (the head disc's box, the PCKh reference),
-``bbox`` (the person's box), ``scores: []``. Standing persons are not annotated; their area
-is an ignore region (``ignore_regions_x/y``), as PoseTrack does for unannotated crowds.
-Sequence names follow the release (``<6-digit video id>_<source>_<set>``) and image ids its
-scheme (``1`` + video id + 4-digit frame).
-
-Detections (the environment's observations) come from :func:`simulate_pose_detections`, a
-pose estimator stand-in: persons are missed more often the more they are occluded; found
-joints are jittered, occluded joints are sometimes hallucinated with low scores; standing
-persons are detected too (inside the ignore regions) and there are a few random false poses.
-They are stored in the result format without ``track_id`` (keypoints ``(x, y, 1)`` with
-per-joint ``scores``, ``(0, 0, 0)`` for joints not found, and a pose ``score``).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -34,7 +17,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.posetrack import (
+from unitrack_env.datasets.posetrack_json import image_id, write_posetrack_json
+from unitrack_env.datasets.posetrack_records import (
     DATA_FOLDER,
     NUM_KEYPOINTS,
     PERSON_CATEGORY,
@@ -42,8 +26,6 @@ from unitrack_env.datasets.posetrack import (
     PoseTrackImage,
     PoseTrackPerson,
     PoseTrackVideo,
-    image_id,
-    write_posetrack_json,
 )
 from unitrack_env.datasets.synthetic.poses import (
     POSETRACK_FROM_SKELETON,
@@ -52,13 +34,8 @@ from unitrack_env.datasets.synthetic.poses import (
     select_joints,
     skeleton_pixels,
 )
-from unitrack_env.datasets.synthetic.scene import (
-    ObjectAnnotation,
-    ObjectRole,
-    SceneConfig,
-    SyntheticVideo,
-    render_scene,
-)
+from unitrack_env.datasets.synthetic.scene import SyntheticVideo, render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectAnnotation, ObjectRole, SceneConfig
 
 #: Benchmarks (cache names) this writer produces.
 BENCHMARKS = ("PoseTrack2018",)

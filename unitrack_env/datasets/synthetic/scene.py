@@ -1,37 +1,6 @@
 """Deterministic synthetic scenes: textured people that walk, cross and occlude each other.
 
-The scene engine is shared by every synthetic data set writer (MOTChallenge now; MOTS,
-PoseTrack, VIS, OTB, DAVIS and JHMDB build on the same model). A scene is a static,
-mildly textured background plus a list of :class:`SceneObject` s:
-
-* **pedestrians** walk with constant velocity plus a small smooth wobble, and may enter or
-  leave the frame. ``num_crossings`` pairs of them are *forced to cross*: the two walk in
-  opposite directions through the same point at the same frame with a small vertical
-  offset, so their boxes overlap heavily and the farther one is occluded. Their textures
-  differ and their sizes are similar, which is what separates an appearance tracker from
-  an IoU tracker.
-* **static persons** stand still (MOTChallenge class 7, a distractor class).
-* **occluders** are static upright structures (a pillar or sign, MOTChallenge class 9)
-  nearer than everything else; one is placed on a walker's path.
-
-Every object has a distinct texture (hue, second colour, and a stripe / checker / dot / blob
-pattern at an object-specific period and orientation), a binary silhouette (a head and an
-elliptic body for persons, a rectangle for occluders), and a depth. Frames are rendered far
-to near, so nearer objects occlude farther ones; the rendered instance map gives each
-object's visible fraction.
-
-Conventions: frame indices are **0-based** here (writers convert to their benchmark's own
-numbering); boxes are amodal ``(x, y, w, h)`` in 0-based pixel coordinates (the top-left
-pixel is ``(0, 0)``), tight around the object's full silhouette, and may extend past the
-image border. Images are ``uint8`` RGB.
-
-All randomness is drawn once, in :func:`render_scene`, from :class:`numpy.random.Generator`
-streams seeded by ``SceneConfig.seed``; rendering a frame is a pure function of the scene
-and the frame index, so frames can be produced lazily, in any order, with identical output.
-
-Keypoints (for the pose writers) have a reserved place: a person's joints can be defined in
-the silhouette's normalised coordinates (see :func:`person_silhouette`) and mapped through
-:meth:`SceneObject.box_at`; :class:`ObjectAnnotation` is where per-frame keypoints belong.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -44,47 +13,13 @@ import numpy as np
 from unitrack_env.datasets.synthetic.layout import build_objects
 from unitrack_env.datasets.synthetic.scene_model import (
     ObjectAnnotation,
-    ObjectRole,
-    Pattern,
     SceneConfig,
     SceneObject,
-    Silhouette,
     SyntheticFrame,
-    Texture,
-    Trajectory,
 )
-from unitrack_env.datasets.synthetic.sprites import (
-    BODY_TOP,
-    EDGE_SHADING,
-    HEAD_COLOUR,
-    HEAD_RADIUS,
-    LEG_GAP_HALF_WIDTH,
-    LEG_GAP_TOP,
-    Sprite,
-    person_silhouette,
-    render_sprite,
-)
+from unitrack_env.datasets.synthetic.sprites import Sprite, render_sprite
 
-__all__ = [
-    "BODY_TOP",
-    "EDGE_SHADING",
-    "HEAD_COLOUR",
-    "HEAD_RADIUS",
-    "LEG_GAP_HALF_WIDTH",
-    "LEG_GAP_TOP",
-    "ObjectAnnotation",
-    "ObjectRole",
-    "Pattern",
-    "SceneConfig",
-    "SceneObject",
-    "Silhouette",
-    "SyntheticFrame",
-    "SyntheticVideo",
-    "Texture",
-    "Trajectory",
-    "person_silhouette",
-    "render_scene",
-]
+__all__ = ["SyntheticVideo", "render_scene"]
 
 #: Seed-stream index for object layout, textures and trajectories.
 _STREAM_OBJECTS = 0

@@ -7,13 +7,7 @@
                                                      numbering, as the 2019 release)
     <root>/detections/{train,valid}.json             noisy detections, results format
 
-Categories: 1 ``person`` (walking and standing people) and 2 ``occluder`` (the static
-structure in front). Ground-truth person masks are the visible pixels of the rendered
-instance map, as compressed RLE; the occluder's are polygons (its visible rectangle), so the
-reader's polygon path is exercised. Detections come from
-:func:`unitrack_env.datasets.synthetic.mots.simulate_frame` without overlap resolution (VIS
-detections may overlap) and with class confusion: one entry per detection, its
-segmentation non-null on its frame only.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -27,7 +21,8 @@ import numpy as np
 from unitrack_env.datasets.rle import encode_masks
 from unitrack_env.datasets.synthetic.motchallenge import SequenceSpec
 from unitrack_env.datasets.synthetic.mots import MaskNoise, simulate_frame
-from unitrack_env.datasets.synthetic.scene import ObjectRole, SceneConfig, render_scene
+from unitrack_env.datasets.synthetic.scene import render_scene
+from unitrack_env.datasets.synthetic.scene_model import ObjectRole, SceneConfig
 from unitrack_env.datasets.youtube_vis import (
     VisData,
     VisTrack,
