@@ -74,7 +74,94 @@ def validate_labels(action: Any, shape: tuple[int, int], object_ids: tuple[int, 
 class DAVISEnv(SequenceEnv[VOSSequence]):
     """Semi-supervised video object segmentation by mask propagation on DAVIS-2017 data.
 
-    Spaces, rewards, metrics and arguments: docs/envs/davis.md.
+    ## Description
+    Each episode is one video sequence of DAVIS-2017 (or any data in its layout). The
+    agent is given the first frame's label map (which pixels belong to which object) and
+    answers with a label map for every frame. The environment scores every answer with
+    the region similarity J and, at the end of the episode, reports the official DAVIS-2017
+    semi-supervised scores of the sequence: J, F and J&F.
+
+    The layout read is ``<root>/JPEGImages/480p/<seq>/00000.jpg ...``,
+    ``<root>/Annotations/480p/<seq>/00000.png ...`` (palette PNGs whose indices are labels:
+    0 background, ``k`` object ``k``, 255 void) and ``<root>/ImageSets/2017/<split>.txt``.
+    DAVIS frames are 854x480, but any size works, and sizes may differ between sequences.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
+    deterministic synthetic data set in the exact DAVIS-2017 layout (two ``val``, one
+    ``train`` and one ``test-dev`` sequence, 432x240, with 2-3 people each who cross and
+    occlude one another; one sequence has void borders), generated once into the user
+    cache, so it works offline.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size.
+    - ``init_labels``: :class:`~unitrack_env.spaces.LabelMap` ``(H, W)`` uint8, the first
+      frame's annotation as the benchmark ships it (0 background, ``k`` object ``k``, 255
+      void), the same at every step. It is the task's input; the annotations of later
+      frames never appear in observations.
+    - ``num_objects``: ``Discrete(255)``, the number of objects. Their labels are the values
+      of ``init_labels`` other than 0 and 255 (``1..num_objects`` in DAVIS).
+
+    ## Action space
+    :class:`~unitrack_env.spaces.LabelMap` ``(H, W)``: the label map of the current frame,
+    of the frame's size, each pixel 0 (background) or an object label. Any integer dtype
+    is accepted (``argmax`` output need not be cast); other shapes, float or bool dtypes,
+    255 (void) and labels that are not objects of the sequence raise
+    ``InvalidActionError`` before anything is recorded. ``action_space.sample()`` draws a
+    valid map for the current episode (the space is narrowed at every reset). A vector
+    environment's batched ``action_space`` was copied before any reset and does not know
+    each copy's frame size, so its samples are not valid actions: give each copy a map of
+    the size of its own ``observation["frame"]``.
+
+    ## Rewards
+    The frame's contribution to the official J-Mean: the mean J (region IoU outside void
+    pixels, 1 for an object that is absent and not predicted) over the sequence's objects
+    on the frames the DAVIS evaluation scores, and 0 on the first frame (it is given) and
+    on the last frame (the official evaluation drops it). So the episode return divided by
+    ``seq_length - 2`` is exactly the sequence's ``J-Mean``. ``info["j"]`` holds the
+    per-object J of every annotated frame, scored or not. Sequences without annotations
+    (test-dev) give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame of the chosen sequence and its label map. The first
+    step answers that same frame (the official results include ``00000.png``), so an
+    episode has as many steps as the sequence has frames. ``info`` holds ``sequence``,
+    ``frame_index`` (0-based, the frame file's number), ``seq_length``, ``frame_rate`` (24),
+    ``image_size`` ``(height, width)``, ``benchmark``, ``has_ground_truth``, ``object_ids``
+    and ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the agent has answered the last frame (there is no
+    truncation). The final ``info["metrics"]`` holds the sequence's DAVIS-2017
+    semi-supervised scores (first and last frames excluded, void pixels ignored, objects
+    compared by label): ``J-Mean``, ``J-Recall``, ``J-Decay``, ``F-Mean``, ``F-Recall``,
+    ``F-Decay`` and ``J&F-Mean``, as fractions (NaN for a sequence of 2 frames or fewer,
+    which has no scored frame). :meth:`write_episode` writes the official result format,
+    ``<folder>/<seq>/<frame>.png`` palette PNGs with the DAVIS palette, and
+    :meth:`score_folder` scores such folders with the same functions (over all objects of
+    all sequences for the combined row, as the DAVIS table does).
+
+    ## Arguments
+    - ``root``: the DAVIS folder holding ``JPEGImages``, ``Annotations`` and ``ImageSets``
+      (default: ``$UNITRACK_DATA/DAVIS`` if that variable is set, else the synthetic
+      default).
+    - ``split``: ``"val"`` (the benchmark's), ``"train"``, ``"test-dev"`` (first frame
+      annotated only: no reward, no metrics), or None for every sequence folder.
+    - ``sequences``: restrict to these sequence names (default: all of the split).
+    - ``resolution``: ``"480p"`` or ``"Full-Resolution"``.
+    - ``year``: ``ImageSets`` sub-folder (``"2017"``).
+    - ``max_frame_size``: bound ``(height, width)`` of the frame and label-map spaces.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; the label maps keep the frame's size).
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` overlays the agent's last label map on the frame it
+      answered (id-coloured translucent masks with outlines).
+
+    ## Version history
+    - v0: initial version.
     """
 
     default_max_frame_size = DEFAULT_MAX_FRAME_SIZE

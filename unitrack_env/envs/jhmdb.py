@@ -24,7 +24,73 @@ REWARD_ALPHA = 0.1
 class JHMDBEnv(SequenceEnv[PoseSequence]):
     """Pose propagation: follow one person's 15 joints through a JHMDB video.
 
-    Spaces, rewards, metrics and arguments: docs/envs/jhmdb.md.
+    ## Description
+    Each episode is one JHMDB video (``"<action>/<video>"``). The agent is given the first
+    frame's 15 joints (neck, belly, face, shoulders, hips, elbows, knees, wrists, ankles, in
+    ``joint_positions.mat`` order) and must predict them in every frame, as in the UniTrack
+    paper's pose propagation (appendix, JHMDB table; the propagation itself is Gaussian
+    belief maps carried by the appearance model's affinities). The final metrics are
+    PCK@0.1 and PCK@0.2.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small deterministic
+    synthetic data set in JHMDB's exact layout (320x240 PNG frames, ``pos_img`` in
+    ``joint_positions.mat``; a walking person crossed by another one), generated once into
+    the user cache.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size (320x240 in JHMDB).
+    - ``init_keypoints``: ``Box((15, 2), float32)``: the first frame's joints ``(x, y)`` in
+      0-based pixels (``pos_img - 1``; the top-left pixel's centre is ``(0, 0)``). This is
+      the task's input; it is the same in every step of an episode. No other ground truth
+      is observed.
+
+    ## Action space
+    ``Box((15, 2), float32)``: the predicted joints of the current frame, same coordinates
+    and joint order as ``init_keypoints``. Wrong shapes, non-numbers and NaN/infinite
+    values raise ``InvalidActionError`` before anything is recorded.
+
+    ## Rewards
+    PCK@0.1 of the frame (:func:`unitrack_env.metrics.pose.frame_pck`): the fraction of the
+    15 joints within ``0.1 x`` the normaliser of the ground truth. The default normaliser
+    is ``0.6 x`` the diagonal of the box spanned by the frame's ground-truth joints, the one
+    of the authors' evaluation script (CRW/TimeCycle ``eval_pck``), which produced every
+    number of the paper's JHMDB table. The first frame is the given input and scores 0
+    (it is never scored).
+
+    ## Starting state
+    ``reset`` returns the first frame and ``init_keypoints``; the agent answers that frame
+    too (echoing ``init_keypoints`` is fine: frame 1 is not scored), so an episode has one
+    step per frame. ``info`` holds ``sequence``, ``frame_index`` (1-based), ``seq_length``,
+    ``frame_rate`` (30, JHMDB's clips are 30 fps), ``image_size`` ``(height, width)`` and
+    ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame. ``info["metrics"]`` holds ``PCK@0.1`` and
+    ``PCK@0.2`` of the video (frames 2..T, per joint, then averaged over the 15 joints, as
+    the authors' script does) as fractions. Results are written per video as
+    ``<folder>/<action>/<video>/joint_positions.mat`` with ``pos_img`` ``(2, 15, T)`` in
+    JHMDB's own 1-based convention (the predicted frame 1 included), readable by the same
+    reader; :meth:`score_folder` pools the joints of all videos before averaging, like
+    the script.
+
+    ## Arguments
+    - ``root``: the JHMDB folder holding ``Rename_Images/`` and ``joint_positions/``
+      (default: ``$UNITRACK_DATA/JHMDB`` if that variable is set, else the synthetic data).
+    - ``split``: None (every annotated video), ``"train"`` or ``"test"`` of the split files.
+    - ``split_index``: 1, 2 or 3 (JHMDB's splits); ``split_dir`` where they are.
+    - ``sequences``: restrict to these ``"<action>/<video>"`` names.
+    - ``normaliser``: ``"box_diagonal"`` (default, the paper's) or ``"box_max_side"``.
+    - ``thresholds``: PCK thresholds of the final metrics (default ``(0.1, 0.2)``).
+    - ``max_frame_size``: bound of the frame space ``(height, width)``.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws the predicted skeleton, one colour per joint.
+
+    ## Version history
+    - v0: initial version.
     """
 
     frame_size_source = "the video's first frame"

@@ -30,7 +30,81 @@ DEFAULT_MAX_TRACKS = 512
 class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     """Multi-object tracking by association on a MOTChallenge-layout data set.
 
-    Spaces, rewards, metrics and arguments: docs/envs/motchallenge.md.
+    ## Description
+    Each episode is one video sequence of a MOTChallenge benchmark (MOT15, MOT16, MOT17,
+    MOT20, or custom data in that layout). At every step the agent sees one frame and that
+    frame's detections (the benchmark's public detections, or a user-given detection
+    folder), and answers with its tracks for that frame: an id and a box per tracked
+    object. The environment scores the answer against the ground truth with the official
+    MOTChallenge rules and, at the end of the episode, reports the official TrackEval
+    metrics (HOTA, CLEAR, Identity) of the whole sequence.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
+    deterministic synthetic data set in the exact MOTChallenge layout, generated once into
+    the user cache, so it works offline.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size.
+    - ``boxes``: ``Box((max_detections, 4), float32)``, finite, ``w, h >= 0``: detections
+      ``(x, y, w, h)`` in 1-based pixels as in ``det.txt``; rows past ``num_detections``
+      are 0.
+    - ``scores``: ``Box((max_detections,), float32)``, finite: detection scores as in the
+      file (MOT15's are unbounded).
+    - ``num_detections``: ``Discrete(max_detections + 1)``, the number of valid rows.
+
+    Ground truth never appears in observations. ``unitrack_env.spaces.unpack_detections``
+    returns the valid rows.
+
+    ## Action space
+    A ``Dict`` of padded arrays: ``ids`` ``(max_tracks,) int64`` (ids >= 1), ``boxes``
+    ``(max_tracks, 4) float32`` (same coordinates as the detections) and ``num_tracks``
+    ``Discrete(max_tracks + 1)``. Build it with ``unitrack_env.spaces.pack_tracks(ids,
+    boxes, max_tracks)``; the unpadded form ``{"ids": (k,), "boxes": (k, 4)}`` is accepted
+    too. Invalid actions (wrong shapes or dtypes, NaN or infinite boxes, negative sizes,
+    ids < 1, duplicate ids) raise ``InvalidActionError`` before anything is recorded.
+
+    ## Rewards
+    ``TP - FP - IDSW`` of the frame under TrackEval's CLEAR matching (IoU >= 0.5, with
+    MOTChallenge preprocessing: tracks matching distractor classes are dropped, only
+    pedestrians with a non-zero flag count). The episode return divided by the number of
+    evaluated ground-truth boxes is exactly TrackEval's MOTA. ``info["clear"]`` has the
+    frame's ``tp``, ``fp``, ``fn`` and ``idsw``. Splits without ground truth give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame of the chosen sequence and its detections.
+    ``info`` holds ``sequence``, ``frame_index`` (1-based), ``seq_length``, ``frame_rate``,
+    ``image_size`` ``(height, width)``, ``benchmark`` and ``has_ground_truth``.
+
+    ## Episode end
+    ``terminated=True`` after the agent has answered the last frame of the sequence (there
+    is no truncation). The final ``info["metrics"]`` holds the sequence's official
+    TrackEval metrics with TrackEval's names (``HOTA``, ``DetA``, ``AssA``, ``MOTA``,
+    ``MOTP``, ``IDF1``, ``IDSW``, ``CLR_FP``, ``CLR_FN``, ``MT``, ``ML``, ...), as fractions.
+    The recorded tracks are available in the official result format via
+    :meth:`episode_results`.
+
+    ## Arguments
+    - ``benchmark``: rule set, one of ``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``.
+    - ``root``: the benchmark folder holding ``train/`` and ``test/`` (default:
+      ``$UNITRACK_DATA/<benchmark>`` if that variable is set, else the synthetic default).
+    - ``split``: sub-folder to read (``"train"`` or ``"test"``).
+    - ``sequences``: restrict to these sequence names (default: all of the split).
+    - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
+    - ``min_score``: drop detections whose score is below this value (the
+      :class:`unitrack_env.wrappers.DetectionScoreFilter` wrapper does the same for any
+      association environment and is the way forward).
+    - ``max_detections``, ``max_tracks``, ``max_frame_size``: space capacities.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; saves the decode time).
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws id-coloured track boxes on the frame.
+
+    ## Version history
+    - v0: initial version.
     """
 
     requires = ("trackeval",)

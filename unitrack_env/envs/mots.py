@@ -28,7 +28,87 @@ DEFAULT_MAX_DETECTIONS = 128
 class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
     """Multi-object tracking and segmentation by associating detection masks.
 
-    Spaces, rewards, metrics and arguments: docs/envs/mots.md.
+    ## Description
+    Each episode is one video sequence of MOTS Challenge (``MOTS20``) or KITTI MOTS. At every
+    step the agent sees one frame and that frame's detection masks, and answers with a track
+    id for each mask (the association step of UniTrack's MOTS head). The environment records
+    the reported masks with their ids, scores them against the ground truth with TrackEval's
+    MOTS rules, and at the end of the episode reports the official metrics (HOTA, sMOTSA,
+    MOTSA, IDF1, IDSW, ...). The recorded episode is written in the official MOTS txt result
+    format (``time_frame id class_id img_height img_width rle``).
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small deterministic
+    synthetic data set in the exact MOTS20 (or KITTI MOTS) layout, generated once into the
+    user cache: textured people walking, crossing and occluding each other, an occluder
+    annotated as an ignore region, and noisy detection masks (dilated/eroded, shifted,
+    missed, false positives, scores).
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native size.
+    - ``masks``: :class:`~unitrack_env.spaces.MaskStack`, ``(num_detections, H, W)`` bool:
+      the detection masks at the frame's size. A stack of masks rather than a label map, so
+      that the mask tasks (MOTS and VIS, where masks may overlap) share one representation;
+      rather than padding, because a padded ``(max_detections, H, W)`` array is megabytes
+      per frame. MOTS masks never overlap: where detection masks of the input file overlap,
+      the pixel goes to the higher-scored detection (MOTS results must be disjoint).
+    - ``boxes``: ``Box((max_detections, 4), float32)``: each mask's tight box ``(x, y, w,
+      h)`` in 0-based pixels (``pycocotools`` ``toBbox`` convention); rows past
+      ``num_detections`` are 0.
+    - ``scores``: ``Box((max_detections,), float32)``: detection scores.
+    - ``num_detections``: ``Discrete(max_detections + 1)``.
+
+    Ground truth never appears in observations.
+
+    ## Action space
+    ``{"ids": Box(0, 2**31 - 1, (max_detections,), int64)}``: ``ids[i]`` is the track id of
+    detection ``i`` for ``i < num_detections``, 0 = not reported; entries past
+    ``num_detections`` are ignored. The unpadded ``{"ids": (num_detections,)}`` is accepted
+    too; ``unitrack_env.spaces.pack_mask_ids`` builds the padded form. Wrong lengths or
+    dtypes, negative ids, and one id given to two masks raise ``InvalidActionError`` before
+    anything is recorded. Reported masks keep the detection's pixels, so results are
+    disjoint, as the MOTS format requires.
+
+    ## Rewards
+    ``TP - FP - IDSW`` of the frame under TrackEval's MOTS evaluation: reported masks that are
+    unmatched and lie more than half inside the ignore regions are dropped, then CLEAR's
+    matching at mask IoU >= 0.5. The episode return divided by the number of ground-truth
+    masks is TrackEval's MOTSA. ``info["clear"]`` has the frame's ``tp``, ``fp``, ``fn`` and
+    ``idsw``. Splits without ground truth give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame and its detections. ``info`` holds ``sequence``,
+    ``frame_index`` (the benchmark's own numbering: MOTS20 1-based, KITTI 0-based),
+    ``seq_length``, ``frame_rate``, ``image_size`` ``(height, width)``, ``benchmark`` and
+    ``has_ground_truth``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame is answered. The final ``info["metrics"]`` holds
+    the sequence's TrackEval metrics (``HOTA``, ``DetA``, ``AssA``, ``sMOTSA``, ``MOTSA``,
+    ``MOTSP``, ``IDF1``, ``IDSW``, ``CLR_FP``, ``CLR_FN``, ... as fractions; ``MOTA``/``MOTP``/
+    ``sMOTA`` are TrackEval's names of the same numbers).
+
+    ## Arguments
+    - ``benchmark``: ``"MOTS20"`` (MOTS Challenge layout) or ``"KITTI-MOTS"``.
+    - ``root``: the benchmark folder (default: ``$UNITRACK_DATA/<benchmark>`` if that
+      variable is set, else the synthetic default).
+    - ``split``: MOTS20 ``"train"``/``"test"``; KITTI ``"training"``/``"testing"``.
+    - ``sequences``: restrict to these sequences.
+    - ``detections``: ``"public"`` (``<seq>/det/det.txt``; KITTI ``<split>/det_02/<seq>.txt``),
+      ``"gt"`` (ground-truth masks as detections) or a folder of ``<seq>.txt`` files, in the
+      MOTS txt format with an optional 7th score field.
+    - ``object_class``: ``"pedestrian"`` or (KITTI) ``"car"``: the class tracked and scored.
+    - ``min_score``: drop detections scored below this (or wrap the environment in
+      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``max_detections``, ``max_frame_size``: space capacities.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws id-coloured masks and boxes.
+
+    ## Version history
+    - v0: initial version.
     """
 
     requires = ("trackeval",)

@@ -66,7 +66,85 @@ def validate_box(action: Any) -> np.ndarray:
 class OTBEnv(SequenceEnv[SOTSequence]):
     """Single object tracking by box propagation on an OTB-2015-layout data set.
 
-    Spaces, rewards, metrics and arguments: docs/envs/otb.md.
+    ## Description
+    Each episode is one video sequence of OTB-2015 (OTB-100, OTB-50, or any folder in the
+    OTB layout). The agent is given the target's box in the first frame and answers with
+    its box in every frame, like the OTB toolkit's one-pass evaluation (OPE). The
+    environment scores every answer against the ground truth and, at the end of the
+    episode, reports the toolkit's success AUC and precision at 20 pixels.
+
+    The layout read is ``<root>/<Seq>/img/0001.jpg ...`` and ``groundtruth_rect.txt``
+    (commas, tabs or spaces; ``groundtruth_rect.<k>.txt`` for the folders with two
+    targets), with the toolkit's frame ranges for the sequences that do not start at
+    frame 1 (David 300-770, BlurCar1 247-988, Tiger1 without its first 5 frames, ...; see
+    :mod:`unitrack_env.datasets.otb`). A copy whose ground truth is shorter than the
+    toolkit's range (a trimmed fixture, e.g. 199 of Human3's 1698 frames) is played over
+    its annotated frames only, with a warning from the reader.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
+    deterministic synthetic data set in the exact OTB layout (three sequences of a walking
+    person who crosses another one and passes behind an occluder; one ground truth file
+    tab-separated, one grayscale sequence whose images start at ``0011.jpg``), generated
+    once into the user cache, so it works offline.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, the frame as uint8 RGB at its native
+      size (grayscale OTB sequences are given as RGB with three equal channels).
+    - ``init_box``: ``Box((4,), float32)``: the target's box in the first frame,
+      ``(x, y, w, h)`` in the ground truth file's 1-based pixels (the top-left pixel is
+      ``(1, 1)``), the same at every step of the episode. It is the task's input; the
+      ground truth of later frames never appears in observations.
+
+    ## Action space
+    ``Box((4,), float32)``: the target's box ``(x, y, w, h)`` in the current frame, in the
+    same 1-based pixels (finite, ``w, h >= 0``; any numeric dtype of shape ``(4,)`` is
+    accepted). NaN or infinite numbers, negative sizes and other shapes raise
+    ``InvalidActionError`` before anything is recorded. A zero-size box is allowed and is
+    scored as the OTB toolkit scores it (replaced by the previous frame's box).
+
+    ## Rewards
+    The IoU of the box the OTB toolkit scores for this frame with the frame's ground truth:
+    on the first frame the toolkit scores the given box (so the reward is 1), on later
+    frames the agent's box (a zero-size box is replaced by the previous frame's scored
+    box). Frames whose ground truth is not a valid box (NaN, ``w <= 0`` or ``h <= 0``)
+    give 0. The episode return divided by the number of frames with valid ground truth is
+    ``AverageOverlap`` (divided by all frames when every frame is valid);
+    ``info["iou"]`` repeats the reward.
+
+    ## Starting state
+    ``reset`` returns the first evaluated frame of the chosen sequence (frame 1 for most
+    sequences; David starts at 300) and the initial box. The first step answers that same
+    frame, so an episode has as many steps as the sequence has frames. ``info`` holds
+    ``sequence``, ``frame_index`` (the benchmark's own 1-based frame number), ``seq_length``,
+    ``frame_rate`` (OTB has none; 30), ``image_size`` ``(height, width)``, ``benchmark``,
+    ``has_ground_truth`` and ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the agent has answered the last frame (there is no
+    truncation). The final ``info["metrics"]`` holds the sequence's OTB scores, computed
+    with the toolkit's rules (first frame = ground truth, degenerate boxes repaired, 21
+    overlap thresholds ``0:0.05:1``, strictly greater, 51 precision thresholds; a frame
+    with invalid ground truth stays in the denominators and fails every success threshold
+    but passes every precision threshold): ``AUC`` (mean success rate; a perfect tracker
+    scores 20/21), ``Precision@20px`` and ``AverageOverlap``. :meth:`write_episode` writes
+    ``<Seq>.txt``, one ``x,y,w,h`` line per frame (the usual OTB result file), and
+    :meth:`score_folder` scores such files with the same functions.
+
+    ## Arguments
+    - ``root``: the OTB folder holding the sequence folders (default: ``$UNITRACK_DATA/OTB``
+      if that variable is set, else the synthetic default).
+    - ``sequences``: restrict to these sequence names (default: every sequence found).
+    - ``max_frame_size``: bound ``(height, width)`` of the frame space.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
+      never look at pixels; saves the decode time).
+    - ``prefetch``: decode the next frame on a background thread.
+    - ``shuffle``: visit sequences in a seeded random order.
+    - ``render_mode``: ``"rgb_array"`` draws the agent's last box on the frame it answered.
+
+    ## Version history
+    - v0: initial version.
     """
 
     def __init__(

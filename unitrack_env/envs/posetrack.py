@@ -46,7 +46,100 @@ _LIMBS = tuple((a - 1, b - 1) for a, b in POSETRACK_SKELETON)
 class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
     """Multi-person pose tracking by association on PoseTrack 2018 data.
 
-    Spaces, rewards, metrics and arguments: docs/envs/posetrack.md.
+    ## Description
+    Each episode is one PoseTrack video. At every step the agent sees a frame and that
+    frame's person poses (17 keypoints each, without identities) and answers with a track
+    id per pose it keeps. The environment scores the answer with poseval's per-keypoint
+    CLEAR MOT rules (head-normalised distance <= 0.5, see
+    :mod:`unitrack_env.metrics.posetrack`) and reports poseval's MOTA, the IDF1 and ID
+    switches the UniTrack paper adds, precision and recall at the end of the episode.
+
+    **Observations (pose detections).** ``detections=`` names a folder of
+    ``<sequence>.json`` files in the PoseTrack result format (``images`` + ``annotations``
+    with ``keypoints``, per-keypoint ``scores`` and a pose ``score``; ``track_id`` is
+    ignored). The UniTrack paper uses the pose estimates of LightTrack, which are not
+    available offline, so on real data without ``detections=`` the environment falls back
+    to **oracle detections**: the annotated poses of the labelled frames with their ids
+    removed, sorted left to right, score 1 (``info["oracle_detections"]`` is True). Oracle
+    detections make MOTA an identity-only score; report them as such. The synthetic data
+    set ships simulated pose-estimator detections (misses, jitter, hallucinated occluded
+    joints, false poses), used by default. A split without annotation files and without
+    ``detections=`` runs with no poses.
+
+    **Frames.** An episode visits the frames listed in the sequence file's ``images`` (all
+    frames of a release video; ``nframes`` is reported as ``info["nframes_declared"]``).
+    The bundled real fixture (mmpose's trimmed copy) lists one labelled frame of a
+    149-frame video, so its episodes have one step; poseval drops the last evaluated frame
+    of every sequence, so with the default ``drop_last_frame=True`` such a one-frame
+    sequence has no evaluated frame and its metrics are NaN. A test split (frames only) is
+    read from ``images/test/<sequence>/``.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, uint8 RGB at native size.
+    - ``keypoints``: ``Box((max_people, 17, 3), float32)``: ``(x, y, score)`` per keypoint
+      in the file's pixels and PoseTrack's keypoint order (nose, head_bottom, head_top,
+      left/right ear, shoulders, elbows, wrists, hips, knees, ankles); score in ``[0, 1]``,
+      0 for a keypoint the detector did not find (coordinates then 0). Rows past
+      ``num_people`` are 0.
+    - ``scores``: ``Box((max_people,), float32)``: pose scores.
+    - ``num_people``: ``Discrete(max_people + 1)``.
+
+    ``unitrack_env.spaces.unpack_poses`` returns the valid rows. Ground truth never appears
+    in observations (oracle detections carry no ids).
+
+    ## Action space
+    A ``Dict`` of padded arrays, mirroring the MOT action: ``ids`` ``(max_tracks,) int64``
+    (>= 1), ``keypoints`` ``(max_tracks, 17, 3) float32`` (the tracked poses, usually the
+    observed ones echoed; a keypoint with score 0 is not predicted) and ``num_tracks``
+    ``Discrete(max_tracks + 1)``. Build it with ``unitrack_env.spaces.pack_pose_tracks``;
+    the unpadded ``{"ids": (k,), "keypoints": (k, 17, 3)}`` is accepted. Wrong shapes or
+    dtypes, NaN/inf, scores outside ``[0, 1]``, ids < 1 or duplicate ids raise
+    ``InvalidActionError`` before anything is recorded.
+
+    ## Rewards
+    On every frame poseval evaluates (labelled frames with people, except the last one
+    when ``drop_last_frame``): ``sum over the 15 poseval joints of (TP - FP - IDSW)``
+    (``TP`` = matched keypoints incl. switches). Other frames give 0. The episode return
+    divided by the number of ground-truth keypoints (``info["metrics"]["num_objects"]``)
+    is the keypoint-pooled MOTA; the reported MOTA averages the per-joint MOTAs instead.
+    ``info["clear"]`` has the frame's ``tp``, ``fp``, ``fn``, ``idsw`` summed over joints.
+    Splits without ground truth give 0.
+
+    ## Starting state
+    ``reset`` returns the first frame and its poses. ``info`` holds ``sequence``,
+    ``frame_index`` (0-based frame number of the file name, PoseTrack's own),
+    ``image_id``, ``is_labeled``, ``seq_length``, ``frame_rate`` (30; not in the files),
+    ``image_size`` ``(height, width)``, ``nframes_declared``, ``has_ground_truth``,
+    ``detections`` (``"synthetic"``, ``"oracle"``, ``"folder"`` or ``"none"``),
+    ``oracle_detections`` and ``synthetic``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame. ``info["metrics"]`` holds poseval's metrics
+    as fractions: ``MOTA``, ``IDF1`` (means over joints), ``IDSW`` (sum over joints),
+    ``MOTP``, ``Precision``, ``Recall``, ``MOTA/<body part>`` (poseval's columns),
+    ``<metric>/<joint>`` per joint, and counts. Results are written as the official
+    PoseTrack 2018 result JSON ``<folder>/<sequence>.json`` (the ground truth's ``images``,
+    one annotation per track with ``track_id``, ``keypoints`` ``(x, y, 1)`` or
+    ``(0, 0, 0)``, ``scores`` and ``score``), which :meth:`score_folder` re-reads.
+
+    ## Arguments
+    - ``root``: folder holding ``posetrack_data/`` (default: ``$UNITRACK_DATA/PoseTrack2018``
+      if that variable is set, else the synthetic data).
+    - ``split``: ``"train"``, ``"val"`` (default, the paper's) or ``"test"``.
+    - ``sequences``: restrict to these sequence names.
+    - ``detections``: a folder of ``<sequence>.json`` pose detections, ``"oracle"``, or
+      None (synthetic: its simulated detections; real: oracle, or none for test).
+    - ``min_score``: drop detected poses scored below this (or wrap the environment in
+      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``max_people``, ``max_tracks``, ``max_frame_size``: space capacities.
+    - ``drop_last_frame``: leave out the last evaluated frame per sequence like poseval.
+    - ``decode_frames``, ``prefetch``, ``shuffle``: as in the other environments.
+    - ``render_mode``: ``"rgb_array"`` draws the tracked skeletons coloured by id.
+
+    ## Version history
+    - v0: initial version.
     """
 
     def __init__(

@@ -26,7 +26,73 @@ DEFAULT_MAX_DETECTIONS = 128
 class VISEnv(SequenceEnv[VisVideo]):
     """Video instance segmentation by associating per-frame detection masks.
 
-    Spaces, rewards, metrics and arguments: docs/envs/vis.md.
+    ## Description
+    Each episode is one video of YouTube-VIS 2019. At every step the agent sees one frame
+    and that frame's detections (mask, class, score) and answers with a track id per
+    detection (UniTrack's association step for VIS). The environment assembles the tracks
+    (a track's mask per frame, its category and score) and at the end of the episode reports
+    the official track mAP (TrackEval's YouTube-VIS evaluation). Results are written in the
+    official results JSON format ``[{video_id, category_id, segmentations, score}]``.
+
+    With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small deterministic
+    synthetic data set in the exact YouTube-VIS 2019 layout (``train.json``, ``valid.json``,
+    ``<split>/JPEGImages/<video>/00000.jpg``), generated once into the user cache: people
+    (category ``person``) walking, crossing and occluding each other, a static ``occluder``
+    object, and noisy overlapping detections with class confusion.
+
+    ## Observation space
+    A ``Dict``:
+
+    - ``frame``: :class:`~unitrack_env.spaces.Image`, uint8 RGB at the video's size.
+    - ``masks``: :class:`~unitrack_env.spaces.MaskStack` ``(num_detections, H, W)`` bool: the
+      detection masks. A stack, not a label map, because VIS detections may overlap.
+    - ``boxes``: ``Box((max_detections, 4), float32)``, each mask's tight ``(x, y, w, h)`` in
+      0-based pixels; rows past ``num_detections`` are 0.
+    - ``scores``: ``Box((max_detections,), float32)``.
+    - ``classes``: ``Box(0, max category id, (max_detections,), int64)``: category ids (0 =
+      padding); names are in ``env.unwrapped.categories``.
+    - ``num_detections``: ``Discrete(max_detections + 1)``.
+
+    ## Action space
+    ``{"ids": Box(0, 2**31 - 1, (max_detections,), int64)}``: the track id of each detection
+    (``i < num_detections``), 0 = not reported; entries past ``num_detections`` are ignored;
+    the unpadded ``(num_detections,)`` form is accepted. Invalid actions (wrong length or
+    dtype, negative ids, one id on two detections) raise ``InvalidActionError`` before
+    anything is recorded. A track's category is the most frequent class of its detections
+    (ties: the larger summed score), its score the mean score of its detections.
+
+    ## Rewards
+    ``TP - FP - IDSW`` of the frame under CLEAR matching at mask IoU >= 0.5 against every
+    ground-truth mask of the frame, class-agnostic (a dense association signal; the official
+    measure, track mAP, is only defined per video and comes at the end). ``info["clear"]``
+    has the counts. Splits without annotations give reward 0.
+
+    ## Starting state
+    ``reset`` returns the first frame and its detections; ``info`` holds ``sequence`` (video
+    name), ``video_id``, ``frame_index`` (0-based position in ``file_names``), ``seq_length``,
+    ``frame_rate`` (6: every 5th frame of 30 fps video), ``image_size`` and
+    ``has_ground_truth``.
+
+    ## Episode end
+    ``terminated=True`` after the last frame. The final ``info["metrics"]`` holds the video's
+    track mAP fields: ``AP`` (mean over IoU 0.50:0.05:0.95), ``AP50``, ``AP75``, ``AR``, and
+    TrackEval's ``AP_all``, ``AR_all`` and area ranges (-1 where undefined).
+
+    ## Arguments
+    - ``root``: the benchmark folder (default ``$UNITRACK_DATA/YouTube-VIS-2019`` if set, else
+      the synthetic default).
+    - ``split``: ``"train"``, ``"valid"`` or ``"test"``; ``annotation_file`` overrides
+      ``<root>/<split>.json``.
+    - ``sequences``: restrict to these videos (names).
+    - ``detections``: ``"public"`` (``<root>/detections/<split>.json``), ``"gt"`` or a
+      results-format JSON file.
+    - ``min_score``: drop detections scored below this (or wrap the environment in
+      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``max_detections``, ``max_frame_size``, ``decode_frames``, ``prefetch``, ``shuffle``,
+      ``render_mode`` as in the other environments.
+
+    ## Version history
+    - v0: initial version.
     """
 
     requires = ("trackeval",)

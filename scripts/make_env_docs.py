@@ -1,0 +1,50 @@
+"""Write docs/envs/<page>.md from the environments' class docstrings (one page per env class).
+
+Run after changing an environment's docstring: ``python scripts/make_env_docs.py``.
+A test fails when a page is out of date.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import inspect
+import sys
+from pathlib import Path
+
+import unitrack_env
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "envs"
+
+
+def pages() -> dict[str, str]:
+    """Return ``{file name: markdown}`` for every environment class in the registry table."""
+    by_class: dict[str, list[str]] = {}
+    for variant in unitrack_env.VARIANTS:
+        by_class.setdefault(variant.entry_point, []).append(variant.env_id)
+    out = {}
+    for entry_point, ids in by_class.items():
+        module_name, class_name = entry_point.split(":")
+        cls = getattr(importlib.import_module(module_name), class_name)
+        doc = inspect.cleandoc(cls.__doc__ or "")
+        summary, _, body = doc.partition("\n")
+        task = module_name.rsplit(".", 1)[-1]
+        header = f"# {summary.strip()}\n\nIds: " + ", ".join(f"`{i}`" for i in ids) + "\n"
+        note = (f"\n<!-- generated from {module_name}.{class_name} by "
+                "scripts/make_env_docs.py; edit the docstring, not this file -->\n")
+        out[f"{task}.md"] = header + note + body.rstrip() + "\n"
+    return out
+
+
+def main() -> int:
+    """Write every page."""
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
+    DOCS.mkdir(parents=True, exist_ok=True)
+    for name, text in pages().items():
+        (DOCS / name).write_text(text)
+        print(f"wrote {DOCS / name}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
