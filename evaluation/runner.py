@@ -29,7 +29,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
+import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -44,6 +44,18 @@ from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks import Benchmark, benchmark_for
 from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
 from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
+from unitrack_env.evaluation.ownership import (
+    Manifest,
+    adopt,
+    claim,
+    clear_ours,
+    hold_folder,
+    in_the_way,
+    in_the_way_message,
+    kept_message,
+    settle,
+)
+from unitrack_env.evaluation.watchdog import DEFAULT_STEP_TIMEOUT, StepTimeout, StepWatchdog
 from unitrack_env.evaluation.workers import (
     SequenceFailure,
     play_in_workers,
@@ -236,7 +248,7 @@ def _run_difference(previous: Any, spec: RunSpec) -> str:
     return "; ".join(changes) or "another run.json format"
 
 
-def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
+def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) -> None:
     run_file = out / "run.json"
     if run_file.is_file() and not overwrite:
         try:
@@ -246,13 +258,57 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
         if previous != spec.to_json():
             raise RunMismatch(out, _run_difference(previous, spec))
     try:
-        if overwrite:
-            for sub in ("data", "sequences"):
-                if (out / sub).is_dir():
-                    shutil.rmtree(out / sub)
+        manifest.add(run_file)
         atomic_write_text(run_file, json.dumps(spec.to_json(), indent=2))
     except OSError as exc:
         raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
+
+
+def _results_match(out: Path, base: Any, name: str) -> bool:
+    """Whether a sequence's record exists and its digest matches its result files."""
+    try:
+        record = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
+    except (OSError, ValueError, TypeError):
+        return False
+    return record.results == result_digest(out / "data", name, base.sequence_names)
+
+
+def _own_out(out: Path, base: Any, names: list[str], overwrite: bool) -> Manifest:
+    """The folder's manifest, after ``--overwrite`` deleted our files; refuse foreign files.
+
+    Runs of ours that left no manifest entry (written before manifests, or a scorecard's
+    stored cells) are adopted when their records verify. Files that no run of ours wrote are
+    never deleted (``--overwrite`` names them) nor overwritten (the run is refused).
+    """
+    every = list(base.sequence_names)
+    try:
+        manifest = Manifest.load(out)
+        listed = {manifest.folder / rel for rel in manifest.files}
+        unlisted = [n for n in every
+                    if _record_path(out, n).is_file() and _record_path(out, n) not in listed]
+        adopt(manifest, every, [n for n in unlisted if _results_match(out, base, n)])
+        if overwrite:
+            kept = clear_ours(manifest, every)
+            if kept:
+                warnings.warn(kept_message(out, kept), UserWarning, stacklevel=3)
+    except OSError as exc:
+        raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
+    blocked = in_the_way(manifest, names, every)
+    if blocked:
+        raise OutputError(in_the_way_message(out, blocked))
+    return manifest
+
+
+def _outside(paths: list[Path], out: Path) -> list[Path]:
+    """``paths`` without those inside ``out``: a run's own files are never its inputs.
+
+    ``--out`` inside ``--root`` is allowed (runs kept beside their data are common): the
+    data readers never look there, and without this filter every file the run writes would
+    change the fingerprint of the very sequences it resumes.
+    """
+    prefixes = {os.path.abspath(out), str(out.resolve())}
+    prefixes = tuple(p.rstrip(os.sep) + os.sep for p in prefixes)
+    return [p for p in paths if not (os.path.abspath(p) + os.sep).startswith(prefixes)]
 
 
 def _sequence_lengths(bench: Benchmark, todo: list[str]
@@ -274,29 +330,42 @@ def _sequence_lengths(bench: Benchmark, todo: list[str]
 
 def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
                todo: list[str], inputs: dict[str, str], bar: Any,
-               causes: dict[str, BaseException]
+               causes: dict[str, BaseException], step_timeout: float | None = None,
                ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
-    """Play ``todo`` in this process; a failed sequence's exception goes into ``causes``."""
+    """Play ``todo`` in this process; a failed sequence's exception goes into ``causes``.
+
+    A step longer than ``step_timeout`` fails its sequence (:mod:`.watchdog`).
+    """
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     player = env
+    watchdog = StepWatchdog(step_timeout, where=f" in {out}")
+
+    def advance() -> None:
+        watchdog.beat()
+        bar.advance()
+
     try:
-        for name in todo:
-            bar.start_sequence(name)
-            try:
-                record, _ = play_episode(player, agent_obj, name, benchmark=bench,
-                                         on_frame=bar.advance)
-            except (ValueError, KeyError, OSError, RuntimeError) as exc:
-                failures[name], causes[name] = SequenceFailure.describe(exc), exc
-                # A reset that raised leaves Gymnasium's checker wrapper without its first
-                # observation; the next episode gets a fresh environment.
-                if player is not env:
-                    player.close()
-                player = spec.make_env()
-                continue
-            record.inputs = inputs[name]
-            save_episode(out, player, record, bench)
-            records[name] = record
+        with watchdog:
+            for name in todo:
+                bar.start_sequence(name)
+                watchdog.start(name)
+                try:
+                    record, _ = play_episode(player, agent_obj, name, benchmark=bench,
+                                             on_frame=advance)
+                except (ValueError, KeyError, OSError, RuntimeError, StepTimeout) as exc:
+                    watchdog.stop()
+                    failures[name], causes[name] = SequenceFailure.describe(exc), exc
+                    # A reset that raised leaves Gymnasium's checker wrapper without its first
+                    # observation; the next episode gets a fresh environment.
+                    if player is not env:
+                        player.close()
+                    player = spec.make_env()
+                    continue
+                watchdog.stop()
+                record.inputs = inputs[name]
+                save_episode(out, player, record, bench)
+                records[name] = record
     finally:
         if player is not env:
             player.close()
@@ -314,7 +383,7 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
     }
     if scores is not None:
         payload |= {"benchmark": scores.benchmark, "per_sequence": scores.per_sequence,
-                    "combined": scores.combined}
+                    "combined": scores.combined, "combined_covers": scores.coverage_json()}
     else:
         payload["note"] = "this split has no ground truth; results were written, not scored"
     atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
@@ -333,6 +402,7 @@ def run(
     workers: int = 1,
     overwrite: bool = False,
     progress: bool = True,
+    step_timeout: float | None = DEFAULT_STEP_TIMEOUT,
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
@@ -345,8 +415,11 @@ def run(
         agent_kwargs: keyword arguments of the agent (checked against its options).
         sequences: only these sequences (default: all of the split).
         workers: parallel worker processes across sequences (1 = in this process).
-        overwrite: discard an existing run in ``out`` instead of resuming it.
+        overwrite: discard an existing run in ``out`` instead of resuming it: the files of
+            runs of ours (per ``out/manifest.json``) are deleted, other files are kept.
         progress: show a progress bar with FPS and ETA.
+        step_timeout: seconds one step (the reset included) may take before its sequence
+            fails (None or 0: no limit); see :mod:`unitrack_env.evaluation.watchdog`.
 
     Returns:
         A :class:`RunReport`; ``metrics.json`` in ``out`` holds the same metrics.
@@ -354,6 +427,9 @@ def run(
     Raises:
         RunFailed: some sequences failed (the others are kept and were scored nowhere; rerun
             to resume once the cause is fixed).
+        OutputInUse: another process is writing into ``out``.
+        OutputError: ``out`` cannot be written, or holds files that no run of ours wrote
+            where this run would write.
     """
     agent_kwargs = dict(agent_kwargs or {})
     if isinstance(sequences, str):  # one name, not its letters
@@ -373,20 +449,30 @@ def run(
         env.close()
         raise
     identity = RunIdentity.of(spec)
-    inputs = {n: identity.sequence_fingerprint(base.sequence_inputs(n)) for n in names}
+    inputs = {n: identity.sequence_fingerprint(_outside(base.sequence_inputs(n), out))
+              for n in names}
     try:
-        _prepare_out(out, spec, overwrite)
-        report = _run_prepared(spec, env, bench, agent_obj, out, names, inputs, workers,
-                               progress)
+        with hold_folder(out, f"agent {name} on {env_id}"):
+            manifest = _own_out(out, base, names, overwrite)
+            _prepare_out(out, spec, overwrite, manifest)
+            report = _run_prepared(spec, env, bench, agent_obj, out, names, inputs, manifest,
+                                   _Options(workers, progress, step_timeout))
     finally:
         close_agent(agent_obj)
         env.close()
     return report
 
 
+@dataclass(frozen=True)
+class _Options:
+    workers: int
+    progress: bool
+    step_timeout: float | None
+
+
 def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
-                  names: list[str], inputs: dict[str, str], workers: int,
-                  progress: bool) -> RunReport:
+                  names: list[str], inputs: dict[str, str], manifest: Manifest,
+                  options: _Options) -> RunReport:
     base = env.unwrapped
     finished = [n for n in names if _record_path(out, n).is_file()]
     replayed = {n: why for n in finished
@@ -398,16 +484,23 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     from unitrack_env.evaluation.progress import RunProgress
 
     causes: dict[str, BaseException] = {}
-    with RunProgress(sum(lengths.values()), enabled=progress) as bar:
-        if workers <= 1 or len(todo) <= 1:
-            records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar,
-                                         causes)
-        else:
-            records, played = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
+    claim(manifest, todo)
+    try:
+        with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
+            if options.workers <= 1 or len(todo) <= 1:
+                records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs,
+                                             bar, causes, options.step_timeout)
+            else:
+                records, played = play_in_workers(spec, out, todo, inputs, lengths,
+                                                  options.workers, bar, options.step_timeout)
+    finally:
+        for name in todo:
+            settle(manifest, name, base.sequence_names)
     failures |= played
     if failures:  # in this process, the first failure's traceback (the agent's code) is kept
         raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
+    manifest.add(out / "metrics.json")
     scores = _score_and_write(out, spec, bench, names, records)
     return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed)

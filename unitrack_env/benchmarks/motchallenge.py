@@ -91,7 +91,7 @@ class MOTChallengeBenchmark(Benchmark):
                                benchmark=self.name, seq_length=self.sequence_length(sequence))
         return dict(score.summary)
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
         from unitrack_env.metrics.motchallenge import score_folder
 
