@@ -10,6 +10,8 @@ it runs one task at a time and sends a heartbeat after each step. The parent the
   for the tasks left;
 * kills a worker whose task sent no heartbeat for ``step_timeout`` seconds (a hung agent,
   even inside a C call) and fails only that task (see :mod:`~unitrack_env.evaluation.watchdog`).
+  The clock starts at the task's first heartbeat (``beat(0)``): a worker's imports and the
+  building of its environment and agent are not steps.
 
 Workers are spawned, watch their parent (they exit when it is gone) and ignore Ctrl-C (the
 parent stops them); see :func:`unitrack_env.evaluation.workers.init_worker`.
@@ -101,6 +103,7 @@ class _Worker:
     item: Any = None
     beat: float = 0.0
     frames: int = 0
+    started: bool = False  # the task's first heartbeat came (start-up is not a step)
 
 
 class SupervisedPool:
@@ -141,7 +144,7 @@ class SupervisedPool:
                     self._retire(worker)  # died idle, after its last answer: blame no one
                 elif worker.number is None and queue:
                     worker.number, worker.item = queue.popleft()
-                    worker.beat, worker.frames = time.monotonic(), 0
+                    worker.beat, worker.frames, worker.started = time.monotonic(), 0, False
                     worker.conn.send((worker.number, fn, args(worker.item)))
             if any(w.number is not None for w in self.workers):
                 yield from self._wait(on_beat)
@@ -149,14 +152,15 @@ class SupervisedPool:
     def _wait(self, on_beat: Callable[[Any, int], None] | None) -> Iterator[tuple[Any, Any]]:
         busy = [w for w in self.workers if w.number is not None]
         timeout = None
-        if self.step_timeout is not None:
-            timeout = max(0.0, min(w.beat for w in busy) + self.step_timeout - time.monotonic())
+        timed = [w.beat for w in busy if w.started]
+        if self.step_timeout is not None and timed:
+            timeout = max(0.0, min(timed) + self.step_timeout - time.monotonic())
         ready = set(wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
                          timeout=timeout))
         for worker in busy:
             if worker.conn in ready or worker.process.sentinel in ready:
                 yield from self._serve(worker, on_beat)
-            elif (self.step_timeout is not None
+            elif (self.step_timeout is not None and worker.started
                   and time.monotonic() - worker.beat >= self.step_timeout):
                 item = worker.item
                 self._retire(worker, kill=True)
@@ -171,6 +175,7 @@ class SupervisedPool:
                 kind, number, payload = worker.conn.recv()
                 if kind == "beat":
                     worker.beat, worker.frames = time.monotonic(), worker.frames + payload
+                    worker.started = True
                     if on_beat is not None:
                         on_beat(worker.item, payload)
                     continue

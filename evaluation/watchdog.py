@@ -57,8 +57,10 @@ def limit(seconds: float | None) -> float | None:
 class StepWatchdog:
     """The in-process watchdog: ``start(name)``, ``beat()`` after each step, ``stop()``."""
 
-    def __init__(self, seconds: float | None, where: str = "", grace: float = GRACE) -> None:
-        self.seconds, self.where, self.grace = limit(seconds), where, grace
+    def __init__(self, seconds: float | None, where: str = "", grace: float | None = None
+                 ) -> None:
+        self.seconds, self.where = limit(seconds), where
+        self.grace = GRACE if grace is None else grace
         self.deadline: float | None = None
         self.sequence, self.frame, self.fired = "", 0, 0.0
         self._stop = threading.Event()

@@ -89,6 +89,8 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str,
         env = spec.make_env()
         agent = spec.make_agent()
         bench = spec.make_benchmark()
+        if beat is not None:
+            beat(0)  # the episode starts: the parent's step clock runs from here
         record, _ = play_episode(env, agent, sequence, benchmark=bench, on_frame=beat)
         record.inputs = inputs
         save_episode(Path(out), env, record, bench)
