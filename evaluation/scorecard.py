@@ -422,8 +422,11 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     out = Path(out)
     check_out_folder(out)
     cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
-    _play_all(out, cells, backend=backend, workers=workers, address=address,
-              on_progress=on_progress)
-    card = combine(out, cells, sources)
-    write_outputs(out, card, radar_scale=radar_scale)
+    from unitrack_env.evaluation.ownership import hold_folder
+
+    with hold_folder(out, "scorecard"):  # one scorecard at a time (each cell run locks too)
+        _play_all(out, cells, backend=backend, workers=workers, address=address,
+                  on_progress=on_progress)
+        card = combine(out, cells, sources)
+        write_outputs(out, card, radar_scale=radar_scale)
     return card

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import ast
-import contextlib
 import inspect
 import os
 import signal
@@ -20,9 +19,7 @@ import sys
 import threading
 import time
 import warnings
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import current_process, get_context
+from multiprocessing import current_process
 from pathlib import Path
 from typing import Any
 
@@ -139,26 +136,6 @@ def refuse_unguarded_script() -> None:
                   for node in tree.body)
     if not guarded:
         raise RuntimeError(message.format(f"{path} (line {line})"))
-
-
-@contextlib.contextmanager
-def worker_pool(workers: int, threads: int) -> Iterator[ProcessPoolExecutor]:
-    """Spawned worker processes that die with this one; stopped at once on an exception.
-
-    On Ctrl-C (or any failure in the block) pending work is cancelled and running workers
-    are terminated; what they finished before was already kept by the caller.
-    """
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                               initializer=init_worker, initargs=(os.getpid(), threads))
-    try:
-        yield pool
-    except BaseException:
-        processes = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.terminate()
-        raise
-    pool.shutdown(wait=True)
 
 
 def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str],
