@@ -192,27 +192,6 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
     return 0
 
 
-def _score_gt(args: argparse.Namespace) -> Any:
-    """``score --benchmark --gt``: every sequence of the ground-truth folder must be there."""
-    from unitrack_env.benchmarks.base import MissingResults
-    from unitrack_env.metrics.motchallenge import score_folder
-
-    gt, results = Path(args.gt), Path(args.results)
-    split = (sorted(d.name for d in gt.iterdir() if (d / "gt" / "gt.txt").is_file())
-             if gt.is_dir() else [])
-    if not split or not results.is_dir():  # score_folder names what is wrong
-        return score_folder(gt, results, benchmark=args.benchmark, sequences=args.sequences)
-    extra = sorted(p.stem for p in results.glob("*.txt") if p.stem not in split)
-    names = args.sequences or [*split, *extra]  # a file without ground truth is refused
-    missing = [n for n in names if not (results / f"{n}.txt").is_file()]
-    if missing and (not args.allow_missing or len(missing) == len(names)):
-        raise MissingResults(results, missing, len(names), args.allow_missing)
-    report = score_folder(gt, results, benchmark=args.benchmark,
-                          sequences=[n for n in names if n not in missing])
-    report.sequences_of, report.missing = len(set(split) | set(names)), missing
-    return report
-
-
 def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     import json
 
@@ -227,7 +206,10 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
                                     allow_missing=args.allow_missing)
         task = unitrack_env.task_of(args.env)
     elif args.benchmark and args.gt:
-        report = _score_gt(args)
+        from unitrack_env.benchmarks.motchallenge import score_split_folder
+
+        report = score_split_folder(args.gt, args.results, args.benchmark, args.sequences,
+                                    allow_missing=args.allow_missing)
         task = "mot"
     else:
         raise ValueError("score needs --env ID [--root DIR] [--split S], or (MOTChallenge) "

@@ -186,7 +186,7 @@ def hold_folder(folder: str | os.PathLike, what: str) -> Iterator[FolderLock]:
     try:
         previous = lock.acquire()
     except OSError as exc:
-        from unitrack_env.evaluation.runner import OutputError
+        from .runner import OutputError
 
         raise OutputError(exc.errno, f"cannot write to {folder}: {exc.strerror or exc}") from exc
     try:
@@ -258,9 +258,10 @@ class Manifest:
             self.files |= new
             self.save()
 
-    def owns(self, path: Path) -> bool:
-        """Whether ``path`` is listed."""
-        return self.relative(path) in self.files or self.relative(path) == MANIFEST
+    def claim(self, sequences: Iterable[str]) -> None:
+        """Mark ``sequences`` as in play (before any of their files is written)."""
+        self.playing |= set(sequences)
+        self.save()
 
 
 # ------------------------------------------------------------------ a run's sequences
@@ -311,12 +312,6 @@ def in_the_way(manifest: Manifest, todo: Iterable[str], names: Iterable[str]) ->
     return [p for p in candidates if p.is_file() and p not in owned]
 
 
-def claim(manifest: Manifest, todo: Iterable[str]) -> None:
-    """Mark ``todo`` as in play (before any of their files is written)."""
-    manifest.playing |= set(todo)
-    manifest.save()
-
-
 def settle(manifest: Manifest, sequence: str, names: Iterable[str]) -> None:
     """A sequence finished (or failed): list the files it wrote, end its claim."""
     manifest.files |= {manifest.relative(p)
@@ -354,3 +349,62 @@ def in_the_way_message(out: Path, files: list[Path]) -> str:
     more = f" and {len(files) - 5} more" if len(files) > 5 else ""
     return (f"{out} holds files that no run of ours wrote and that this run would overwrite: "
             f"{shown}{more}; move them away or choose another --out")
+
+
+def _record(out: Path, name: str) -> Path:
+    return out / "sequences" / f"{name}.json"
+
+
+def results_match(out: Path, names: list[str], name: str) -> bool:
+    """Whether sequence ``name`` has a record whose digest matches its result files."""
+    from .episode import SequenceRecord
+    from .identity import result_digest
+
+    try:
+        record = SequenceRecord.from_json(json.loads(_record(out, name).read_text()))
+    except (OSError, ValueError, TypeError):
+        return False
+    return record.results == result_digest(out / "data", name, names)
+
+
+def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: bool) -> Manifest:
+    """The folder's manifest, after ``overwrite`` deleted our files; refuse foreign files.
+
+    ``every`` is the split's sequences, ``names`` those this run plays or keeps. Runs of ours
+    that left no manifest entry (written before manifests, or a scorecard's stored cells)
+    are adopted when their records verify. Files that no run of ours wrote are never deleted
+    (``overwrite`` names them in a warning) nor overwritten (the run is refused).
+
+    Raises:
+        OutputError: a file that is not ours is where this run would write; or ``out``
+            cannot be written.
+    """
+    from .runner import OutputError
+
+    every = list(every)
+    try:
+        manifest = Manifest.load(out)
+        listed = {manifest.folder / rel for rel in manifest.files}
+        unlisted = [n for n in every if _record(out, n).is_file() and _record(out, n) not in listed]
+        adopt(manifest, every, [n for n in unlisted if results_match(out, every, n)])
+        if overwrite and (kept := clear_ours(manifest, every)):
+            warnings.warn(kept_message(out, kept), UserWarning, stacklevel=3)
+    except OSError as exc:
+        raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
+    blocked = in_the_way(manifest, names, every)
+    if blocked:
+        raise OutputError(in_the_way_message(out, blocked))
+    return manifest
+
+
+def outside(paths: list[Path], out: Path) -> list[Path]:
+    """``paths`` without those inside ``out``: a run's own files are never its inputs.
+
+    ``--out`` inside ``--root`` is allowed rather than refused (runs kept beside their data
+    are common, and the data readers never read them as sequences); without this filter,
+    every file a run writes there would change the fingerprint of the very sequences it
+    resumes, and each rerun would replay them all.
+    """
+    prefixes = tuple({p.rstrip(os.sep) + os.sep
+                      for p in (os.path.abspath(out), str(Path(out).resolve()))})
+    return [p for p in paths if not (os.path.abspath(p) + os.sep).startswith(prefixes)]

@@ -30,7 +30,7 @@ from multiprocessing import get_context
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from unitrack_env.evaluation.watchdog import limit, timeout_message
+from .watchdog import limit, timeout_message
 
 
 class WorkerDied(RuntimeError):
@@ -69,7 +69,7 @@ def describe_exit(exitcode: int | None) -> str:
 
 def _worker_main(conn: Connection, parent: int, threads: int) -> None:
     """A worker: run tasks from the pipe until told to stop; a heartbeat after each step."""
-    from unitrack_env.evaluation.workers import init_worker
+    from .workers import init_worker
 
     init_worker(parent, threads)
     while True:

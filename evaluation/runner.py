@@ -29,7 +29,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -42,20 +41,11 @@ from unitrack_env.agents.base import agent_class, close_agent
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks import Benchmark, benchmark_for
-from unitrack_env.evaluation.episode import SequenceRecord, play_episode, recorded_results
+from unitrack_env.evaluation.episode import SequenceRecord, recorded_results
 from unitrack_env.evaluation.identity import RunIdentity, option_changes, result_digest
-from unitrack_env.evaluation.ownership import (
-    Manifest,
-    adopt,
-    claim,
-    clear_ours,
-    hold_folder,
-    in_the_way,
-    in_the_way_message,
-    kept_message,
-    settle,
-)
-from unitrack_env.evaluation.watchdog import DEFAULT_STEP_TIMEOUT, StepTimeout, StepWatchdog
+from unitrack_env.evaluation.ownership import Manifest, hold_folder, outside, own_folder, settle
+from unitrack_env.evaluation.serial import play_here
+from unitrack_env.evaluation.watchdog import DEFAULT_STEP_TIMEOUT
 from unitrack_env.evaluation.workers import (
     SequenceFailure,
     play_in_workers,
@@ -264,53 +254,6 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) 
         raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
 
 
-def _results_match(out: Path, base: Any, name: str) -> bool:
-    """Whether a sequence's record exists and its digest matches its result files."""
-    try:
-        record = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
-    except (OSError, ValueError, TypeError):
-        return False
-    return record.results == result_digest(out / "data", name, base.sequence_names)
-
-
-def _own_out(out: Path, base: Any, names: list[str], overwrite: bool) -> Manifest:
-    """The folder's manifest, after ``--overwrite`` deleted our files; refuse foreign files.
-
-    Runs of ours that left no manifest entry (written before manifests, or a scorecard's
-    stored cells) are adopted when their records verify. Files that no run of ours wrote are
-    never deleted (``--overwrite`` names them) nor overwritten (the run is refused).
-    """
-    every = list(base.sequence_names)
-    try:
-        manifest = Manifest.load(out)
-        listed = {manifest.folder / rel for rel in manifest.files}
-        unlisted = [n for n in every
-                    if _record_path(out, n).is_file() and _record_path(out, n) not in listed]
-        adopt(manifest, every, [n for n in unlisted if _results_match(out, base, n)])
-        if overwrite:
-            kept = clear_ours(manifest, every)
-            if kept:
-                warnings.warn(kept_message(out, kept), UserWarning, stacklevel=3)
-    except OSError as exc:
-        raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
-    blocked = in_the_way(manifest, names, every)
-    if blocked:
-        raise OutputError(in_the_way_message(out, blocked))
-    return manifest
-
-
-def _outside(paths: list[Path], out: Path) -> list[Path]:
-    """``paths`` without those inside ``out``: a run's own files are never its inputs.
-
-    ``--out`` inside ``--root`` is allowed (runs kept beside their data are common): the
-    data readers never look there, and without this filter every file the run writes would
-    change the fingerprint of the very sequences it resumes.
-    """
-    prefixes = {os.path.abspath(out), str(out.resolve())}
-    prefixes = tuple(p.rstrip(os.sep) + os.sep for p in prefixes)
-    return [p for p in paths if not (os.path.abspath(p) + os.sep).startswith(prefixes)]
-
-
 def _sequence_lengths(bench: Benchmark, todo: list[str]
                       ) -> tuple[dict[str, int], dict[str, str]]:
     """Frames of each sequence to play, read before any is played.
@@ -326,50 +269,6 @@ def _sequence_lengths(bench: Benchmark, todo: list[str]
         except (ValueError, KeyError, OSError) as exc:
             failures[name] = SequenceFailure.describe(exc)
     return lengths, failures
-
-
-def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
-               todo: list[str], inputs: dict[str, str], bar: Any,
-               causes: dict[str, BaseException], step_timeout: float | None = None,
-               ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
-    """Play ``todo`` in this process; a failed sequence's exception goes into ``causes``.
-
-    A step longer than ``step_timeout`` fails its sequence (:mod:`.watchdog`).
-    """
-    records: dict[str, SequenceRecord] = {}
-    failures: dict[str, str] = {}
-    player = env
-    watchdog = StepWatchdog(step_timeout, where=f" in {out}")
-
-    def advance() -> None:
-        watchdog.beat()
-        bar.advance()
-
-    try:
-        with watchdog:
-            for name in todo:
-                bar.start_sequence(name)
-                watchdog.start(name)
-                try:
-                    record, _ = play_episode(player, agent_obj, name, benchmark=bench,
-                                             on_frame=advance)
-                except (ValueError, KeyError, OSError, RuntimeError, StepTimeout) as exc:
-                    watchdog.stop()
-                    failures[name], causes[name] = SequenceFailure.describe(exc), exc
-                    # A reset that raised leaves Gymnasium's checker wrapper without its first
-                    # observation; the next episode gets a fresh environment.
-                    if player is not env:
-                        player.close()
-                    player = spec.make_env()
-                    continue
-                watchdog.stop()
-                record.inputs = inputs[name]
-                save_episode(out, player, record, bench)
-                records[name] = record
-    finally:
-        if player is not env:
-            player.close()
-    return records, failures
 
 
 def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str],
@@ -425,11 +324,9 @@ def run(
         A :class:`RunReport`; ``metrics.json`` in ``out`` holds the same metrics.
 
     Raises:
-        RunFailed: some sequences failed (the others are kept and were scored nowhere; rerun
-            to resume once the cause is fixed).
+        RunFailed: some sequences failed (the others are kept; rerun to resume).
         OutputInUse: another process is writing into ``out``.
-        OutputError: ``out`` cannot be written, or holds files that no run of ours wrote
-            where this run would write.
+        OutputError: ``out`` cannot be written, or files no run of ours wrote are in the way.
     """
     agent_kwargs = dict(agent_kwargs or {})
     if isinstance(sequences, str):  # one name, not its letters
@@ -448,19 +345,13 @@ def run(
     except BaseException:
         env.close()
         raise
-    identity = RunIdentity.of(spec)
-    inputs = {n: identity.sequence_fingerprint(_outside(base.sequence_inputs(n), out))
-              for n in names}
+    options = _Options(workers, progress, step_timeout, overwrite)
     try:
         with hold_folder(out, f"agent {name} on {env_id}"):
-            manifest = _own_out(out, base, names, overwrite)
-            _prepare_out(out, spec, overwrite, manifest)
-            report = _run_prepared(spec, env, bench, agent_obj, out, names, inputs, manifest,
-                                   _Options(workers, progress, step_timeout))
+            return _run_owned(spec, env, bench, agent_obj, out, names, options)
     finally:
         close_agent(agent_obj)
         env.close()
-    return report
 
 
 @dataclass(frozen=True)
@@ -468,6 +359,19 @@ class _Options:
     workers: int
     progress: bool
     step_timeout: float | None
+    overwrite: bool
+
+
+def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
+               names: list[str], options: _Options) -> RunReport:
+    """The run, once ``out`` is locked: claim the folder, fingerprint the inputs, play."""
+    base = env.unwrapped
+    identity = RunIdentity.of(spec)
+    inputs = {n: identity.sequence_fingerprint(outside(base.sequence_inputs(n), out))
+              for n in names}
+    manifest = own_folder(out, base.sequence_names, names, options.overwrite)
+    _prepare_out(out, spec, options.overwrite, manifest)
+    return _run_prepared(spec, env, bench, agent_obj, out, names, inputs, manifest, options)
 
 
 def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
@@ -484,11 +388,11 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     from unitrack_env.evaluation.progress import RunProgress
 
     causes: dict[str, BaseException] = {}
-    claim(manifest, todo)
+    manifest.claim(todo)
     try:
         with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
             if options.workers <= 1 or len(todo) <= 1:
-                records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs,
+                records, played = play_here(spec, env, bench, agent_obj, out, todo, inputs,
                                              bar, causes, options.step_timeout)
             else:
                 records, played = play_in_workers(spec, out, todo, inputs, lengths,
