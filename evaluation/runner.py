@@ -314,14 +314,13 @@ def run(
         agent_kwargs: keyword arguments of the agent (checked against its options).
         sequences: only these sequences (default: all of the split).
         workers: parallel worker processes across sequences (1 = in this process).
-        overwrite: discard an existing run in ``out`` instead of resuming it: the files of
-            runs of ours (per ``out/manifest.json``) are deleted, other files are kept.
+        overwrite: discard an existing run in ``out`` instead of resuming it (only files
+            that runs of ours wrote, per ``out/manifest.json``, are deleted).
         progress: show a progress bar with FPS and ETA.
-        step_timeout: seconds one step (the reset included) may take before its sequence
-            fails (None or 0: no limit); see :mod:`unitrack_env.evaluation.watchdog`.
+        step_timeout: seconds a step may take before its sequence fails (None, 0: no limit).
 
     Returns:
-        A :class:`RunReport`; ``metrics.json`` in ``out`` holds the same metrics.
+        A :class:`RunReport` (``metrics.json`` in ``out`` holds the same metrics).
 
     Raises:
         RunFailed: some sequences failed (the others are kept; rerun to resume).
@@ -329,8 +328,7 @@ def run(
         OutputError: ``out`` cannot be written, or files no run of ours wrote are in the way.
     """
     agent_kwargs = dict(agent_kwargs or {})
-    if isinstance(sequences, str):  # one name, not its letters
-        sequences = [sequences]
+    sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
     cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
@@ -345,10 +343,10 @@ def run(
     except BaseException:
         env.close()
         raise
-    options = _Options(workers, progress, step_timeout, overwrite)
     try:
         with hold_folder(out, f"agent {name} on {env_id}"):
-            return _run_owned(spec, env, bench, agent_obj, out, names, options)
+            return _run_owned(spec, env, bench, agent_obj, out, names,
+                              _Options(workers, progress, step_timeout, overwrite))
     finally:
         close_agent(agent_obj)
         env.close()

@@ -148,13 +148,12 @@ class Benchmark(ABC):
         if not folder.is_dir():
             raise DataFormatError(folder, "is a file; the results are a folder of result files"
                                   if folder.is_file() else "results folder not found")
+        if (folder / "run.json").is_file() and (folder / "data").is_dir():
+            raise DataFormatError(folder, "is the folder of a run; its result files are in "
+                                  f"{folder / 'data'}")
         names = self.scorable() if sequences is None else list(dict.fromkeys(sequences))
         missing = [name for name in names if not self.has_results(folder, name)]
         if missing and (not allow_missing or len(missing) == len(names)):
-            if len(missing) == len(names) and (folder / "data").is_dir():
-                allow_missing = False  # the user named the run folder, not its data/
-                missing = [f"{missing[0]} (the run's result files are in {folder / 'data'})",
-                           *missing[1:]]
             raise MissingResults(folder, missing, len(names), allow_missing)
         present = [name for name in names if name not in missing]
         report = self.score_files(folder, present)
