@@ -10,6 +10,13 @@ Output folder layout (TrackEval's tracker layout, so the folder can be scored ag
     <out>/sequences/<sequence>.json  per-sequence record: frames, seconds, FPS, action digest,
                                    fingerprint of the inputs, digest of the result files
     <out>/metrics.json             per-sequence and combined official metrics
+    <out>/manifest.json            every file a run of ours wrote here
+    <out>/.unitrack.lock           while a run writes: who holds the folder
+
+A run owns its folder (:mod:`unitrack_env.evaluation.ownership`): one process at a time,
+``overwrite`` deletes only what the manifest lists, files that no run of ours wrote are
+never overwritten. A step longer than ``step_timeout`` fails its sequence
+(:mod:`unitrack_env.evaluation.watchdog`).
 
 The runner knows no task: the environment plays, and the id's benchmark
 (:class:`unitrack_env.benchmarks.Benchmark`, named by the registration table) writes the
