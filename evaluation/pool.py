@@ -43,10 +43,12 @@ class WorkerTimedOut(RuntimeError):
 
 #: What a worker's death by signal most likely means.
 SIGNAL_CAUSES = {
-    "SIGKILL": "usually the out-of-memory killer (the system log, `dmesg`, says), or a kill -9",
-    "SIGSEGV": "a segmentation fault: a crash in native code (a C extension, a GPU driver)",
+    "SIGKILL": "usually the out-of-memory killer, which the system log and dmesg name; or a "
+               "kill -9",
+    "SIGSEGV": "a segmentation fault: a crash in native code such as a C extension or a GPU "
+               "driver",
     "SIGBUS": "a bus error: a crash in native code, or a memory-mapped file that shrank",
-    "SIGABRT": "native code called abort() (a failed assertion in a C/C++ library)",
+    "SIGABRT": "native code called abort(), e.g. a failed assertion in a C/C++ library",
     "SIGFPE": "an arithmetic fault in native code",
     "SIGTERM": "someone terminated it",
 }
@@ -181,14 +183,16 @@ class SupervisedPool:
                     continue
                 item, worker.number, worker.item = worker.item, None, None
                 yield item, payload
-        except (EOFError, OSError):
-            pass  # the pipe closed: the process is gone
+        except (EOFError, OSError):  # the pipe closed: the process ends (or is ended)
+            worker.process.join(timeout=5)
+            if worker.process.is_alive():
+                worker.process.kill()
+                worker.process.join(timeout=5)
         except Exception as exc:  # an answer that cannot be unpickled here
             item, worker.number, worker.item = worker.item, None, None
             yield item, RuntimeError(f"the answer cannot be read: {type(exc).__name__}: {exc}")
         if worker.number is not None and not worker.process.is_alive():
             item = worker.item
-            worker.process.join(timeout=10)
             self._retire(worker)
             yield item, WorkerDied(describe_exit(worker.process.exitcode))
 

@@ -33,6 +33,7 @@ keeping every finished sequence.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -403,8 +404,9 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
                 records, played = play_in_workers(spec, out, todo, inputs, lengths,
                                                   options.workers, bar, options.step_timeout)
     finally:
-        for name in todo:
-            settle(manifest, name, base.sequence_names)
+        with contextlib.suppress(OSError):  # a full disk: the claims still say they are ours
+            for name in todo:
+                settle(manifest, name, base.sequence_names)
     failures |= played
     if failures:  # in this process, the first failure's traceback (the agent's code) is kept
         raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)

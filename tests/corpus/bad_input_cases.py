@@ -659,7 +659,8 @@ def _twice(scratch: Path, before_second: Callable[[Path], None]) -> str:
     from unitrack_env.evaluation.cli import main
 
     argv = [a.format(out=scratch / "out") for a in EVALUATE]
-    assert main(argv) == 0
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(argv) == 0
     before_second(scratch / "out")
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):

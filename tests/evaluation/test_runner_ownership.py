@@ -10,6 +10,7 @@ import subprocess
 import sys
 import textwrap
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -57,9 +58,13 @@ def test_a_file_of_the_user_where_a_run_would_write_is_refused(tmp_path, capsys)
     out = tmp_path / "mine"
     (out / "data").mkdir(parents=True)
     (out / "data" / "SYN-01.txt").write_text("results of the user's own tracker\n")
+    with pytest.raises(OutputError, match="no run of ours wrote.*data/SYN-01.txt"):
+        run(ENV, "iou", out=out, progress=False)
     for overwrite in ([], ["--overwrite"]):
-        assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", str(out), "--quiet",
-                     *overwrite]) == 2
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # --overwrite names the file it kept, then refuses
+            assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", str(out),
+                         "--quiet", *overwrite]) == 2
         err = capsys.readouterr().err
         assert "no run of ours wrote" in err and "data/SYN-01.txt" in err
     assert (out / "data" / "SYN-01.txt").read_text() == "results of the user's own tracker\n"
