@@ -233,13 +233,25 @@ class Manifest:
 
     @classmethod
     def load(cls, folder: Path) -> Manifest:
-        """The folder's manifest (empty when there is none or it is unreadable)."""
-        try:
-            data = json.loads((Path(folder) / MANIFEST).read_text())
-            return cls(Path(folder), set(map(str, data.get("files", []))),
-                       set(map(str, data.get("playing", []))), True)
-        except (OSError, ValueError, TypeError, AttributeError):
+        """The folder's manifest (empty when there is none).
+
+        Raises:
+            ValueError: ``manifest.json`` is there but not one of ours (another tool's file,
+                or damaged): its list cannot be trusted to say what may be deleted.
+        """
+        path = Path(folder) / MANIFEST
+        if not path.exists():
             return cls(Path(folder))
+        try:
+            data = json.loads(path.read_text())
+            if data.get("written_by") == "unitrack-env":
+                return cls(Path(folder), set(map(str, data["files"])),
+                           set(map(str, data["playing"])), True)
+        except (OSError, ValueError, TypeError, AttributeError, KeyError):
+            pass
+        raise ValueError(f"{path} is not a manifest of unitrack-env (another tool's file, or "
+                         "damaged), so it cannot say which files runs of ours wrote; move it "
+                         "away or choose another --out")
 
     def save(self) -> None:
         """Write the manifest (atomically)."""
@@ -383,7 +395,7 @@ def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: boo
 
     every = list(every)
     try:
-        manifest = Manifest.load(out)
+        manifest = Manifest.load(out)  # a foreign manifest.json: ValueError, a clear refusal
         listed = {manifest.folder / rel for rel in manifest.files}
         unlisted = [n for n in every if _record(out, n).is_file() and _record(out, n) not in listed]
         adopt(manifest, every, [n for n in unlisted if results_match(out, every, n)])

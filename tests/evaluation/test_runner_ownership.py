@@ -183,3 +183,13 @@ def test_two_processes_into_one_new_folder_one_is_refused(tmp_path):
     metrics = json.loads((out / "metrics.json").read_text())
     agent = json.loads((out / "run.json").read_text())["agent"]
     assert metrics["agent"] == agent  # never metrics under one name from the other's files
+
+
+def test_a_manifest_json_of_another_tool_is_not_trusted(tmp_path):
+    out = tmp_path / "theirs"
+    (out / "data").mkdir(parents=True)
+    (out / "data" / "notes.txt").write_text("keep me\n")
+    (out / MANIFEST).write_text(json.dumps({"files": ["data/notes.txt"]}))
+    with pytest.raises(ValueError, match="not a manifest of unitrack-env"):
+        run(ENV, "iou", out=out, progress=False, overwrite=True)
+    assert (out / "data" / "notes.txt").read_text() == "keep me\n"
