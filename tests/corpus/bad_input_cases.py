@@ -1246,6 +1246,9 @@ CASES: tuple[Case, ...] = (
     _c("CLI-out-user-result-in-the-way", "evaluate into a folder whose data/SYN-01.txt is "
        "the user's own", cli(*EVALUATE, "--overwrite", data=_in_out(f"data/{MOT_SEQ}.txt")),
        "exit 2:", "no run of ours wrote", f"data/{MOT_SEQ}.txt", error="CLIFailed"),
+    _c("CLI-out-foreign-manifest", "evaluate --overwrite into a folder whose manifest.json "
+       "is another tool's", cli(*EVALUATE, "--overwrite", data=_in_out("manifest.json")),
+       "exit 2:", "manifest.json is not a manifest of unitrack-env", error="CLIFailed"),
     _c("CLI-out-in-use", "evaluate into a folder another run is writing", _while_held,
        "exit 2:", "in use by another run", "pid", "agent sort on", "since",
        error="CLIFailed"),

@@ -193,3 +193,12 @@ def test_a_manifest_json_of_another_tool_is_not_trusted(tmp_path):
     with pytest.raises(ValueError, match="not a manifest of unitrack-env"):
         run(ENV, "iou", out=out, progress=False, overwrite=True)
     assert (out / "data" / "notes.txt").read_text() == "keep me\n"
+
+
+def test_a_scorecard_folder_has_one_owner_too(tmp_path, capsys):
+    out = tmp_path / "card"
+    with hold_folder(out, "scorecard"):
+        assert main(["scorecard", "--model", "random", "--tasks", "sot", "--out",
+                     str(out)]) == 2
+    assert "in use by another run" in capsys.readouterr().err
+    assert not (out / "cells").exists()
