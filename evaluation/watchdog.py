@@ -113,6 +113,8 @@ class StepWatchdog:
         if deadline is not None and self.seconds is not None and time.monotonic() >= deadline:
             self.deadline = None
             raise StepTimeout(timeout_message(self.seconds, self.frame))
+        if callable(self._previous):  # not ours: the handler we replaced for the run
+            self._previous(signum, frame)
 
     def _watch(self) -> None:
         assert self.seconds is not None
