@@ -107,10 +107,10 @@ class Holder:
 def _process_start(pid: int) -> str:
     """The start time of process ``pid`` in clock ticks since boot (Linux), else ""."""
     try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
+        fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
     except OSError:
         return ""
-    return stat.rpartition(")")[2].split()[19]
+    return fields[19] if len(fields) > 19 else ""
 
 
 class FolderLock:
@@ -129,7 +129,7 @@ class FolderLock:
             try:
                 if not self._flock(fd):
                     raise OutputInUse(self.folder, Holder.parse(_read_fd(fd)))
-                if os.fstat(fd).st_ino != os.stat(self.path).st_ino:
+                if not _same_file(fd, self.path):
                     os.close(fd)  # the holder removed the file between our open and lock
                     continue
                 previous = Holder.parse(_read_fd(fd))
@@ -166,6 +166,13 @@ class FolderLock:
         with contextlib.suppress(OSError):
             os.close(self.fd)
         self.fd = None
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        return os.fstat(fd).st_ino == os.stat(path).st_ino
+    except FileNotFoundError:
+        return False
 
 
 def _read_fd(fd: int) -> str:
