@@ -162,6 +162,7 @@ def test_a_killed_run_leaves_its_claim(tmp_path, monkeypatch):
     assert _manifest(out)["playing"] == []
 
 
+@pytest.mark.slow  # two interpreters; the holder-in-a-subprocess test above runs by default
 def test_two_processes_into_one_new_folder_one_is_refused(tmp_path):
     out = tmp_path / "both"
     slow = tmp_path / "slow.py"

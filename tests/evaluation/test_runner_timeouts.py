@@ -55,6 +55,7 @@ def test_a_hung_agent_fails_its_sequence_in_this_process(tmp_path, how):
     assert (out / "sequences" / "SYN-02.json").is_file()  # the next sequence still played
 
 
+@pytest.mark.slow  # worker start-up; the corpus's CLI-worker-segfault covers the pool in CI
 def test_a_hung_agent_fails_its_sequence_in_a_worker(tmp_path):
     out = tmp_path / "run"
     with pytest.raises(RunFailed) as caught:
@@ -66,7 +67,7 @@ def test_a_hung_agent_fails_its_sequence_in_a_worker(tmp_path):
 
 
 @pytest.mark.parametrize(("how", "named", "bad", "good"), [
-    (SEGFAULT, "SIGSEGV", "SYN-02", "SYN-01"),
+    pytest.param(SEGFAULT, "SIGSEGV", "SYN-02", "SYN-01", marks=pytest.mark.slow),  # in corpus
     pytest.param(OOM, "SIGKILL", "SYN-01", "SYN-02", marks=pytest.mark.slow),
 ])
 def test_a_crashed_worker_blames_only_its_sequence_and_names_the_signal(tmp_path, how, named,
