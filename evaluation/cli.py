@@ -201,9 +201,9 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
 
         env_kwargs = _env_kwargs(args)
         bench = benchmark_for(_check_env_id(args.env), **env_kwargs)
-        report = bench.score_folder(Path(args.results),
-                                    args.sequences or env_kwargs.get("sequences"),
-                                    allow_missing=args.allow_missing)
+        chosen = env_kwargs.get("sequences")  # --env-arg sequences=...: those with gt
+        report = bench.score_folder(Path(args.results), args.sequences or (
+            bench.scorable(chosen) if chosen else None), allow_missing=args.allow_missing)
         task = unitrack_env.task_of(args.env)
     elif args.benchmark and args.gt:
         from unitrack_env.benchmarks.motchallenge import score_split_folder
