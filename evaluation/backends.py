@@ -7,8 +7,8 @@ others). Results come back through the backend itself (pipes for the pool, Ray's
 store for Ray), so workers on other machines need no shared file system.
 
 * ``pool``: ``workers`` spawned processes on this machine, each with ``cpu_count // workers``
-  torch threads; they watch their parent and ignore Ctrl-C (see
-  :mod:`unitrack_env.evaluation.workers`).
+  torch threads; they watch their parent and ignore Ctrl-C, and a worker that dies fails
+  only the item it was running, naming the signal (see :mod:`unitrack_env.evaluation.pool`).
 * ``ray``: one Ray task per item declaring ``num_cpus=1`` (and ``num_gpus``), one torch
   thread each; ``address=None`` starts a local Ray with ``workers`` CPUs, ``"auto"`` or
   ``"ray://host:port"`` joins a running cluster. Needs the ``ray`` extra.
@@ -19,7 +19,6 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import as_completed
 from typing import Any
 
 Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]]
@@ -28,7 +27,7 @@ Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]
 @contextlib.contextmanager
 def pool_backend(workers: int = 1) -> Iterator[Runner]:
     """Local worker processes (``workers`` <= 1: in this process)."""
-    from .workers import worker_pool
+    from .pool import SupervisedPool
 
     workers = max(1, int(workers))
     threads = max(1, (os.cpu_count() or 1) // workers)
@@ -44,16 +43,16 @@ def pool_backend(workers: int = 1) -> Iterator[Runner]:
         yield run_here
         return
 
-    with worker_pool(workers, threads) as pool:
+    with SupervisedPool(workers, threads) as pool:
         def run_pool(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
-            futures = {pool.submit(fn, item, threads): item for item in items}
-            for future in as_completed(futures):
-                try:
-                    yield futures[future], future.result()
-                except Exception as exc:
-                    yield futures[future], exc
+            yield from pool.run(_call, items, lambda item: (fn, item, threads))
 
         yield run_pool
+
+
+def _call(fn: Callable[..., Any], item: Any, threads: int, beat: Any) -> Any:
+    """A pool task: ``fn(item, threads)`` (a cell keeps its own per-step watchdog)."""
+    return fn(item, threads)
 
 
 @contextlib.contextmanager

@@ -19,8 +19,14 @@ from typing import Any
 
 from rich.console import Console
 
-from .cli_types import names, positive_float, positive_int
+from .cli_types import (
+    names,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
 from .progress import one_line_warnings
+from .watchdog import DEFAULT_STEP_TIMEOUT
 
 #: gym.make's own keyword arguments, accepted by every environment.
 GYM_MAKE_OPTIONS: dict[str, Any] = {
@@ -120,7 +126,7 @@ def _feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
 
 
 def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
-                   task: str, fmt: str, fps: dict | None = None) -> None:
+                   task: str, fmt: str, fps: dict | None = None, coverage: str = "") -> None:
     from .tables import metrics_csv, metrics_json, metrics_table
 
     if fmt == "json":
@@ -130,7 +136,7 @@ def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, 
                       soft_wrap=True)
     else:
         table, dropped = metrics_table(per_sequence, combined, title, fps, task,
-                                       width=console.width)
+                                       width=console.width, coverage=coverage)
         console.print(table)
         if dropped:
             console.print(f"({len(dropped)} more column(s) do not fit: {', '.join(dropped)}; "
@@ -153,7 +159,8 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
                      agent_kwargs=agent_kwargs,
                      sequences=args.sequences,
                      workers=args.workers, overwrite=args.overwrite,
-                     progress=not args.quiet and args.format == "table")
+                     progress=not args.quiet and args.format == "table",
+                     step_timeout=args.step_timeout)
     log = console if args.format == "table" else _console(stderr=True)
     if cache_summary():
         log.print(cache_summary(), markup=False)
@@ -169,7 +176,7 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
         fps = {name: record.fps for name, record in report.records.items()}
         _print_metrics(console, report.scores.per_sequence, report.scores.combined,
                        f"{args.agent} on {args.env}", unitrack_env.task_of(args.env),
-                       args.format, fps)
+                       args.format, fps, coverage=report.scores.coverage)
         undefined = sorted(name for name, values in report.scores.per_sequence.items()
                            if any(not _defined(v) for v in values.values()))
         if undefined:
@@ -189,27 +196,31 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
 def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     import json
 
-    sequences = args.sequences
     if args.env:
         import unitrack_env
         from unitrack_env.benchmarks import benchmark_for
 
         env_kwargs = _env_kwargs(args)
         bench = benchmark_for(_check_env_id(args.env), **env_kwargs)
-        names = sequences or bench.scorable(env_kwargs.get("sequences"))
-        report = bench.score_folder(Path(args.results), names)
+        chosen = env_kwargs.get("sequences")  # --env-arg sequences=...: those with gt
+        report = bench.score_folder(Path(args.results), args.sequences or (
+            bench.scorable(chosen) if chosen else None), allow_missing=args.allow_missing)
         task = unitrack_env.task_of(args.env)
     elif args.benchmark and args.gt:
-        from unitrack_env.metrics.motchallenge import score_folder
+        from unitrack_env.benchmarks.motchallenge import score_split_folder
 
-        report = score_folder(args.gt, args.results, benchmark=args.benchmark,
-                              sequences=sequences)
+        report = score_split_folder(args.gt, args.results, args.benchmark, args.sequences,
+                                    allow_missing=args.allow_missing)
         task = "mot"
     else:
         raise ValueError("score needs --env ID [--root DIR] [--split S], or (MOTChallenge) "
                          "--benchmark MOT17 --gt DIR")
     _print_metrics(console, report.per_sequence, report.combined, str(args.results), task,
-                   args.format)
+                   args.format, coverage=report.coverage)
+    if report.missing:
+        _console(stderr=True).print(f"(--allow-missing: COMBINED covers {report.coverage}; "
+                                    f"no result file for {', '.join(report.missing)})",
+                                    markup=False)
     if args.out:
         from unitrack_env.io import atomic_write_text
 
@@ -309,7 +320,11 @@ def _add_evaluate(ev: argparse.ArgumentParser) -> None:
     ev.add_argument("--workers", type=positive_int, default=1,
                     help="parallel worker processes, one sequence each (default: 1)")
     ev.add_argument("--overwrite", action="store_true",
-                    help="discard a previous run in --out instead of resuming it")
+                    help="discard a previous run in --out instead of resuming it (deletes only "
+                    "the files runs of ours wrote, listed in <out>/manifest.json)")
+    ev.add_argument("--step-timeout", type=non_negative_float, default=DEFAULT_STEP_TIMEOUT,
+                    metavar="SECONDS", help="a step (the agent's act() and the env's step) "
+                    "longer than this fails its sequence (default: %(default)g; 0: no limit)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     _format_option(ev)
     ev.set_defaults(func=_cmd_evaluate)
@@ -327,6 +342,10 @@ def _add_score(sc: argparse.ArgumentParser) -> None:
                     help="results folder (as written by `unitrack evaluate` under <out>/data)")
     sc.add_argument("--sequences", type=names,
                     help="comma-separated sequence names (default: all files)")
+    sc.add_argument("--allow-missing", action="store_true",
+                    help="score the sequences that have a result file even when others of the "
+                    "split have none (refused by default: the combined row would not be the "
+                    "benchmark's)")
     sc.add_argument("--out", help="also write the metrics as JSON to this file")
     _format_option(sc)
     sc.set_defaults(func=_cmd_score)

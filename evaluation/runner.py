@@ -5,10 +5,10 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
-import shutil
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -24,8 +24,11 @@ from unitrack_env.benchmarks.base import Benchmark, select_sequences
 from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
-from .episode import SequenceRecord, play_episode, recorded_results
+from .episode import SequenceRecord, recorded_results
 from .identity import RunIdentity, option_changes, result_digest
+from .ownership import Manifest, hold_folder, outside, own_folder, settle
+from .serial import play_here
+from .watchdog import DEFAULT_STEP_TIMEOUT
 from .workers import (
     SequenceFailure,
     play_in_workers,
@@ -212,7 +215,7 @@ def _run_difference(previous: Any, spec: RunSpec) -> str:
     return "; ".join(changes) or "another run.json format"
 
 
-def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
+def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) -> None:
     run_file = out / "run.json"
     if run_file.is_file() and not overwrite:
         try:
@@ -222,10 +225,7 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool) -> None:
         if previous != spec.to_json():
             raise RunMismatch(out, _run_difference(previous, spec))
     try:
-        if overwrite:
-            for sub in ("data", "sequences"):
-                if (out / sub).is_dir():
-                    shutil.rmtree(out / sub)
+        manifest.add(run_file)
         atomic_write_text(run_file, json.dumps(spec.to_json(), indent=2))
     except OSError as exc:
         raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
@@ -248,37 +248,6 @@ def _sequence_lengths(bench: Benchmark, todo: list[str]
     return lengths, failures
 
 
-def _play_here(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
-               todo: list[str], inputs: dict[str, str], bar: Any,
-               causes: dict[str, BaseException]
-               ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
-    """Play ``todo`` in this process; a failed sequence's exception goes into ``causes``."""
-    records: dict[str, SequenceRecord] = {}
-    failures: dict[str, str] = {}
-    player = env
-    try:
-        for name in todo:
-            bar.start_sequence(name)
-            try:
-                record, _ = play_episode(player, agent_obj, name, benchmark=bench,
-                                         on_frame=bar.advance)
-            except (ValueError, KeyError, OSError, RuntimeError) as exc:
-                failures[name], causes[name] = SequenceFailure.describe(exc), exc
-                # A reset that raised leaves Gymnasium's checker wrapper without its first
-                # observation; the next episode gets a fresh environment.
-                if player is not env:
-                    player.close()
-                player = spec.make_env()
-                continue
-            record.inputs = inputs[name]
-            save_episode(out, player, record, bench)
-            records[name] = record
-    finally:
-        if player is not env:
-            player.close()
-    return records, failures
-
-
 def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str],
                      records: dict[str, SequenceRecord]) -> ScoreReport | None:
     with_gt = bench.scorable(names)
@@ -290,7 +259,7 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
     }
     if scores is not None:
         payload |= {"benchmark": scores.benchmark, "per_sequence": scores.per_sequence,
-                    "combined": scores.combined}
+                    "combined": scores.combined, "combined_covers": scores.coverage_json()}
     else:
         payload["note"] = "this split has no ground truth; results were written, not scored"
     atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
@@ -309,6 +278,7 @@ def run(
     workers: int = 1,
     overwrite: bool = False,
     progress: bool = True,
+    step_timeout: float | None = DEFAULT_STEP_TIMEOUT,
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
@@ -321,19 +291,21 @@ def run(
         agent_kwargs: keyword arguments of the agent (checked against its options).
         sequences: only these sequences (default: all of the split).
         workers: parallel worker processes across sequences (1 = in this process).
-        overwrite: discard an existing run in ``out`` instead of resuming it.
+        overwrite: discard an existing run in ``out`` instead of resuming it (only files
+            that runs of ours wrote, per ``out/manifest.json``, are deleted).
         progress: show a progress bar with FPS and ETA.
+        step_timeout: seconds a step may take before its sequence fails (None, 0: no limit).
 
     Returns:
-        A :class:`RunReport`; ``metrics.json`` in ``out`` holds the same metrics.
+        A :class:`RunReport` (``metrics.json`` in ``out`` holds the same metrics).
 
     Raises:
-        RunFailed: some sequences failed (the others are kept and were scored nowhere; rerun
-            to resume once the cause is fixed).
+        RunFailed: some sequences failed (the others are kept; rerun to resume).
+        OutputInUse: another process is writing into ``out``.
+        OutputError: ``out`` cannot be written, or files no run of ours wrote are in the way.
     """
     agent_kwargs = dict(agent_kwargs or {})
-    if isinstance(sequences, str):  # one name, not its letters
-        sequences = [sequences]
+    sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
     cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
@@ -347,21 +319,38 @@ def run(
     except BaseException:
         env.close()
         raise
-    identity = RunIdentity.of(spec)
-    inputs = {n: identity.sequence_fingerprint(base.sequence_inputs(n)) for n in names}
     try:
-        _prepare_out(out, spec, overwrite)
-        report = _run_prepared(spec, env, bench, agent_obj, out, names, inputs, workers,
-                               progress)
+        with hold_folder(out, f"agent {name} on {env_id}"):
+            return _run_owned(spec, env, bench, agent_obj, out, names,
+                              _Options(workers, progress, step_timeout, overwrite))
     finally:
         close_agent(agent_obj)
         env.close()
-    return report
+
+
+@dataclass(frozen=True)
+class _Options:
+    workers: int
+    progress: bool
+    step_timeout: float | None
+    overwrite: bool
+
+
+def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
+               names: list[str], options: _Options) -> RunReport:
+    """The run, once ``out`` is locked: claim the folder, fingerprint the inputs, play."""
+    base = env.unwrapped
+    identity = RunIdentity.of(spec)
+    inputs = {n: identity.sequence_fingerprint(outside(base.sequence_inputs(n), out))
+              for n in names}
+    manifest = own_folder(out, base.sequence_names, names, options.overwrite)
+    _prepare_out(out, spec, options.overwrite, manifest)
+    return _run_prepared(spec, env, bench, agent_obj, out, names, inputs, manifest, options)
 
 
 def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
-                  names: list[str], inputs: dict[str, str], workers: int,
-                  progress: bool) -> RunReport:
+                  names: list[str], inputs: dict[str, str], manifest: Manifest,
+                  options: _Options) -> RunReport:
     base = env.unwrapped
     finished = [n for n in names if _record_path(out, n).is_file()]
     replayed = {n: why for n in finished
@@ -373,16 +362,24 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     from .progress import RunProgress
 
     causes: dict[str, BaseException] = {}
-    with RunProgress(sum(lengths.values()), enabled=progress) as bar:
-        if workers <= 1 or len(todo) <= 1:
-            records, played = _play_here(spec, env, bench, agent_obj, out, todo, inputs, bar,
-                                         causes)
-        else:
-            records, played = play_in_workers(spec, out, todo, inputs, lengths, workers, bar)
+    manifest.claim(todo)
+    try:
+        with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
+            if options.workers <= 1 or len(todo) <= 1:
+                records, played = play_here(spec, env, bench, agent_obj, out, todo, inputs,
+                                             bar, causes, options.step_timeout)
+            else:
+                records, played = play_in_workers(spec, out, todo, inputs, lengths,
+                                                  options.workers, bar, options.step_timeout)
+    finally:
+        with contextlib.suppress(OSError):  # a full disk: the claims still say they are ours
+            for name in todo:
+                settle(manifest, name, base.sequence_names)
     failures |= played
     if failures:  # in this process, the first failure's traceback (the agent's code) is kept
         raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
+    manifest.add(out / "metrics.json")
     scores = _score_and_write(out, spec, bench, names, records)
     return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed)

@@ -404,9 +404,12 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     resolve_runtime(runtime)  # a runtime that is not installed: one error now, not one per cell
     out = Path(out)
     check_out_folder(out)
-    cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
-    _play_all(out, cells, backend=backend, workers=workers, address=address,
-              on_progress=on_progress)
-    card = combine(out, cells, sources)
-    write_outputs(out, card, radar_scale=radar_scale)
+    from .ownership import hold_folder
+
+    with hold_folder(out, "scorecard"):  # one scorecard at a time (each cell run locks too)
+        cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
+        _play_all(out, cells, backend=backend, workers=workers, address=address,
+                  on_progress=on_progress)
+        card = combine(out, cells, sources)
+        write_outputs(out, card, radar_scale=radar_scale)
     return card

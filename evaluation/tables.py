@@ -47,10 +47,11 @@ def format_cell(name: str, value: float | None) -> str:
     return f"{100 * value:.1f}"
 
 
-def _all_rows(per_sequence: Rows, combined: Mapping[str, float] | None) -> dict[str, Mapping]:
+def _all_rows(per_sequence: Rows, combined: Mapping[str, float] | None,
+              label: str = "COMBINED") -> dict[str, Mapping]:
     rows = dict(per_sequence)
     if combined:
-        rows["COMBINED"] = combined
+        rows[label] = combined
     return rows
 
 
@@ -77,13 +78,15 @@ def metrics_table(
     fps: Mapping[str, float] | None = None,
     task: str = "mot",
     width: int | None = None,
+    coverage: str = "",
 ) -> tuple[Table, list[str]]:
     """A rich table: one row per sequence plus COMBINED; returns (table, dropped columns).
 
     With ``width`` (the terminal's), columns that would not fit are dropped, least
-    important first.
+    important first. ``coverage`` (``"7 of 7 sequences"``) labels the combined row.
     """
-    rows = _all_rows(per_sequence, combined)
+    label = f"COMBINED ({coverage})" if coverage else "COMBINED"
+    rows = _all_rows(per_sequence, combined, label)
     columns = table_columns(task, list(rows.values()))
     cells = {name: max((len(format_cell(name, r.get(name))) for r in rows.values()), default=1)
              for name in columns}
@@ -100,7 +103,7 @@ def metrics_table(
         values = [format_cell(column, metrics.get(column)) for column in kept]
         if fps is not None:
             values.append(f"{fps[name]:.1f}" if name in fps else "")
-        table.add_row(name, *values, style="bold" if name == "COMBINED" else None)
+        table.add_row(name, *values, style="bold" if name == label else None)
     return table, dropped
 
 

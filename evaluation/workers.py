@@ -1,8 +1,9 @@
 """Sequences played in parallel worker processes, robust to failures on either side.
 
 * A sequence that fails in a worker comes back as a one-line message (the worker catches
-  it), so the pool keeps serving the other sequences; an exception that escapes anyway (a
-  worker killed by the OOM killer) is reported for the sequences it took down.
+  it), so the pool keeps serving the other sequences; a worker that dies (a segfault, the
+  OOM killer) or hangs fails only the sequence it was playing
+  (:mod:`unitrack_env.evaluation.pool`).
 * Workers die with their parent: each one watches its parent process and exits when it is
   gone (killed, crashed), so no orphan keeps writing into the output folder.
 * Workers share the CPU: each one gets ``cpu_count // workers`` torch threads.
@@ -11,7 +12,6 @@
 from __future__ import annotations
 
 import ast
-import contextlib
 import inspect
 import os
 import signal
@@ -19,10 +19,7 @@ import sys
 import threading
 import time
 import warnings
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
-from multiprocessing import current_process, get_context
+from multiprocessing import current_process
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +43,8 @@ class SequenceFailure:
             return str(exc)
         if isinstance(exc, KeyError) and exc.args:
             return str(exc.args[0])
+        if type(exc).__name__ == "StepTimeout":
+            return str(exc)
         return f"{type(exc).__name__}: {exc}"
 
 
@@ -59,7 +58,8 @@ def _watch_parent(parent: int) -> None:
     threading.Thread(target=watch, name="unitrack-parent-watchdog", daemon=True).start()
 
 
-def _init_worker(parent: int, threads: int) -> None:
+def init_worker(parent: int, threads: int) -> None:
+    """Set up a worker process: ignore Ctrl-C, die with the parent, one-line warnings."""
     # Ctrl-C reaches the whole process group; the parent handles it (keeps finished
     # sequences, stops the pool), so the workers must not die mid-write on their own.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -71,8 +71,12 @@ def _init_worker(parent: int, threads: int) -> None:
         torch.set_num_threads(threads)
 
 
-def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any]:
-    """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``."""
+def _play_one(spec: Any, out: str, sequence: str, inputs: str,
+              beat: Any = None) -> tuple[str, Any]:
+    """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``.
+
+    ``beat`` is called after every step (the parent's progress bar and step watchdog).
+    """
     from unitrack_env.agents.base import close_agent
 
     from .episode import play_episode
@@ -83,7 +87,9 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str) -> tuple[str, Any
         env = spec.make_env()
         agent = spec.make_agent()
         bench = env.unwrapped.scoring
-        record, _ = play_episode(env, agent, sequence, benchmark=bench)
+        if beat is not None:
+            beat(0)  # the episode starts: the parent's step clock runs from here
+        record, _ = play_episode(env, agent, sequence, benchmark=bench, on_frame=beat)
         record.inputs = inputs
         save_episode(Path(out), env, record, bench)
         return "ok", record.to_json()
@@ -133,47 +139,32 @@ def refuse_unguarded_script() -> None:
         raise RuntimeError(message.format(f"{path} (line {line})"))
 
 
-@contextlib.contextmanager
-def worker_pool(workers: int, threads: int) -> Iterator[ProcessPoolExecutor]:
-    """Spawned worker processes that die with this one; stopped at once on an exception.
-
-    On Ctrl-C (or any failure in the block) pending work is cancelled and running workers
-    are terminated; what they finished before was already kept by the caller.
-    """
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                               initializer=_init_worker, initargs=(os.getpid(), threads))
-    try:
-        yield pool
-    except BaseException:
-        processes = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.terminate()
-        raise
-    pool.shutdown(wait=True)
-
-
 def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str],
-                    lengths: dict[str, int], workers: int,
-                    bar: Any) -> tuple[dict[str, Any], dict[str, str]]:
-    """Play ``todo`` in ``workers`` processes; return (records, failures) by sequence."""
+                    lengths: dict[str, int], workers: int, bar: Any,
+                    step_timeout: float | None = None) -> tuple[dict[str, Any], dict[str, str]]:
+    """Play ``todo`` in ``workers`` supervised processes; return (records, failures).
+
+    A worker that dies or overruns ``step_timeout`` fails only the sequence it was playing
+    (:mod:`unitrack_env.evaluation.pool`).
+    """
     from .episode import SequenceRecord
+    from .pool import SupervisedPool
 
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     threads = max(1, (os.cpu_count() or 1) // workers)
-    with worker_pool(workers, threads) as pool:
-        futures = {pool.submit(_play_one, spec, str(out), s, inputs[s]): s for s in todo}
-        for future in as_completed(futures):
-            name = futures[future]
-            try:
-                status, payload = future.result()
-            except BrokenProcessPool:
-                status, payload = "error", ("a worker process died (out of memory or "
-                                            "killed) while playing this sequence")
+    with SupervisedPool(min(workers, len(todo)), threads, step_timeout) as pool:
+        played = pool.run(_play_one, todo, lambda s: (spec, str(out), s, inputs[s]),
+                          on_beat=lambda s, frames: bar.advance(frames))
+        for name, outcome in played:
+            if isinstance(outcome, BaseException):
+                if not isinstance(outcome, (RuntimeError, ValueError, KeyError)):
+                    raise outcome  # OutputError (a full disk): stop, as in this process
+                failures[name] = str(outcome)
+                continue
+            status, payload = outcome
             if status == "ok":
                 records[name] = SequenceRecord.from_json(payload)
-                bar.advance(lengths[name])
             else:
                 failures[name] = payload
     return records, failures

@@ -614,6 +614,139 @@ def _mot_with(change: Callable[[Path], None]) -> Callable[[Path], Path]:
     return build
 
 
+# ------------------------------------------- issue 22: output folders, scoring, timeouts
+MOT17 = "UniTrack/MOT17-v0"
+EVALUATE = ("evaluate", "--env", MOT17, "--agent", "iou", "--out", "{out}", "--quiet",
+            "--sequences", MOT_SEQ)
+
+
+def _in_out(*files: str) -> Callable[[Path], Path]:
+    """Data builder: the user's own files in the output folder (``{out}``) before the run."""
+    def build(scratch: Path) -> Path:
+        for rel in files:
+            write(scratch / "out" / rel, "the user's own file\n")
+        return scratch
+    return build
+
+
+def _while_held(scratch: Path) -> None:
+    """``unitrack evaluate`` into a folder whose lock another run holds."""
+    from unitrack_env.evaluation.ownership import hold_folder
+
+    with hold_folder(scratch / "out", f"agent sort on {MOT17}"):
+        cli(*EVALUATE)(scratch)
+
+
+def _dead_holder(scratch: Path) -> None:
+    """A lock file left by a process that is gone (killed), on this host."""
+    import socket
+    import subprocess
+    import sys
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    write(scratch / "out" / ".unitrack.lock", json.dumps({
+        "pid": gone.pid, "host": socket.gethostname(), "command": "unitrack evaluate",
+        "what": "agent iou", "since": "2026-01-01 00:00:00 UTC"}))
+    cli(*EVALUATE)(scratch)
+
+
+def _twice(scratch: Path, before_second: Callable[[Path], None]) -> str:
+    """Run EVALUATE twice (``before_second`` in between); the second run's output."""
+    import contextlib
+    import io
+
+    from unitrack_env.evaluation.cli import main
+
+    argv = [a.format(out=scratch / "out") for a in EVALUATE]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(argv) == 0
+    before_second(scratch / "out")
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
+        code = main(argv)
+    if code:
+        raise CLIFailed(f"exit {code}: {printed.getvalue()}")
+    return printed.getvalue()
+
+
+def _out_inside_root(scratch: Path) -> None:
+    """--out inside --root: the rerun must resume, not replay."""
+    import contextlib
+    import io
+
+    from unitrack_env.evaluation.cli import main
+
+    root = clone(synthetic("motchallenge", "MOT17"), scratch / "MOT17")
+    argv = ["evaluate", "--env", MOT17, "--root", str(root), "--agent", "iou", "--out",
+            str(root / "runs" / "iou"), "--quiet", "--sequences", MOT_SEQ]
+    for _ in range(2):
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
+            assert main(argv) == 0
+    if "replayed" in printed.getvalue() or "resumed" not in printed.getvalue():
+        raise ValueError(f"the rerun replayed: {printed.getvalue()}")
+
+
+def _stale_temporaries(scratch: Path) -> None:
+    left = ("data/.SYN-01.txt.k2j4h5g1.tmp", ".metrics.json.x8_ab3cd.tmp")
+
+    def leave(out: Path) -> None:
+        for rel in left:
+            write(out / rel, "half a file from a killed write")
+
+    _twice(scratch, leave)
+    if any((scratch / "out" / rel).exists() for rel in left):
+        raise ValueError("stale temporary files were left in the output folder")
+
+
+def _results(*names: str) -> Callable[[Path], Path]:
+    """Data builder: ``results/<name>.txt`` for each name, beside the MOT17 data (``MOT17/``)."""
+    def build(scratch: Path) -> Path:
+        clone(synthetic("motchallenge", "MOT17"), scratch / "MOT17")
+        for name in names:
+            write(scratch / "results" / f"{name}.txt", "1,1,10,10,20,20,1,-1,-1,-1\n")
+        return scratch
+    return build
+
+
+def _api_missing(scratch: Path) -> None:
+    from unitrack_env.benchmarks import benchmark_for
+
+    _results(MOT_SEQ)(scratch)
+    benchmark_for(MOT17).score_folder(scratch / "results")
+
+
+AGENT_FILE = """
+import os, signal, time
+from unitrack_env.agents.baselines.iou import IoUAgent
+
+class Bad(IoUAgent):
+    def reset(self, observation, info):
+        self.bad, self.frames = info["sequence"] == "SYN-02", 0
+        return super().reset(observation, info)
+
+    def act(self, observation):
+        self.frames += 1
+        if self.bad and self.frames == 3:
+            {how}
+        return super().act(observation)
+"""
+
+
+def _bad_agent(how: str) -> Callable[[Path], Path]:
+    """Data builder: ``{data}/bad.py:Bad``, an IoU agent that does ``how`` on SYN-02."""
+    def build(scratch: Path) -> Path:
+        write(scratch / "bad.py", AGENT_FILE.format(how=how))
+        return scratch
+    return build
+
+
+def _agent_run(*extra: str) -> tuple[str, ...]:
+    return ("evaluate", "--env", MOT17, "--agent", "{data}/bad.py:Bad", "--out", "{out}",
+            "--quiet", *extra)
+
+
 # ------------------------------------------------------------------------------ table
 def _c(id: str, what: str, run: Callable[[Path], Any], *expect: str, kind: str = "error",
        error: str = "DataFormatError") -> Case:
@@ -1105,6 +1238,42 @@ CASES: tuple[Case, ...] = (
            MOT_SEQ, "--agent", "iou", "--out", "{out}", "--quiet",
            data=_mot_with(_append(GT, "\n\n"))),
        "SYN-01", "gt.txt", "blank line", error="CLIFailed"),
+    # ------------------------------------------ issue 22: output folders, scoring, timeouts
+    _c("CLI-overwrite-user-files", "evaluate --overwrite into a folder of the user's own "
+       "data/ and sequences/ (no run of ours)",
+       cli(*EVALUATE, "--overwrite", data=_in_out("data/own.txt", "sequences/notes.json")),
+       "--overwrite kept 2 file(s)", "data/own.txt", "sequences/notes.json", kind="warning"),
+    _c("CLI-out-user-result-in-the-way", "evaluate into a folder whose data/SYN-01.txt is "
+       "the user's own", cli(*EVALUATE, "--overwrite", data=_in_out(f"data/{MOT_SEQ}.txt")),
+       "exit 2:", "no run of ours wrote", f"data/{MOT_SEQ}.txt", error="CLIFailed"),
+    _c("CLI-out-foreign-manifest", "evaluate --overwrite into a folder whose manifest.json "
+       "is another tool's", cli(*EVALUATE, "--overwrite", data=_in_out("manifest.json")),
+       "exit 2:", "manifest.json is not a manifest of unitrack-env", error="CLIFailed"),
+    _c("CLI-out-in-use", "evaluate into a folder another run is writing", _while_held,
+       "exit 2:", "in use by another run", "pid", "agent sort on", "since",
+       error="CLIFailed"),
+    _c("CLI-out-stale-lock", "evaluate into a folder locked by a run that was killed",
+       _dead_holder, "took over the lock of a run that is no longer running", kind="warning"),
+    _c("CLI-out-inside-root", "evaluate with --out inside --root, twice (must resume)",
+       _out_inside_root, kind="accepted"),
+    _c("CLI-out-stale-temporaries", "hidden .tmp files of a killed write in the output folder "
+       "(must be removed)", _stale_temporaries, kind="accepted"),
+    _c("CLI-score-gt-missing-result", "score --benchmark --gt with one result file missing",
+       cli("score", "--benchmark", "MOT17", "--gt", "{data}/MOT17/train", "--results",
+           "{data}/results", data=_results(MOT_SEQ)),
+       "exit 2:", "no result file for 1 of the 2 sequences", "SYN-02", "--allow-missing",
+       error="CLIFailed"),
+    _c("CLI-score-env-missing-result", "score --env with one result file missing",
+       cli("score", "--env", MOT17, "--results", "{data}/results", data=_results(MOT_SEQ)),
+       "exit 2:", "no result file for 1 of the 2 sequences", "SYN-02", error="CLIFailed"),
+    _c("API-score-folder-missing-result", "benchmark_for(...).score_folder(folder) with one "
+       "result file missing", _api_missing, "SYN-02", "allow_missing=True"),
+    _c("CLI-step-timeout", "an agent whose act() never returns (--step-timeout 1)",
+       cli(*_agent_run("--step-timeout", "1"), data=_bad_agent("time.sleep(3600)")),
+       "exit 1:", "SYN-02", "no step finished within 1 s", error="CLIFailed"),
+    _c("CLI-worker-segfault", "an agent that segfaults in a worker (--workers 2)",
+       cli(*_agent_run("--workers", "2"), data=_bad_agent("os.kill(os.getpid(), 11)")),
+       "exit 1:", "1 sequence(s) failed", "SYN-02", "SIGSEGV", error="CLIFailed"),
 )
 
 

@@ -104,6 +104,7 @@ def test_the_pytest_plugin_loads_without_the_heavy_parts():
 
 @pytest.mark.parametrize(("argv", "message"), [
     (["evaluate", "--workers", "0"], "argument --workers: 0 is not >= 1"),
+    (["evaluate", "--step-timeout", "-1"], "argument --step-timeout: -1 is not a number >= 0"),
     (["evaluate", "--sequences", "SYN-01,"], "argument --sequences: 'SYN-01,' holds an empty"),
     (["render", "--sequence", "SYN-01", "--fps", "-5"], "argument --fps: -5 is not a positive"),
     (["render", "--sequence", "SYN-01", "--fps", "0"], "argument --fps: 0 is not a positive"),
@@ -153,3 +154,63 @@ def np_file() -> str:
     import numpy
 
     return numpy.__file__
+
+
+# ------------------------------------------------ issue 22: scoring refuses incomplete results
+@pytest.fixture(scope="module")
+def one_missing(tmp_path_factory):
+    """A finished iou run on synthetic MOT16 with SYN-02's result file deleted."""
+    from unitrack_env.evaluation.runner import run
+
+    out = tmp_path_factory.mktemp("score") / "run"
+    full = run(ENV, "iou", out=out, progress=False)
+    (out / "data" / "SYN-02.txt").unlink()
+    return out / "data", full
+
+
+def _gt() -> str:
+    from unitrack_env.datasets.synthetic import ensure_synthetic
+
+    return str(ensure_synthetic("MOT16") / "train")
+
+
+@pytest.mark.parametrize("form", [["--env", ENV], ["--benchmark", "MOT16", "--gt", "{gt}"]])
+def test_score_refuses_a_missing_result_file_in_every_form(one_missing, form, capsys):
+    data, full = one_missing
+    argv = ["score", *[a.format(gt=_gt()) for a in form], "--results", str(data)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "no result file for 1 of the 2 sequences to score: SYN-02" in err
+    assert "--allow-missing" in err
+    assert main([*argv, "--allow-missing", "--format", "json"]) == 0
+    captured = capsys.readouterr()
+    assert "COMBINED covers 1 of 2 sequences; no result file for SYN-02" in captured.err
+    assert list(json.loads(captured.out)["per_sequence"]) == ["SYN-01"]
+    assert main([*argv[:-2], "--results", str(data.parent / "data"), "--sequences",
+                 "SYN-01"]) == 0  # asked for one: it is there
+    assert "COMBINED (1 of 2 sequences)" in capsys.readouterr().out
+
+
+def test_score_folder_api_refuses_missing_results(one_missing):
+    from unitrack_env.benchmarks import benchmark_for
+    from unitrack_env.benchmarks.base import MissingResults
+
+    data, full = one_missing
+    bench = benchmark_for(ENV)
+    with pytest.raises(MissingResults, match="SYN-02") as caught:
+        bench.score_folder(data)
+    assert caught.value.missing == ["SYN-02"]
+    partial = bench.score_folder(data, allow_missing=True)
+    assert partial.coverage == "1 of 2 sequences" and partial.missing == ["SYN-02"]
+    assert json.loads(partial.to_json())["sequences"] == {"scored": 1, "of": 2,
+                                                          "missing": ["SYN-02"]}
+    assert full.scores.coverage == "2 of 2 sequences"
+    with pytest.raises(MissingResults, match="nothing to score"):
+        bench.score_folder(data, ["SYN-02"], allow_missing=True)
+
+
+def test_a_run_folder_given_as_results_points_to_its_data(one_missing, capsys):
+    data, _ = one_missing
+    assert main(["score", "--env", ENV, "--results", str(data.parent)]) == 2
+    assert f"result files are in {data}" in capsys.readouterr().err
+

@@ -151,7 +151,7 @@ def test_cli_evaluate_score_and_errors(tmp_path, capsys):
     bad.mkdir()
     (bad / "SYN-01.txt").write_text("1,1,a,2,3,4,1,-1,-1,-1\n")
     assert main(["score", "--benchmark", "MOT16", "--gt", str(ensure_synthetic("MOT16") / "train"),
-                 "--results", str(bad)]) == 2
+                 "--results", str(bad), "--allow-missing"]) == 2
     assert "line 1" in capsys.readouterr().err
 
 

@@ -54,7 +54,7 @@ class _DotBenchmark(Benchmark):
     def score_sequence(self, sequence, results):
         return {"Error": float(np.abs(results - self.dataset.truth[sequence]).mean())}
 
-    def score_folder(self, folder, sequences):
+    def score_files(self, folder, sequences):
         per = {name: self.score_sequence(name, self.read(folder, name)) for name in sequences}
         return ScoreReport("Dots", per, {}, per)
 

@@ -22,6 +22,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
+from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.roots import resolve_root
 
@@ -150,6 +151,65 @@ class Benchmark(ABC):
     def digest(self, results: Any) -> str:
         """A stable SHA-256 digest of one sequence's results (the recorded actions)."""
 
+    def has_results(self, folder: str | os.PathLike, name: str) -> bool:
+        """Whether ``folder`` holds a result file of sequence ``name`` (any file of its)."""
+        from unitrack_env.fingerprint import sequence_files
+
+        folder = Path(folder)
+        return folder.is_dir() and bool(sequence_files(folder, name, self.sequence_names,
+                                                       shared=False))
+
+    def score_folder(self, folder: str | os.PathLike, sequences: Iterable[str] | None = None,
+                     *, allow_missing: bool = False) -> ScoreReport:
+        """Score the result files of ``sequences`` (default: every scorable one) in ``folder``.
+
+        A sequence without a result file is refused, naming every such sequence: a combined
+        score over part of a split is not the benchmark's score. ``allow_missing=True``
+        scores the others. The report's :attr:`~ScoreReport.coverage` says what the combined
+        row covers, counted against every scorable sequence of the split (``"2 of 7
+        sequences"`` when two were asked for).
+
+        Raises:
+            MissingResults: result files are missing (and ``allow_missing`` is False).
+        """
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise DataFormatError(folder, "is a file; the results are a folder of result files"
+                                  if folder.is_file() else "results folder not found")
+        if (folder / "run.json").is_file() and (folder / "data").is_dir():
+            raise DataFormatError(folder, "is the folder of a run; its result files are in "
+                                  f"{folder / 'data'}")
+        names = self.scorable() if sequences is None else list(dict.fromkeys(sequences))
+        missing = [name for name in names if not self.has_results(folder, name)]
+        if missing and (not allow_missing or len(missing) == len(names)):
+            raise MissingResults(folder, missing, len(names), allow_missing)
+        present = [name for name in names if name not in missing]
+        report = self.score_files(folder, present)
+        report.sequences_of = len(set(names) | set(self.scorable()))
+        report.missing = missing
+        return report
+
     @abstractmethod
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
-        """Score the result files of ``sequences`` in ``folder`` with the official metrics."""
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+        """Score the result files of ``sequences`` (all present) with the official metrics."""
+
+
+class MissingResults(DataFormatError):
+    """Some sequences to score have no result file (``missing``, of ``expected``)."""
+
+    def __init__(self, folder: Path, missing: list[str], expected: int,
+                 allowed: bool = False) -> None:
+        self.missing, self.expected, self.allowed = list(missing), expected, allowed
+        shown = ", ".join(missing[:10]) + (f" and {len(missing) - 10} more"
+                                           if len(missing) > 10 else "")
+        if allowed:  # every one is missing: nothing to score
+            advice = "nothing to score"
+        else:
+            advice = (f"a combined score over the other {expected - len(missing)} is not the "
+                      "benchmark's; add --allow-missing (allow_missing=True) to score them "
+                      "anyway")
+        super().__init__(folder, f"no result file for {len(missing)} of the {expected} "
+                                 f"sequences to score: {shown}; {advice}")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.path, self.missing, self.expected, self.allowed))

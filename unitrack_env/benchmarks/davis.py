@@ -101,7 +101,7 @@ class DAVISBenchmark(Benchmark):
             digest.update(np.ascontiguousarray(labels).tobytes())
         return digest.hexdigest()
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<seq>/<frame>.png`` results with the DAVIS-2017 protocol.
 
         Like the official evaluation, only the scored frames' PNGs (all but the first and

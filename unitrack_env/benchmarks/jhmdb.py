@@ -87,7 +87,7 @@ class JHMDBBenchmark(Benchmark):
         """PCK counts of predicted joints against ground truth (same frames)."""
         return pck_counts(predictions, ground_truth, self.thresholds, method=self.normaliser)
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<name>/joint_positions.mat`` files.
 
         Raises:

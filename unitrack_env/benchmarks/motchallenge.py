@@ -7,7 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
+from unitrack_env.benchmarks.base import (
+    Benchmark,
+    MissingResults,
+    data_root,
+    one_of,
+    rounded_digest,
+)
 from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import ScoreReport
@@ -89,9 +95,39 @@ class MOTChallengeBenchmark(Benchmark):
                                benchmark=self.name, seq_length=self.sequence_length(sequence))
         return dict(score.summary)
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
         from unitrack_env.metrics.motchallenge import score_folder
 
         return score_folder(self.dataset.split_dir, folder, benchmark=self.name,
                             sequences=sequences)
+
+
+def score_split_folder(gt: str | os.PathLike, results: str | os.PathLike, benchmark: str,
+                       sequences: list[str] | None = None, *,
+                       allow_missing: bool = False) -> ScoreReport:
+    """Score ``results/<seq>.txt`` against a split folder ``gt`` (``unitrack score --gt``).
+
+    Every sequence of ``gt`` that has ``gt/gt.txt`` (or of ``sequences``) must have a result
+    file, as in :meth:`~unitrack_env.benchmarks.base.Benchmark.score_folder`;
+    a result file of a sequence without ground truth is refused.
+
+    Raises:
+        MissingResults: result files are missing (and ``allow_missing`` is False).
+    """
+    from unitrack_env.metrics.motchallenge import score_folder
+
+    gt, results = Path(gt), Path(results)
+    split = (sorted(d.name for d in gt.iterdir() if (d / "gt" / "gt.txt").is_file())
+             if gt.is_dir() else [])
+    if not split or not results.is_dir():  # score_folder names what is wrong
+        return score_folder(gt, results, benchmark=benchmark, sequences=sequences)
+    extra = sorted(p.stem for p in results.glob("*.txt") if p.stem not in split)
+    names = list(sequences or [*split, *extra])
+    missing = [n for n in names if not (results / f"{n}.txt").is_file()]
+    if missing and (not allow_missing or len(missing) == len(names)):
+        raise MissingResults(results, missing, len(names), allow_missing)
+    report = score_folder(gt, results, benchmark=benchmark,
+                          sequences=[n for n in names if n not in missing])
+    report.sequences_of, report.missing = len(set(split) | set(names)), missing
+    return report

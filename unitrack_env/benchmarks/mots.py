@@ -90,7 +90,7 @@ class MOTSBenchmark(Benchmark):
                                sequence=sequence)
         return dict(score.summary)
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
         from unitrack_env.metrics.mots import score_folder
 

@@ -102,7 +102,7 @@ class OTBBenchmark(Benchmark):
         """The OTB metrics of one sequence's boxes."""
         return evaluate_sot_sequence(results, self.load(sequence).boxes).as_dict()
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` result files with the OTB toolkit's rules."""
         per_sequence, scores = {}, {}
         for name in sequences:

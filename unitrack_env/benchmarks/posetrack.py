@@ -75,7 +75,7 @@ class PoseTrackBenchmark(Benchmark):
                 digest.update(np.round(row, 3).tobytes())
         return digest.hexdigest()
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
         per_sequence: dict[str, dict[str, float]] = {}
         counts = []

@@ -76,7 +76,7 @@ class VISBenchmark(Benchmark):
         video = self.dataset.video(sequence)
         return score_videos(self.dataset.data, results, [video]).per_sequence[video.name]
 
-    def score_folder(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Track mAP of ``<folder>/<video>.json`` files, per video and combined."""
         from unitrack_env.metrics.vis import score_videos
 

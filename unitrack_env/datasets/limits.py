@@ -1,28 +1,6 @@
 """Limits checked at the door: image dimensions, id ranges and id counts.
 
-Every reader checks its files against these limits when a sequence is opened, before the
-first frame is played, so that a hostile or corrupt file is refused with its name instead
-of exhausting memory mid-episode or at scoring. Each limit is far above what the real
-benchmarks hold and far below where memory runs out:
-
-* Images: :func:`image_size` reads the width and height from a PNG's ``IHDR`` chunk or a
-  JPEG's start-of-frame segment without decoding; :data:`MAX_IMAGE_PIXELS` (64 Mpx, eight
-  times a 3840x2160 DAVIS full-resolution frame, the largest frame of any supported
-  benchmark; 192 MiB decoded as RGB) bounds a frame or an annotation map. A PNG's header
-  can claim 100000x100000 pixels in 70 bytes (a "decompression bomb"): Pillow refuses it
-  with ``DecompressionBombError``, OpenCV allocates up to 1 Gpx of it.
-* Ids: :data:`MAX_ID` bounds ids read from JSON or text (int32, the ids the action space
-  and the official result files carry exactly; Python reads a JSON ``2**70`` as an int that
-  numpy cannot store).
-* Frames: :data:`MAX_FRAMES` bounds a sequence's stated length (``seqLength``).
-* Id counts: :data:`MAX_TRACKS` bounds the distinct ground-truth ids of one sequence.
-  TrackEval's HOTA keeps about 22 matrices of ``gt ids x tracker ids`` doubles per sequence
-  (``trackeval/metrics/hota.py``: one per alpha, the potential matches, their alignment
-  score), 176 bytes per pair; 10 million ids asked for 728 TiB for one of them. The busiest
-  MOTChallenge sequence (MOT20-05) has about 1,200 tracks, a YouTube-VIS or PoseTrack video
-  tens; 10,000 tracks against 5,000 tracker ids is 9 GB at scoring. The tracker's id count
-  is only known at scoring, which checks the product against the machine's memory
-  (:func:`unitrack_env.metrics.motchallenge.check_matrix_memory`).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -20,12 +20,29 @@ class ScoreReport:
         scores: task-specific full results per sequence (for MOT, TrackEval's
             :class:`~unitrack_env.metrics.motchallenge.SequenceScore`), including
             ``COMBINED``; not serialised by :meth:`to_json`.
+        sequences_of: how many sequences the split has to score (0: not known).
+        missing: sequences asked for that had no result file (``allow_missing=True``).
     """
 
     benchmark: str
     per_sequence: dict[str, dict[str, float]]
     combined: dict[str, float]
     scores: dict[str, Any] = field(default_factory=dict, repr=False)
+    sequences_of: int = 0
+    missing: list[str] = field(default_factory=list)
+
+    @property
+    def coverage(self) -> str:
+        """What the combined row covers: ``"7 of 7 sequences"`` (``"7 sequences"``)."""
+        scored = len(self.per_sequence)
+        if self.sequences_of:
+            return f"{scored} of {self.sequences_of} sequences"
+        return f"{scored} sequence{'s' if scored != 1 else ''}"
+
+    def coverage_json(self) -> dict[str, Any]:
+        """``{"scored": 7, "of": 7, "missing": []}`` (``of`` null when not known)."""
+        return {"scored": len(self.per_sequence), "of": self.sequences_of or None,
+                "missing": list(self.missing)}
 
     def to_json(self, *, indent: int | None = 2) -> str:
         """Serialise benchmark, per-sequence and combined metrics as JSON text."""
@@ -33,5 +50,6 @@ class ScoreReport:
             "benchmark": self.benchmark,
             "per_sequence": self.per_sequence,
             "combined": self.combined,
+            "sequences": self.coverage_json(),
         }
         return json.dumps(payload, indent=indent, sort_keys=False)

@@ -1,0 +1,124 @@
+"""Per-step time limits: a hung agent becomes a failed sequence, not a run that never ends.
+
+More in docs/module-notes.md.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+from types import FrameType, TracebackType
+
+#: The default limit of one step, in seconds (generous: a slow CPU model takes ~1 s).
+DEFAULT_STEP_TIMEOUT = 300.0
+#: Seconds after the signal before a step that cannot be interrupted ends the process.
+GRACE = 30.0
+
+
+class StepTimeout(BaseException):  # noqa: N818 - it is a stop signal, like KeyboardInterrupt
+    """A step took longer than the limit."""
+
+
+def timeout_message(seconds: float, frame: int) -> str:
+    """The line a timed-out sequence fails with."""
+    where = "in the reset" if frame == 0 else f"after frame {frame}"
+    return (f"no step finished within {seconds:g} s ({where}): the agent's act() (or the "
+            "environment) hung; --step-timeout S changes the limit, 0 disables it")
+
+
+def limit(seconds: float | None) -> float | None:
+    """The limit in seconds, or None for none (None, 0 or a negative number)."""
+    return float(seconds) if seconds is not None and seconds > 0 else None
+
+
+class StepWatchdog:
+    """The in-process watchdog: ``start(name)``, ``beat()`` after each step, ``stop()``."""
+
+    def __init__(self, seconds: float | None, where: str = "", grace: float | None = None
+                 ) -> None:
+        self.seconds, self.where = limit(seconds), where
+        self.grace = GRACE if grace is None else grace
+        self.deadline: float | None = None
+        self.sequence, self.frame, self.fired = "", 0, 0.0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._signals = False
+        self._previous: object = None
+
+    def __enter__(self) -> StepWatchdog:
+        if self.seconds is None:
+            return self
+        self._target = threading.get_ident()
+        self._signals = (threading.current_thread() is threading.main_thread()
+                         and hasattr(signal, "SIGALRM") and hasattr(signal, "pthread_kill"))
+        if self._signals:
+            self._previous = signal.signal(signal.SIGALRM, self._on_alarm)
+        self._thread = threading.Thread(target=self._watch, name="unitrack-step-watchdog",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.deadline = None
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        if self._signals:
+            signal.signal(signal.SIGALRM, self._previous)  # type: ignore[arg-type]
+
+    def start(self, sequence: str) -> None:
+        """A sequence starts (its reset is the first step)."""
+        self.sequence, self.frame, self.fired = sequence, 0, 0.0
+        if self.seconds is not None:
+            self.deadline = time.monotonic() + self.seconds
+
+    def beat(self, frames: int = 1) -> None:
+        """A step ended."""
+        self.frame += frames
+        self.fired = 0.0
+        if self.seconds is not None:
+            self.deadline = time.monotonic() + self.seconds
+
+    def stop(self) -> None:
+        """The sequence ended (or failed)."""
+        self.deadline = None
+        self.fired = 0.0
+
+    def _on_alarm(self, signum: int, frame: FrameType | None) -> None:
+        deadline = self.deadline
+        if deadline is not None and self.seconds is not None and time.monotonic() >= deadline:
+            self.deadline = None
+            raise StepTimeout(timeout_message(self.seconds, self.frame))
+        if callable(self._previous):  # not ours: the handler we replaced for the run
+            self._previous(signum, frame)
+
+    def _watch(self) -> None:
+        assert self.seconds is not None
+        period = min(1.0, self.seconds / 4)
+        while not self._stop.wait(period):
+            deadline = self.deadline
+            now = time.monotonic()
+            if deadline is None or now < deadline:
+                continue
+            if not self.fired:
+                self.fired = now
+                if self._signals:
+                    signal.pthread_kill(self._target, signal.SIGALRM)
+                    continue
+            if now - self.fired >= (self.grace if self._signals else 0.0):
+                self._give_up()
+
+    def _give_up(self) -> None:
+        """The step cannot be interrupted in this process: say why and end the process."""
+        sys.stderr.write(
+            f"\nerror: sequence '{self.sequence}': {timeout_message(self.seconds or 0, self.frame)}"
+            f"; it cannot be interrupted in this process (stuck in native code), so the run "
+            f"stops here. Finished sequences are kept{self.where}; run the same command again "
+            "to resume, with --workers 2 to play such an agent in worker processes that can "
+            "be stopped\n")
+        sys.stderr.flush()
+        os._exit(3)
