@@ -2,10 +2,9 @@
 
 :class:`UniTrackMOTAgent` and :class:`UniTrackMOTConfig` are
 :class:`~unitrack_env.agents.heads.association.UniTrackAgent` and
-:class:`~unitrack_env.agents.heads.unitrack_config.UniTrackConfig`; the MOT defaults (the
-paper's setting plus four measured departures, ``paper_settings=True`` for the paper's) are
-documented there and in
-:data:`~unitrack_env.agents.primitives.association_config.MOT_ASSOCIATION`.
+:class:`~unitrack_env.agents.heads.unitrack_config.UniTrackConfig`; the MOT defaults are
+:meth:`~unitrack_env.agents.primitives.association_config.AssociationConfig.mot`
+(``preset="paper"`` for the paper's setting).
 """
 
 from __future__ import annotations
@@ -14,13 +13,15 @@ from typing import Any
 
 from unitrack_env.agents.heads.association import UniTrackAgent
 from unitrack_env.agents.heads.unitrack_config import (
-    MOT_OUTPUT_MAX_ASPECT,
-    MOT_OUTPUT_MIN_AREA,
     MOT_PIXEL_ORIGIN,
     ROI_OUTPUT_SIZE,
     UniTrackConfig,
 )
 from unitrack_env.agents.primitives.adapters import default_max_tracks
+from unitrack_env.agents.primitives.association_config import (
+    MOT_OUTPUT_MAX_ASPECT,
+    MOT_OUTPUT_MIN_AREA,
+)
 
 UniTrackMOTAgent = UniTrackAgent
 """The ``unitrack`` agent (box, mask and pose association); its MOT name."""

@@ -53,7 +53,7 @@ from typing import Any, Generic
 import numpy as np
 
 from unitrack_env.agents.primitives.appearance_memory import remember
-from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION, AssociationConfig
+from unitrack_env.agents.primitives.association_config import AssociationConfig
 from unitrack_env.agents.primitives.kalman import KalmanFilter, xywh_to_xyah
 from unitrack_env.agents.primitives.matching import fuse_motion, iou_cost, linear_assignment
 from unitrack_env.agents.primitives.tracks import (
@@ -67,7 +67,6 @@ from unitrack_env.geometry import box_iou
 
 __all__ = [
     "HEIGHT_VELOCITY_INDEX",
-    "MOT_ASSOCIATION",
     "AssociationConfig",
     "Associator",
     "P",

@@ -28,6 +28,7 @@ from unitrack_env.metrics.mots import MaskClearStream
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import MASK_ALPHA as MASK_ALPHA
+from unitrack_env.score_range import declared_range
 from unitrack_env.render import draw_masks
 
 #: Default capacity of the detection arrays.
@@ -89,8 +90,10 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
     ## Starting state
     ``reset`` returns the first frame and its detections. ``info`` holds ``sequence``,
     ``frame_index`` (the benchmark's own numbering: MOTS20 1-based, KITTI 0-based),
-    ``seq_length``, ``frame_rate``, ``image_size`` ``(height, width)``, ``benchmark`` and
-    ``has_ground_truth``.
+    ``seq_length``, ``frame_rate``, ``image_size`` ``(height, width)``, ``benchmark``,
+    ``has_ground_truth`` and
+    ``detection_scores`` (the range of the detection scores, ``{"low", "high", "bounded",
+    "source"}``: 0..1, see :mod:`unitrack_env.score_range`).
 
     ## Episode end
     ``terminated=True`` after the last frame is answered. The final ``info["metrics"]`` holds
@@ -186,7 +189,8 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
         self._results = []
         return dict(seq_length=info.length, frame_rate=info.frame_rate,
                     image_size=(info.height, info.width), benchmark=self.benchmark,
-                    has_ground_truth=self._gt is not None, synthetic=self.synthetic)
+                    has_ground_truth=self._gt is not None, synthetic=self.synthetic,
+                    detection_scores=declared_range(self.benchmark).info())
 
     def _first_step(self) -> int:
         return self._sequence.first_frame  # the benchmark's numbering: MOTS20 1, KITTI 0

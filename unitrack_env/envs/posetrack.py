@@ -34,6 +34,7 @@ from unitrack_env.metrics.posetrack import (
 )
 from unitrack_env.metrics.posetrack_frames import remove_ignored
 from unitrack_env.render import draw_poses
+from unitrack_env.score_range import declared_range
 
 #: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).
 DEFAULT_MAX_PEOPLE = 100
@@ -117,7 +118,9 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
     ``image_id``, ``is_labeled``, ``seq_length``, ``frame_rate`` (30; not in the files),
     ``image_size`` ``(height, width)``, ``nframes_declared``, ``has_ground_truth``,
     ``detections`` (``"synthetic"``, ``"oracle"``, ``"folder"`` or ``"none"``),
-    ``oracle_detections`` and ``synthetic``.
+    ``oracle_detections``, ``synthetic`` and
+    ``detection_scores`` (the range of the detection scores, ``{"low", "high", "bounded",
+    "source"}``: 0..1, see :mod:`unitrack_env.score_range`).
 
     ## Episode end
     ``terminated=True`` after the last frame. ``info["metrics"]`` holds poseval's metrics
@@ -225,6 +228,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
             detections=self.detection_source,
             oracle_detections=self.detection_source == ORACLE,
             synthetic=self.synthetic,
+            detection_scores=declared_range("PoseTrack2018").info(),
         )
 
     @property

@@ -19,6 +19,7 @@ from unitrack_env.envs.base import DEFAULT_MAX_FRAME_SIZE as DEFAULT_MAX_FRAME_S
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.mots import MaskClearStream
 from unitrack_env.render import draw_masks
+from unitrack_env.score_range import declared_range
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
@@ -71,8 +72,10 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
     ## Starting state
     ``reset`` returns the first frame and its detections; ``info`` holds ``sequence`` (video
     name), ``video_id``, ``frame_index`` (0-based position in ``file_names``), ``seq_length``,
-    ``frame_rate`` (6: every 5th frame of 30 fps video), ``image_size`` and
-    ``has_ground_truth``.
+    ``frame_rate`` (6: every 5th frame of 30 fps video), ``image_size``,
+    ``has_ground_truth`` and
+    ``detection_scores`` (the range of the detection scores, ``{"low", "high", "bounded",
+    "source"}``: 0..1, see :mod:`unitrack_env.score_range`).
 
     ## Episode end
     ``terminated=True`` after the last frame. The final ``info["metrics"]`` holds the video's
@@ -152,7 +155,8 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
         self._tracks = {}
         return dict(video_id=video.id, seq_length=video.length, frame_rate=FRAME_RATE,
                     image_size=(video.height, video.width), benchmark=BENCHMARK,
-                    has_ground_truth=self._gt is not None, synthetic=self.synthetic)
+                    has_ground_truth=self._gt is not None, synthetic=self.synthetic,
+                    detection_scores=declared_range(BENCHMARK).info())
 
     def _length(self) -> int:
         return self._sequence.length
