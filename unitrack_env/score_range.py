@@ -90,17 +90,16 @@ _CONFIDENCE = "a detector confidence in 0..1"
 DETECTION_SCORES: Mapping[str, ScoreRange] = MappingProxyType({
     "MOT15": ScoreRange(
         0.0, 100.0, False,
-        "MOT15's ACF detections are unbounded detector scores; PETS09-S2L1's det.txt runs "
-        "from -0.48 to 138.92 (2905 rows, ../shared/data/MOT15); 0..100 is their nominal "
-        "scale"),
+        "MOT15's ACF detections are unbounded detector scores; PETS09-S2L1's det.txt "
+        "(frames 1-400, 2905 rows) runs from -0.48 to 138.92; 0..100 is their nominal scale"),
     "MOT16": ScoreRange(
         0.0, 1.0, True,
         "declared 0..1 like MOT17 (the synthetic MOT16 default: 0.01..0.999); MOT16's public "
         "DPM files were not measured here: pass score_range= if yours differ"),
     "MOT17": ScoreRange(
         0.0, 1.0, True,
-        "FRCNN/SDP confidences; the MOT17 FRCNN clips in ../shared/data run from 0.051 to 1 "
-        "(332 rows); the *-DPM files were not measured here: pass score_range= for them"),
+        "FRCNN/SDP confidences; MOT17-02/04/05/11-FRCNN (first 4-8 frames, 332 rows) run "
+        "from 0.051 to 1; the *-DPM files were not measured here: pass score_range= for them"),
     "MOT20": ScoreRange(0.0, 1.0, True, f"MOT20's public detections: {_CONFIDENCE}"),
     "MOTS20": ScoreRange(0.0, 1.0, True, f"MOTS detections: {_CONFIDENCE}"),
     "YouTube-VIS-2019": ScoreRange(0.0, 1.0, True, f"VIS result files: {_CONFIDENCE}"),
