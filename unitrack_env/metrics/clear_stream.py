@@ -122,6 +122,8 @@ class StreamingClear:
     totals: ClearTotals = field(default_factory=ClearTotals, init=False)
     _last_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
     _prev_step_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
+    #: The last frame's matches, gt id -> tracker id (read by the py-motmetrics cross-check).
+    frame_matches: dict[int, int] = field(default_factory=dict, init=False, repr=False)
 
     def reset(self) -> None:
         """Forget all matches and totals (start of a sequence)."""
@@ -153,6 +155,7 @@ class StreamingClear:
         g_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
         t_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
         n, k = len(g_ids), len(t_ids)
+        self.frame_matches = {}
         if n == 0 or k == 0:
             result = FrameClear(tp=0, fp=k, fn=n, idsw=0)
             self.totals.add(result)
@@ -177,6 +180,7 @@ class StreamingClear:
                 idsw += 1
             self._last_match[g] = t
         self._prev_step_match = dict(zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
+        self.frame_matches = dict(self._prev_step_match)
 
         tp = len(rows)
         result = FrameClear(
