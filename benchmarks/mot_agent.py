@@ -238,6 +238,10 @@ def _datasets(work: Path) -> list[DataSet]:
     return sets
 
 
+#: (appearance_momentum, ambiguity_margin) pairs of ``--grid``.
+GRID = ((0.0, 0.0), (0.0, 0.05), (0.0, 0.1), (0.0, 0.2), (0.9, 0.05), (0.9, 0.1), (0.95, 0.0),
+        (0.95, 0.05), (0.95, 0.1), (0.95, 0.2))
+
 #: Metrics of the accuracy table (TrackEval names).
 TABLE_METRICS = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA")
 
@@ -287,7 +291,7 @@ def _replay_scores(recordings: list, config: AssociationConfig,
 def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int] | None = None,
              random_weights: bool = True, peers_too: bool = True, data: str = "",
              all_variants: bool = False, layer: str | None = None,
-             runtime: str | None = None) -> None:
+             runtime: str | None = None, grid: bool = False) -> None:
     """The issue-11 accuracy table and per-stage diagnostics on every long sequence.
 
     Every sequence is recorded once per appearance model (detections + box features, see
@@ -333,6 +337,10 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
                          if all_variants or not motion]
             variants += [("preset=paper w/o motion",
                           {"preset": "paper", "use_motion": False})]
+            if grid:  # docs/design-decisions.md: appearance memory x ambiguity margin
+                variants += [(f"momentum={m} margin={d}", {"association": {
+                    "appearance_momentum": m, "ambiguity_margin": d}})
+                    for m, d in GRID]
             if weights == "random":
                 variants = [(n, o) for n, o in variants if "w/o motion" in n]
             for name, options in variants:
@@ -461,6 +469,8 @@ def main() -> None:
     parser.add_argument("--layer", default=None,
                         help="accuracy: layer of the ImageNet model (default stage5; e.g. "
                              "stage3, stage4, stage3+stage5)")
+    parser.add_argument("--grid", action="store_true",
+                        help="accuracy: also the appearance-momentum x ambiguity-margin grid")
     parser.add_argument("--runtime", default=None,
                         help="accuracy: inference runtime of the recordings (torch, openvino, "
                              "onnxruntime, auto; default torch)")
@@ -472,7 +482,7 @@ def main() -> None:
         if part == "accuracy":
             accuracy(args.threads, args.work, args.input_size, not args.no_random,
                      not args.no_peers, args.data, args.all_variants, args.layer,
-                     args.runtime)
+                     args.runtime, args.grid)
         else:
             PARTS[part](args.threads)
 

@@ -58,11 +58,11 @@ class AssociationConfig:
             ``IoU > confirm_iou_threshold`` to its box. Paper (appendix C.1): the IoU between
             the consecutive boxes must be at least 0.8 (the default). The authors' code passes
             0.7 as an IoU *distance* limit, i.e. accepts ``IoU > 0.3``; reading that 0.7 as
-            an IoU gives 0.7. On the synthetic MOT16 set the three values differ by less
-            than 0.01 IDF1.
+            an IoU gives 0.7.
         new_track_score: A detection left unmatched starts a track when its score is at
-            least this value. Authors' code: 0.5 (their detector's confidence); public
-            MOTChallenge detections use other score scales, so the heads expose it.
+            least this value, on the detections' own scale. Authors' code: 0.5 (their
+            detector's confidence); the ``unitrack`` agent states it on 0..1 of the
+            environment's declared score range.
         confirm_on_first_frame: Tracks born on the first frame of an episode are confirmed
             at once (authors' code; the paper is silent). Without it every object would be
             missed on frame 1.
@@ -71,8 +71,7 @@ class AssociationConfig:
         duplicate_iou: An active and a lost track with ``IoU > duplicate_iou`` are treated
             as duplicates and the younger is removed. The authors' code passes 0.15 as an
             IoU *distance* limit, i.e. ``IoU > 0.85``; that is the default (read as an IoU,
-            0.15 would merge neighbours in a crowd: on the synthetic MOT16 set IDF1 falls
-            from 0.84 to 0.63 on SYN-01).
+            0.15 would merge neighbours in a crowd).
         freeze_lost_height_velocity: Set the height velocity of lost tracks to 0 before
             predicting (authors' code, from JDE), so that unobserved boxes do not grow or
             shrink without bound.
