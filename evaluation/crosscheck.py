@@ -176,7 +176,7 @@ class Crosscheck:
 
 
 def _matched_pairs(acc: Any) -> dict[int, dict[int, int]]:
-    """motmetrics' matches per frame, ``{frame: {gt id: tracker id}}``."""
+    """Motmetrics' matches per frame, ``{frame: {gt id: tracker id}}``."""
     events = acc.mot_events
     kept = events[events.Type.isin(["MATCH", "SWITCH"])]
     out: dict[int, dict[int, int]] = {}
@@ -187,8 +187,11 @@ def _matched_pairs(acc: Any) -> dict[int, dict[int, int]]:
 
 def _accumulate(gt_frames: Sequence[GtFrame], tracker_frames: Sequence[TrackerFrame],
                 benchmark: str) -> tuple[Any, list[dict[int, int] | None]]:
-    """motmetrics' accumulator and TrackEval's matches per frame (None: frame left the
-    previous-frame record untouched, no ground truth or no tracker boxes)."""
+    """The motmetrics accumulator and TrackEval's matches per frame.
+
+    A frame without ground truth or without tracker boxes gets None: it leaves TrackEval's
+    previous-frame record untouched.
+    """
     if len(gt_frames) != len(tracker_frames):
         raise ValueError(
             f"{len(gt_frames)} ground-truth frames but {len(tracker_frames)} tracker frames"
@@ -274,8 +277,11 @@ def crosscheck_frames(gt_frames: Sequence[GtFrame], tracker_frames: Sequence[Tra
 
 def crosscheck_sequence(seq_dir: Path, results: Path | np.ndarray, *, benchmark: str,
                         seq_length: int | None = None) -> Crosscheck:
-    """Score ``results`` (a MOTChallenge result file or its rows) on the sequence folder
-    ``seq_dir`` (``gt/gt.txt``, ``seqinfo.ini``) with TrackEval and with motmetrics."""
+    """Score ``results`` with TrackEval and with motmetrics, and compare them.
+
+    ``results`` is a MOTChallenge result file or its rows; ``seq_dir`` the sequence folder
+    (``gt/gt.txt``, ``seqinfo.ini``).
+    """
     from unitrack_env.metrics.motchallenge import score_sequence
 
     seq_dir = Path(seq_dir)

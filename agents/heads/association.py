@@ -6,8 +6,9 @@ info (``info["task"]``; without it, from the observation's keys, or the ``task``
 and picks the task's observation adapter (:mod:`~unitrack_env.agents.primitives.adapters`,
 sized by ``info["capacities"]``) and settings (:data:`TASK_DEFAULTS` and the association
 preset, resolved once by :meth:`UniTrackConfig.settings`, with the score thresholds on the
-environment's declared score range ``info["detection_scores"]``). Per frame (UniTrack paper, section 2.4 and appendix C;
-facts about the authors' code in ``OFFICIAL-CODE-FACTS.md``, "Association"):
+environment's declared score range ``info["detection_scores"]``). Per frame (UniTrack
+paper, section 2.4 and appendix C; facts about the authors' code in
+``OFFICIAL-CODE-FACTS.md``, "Association"):
 
 1. Read the frame's observations and drop unusable ones (non-finite scores, empty boxes
    or masks, poses without a visible keypoint).
@@ -210,11 +211,11 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
 
     # ------------------------------------------------------------------ episode
     def reset(self, observation: Any, info: dict[str, Any]) -> None:
-        """Forget all tracks and ids; read the task, capacities, ``frame_rate`` and
-        ``detection_scores`` (the range the score thresholds are stated on) from info.
+        """Forget all tracks and ids; read the task, capacities and ``frame_rate`` from info.
 
         Without ``info["task"]`` (and the ``task`` option) the observation (may be None)
-        tells the task; without ``info["detection_scores"]`` thresholds apply as given.
+        tells the task. ``info["detection_scores"]`` is the range the score thresholds are
+        stated on (without it they apply as given).
         """
         task = self.config.task or reset_task(observation, info, self.task)
         self.score_range = ScoreRange.from_info(info.get("detection_scores"))

@@ -1,4 +1,4 @@
-"""Detection score ranges are declared per benchmark, reported at reset, and can be mapped to 0..1."""
+"""Detection score ranges are declared per benchmark, reported at reset, mapped to 0..1."""
 
 from __future__ import annotations
 

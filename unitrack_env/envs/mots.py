@@ -28,8 +28,8 @@ from unitrack_env.metrics.mots import MaskClearStream
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import MASK_ALPHA as MASK_ALPHA
-from unitrack_env.score_range import declared_range
 from unitrack_env.render import draw_masks
+from unitrack_env.score_range import declared_range
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
