@@ -13,7 +13,6 @@ import sys
 from pathlib import Path
 
 import unitrack_env
-from unitrack_env.score_range import DETECTION_SCORES
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "envs"
 
@@ -41,9 +40,8 @@ def _score_table(ids: list[str]) -> str:
     """The declared detection score range of each id (``unitrack_env.score_range``), if any."""
     rows = []
     for variant in unitrack_env.VARIANTS:
-        name = variant.kwargs.get("benchmark") or variant.folder
-        if variant.env_id in ids and name in DETECTION_SCORES:
-            scores = DETECTION_SCORES[name]
+        scores = variant.detection_scores
+        if variant.env_id in ids and scores is not None:
             custom = " (custom data: the rule set's range unless `score_range=`)" \
                 if variant.folder is None else ""
             rows.append(f"| `{variant.env_id}` | {scores.low:g} .. {scores.high:g} | "

@@ -88,3 +88,12 @@ def test_mot17_range_is_unit_and_unit_mode_changes_nothing() -> None:
     env.close()
     assert info["detection_scores"]["high"] == 1.0 and info["detection_scores"]["bounded"]
     np.testing.assert_array_equal(raw["scores"], unit["scores"])
+
+
+def test_registry_rows_carry_their_declared_range() -> None:
+    from unitrack_env.registration import variant
+
+    assert variant("UniTrack/MOT15-v0").detection_scores == declared_range("MOT15")
+    assert variant("UniTrack/MOT17-v0").detection_scores.is_unit
+    assert variant("UniTrack/VIS-v0").detection_scores.is_unit
+    assert variant("UniTrack/OTB-v0").detection_scores is None
