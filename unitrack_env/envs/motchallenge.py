@@ -110,7 +110,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence], task="mot"):
     - ``score_range``: ``(low, high)`` of your own data's scores, instead of the
       benchmark's declared range.
     - ``min_score``: drop detections whose score (as observed, i.e. after
-      ``detection_scores``) is below this value.
+      ``detection_scores``) is below this value (the one place that filters detections
+      by score).
     - ``max_detections``, ``max_tracks``, ``max_frame_size``: space capacities.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).

@@ -111,8 +111,8 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo], task="mots"):
       ``"gt"`` (ground-truth masks as detections) or a folder of ``<seq>.txt`` files, in the
       MOTS txt format with an optional 7th score field.
     - ``object_class``: ``"pedestrian"`` or (KITTI) ``"car"``: the class tracked and scored.
-    - ``min_score``: drop detections scored below this (or wrap the environment in
-      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``min_score``: drop detections scored below this (the one place that filters
+      detections by score).
     - ``max_detections``, ``max_frame_size``: space capacities.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
     - ``prefetch``: decode the next frame on a background thread.

@@ -138,8 +138,8 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence], task="posetrack"):
     - ``sequences``: restrict to these sequence names.
     - ``detections``: a folder of ``<sequence>.json`` pose detections, ``"oracle"``, or
       None (synthetic: its simulated detections; real: oracle, or none for test).
-    - ``min_score``: drop detected poses scored below this (or wrap the environment in
-      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``min_score``: drop detected poses scored below this (the one place that filters
+      detections by score).
     - ``max_people``, ``max_tracks``, ``max_frame_size``: space capacities.
     - ``drop_last_frame``: leave out the last evaluated frame per sequence like poseval.
     - ``decode_frames``, ``prefetch``, ``shuffle``: as in the other environments.

@@ -90,8 +90,8 @@ class VISEnv(SequenceEnv[VisVideo], task="vis"):
     - ``sequences``: restrict to these videos (names).
     - ``detections``: ``"public"`` (``<root>/detections/<split>.json``), ``"gt"`` or a
       results-format JSON file.
-    - ``min_score``: drop detections scored below this (or wrap the environment in
-      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``min_score``: drop detections scored below this (the one place that filters
+      detections by score).
     - ``max_detections``, ``max_frame_size``, ``decode_frames``, ``prefetch``, ``shuffle``,
       ``render_mode`` as in the other environments.
 
