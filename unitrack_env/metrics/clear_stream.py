@@ -122,7 +122,8 @@ class StreamingClear:
     totals: ClearTotals = field(default_factory=ClearTotals, init=False)
     _last_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
     _prev_step_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
-    #: The last frame's matches, gt id -> tracker id (read by the py-motmetrics cross-check).
+    #: Matches of the last frame with ground truth and tracker boxes, gt id -> tracker id
+    #: (the previous-frame record; read by the py-motmetrics cross-check).
     frame_matches: dict[int, int] = field(default_factory=dict, init=False, repr=False)
 
     def reset(self) -> None:
@@ -155,7 +156,6 @@ class StreamingClear:
         g_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
         t_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
         n, k = len(g_ids), len(t_ids)
-        self.frame_matches = {}
         if n == 0 or k == 0:
             result = FrameClear(tp=0, fp=k, fn=n, idsw=0)
             self.totals.add(result)
@@ -179,8 +179,8 @@ class StreamingClear:
             if last is not None and last != t:
                 idsw += 1
             self._last_match[g] = t
-        self._prev_step_match = dict(zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
-        self.frame_matches = dict(self._prev_step_match)
+        self.frame_matches = self._prev_step_match = dict(
+            zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
 
         tp = len(rows)
         result = FrameClear(
