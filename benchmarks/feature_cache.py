@@ -190,7 +190,7 @@ def metrics(threads: int) -> None:
 
     sets = [("MOT17 clips", "UniTrack/MOT17-v0", {"root": str(SHARED / "MOT17")}, {}),
             ("PETS09-S2L1", "UniTrack/MOT15-v0", {"root": str(SHARED / "MOT15")},
-             {"new_track_score": 50.0})]
+             {})]  # the env declares PETS's 0..100 scores; the agent reads it
     with tempfile.TemporaryDirectory() as tmp:
         for label, env_id, env_kwargs, extra in sets:
             results = {}

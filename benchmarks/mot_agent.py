@@ -8,10 +8,14 @@ Parts (run all, or pick with --parts):
   cache        second run with the feature cache vs the first (goal >= 20x faster)
   accuracy     (slow) HOTA / IDF1 / MOTA / IDSW / DetA / AssA of iou, roboflow SORT and ByteTrack
                (run in a separate virtual environment: `trackers` needs opencv-python, which
-               must not enter ours) and unitrack (defaults, paper_settings, rsm/cf/gf/gpf with
+               must not enter ours) and unitrack (defaults, preset=paper, rsm/cf/gf/gpf with
                motion on/off, random weights without motion) on PETS09-S2L1, the hard
                synthetic scenes (unitrack_env.datasets.synthetic.hard_mot), the MOT17 clips
                and the default synthetic MOT16 set; then per-stage diagnostics per sequence.
+               Every unitrack row runs at the agent's defaults plus the options in its name
+               (no hidden argument): its thresholds are on 0..1 of the score range the env
+               declares (MOT15: 0..100), and the peers get the env's 0..1 scores
+               (detection_scores='unit').
                Each sequence's detections and box features are recorded once per weights and
                replayed through the association engine (benchmarks/_mot_replay.py).
   peers        time per frame of roboflow SORT / ByteTrack and iou at 30 detections
@@ -43,18 +47,18 @@ from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel, letterbox
 from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
 from unitrack_env.agents.primitives.association import Associator
+from unitrack_env.agents.primitives.association_config import AssociationConfig
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
 from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motchallenge
 from unitrack_env.evaluation.runner import run
 from unitrack_env.frames import read_rgb
+from unitrack_env.score_range import ScoreRange
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _mot_replay import diagnose, record, replay, score  # noqa: E402  (benchmark helper)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = (REPO / ".." / "shared" / "data").resolve()
-#: PETS09-S2L1 detection scores are 0-100+; trackers built for [0, 1] scores get them / 100.
-PETS_SCORE_SCALE = 100.0
 
 
 def _median_time(fn, repeats: int) -> float:
@@ -209,14 +213,20 @@ class DataSet:
     label: str
     env_id: str
     env_kwargs: dict
-    score_scale: float = 1.0  # detection scores / this = [0, 1] (peers, new-track score)
+
+    def score_range(self) -> ScoreRange:
+        """The range the environment declares for its detection scores."""
+        env = gym.make(self.env_id, **self.env_kwargs, decode_frames=False)
+        try:
+            return env.unwrapped.observed_scores()
+        finally:
+            env.close()
 
 
 def _datasets(work: Path) -> list[DataSet]:
     sets = []
     if (SHARED / "MOT15").is_dir():
-        sets.append(DataSet("PETS09-S2L1", "UniTrack/MOT15-v0", {"root": str(SHARED / "MOT15")},
-                            PETS_SCORE_SCALE))
+        sets.append(DataSet("PETS09-S2L1", "UniTrack/MOT15-v0", {"root": str(SHARED / "MOT15")}))
     hard = work / "hard-mot17"
     if not (hard / "train" / HARD_SPEC.sequences[-1].sequence.name / "det").is_dir():
         print(f"[accuracy] writing the hard synthetic scenes to {hard} (one-off)...", flush=True)
@@ -228,10 +238,9 @@ def _datasets(work: Path) -> list[DataSet]:
     return sets
 
 
-def _agent_kwargs(env_id: str) -> dict:
-    # PETS scores are 0-100+: the paper's new-track threshold 0.5 means 50 on that scale.
-    return {"new_track_score": 0.5 * PETS_SCORE_SCALE} if env_id.endswith("MOT15-v0") else {}
-
+#: (appearance_momentum, ambiguity_margin) pairs of ``--grid``.
+GRID = ((0.0, 0.0), (0.0, 0.05), (0.0, 0.1), (0.0, 0.2), (0.9, 0.05), (0.9, 0.1), (0.95, 0.0),
+        (0.95, 0.05), (0.95, 0.1), (0.95, 0.2))
 
 #: Metrics of the accuracy table (TrackEval names).
 TABLE_METRICS = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA")
@@ -245,17 +254,19 @@ def _combined(scores: dict) -> dict[str, float]:
 
 
 def _peer_scores(data: DataSet, recordings: list, tmp: Path) -> dict[str, dict[str, float]]:
-    """roboflow SORT and ByteTrack on the same public detections (scores scaled to [0, 1])."""
+    """roboflow SORT and ByteTrack on the same public detections, scores on 0..1 (what
+    ``detection_scores="unit"`` hands out)."""
     from unitrack_env.metrics.motchallenge import score_sequence
 
     python = _peer_python()
     script = REPO / "benchmarks" / "_peer_roboflow.py"
     out: dict[str, dict[str, float]] = {}
+    scores = data.score_range()
     for name in ("sort", "bytetrack"):
         per_seq = {}
         for rec in recordings:
             det = np.loadtxt(rec.seq_dir / "det" / "det.txt", delimiter=",", ndmin=2)
-            det[:, 6] = np.clip(det[:, 6] / data.score_scale, 0, 1)
+            det[:, 6] = scores.to_unit(det[:, 6])
             scaled = tmp / f"{rec.name}-det.txt"
             np.savetxt(scaled, det, delimiter=",", fmt="%.4f")
             result = tmp / f"{rec.name}-{name}.txt"
@@ -267,7 +278,8 @@ def _peer_scores(data: DataSet, recordings: list, tmp: Path) -> dict[str, dict[s
     return out
 
 
-def _replay_scores(recordings: list, config, similarity) -> tuple[dict, dict]:
+def _replay_scores(recordings: list, config: AssociationConfig,
+                   similarity) -> tuple[dict, dict]:
     per_seq, diags = {}, {}
     for rec in recordings:
         result = replay(rec, config, similarity)
@@ -279,7 +291,7 @@ def _replay_scores(recordings: list, config, similarity) -> tuple[dict, dict]:
 def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int] | None = None,
              random_weights: bool = True, peers_too: bool = True, data: str = "",
              all_variants: bool = False, layer: str | None = None,
-             runtime: str | None = None) -> None:
+             runtime: str | None = None, grid: bool = False) -> None:
     """The issue-11 accuracy table and per-stage diagnostics on every long sequence.
 
     Every sequence is recorded once per appearance model (detections + box features, see
@@ -305,35 +317,40 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
         weights_list = ("imagenet-lite0", "random") if random_weights else ("imagenet-lite0",)
         for weights in weights_list:
             kwargs = {"weights": weights, "num_threads": threads,
-                      "feature_cache": str(work / "features"), **_agent_kwargs(data.env_id)}
+                      "feature_cache": str(work / "features")}
             if input_size is not None:
                 kwargs["input_size"] = tuple(input_size)
             if layer is not None and weights != "random":
                 kwargs["layer"] = layer
             if runtime is not None:
                 kwargs["runtime"] = runtime
-            record_kwargs = {k: v for k, v in kwargs.items() if k != "new_track_score"}
-            recordings = record(data.env_id, data.env_kwargs, record_kwargs, work / "recordings")
+            recordings = record(data.env_id, data.env_kwargs, kwargs, work / "recordings")
+            declared = data.score_range()  # what the agent reads from the reset info
             if weights == "imagenet-lite0" and peers_too:
                 with tempfile.TemporaryDirectory() as tmp:
                     for name, m in _peer_scores(data, recordings, Path(tmp)).items():
                         rows.append((label, name, m))
-            variants = [("defaults", {}), ("paper_settings", {"paper_settings": True})]
+            variants = [("defaults", {}), ("preset=paper", {"preset": "paper"})]
             variants += [(f"{sim}{'' if motion else ' w/o motion'}",
                           {"similarity": sim, "use_motion": motion})
                          for sim in ("rsm", "cf", "gf", "gpf") for motion in (True, False)
                          if all_variants or not motion]
-            variants += [("paper_settings w/o motion",
-                          {"paper_settings": True, "use_motion": False})]
+            variants += [("preset=paper w/o motion",
+                          {"preset": "paper", "use_motion": False})]
+            if grid:  # docs/design-decisions.md: appearance memory x ambiguity margin
+                variants += [(f"momentum={m} margin={d}", {"association": {
+                    "appearance_momentum": m, "ambiguity_margin": d}})
+                    for m, d in GRID]
             if weights == "random":
                 variants = [(n, o) for n, o in variants if "w/o motion" in n]
             for name, options in variants:
                 config = UniTrackConfig(**{**kwargs, **options})
-                m, diags = _replay_scores(recordings, config.association_config("mot"),
+                m, diags = _replay_scores(recordings,
+                                          config.association_config("mot", declared),
                                           config.similarity)
                 tag = "" if weights == "imagenet-lite0" else f" [{weights}]"
                 rows.append((label, f"unitrack {name}{tag}", m))
-                if name in ("defaults", "paper_settings") and weights == "imagenet-lite0":
+                if name in ("defaults", "preset=paper") and weights == "imagenet-lite0":
                     for seq, d in diags.items():
                         diag_rows.append((label, seq, name, d))
                 print(f"  {label:16s} unitrack {name}{tag:10s} HOTA {100 * m['HOTA']:5.1f} "
@@ -452,6 +469,8 @@ def main() -> None:
     parser.add_argument("--layer", default=None,
                         help="accuracy: layer of the ImageNet model (default stage5; e.g. "
                              "stage3, stage4, stage3+stage5)")
+    parser.add_argument("--grid", action="store_true",
+                        help="accuracy: also the appearance-momentum x ambiguity-margin grid")
     parser.add_argument("--runtime", default=None,
                         help="accuracy: inference runtime of the recordings (torch, openvino, "
                              "onnxruntime, auto; default torch)")
@@ -463,7 +482,7 @@ def main() -> None:
         if part == "accuracy":
             accuracy(args.threads, args.work, args.input_size, not args.no_random,
                      not args.no_peers, args.data, args.all_variants, args.layer,
-                     args.runtime)
+                     args.runtime, args.grid)
         else:
             PARTS[part](args.threads)
 

@@ -32,8 +32,26 @@ def pages() -> dict[str, str]:
         header = f"# {summary.strip()}\n\nIds: " + ", ".join(f"`{i}`" for i in ids) + "\n"
         note = (f"\n<!-- generated from {module_name}.{class_name} by "
                 "scripts/make_env_docs.py; edit the docstring, not this file -->\n")
-        out[f"{task}.md"] = header + note + body.rstrip() + "\n"
+        out[f"{task}.md"] = header + note + body.rstrip() + "\n" + _score_table(ids)
     return out
+
+
+def _score_table(ids: list[str]) -> str:
+    """The declared detection score range of each id (``unitrack_env.score_range``), if any."""
+    rows = []
+    for variant in unitrack_env.VARIANTS:
+        scores = variant.detection_scores
+        if variant.env_id in ids and scores is not None:
+            custom = " (custom data: the rule set's range unless `score_range=`)" \
+                if variant.folder is None else ""
+            rows.append(f"| `{variant.env_id}` | {scores.low:g} .. {scores.high:g} | "
+                        f"{'yes' if scores.bounded else 'no'} | {scores.source}{custom} |")
+    if not rows:
+        return ""
+    return ("\n## Detection scores\n\nThe range each id declares for its detection scores "
+            "(reported as `info[\"detection_scores\"]` at reset; agents state thresholds on "
+            "0..1 of it), from `unitrack_env.score_range.DETECTION_SCORES`:\n\n"
+            "| id | range | bounded | source |\n|---|---|---|---|\n" + "\n".join(rows) + "\n")
 
 
 def main() -> int:

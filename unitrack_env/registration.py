@@ -17,6 +17,8 @@ from typing import Any
 
 import gymnasium as gym
 
+from unitrack_env.score_range import DETECTION_SCORES, ScoreRange
+
 #: Namespace of every id.
 NAMESPACE = "UniTrack"
 
@@ -48,6 +50,15 @@ class Variant:
     def env_id(self) -> str:
         """The full Gymnasium id, e.g. ``UniTrack/MOT17-v0``."""
         return f"{NAMESPACE}/{self.name}-v{self.version}"
+
+    @property
+    def detection_scores(self) -> ScoreRange | None:
+        """The declared range of the id's detection scores (None: no detections).
+
+        Looked up in :data:`unitrack_env.score_range.DETECTION_SCORES` by the row's
+        ``benchmark`` argument, else its folder.
+        """
+        return DETECTION_SCORES.get(self.kwargs.get("benchmark") or self.folder or "")
 
 
 _MOT = "unitrack_env.envs.motchallenge:MOTChallengeEnv"

@@ -38,8 +38,6 @@ class IoUConfig:
 
     Attributes:
         iou_threshold: least IoU between a track's predicted box and a detection to match.
-        min_score: detections scored below this are ignored (scores are benchmark-specific:
-            MOT17 FRCNN scores lie in [0, 1], MOT15's are unbounded).
         min_hits: a track is reported once it has been matched this many times (during the
             first ``min_hits`` frames of an episode every matched track is reported, so the
             opening frames are not lost).
@@ -58,7 +56,6 @@ class IoUConfig:
     """
 
     iou_threshold: float = 0.3
-    min_score: float = -np.inf
     min_hits: int = 2
     max_lost_seconds: float = 1.0
     velocity_smoothing: float = 0.5
@@ -136,7 +133,7 @@ class IoUAgent(Agent, name="iou", tasks=("mot", "mots", "vis", "posetrack")):
             self._start(detect_task(observation), {"capacities": self.adapter.capacities},
                         self._frame_rate)
         detections = self.adapter.detections(observation)
-        valid = np.flatnonzero(detections.scores >= self.config.min_score)
+        valid = np.arange(len(detections.scores))  # (score filtering: the env's min_score)
         if self.adapter.kind == "boxes":
             states = detections.boxes[valid]
         elif self.adapter.kind == "masks":

@@ -18,13 +18,13 @@ class FreshIdsAgent(Agent, name="fresh-ids", tasks=("mot",)):
     associated across frames, so every continuing object is an identity switch: the floor
     for IDF1, AssA and HOTA.
 
+    Which detections it sees is the environment's ``min_score``.
+
     Args:
-        min_score: ignore detections scored below this.
         max_tracks: action capacity (must match the environment's ``max_tracks``).
     """
 
-    def __init__(self, min_score: float = -np.inf, max_tracks: int = 512) -> None:
-        self.min_score = min_score
+    def __init__(self, max_tracks: int = 512) -> None:
         self.max_tracks = max_tracks
         self._next_id = 1
 
@@ -33,9 +33,8 @@ class FreshIdsAgent(Agent, name="fresh-ids", tasks=("mot",)):
         self._next_id = 1
 
     def act(self, observation: dict[str, Any]) -> dict[str, Any]:
-        """Give each detection above the score threshold a fresh id."""
-        boxes, scores = unpack_detections(observation)
-        boxes = boxes[scores >= self.min_score]
+        """Give each detection a fresh id."""
+        boxes, _ = unpack_detections(observation)
         ids = np.arange(self._next_id, self._next_id + len(boxes))
         self._next_id += len(boxes)
         return pack_tracks(ids, boxes, self.max_tracks)

@@ -4,12 +4,14 @@ One agent plays every association environment -- MOT (boxes), MOTS (masks), VIS 
 with classes) and PoseTrack (poses). At reset it reads the task from the environment's
 info (``info["task"]``; without it, from the observation's keys, or the ``task`` option)
 and picks the task's observation adapter (:mod:`~unitrack_env.agents.primitives.adapters`,
-sized by ``info["capacities"]``) and settings (:data:`TASK_DEFAULTS`, resolved once by
-:meth:`UniTrackConfig.settings`). Per frame (UniTrack paper, section 2.4 and appendix C;
-facts about the authors' code in ``OFFICIAL-CODE-FACTS.md``, "Association"):
+sized by ``info["capacities"]``) and settings (:data:`TASK_DEFAULTS` and the association
+preset, resolved once by :meth:`UniTrackConfig.settings`, with the score thresholds on the
+environment's declared score range ``info["detection_scores"]``). Per frame (UniTrack
+paper, section 2.4 and appendix C; facts about the authors' code in
+``OFFICIAL-CODE-FACTS.md``, "Association"):
 
-1. Read the frame's observations and drop unusable ones (score below ``min_score``, empty
-   boxes or masks, poses without a visible keypoint).
+1. Read the frame's observations and drop unusable ones (non-finite scores, empty boxes
+   or masks, poses without a visible keypoint).
 2. Turn every observation into a box for the Kalman filter and the IoU stages and a region
    for appearance: a box is itself; a mask gives the paper's mean / mean-absolute-deviation
    box (appendix C.1, :func:`~unitrack_env.agents.primitives.mask_features.mask_to_box`); a
@@ -30,8 +32,8 @@ facts about the authors' code in ``OFFICIAL-CODE-FACTS.md``, "Association"):
    MOTS/VIS one id per detection (0 = not reported); PoseTrack the ids with the matched
    poses echoed.
 
-The task defaults and their measurements are listed in
-:mod:`~unitrack_env.agents.heads.unitrack_config`.
+The options are :class:`~unitrack_env.agents.heads.unitrack_config.UniTrackConfig`; why
+each default: ``docs/design-decisions.md``.
 
 Example:
     >>> import gymnasium as gym, unitrack_env                    # doctest: +SKIP
@@ -50,6 +52,8 @@ from typing import Any
 
 import numpy as np
 import torch
+
+from unitrack_env.score_range import ScoreRange
 
 from ..appearance.cached_model import CachedAppearanceModel
 from ..appearance.feature_cache import resolve_cache
@@ -149,6 +153,8 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
             self.model, base.stride, input_size=cfg.input_size, roi_size=cfg.roi_size,
             sampling_ratio=cfg.roi_sampling_ratio, pixel_origin=cfg.pixel_origin)
         self._task_from_info = False
+        #: The environment's declared score range (``info["detection_scores"]``), if any.
+        self.score_range: ScoreRange | None = None
         self._start(cfg.task or "mot", {}, 30.0)
 
     @property
@@ -163,7 +169,7 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
 
     def _start(self, task: str, capacities: Mapping[str, int], frame_rate: float) -> None:
         """Resolve ``task``'s settings and adapter; build its association engine."""
-        self.settings = self.config.settings(task)
+        self.settings = self.config.settings(task, self.score_range)
         if self._max_tracks is not None:
             capacities = {**capacities, "max_tracks": self._max_tracks}
         self.adapter: ObservationAdapter = adapter_for(task, capacities)
@@ -176,9 +182,11 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         """Forget all tracks and ids; read the task, capacities and ``frame_rate`` from info.
 
         Without ``info["task"]`` (and the ``task`` option) the observation (may be None)
-        tells the task.
+        tells the task. ``info["detection_scores"]`` is the range the score thresholds are
+        stated on (without it they apply as given).
         """
         task = self.config.task or reset_task(observation, info, self.task)
+        self.score_range = ScoreRange.from_info(info.get("detection_scores"))
         self._task_from_info = bool(info.get("task"))
         self._start(task, dict(info.get("capacities") or {}), self.associator.frame_rate)
         frame_rate = info.get("frame_rate")
@@ -230,12 +238,10 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
             return self.associator.step(parsed.boxes, parsed.scores, features, categories)
         return self.associator.step(parsed.boxes, parsed.scores, features)
 
-    def _usable(self, scores: np.ndarray) -> np.ndarray:
-        """Finite scores at or above ``min_score``."""
-        keep = np.isfinite(scores)
-        if self.config.min_score is not None:
-            keep &= scores >= self.config.min_score
-        return keep
+    @staticmethod
+    def _usable(scores: np.ndarray) -> np.ndarray:
+        """Finite scores (which detections to keep is the environment's ``min_score``)."""
+        return np.isfinite(scores)
 
     # ------------------------------------------------------------------ boxes (MOT)
     def _act_boxes(self, frame: np.ndarray, detections: Detections) -> dict[str, Any]:

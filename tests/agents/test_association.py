@@ -285,11 +285,12 @@ def test_appearance_keeps_ids_where_iou_only_swaps(use_motion: bool) -> None:
 
 # ---------------------------------------------------------------------- issue 11 knobs
 def test_reported_box_is_the_detection_by_default_in_mot_but_filtered_in_the_paper() -> None:
-    from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION
+    from dataclasses import replace
 
     paper = Associator(dot_similarity)
     assert paper.config.report_filtered_box  # authors' code: the Kalman state
-    mot = Associator(dot_similarity, AssociationConfig(**MOT_ASSOCIATION))
+    unfiltered = {"output_min_area": None, "output_max_aspect": None}
+    mot = Associator(dot_similarity, replace(AssociationConfig.mot(), **unfiltered))
     for x in (0.0, 3.0, 7.0, 8.0):  # uneven motion: the filter lags the detections
         det = [box(x)]
         out_paper = paper.step(np.array(det), np.ones(1), [RED])

@@ -55,9 +55,8 @@ def test_registered_under_unitrack(model: AppearanceModel) -> None:
     assert agent.associator.config.output_min_area == 200.0
 
 
-def test_empty_frames_and_filtered_detections(model: AppearanceModel) -> None:
-    agent = UniTrackAgent(max_tracks=8, appearance_model=model, input_size=HALF_SIZE,
-                             min_score=0.3, **ONE)
+def test_empty_frames_and_lost_tracks(model: AppearanceModel) -> None:
+    agent = UniTrackAgent(max_tracks=8, appearance_model=model, input_size=HALF_SIZE, **ONE)
     rng = np.random.default_rng(0)
     frame = rng.integers(0, 255, (240, 320, 3), dtype=np.uint8)
     agent.reset(observation(frame, [], []), {"frame_rate": 10.0, "sequence": "x"})
@@ -69,10 +68,27 @@ def test_empty_frames_and_filtered_detections(model: AppearanceModel) -> None:
     assert agent.act(observation(frame, people, [0.9, 0.9]))["num_tracks"] == 0
     ids, _ = unpack_tracks(agent.act(observation(frame, people, [0.9, 0.9])))
     assert sorted(ids.tolist()) == [1, 2]
-    # Every detection below min_score: no backbone pass, tracks become lost, nothing reported.
-    assert agent.act(observation(frame, people, [0.1, 0.2]))["num_tracks"] == 0
+    # No detection: no backbone pass, tracks become lost, nothing reported.
+    assert agent.act(observation(frame, [], []))["num_tracks"] == 0
     again = agent.act(observation(frame, people, [0.9, 0.9]))
     assert sorted(unpack_tracks(again)[0].tolist()) == [1, 2]  # re-found, same ids
+
+
+def test_new_track_score_is_on_the_declared_score_range(model: AppearanceModel) -> None:
+    # MOT15 declares 0..100: the new-track score 0.5 means 50 there; without a declaration
+    # (or on 0..1) it is 0.5 as given.
+    agent = UniTrackAgent(max_tracks=8, appearance_model=model, input_size=HALF_SIZE, **ONE)
+    frame = np.full((240, 320, 3), 90, np.uint8)
+    person = [[21.0, 31.0, 30.0, 80.0]]
+    mot15 = {"low": 0.0, "high": 100.0, "bounded": False, "source": "test"}
+    for declared, score, starts in ((mot15, 40.0, False), (mot15, 60.0, True),
+                                    (None, 0.6, True), (None, 0.4, False)):
+        agent.reset(None, {"frame_rate": 10.0, "detection_scores": declared})
+        assert agent.associator.config.new_track_score == (50.0 if declared else 0.5)
+        agent.act(observation(frame, person, [score]))
+        assert (len(agent.associator.tracks) == 1) == starts, (declared, score)
+    with pytest.raises(ValueError, match="agent option"):
+        UniTrackAgent(appearance_model=model, association={"new_track_score": 50})
 
 
 def test_options_are_validated(model: AppearanceModel) -> None:
@@ -187,14 +203,13 @@ def test_real_pets09_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path) -
     env_kwargs = {"root": str(root)}
     iou = run("UniTrack/MOT15-v0", "iou", out=tmp_path / "iou", progress=False,
               env_kwargs={**env_kwargs, "decode_frames": False}).combined
-    # PETS scores are 0-100+: the new-track score 0.5 of [0, 1] detectors is 50 there.
+    # At its defaults: the env declares PETS's 0..100 scores, the new-track score is 0.5 of it.
     # runtime="auto": the fastest installed runtime (the test extra installs OpenVINO: 116 s
     # instead of 676 s for this test on 2 busy cores); it also checks the MOT head end to end
     # on a compiled runtime (torch when none is installed).
     unitrack = run("UniTrack/MOT15-v0", "unitrack", out=tmp_path / "unitrack", progress=False,
                    env_kwargs=env_kwargs,
-                   agent_kwargs={"new_track_score": 50.0, "num_threads": 2,
-                                 "runtime": "auto"}).combined
+                   agent_kwargs={"num_threads": 2, "runtime": "auto"}).combined
     for name, peer in {"iou": iou, **PETS_PEERS}.items():
         assert unitrack["HOTA"] > peer["HOTA"], name
         assert unitrack["IDF1"] > peer["IDF1"], name
@@ -232,18 +247,25 @@ def test_mot_defaults_are_the_paper_plus_documented_departures() -> None:
     from dataclasses import replace
 
     from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
-    from unitrack_env.agents.primitives.association_config import MOT_ASSOCIATION, AssociationConfig
+    from unitrack_env.agents.primitives.association_config import AssociationConfig
 
-    paper = UniTrackConfig(paper_settings=True).association_config("mot")
+    paper = UniTrackConfig(preset="paper").association_config("mot")
     default = UniTrackConfig().association_config("mot")
     filt = {"output_min_area": 200.0, "output_max_aspect": 1.6}
-    assert paper == AssociationConfig(**filt)  # the paper's (and code's) values, unchanged
-    assert default == replace(paper, **MOT_ASSOCIATION)
-    assert not default.report_filtered_box and default.ambiguity_margin > 0
+    assert paper == AssociationConfig(**filt) == AssociationConfig.paper("mot")
+    departures = {"report_filtered_box": False, "ambiguity_margin": 0.05,
+                  "appearance_momentum": 0.95, "confirm_iou_threshold": 0.5,
+                  "iou_stage_includes_lost": True}
+    assert default == replace(paper, **departures) == AssociationConfig.mot()
     # Explicit fields still override, with or without the paper's setting.
-    assert UniTrackConfig(paper_settings=True, association={"ambiguity_margin": 0.2}
+    assert UniTrackConfig(preset="paper", association={"ambiguity_margin": 0.2}
                           ).association_config("mot").ambiguity_margin == 0.2
+    assert not UniTrackConfig(preset="paper", output_filter=False
+                              ).association_config("mot").output_min_area
     # The other association tasks keep their defaults (their goldens are unchanged).
     for task in ("mots", "vis", "posetrack"):
         assert UniTrackConfig().association_config(task) == \
-            UniTrackConfig(paper_settings=True).association_config(task)
+            UniTrackConfig(preset="paper").association_config(task) == \
+            AssociationConfig.paper(task)
+    with pytest.raises(ValueError, match="preset must be one of default, paper"):
+        UniTrackConfig(preset="papers")

@@ -1,4 +1,5 @@
-"""py-motmetrics and TrackEval agree on MOTA, IDF1 and IDSW for the same preprocessed frames."""
+"""py-motmetrics and TrackEval agree on perturbed ground truth; on real tracker outputs the
+cross-check reports where they differ and by which rule."""
 
 from __future__ import annotations
 
@@ -140,3 +141,55 @@ def test_gt_copy_without_seqinfo(tmp_path: Path) -> None:
     gt_rows, n = load_gt(PETS)
     trk = perturbed_tracker(gt_rows, n, seed=5, level=0.8)
     assert_agree(seq_dir, gt_rows, n, trk, "MOT15")
+
+
+# ---------------------------------------------------------------- real tracker outputs
+def test_numpy_2_without_asfarray_is_not_patched() -> None:
+    # motmetrics 1.4.0's iou_matrix needs np.asfarray (gone in NumPy 2); the cross-check never
+    # calls it and must not put it back into the user's NumPy.
+    had = hasattr(np, "asfarray")
+    box = np.array([[0.0, 0.0, 10.0, 10.0]])
+    gt = [GtFrame(np.array([1]), box, np.array([1]), np.array([1]))]
+    motmetrics_summary(gt, [TrackerFrame(np.array([7]), box)], benchmark="MOT17")
+    assert hasattr(np, "asfarray") == had
+    if int(np.__version__.split(".")[0]) >= 2:
+        assert not had
+
+
+def test_iou_tracker_on_pets09_differs_by_the_continuation_rule(tmp_path: Path) -> None:
+    # The `iou` agent's real output on PETS09-S2L1: motmetrics continues gt 1's match to
+    # tracker 57 from frame 303 at frame 306 (TrackEval only continues frame 305's record,
+    # where gt 1 was missed), so it counts one more TP and a higher MOTA.
+    from unitrack_env.evaluation.crosscheck import CONTINUATION, DISPLACED, crosscheck_sequence
+    from unitrack_env.evaluation.runner import run
+
+    if not (PETS / "gt" / "gt.txt").is_file():
+        pytest.skip(f"PETS09-S2L1 fixture not found under {PETS}")
+    run("UniTrack/MOT15-v0", "iou", out=tmp_path / "iou", progress=False,
+        env_kwargs={"root": str(PETS.parents[1]), "decode_frames": False})
+    check = crosscheck_sequence(PETS, tmp_path / "iou" / "data" / "PETS09-S2L1.txt",
+                                benchmark="MOT15")
+    diff = check.differences()
+    assert set(diff) == {"MOTA", "CLR_TP", "CLR_FP", "CLR_FN"}
+    assert diff["CLR_TP"] == (1958, 1959) and diff["MOTA"][1] > diff["MOTA"][0]
+    assert [(p.frame, p.gt_id, p.rule) for p in check.pairs] == [
+        (306, 1, CONTINUATION), (306, 13, DISPLACED)]
+    assert check.pairs[0].last_frame == 303 and check.pairs[0].trackeval is None
+    report = check.report("PETS09-S2L1")
+    assert "continuation rule" in report and "from frame 303" in report
+    # TrackEval's side of the report is TrackEval's own scoring.
+    assert check.trackeval["MOTA"] == score_sequence(
+        PETS, tmp_path / "iou" / "data" / "PETS09-S2L1.txt", benchmark="MOT15")["MOTA"]
+
+
+def test_agreement_is_reported_as_such() -> None:
+    from unitrack_env.evaluation.crosscheck import crosscheck_frames
+
+    box = np.array([[0.0, 0.0, 10.0, 10.0]])
+    gt = [GtFrame(np.array([1]), box, np.array([1]), np.array([1]))] * 2
+    trk = [TrackerFrame(np.array([7]), box)] * 2
+    te = {"MOTA": 1.0, "IDF1": 1.0, "IDSW": 0.0, "CLR_TP": 2.0, "CLR_FP": 0.0, "CLR_FN": 0.0,
+          "IDTP": 2.0, "IDFP": 0.0, "IDFN": 0.0}
+    check = crosscheck_frames(gt, trk, te, benchmark="MOT17")
+    assert not check.pairs and not check.differences()
+    assert "agree exactly" in check.report()

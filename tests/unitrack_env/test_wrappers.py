@@ -1,4 +1,4 @@
-"""The wrappers: DetectionScoreFilter equals the envs' min_score=, FrameSkip scores every frame."""
+"""The association envs' min_score= filters detections; FrameSkip scores every frame."""
 
 from __future__ import annotations
 
@@ -10,8 +10,7 @@ import pytest
 
 import unitrack_env
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.errors import InvalidActionError
-from unitrack_env.wrappers import DetectionScoreFilter, FrameSkip
+from unitrack_env.wrappers import FrameSkip
 
 ASSOCIATION_IDS = ["UniTrack/MOT17-v0", "UniTrack/MOTS-v0", "UniTrack/VIS-v0",
                    "UniTrack/PoseTrack-v0"]
@@ -49,44 +48,21 @@ def _play(env, sequence):
 
 
 @pytest.mark.parametrize("env_id", ASSOCIATION_IDS)
-def test_score_filter_equals_the_min_score_argument(env_id):
-    flagged = gym.make(env_id, min_score=0.5)
-    wrapped = DetectionScoreFilter(gym.make(env_id), 0.5)
-    name = flagged.unwrapped.sequence_names[0]
-    seen_a, rewards_a, info_a = _play(flagged, name)
-    seen_b, rewards_b, info_b = _play(wrapped, name)
-    assert rewards_a == rewards_b
-    for a, b in zip(seen_a, seen_b, strict=True):
-        assert a.keys() == b.keys()
-        for key in a:
-            np.testing.assert_array_equal(np.asarray(a[key]), np.asarray(b[key]))
-        assert wrapped.observation_space.contains(b)
-    assert info_a["metrics"].keys() == info_b["metrics"].keys()
-    np.testing.assert_array_equal(list(info_a["metrics"].values()),
-                                  list(info_b["metrics"].values()))
-    assert flagged.unwrapped.episode_digest() == wrapped.unwrapped.episode_digest()
-
-
-def test_score_filter_drops_low_scores_and_maps_ids_back():
-    env = DetectionScoreFilter(gym.make("UniTrack/MOTS-v0"), 0.0)
-    raw, _ = env.env.reset(seed=0)
-    scores = np.sort(raw["scores"][:raw["num_detections"]])
-    env.min_score = float(scores[len(scores) // 2])  # keeps the upper half
-    observation, _ = env.reset(seed=0)
-    n = observation["num_detections"]
-    assert 0 < n < raw["num_detections"] and len(observation["masks"]) == n
-    assert (observation["scores"][:n] >= env.min_score).all()
-    observation, *_ = env.step({"ids": np.arange(1, n + 1)})  # one id per kept detection
-    _, ids, _ = env.unwrapped._results[0]
-    assert sorted(ids.tolist()) == list(range(1, n + 1))
-    with pytest.raises(InvalidActionError, match="entries; this frame has"):
-        env.step({"ids": np.arange(1, observation["num_detections"] + 2)})
-
-
-def test_score_filter_needs_detections():
-    env = DetectionScoreFilter(gym.make("UniTrack/OTB-v0"), 0.5)
-    with pytest.raises(TypeError, match="association environments"):
-        env.reset(seed=0)
+def test_min_score_is_the_one_score_filter(env_id):
+    # Every association env filters by score with min_score= (the agent and no wrapper do).
+    plain, flagged = gym.make(env_id), gym.make(env_id, min_score=0.5)
+    name = plain.unwrapped.sequence_names[0]
+    seen_all, _, _ = _play(plain, name)
+    seen_kept, _, info = _play(flagged, name)
+    count = "num_people" if "num_people" in seen_all[0] else "num_detections"
+    dropped = 0
+    for a, b in zip(seen_all, seen_kept, strict=True):
+        scores = np.asarray(a["scores"][: a[count]])
+        assert b[count] == int((scores >= 0.5).sum())
+        assert (np.asarray(b["scores"][: b[count]]) >= 0.5).all()
+        assert flagged.observation_space.contains(b)
+        dropped += a[count] - b[count]
+    assert dropped > 0 and "metrics" in info
 
 
 @pytest.mark.parametrize("env_id", unitrack_env.env_ids())

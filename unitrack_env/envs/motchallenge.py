@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.clear_stream import StreamingClear
 from unitrack_env.metrics.mot_preprocess import preprocess_frame
 from unitrack_env.render import draw_boxes
+from unitrack_env.score_range import UNIT, ScoreRange, check_mode, declared_range
 
 #: Default capacity of the padded detection arrays (MOT20 public detections reach ~250).
 DEFAULT_MAX_DETECTIONS = 512
@@ -52,7 +54,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
       ``(x, y, w, h)`` in 1-based pixels as in ``det.txt``; rows past ``num_detections``
       are 0.
     - ``scores``: ``Box((max_detections,), float32)``, finite: detection scores as in the
-      file (MOT15's are unbounded).
+      file (MOT15's are unbounded), or on 0..1 with ``detection_scores="unit"``.
     - ``num_detections``: ``Discrete(max_detections + 1)``, the number of valid rows.
 
     Ground truth never appears in observations. ``unitrack_env.spaces.unpack_detections``
@@ -76,7 +78,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     ## Starting state
     ``reset`` returns the first frame of the chosen sequence and its detections.
     ``info`` holds ``sequence``, ``frame_index`` (1-based), ``seq_length``, ``frame_rate``,
-    ``image_size`` ``(height, width)``, ``benchmark`` and ``has_ground_truth``.
+    ``image_size`` ``(height, width)``, ``benchmark``, ``has_ground_truth`` and
+    ``detection_scores``: the range of the observed scores, ``{"low", "high", "bounded",
+    "source"}`` (see below), so that an agent can state its thresholds on 0..1.
 
     ## Episode end
     ``terminated=True`` after the agent has answered the last frame of the sequence (there
@@ -93,9 +97,16 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     - ``split``: sub-folder to read (``"train"`` or ``"test"``).
     - ``sequences``: restrict to these sequence names (default: all of the split).
     - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
-    - ``min_score``: drop detections whose score is below this value (the
-      :class:`unitrack_env.wrappers.DetectionScoreFilter` wrapper does the same for any
-      association environment and is the way forward).
+    - ``detection_scores``: ``"raw"`` (default) passes the file's scores through;
+      ``"unit"`` maps the benchmark's declared range to 0..1 (``(score - low) / (high -
+      low)``, clipped), for trackers whose thresholds assume confidences in 0..1. Declared
+      ranges (:data:`unitrack_env.score_range.DETECTION_SCORES`): MOT15 0..100, unbounded
+      (PETS09-S2L1's scores run from -0.48 to 138.92); MOT16, MOT17, MOT20 0..1.
+    - ``score_range``: ``(low, high)`` of your own data's scores, instead of the
+      benchmark's declared range.
+    - ``min_score``: drop detections whose score (as observed, i.e. after
+      ``detection_scores``) is below this value (the one place that filters detections
+      by score).
     - ``max_detections``, ``max_tracks``, ``max_frame_size``: space capacities.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).
@@ -118,6 +129,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         sequences: list[str] | tuple[str, ...] | None = None,
         detections: str | os.PathLike = "public",
         min_score: float | None = None,
+        detection_scores: str = "raw",
+        score_range: tuple[float, float] | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
         max_tracks: int = DEFAULT_MAX_TRACKS,
         **options: Unpack[EpisodeOptions],
@@ -127,6 +140,10 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         bench = MOTChallengeBenchmark.build(benchmark, root, split, detections)
         self._use_benchmark(bench, sequences, bench.dataset.split_dir)
         self.min_score = min_score
+        self.detection_scores = check_mode(detection_scores)
+        #: The declared range of the file's scores (``score_range``, else the benchmark's).
+        self.score_range: ScoreRange = ScoreRange.of(score_range) if score_range is not None \
+            else declared_range(self.benchmark)
         self.max_detections = int(max_detections)
         self.max_tracks = int(max_tracks)
         self.observation_space = ut_spaces.detection_observation_space(
@@ -144,6 +161,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         info = sequence.info
         self._check_frame_size(name, info.width, info.height)
         detections = sequence.detections
+        if self.detection_scores == "unit":
+            detections = dataclasses.replace(
+                detections, scores=self.score_range.to_unit(detections.scores))
         if self.min_score is not None:
             detections = detections.filter(detections.scores >= self.min_score)
         most = int(detections.count_per_frame(info.length).max(initial=0))
@@ -159,7 +179,15 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         return dict(seq_length=info.length, frame_rate=info.frame_rate,
                     image_size=(info.height, info.width), benchmark=self.benchmark,
                     has_ground_truth=sequence.ground_truth is not None,
-                    synthetic=self.synthetic)
+                    synthetic=self.synthetic, detection_scores=self.observed_scores().info())
+
+    def observed_scores(self) -> ScoreRange:
+        """The range of the scores in the observations (0..1 with ``detection_scores="unit"``)."""
+        if self.detection_scores == "raw":
+            return self.score_range
+        return dataclasses.replace(UNIT, source=f"{self.score_range.low:g}.."
+                                   f"{self.score_range.high:g} mapped to 0..1, clipped "
+                                   f"(detection_scores='unit'); {self.score_range.source}")
 
     def _first_step(self) -> int:
         return 1  # MOTChallenge frames are numbered from 1

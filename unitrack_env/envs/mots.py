@@ -20,6 +20,7 @@ from unitrack_env.metrics.mots import MaskClearStream
 
 # Drawing lives in unitrack_env.render; the old names stay importable from here.
 from unitrack_env.render import draw_masks
+from unitrack_env.score_range import declared_range
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
@@ -80,8 +81,10 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
     ## Starting state
     ``reset`` returns the first frame and its detections. ``info`` holds ``sequence``,
     ``frame_index`` (the benchmark's own numbering: MOTS20 1-based, KITTI 0-based),
-    ``seq_length``, ``frame_rate``, ``image_size`` ``(height, width)``, ``benchmark`` and
-    ``has_ground_truth``.
+    ``seq_length``, ``frame_rate``, ``image_size`` ``(height, width)``, ``benchmark``,
+    ``has_ground_truth`` and
+    ``detection_scores`` (the range of the detection scores, ``{"low", "high", "bounded",
+    "source"}``: 0..1, see :mod:`unitrack_env.score_range`).
 
     ## Episode end
     ``terminated=True`` after the last frame is answered. The final ``info["metrics"]`` holds
@@ -99,8 +102,8 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
       ``"gt"`` (ground-truth masks as detections) or a folder of ``<seq>.txt`` files, in the
       MOTS txt format with an optional 7th score field.
     - ``object_class``: ``"pedestrian"`` or (KITTI) ``"car"``: the class tracked and scored.
-    - ``min_score``: drop detections scored below this (or wrap the environment in
-      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``min_score``: drop detections scored below this (the one place that filters
+      detections by score).
     - ``max_detections``, ``max_frame_size``: space capacities.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder.
     - ``prefetch``: decode the next frame on a background thread.
@@ -167,7 +170,8 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
         self._results = []
         return dict(seq_length=info.length, frame_rate=info.frame_rate,
                     image_size=(info.height, info.width), benchmark=self.benchmark,
-                    has_ground_truth=self._gt is not None, synthetic=self.synthetic)
+                    has_ground_truth=self._gt is not None, synthetic=self.synthetic,
+                    detection_scores=declared_range(self.benchmark).info())
 
     def _first_step(self) -> int:
         return self._sequence.first_frame  # the benchmark's numbering: MOTS20 1, KITTI 0

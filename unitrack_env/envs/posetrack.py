@@ -30,6 +30,7 @@ from unitrack_env.metrics.posetrack_frames import (
     remove_ignored,
 )
 from unitrack_env.render import draw_poses
+from unitrack_env.score_range import declared_range
 
 #: Default capacity of the padded pose arrays (PoseTrack frames hold up to ~30 people).
 DEFAULT_MAX_PEOPLE = 100
@@ -113,7 +114,9 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
     ``image_id``, ``is_labeled``, ``seq_length``, ``frame_rate`` (30; not in the files),
     ``image_size`` ``(height, width)``, ``nframes_declared``, ``has_ground_truth``,
     ``detections`` (``"synthetic"``, ``"oracle"``, ``"folder"`` or ``"none"``),
-    ``oracle_detections`` and ``synthetic``.
+    ``oracle_detections``, ``synthetic`` and
+    ``detection_scores`` (the range of the detection scores, ``{"low", "high", "bounded",
+    "source"}``: 0..1, see :mod:`unitrack_env.score_range`).
 
     ## Episode end
     ``terminated=True`` after the last frame. ``info["metrics"]`` holds poseval's metrics
@@ -131,8 +134,8 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
     - ``sequences``: restrict to these sequence names.
     - ``detections``: a folder of ``<sequence>.json`` pose detections, ``"oracle"``, or
       None (synthetic: its simulated detections; real: oracle, or none for test).
-    - ``min_score``: drop detected poses scored below this (or wrap the environment in
-      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``min_score``: drop detected poses scored below this (the one place that filters
+      detections by score).
     - ``max_people``, ``max_tracks``, ``max_frame_size``: space capacities.
     - ``drop_last_frame``: leave out the last evaluated frame per sequence like poseval.
     - ``decode_frames``, ``prefetch``, ``shuffle``: as in the other environments.
@@ -218,6 +221,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
             detections=self.detection_source,
             oracle_detections=self.detection_source == ORACLE,
             synthetic=self.synthetic,
+            detection_scores=declared_range("PoseTrack2018").info(),
         )
 
     @property

@@ -18,6 +18,7 @@ from unitrack_env.datasets.youtube_vis import FRAME_RATE, VisTrack, VisVideo
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.metrics.mots import MaskClearStream
 from unitrack_env.render import draw_masks
+from unitrack_env.score_range import declared_range
 
 #: Default capacity of the detection arrays.
 DEFAULT_MAX_DETECTIONS = 128
@@ -70,8 +71,10 @@ class VISEnv(SequenceEnv[VisVideo]):
     ## Starting state
     ``reset`` returns the first frame and its detections; ``info`` holds ``sequence`` (video
     name), ``video_id``, ``frame_index`` (0-based position in ``file_names``), ``seq_length``,
-    ``frame_rate`` (6: every 5th frame of 30 fps video), ``image_size`` and
-    ``has_ground_truth``.
+    ``frame_rate`` (6: every 5th frame of 30 fps video), ``image_size``,
+    ``has_ground_truth`` and
+    ``detection_scores`` (the range of the detection scores, ``{"low", "high", "bounded",
+    "source"}``: 0..1, see :mod:`unitrack_env.score_range`).
 
     ## Episode end
     ``terminated=True`` after the last frame. The final ``info["metrics"]`` holds the video's
@@ -86,8 +89,8 @@ class VISEnv(SequenceEnv[VisVideo]):
     - ``sequences``: restrict to these videos (names).
     - ``detections``: ``"public"`` (``<root>/detections/<split>.json``), ``"gt"`` or a
       results-format JSON file.
-    - ``min_score``: drop detections scored below this (or wrap the environment in
-      :class:`unitrack_env.wrappers.DetectionScoreFilter`, the way forward).
+    - ``min_score``: drop detections scored below this (the one place that filters
+      detections by score).
     - ``max_detections``, ``max_frame_size``, ``decode_frames``, ``prefetch``, ``shuffle``,
       ``render_mode`` as in the other environments.
 
@@ -147,7 +150,8 @@ class VISEnv(SequenceEnv[VisVideo]):
         self._tracks = {}
         return dict(video_id=video.id, seq_length=video.length, frame_rate=FRAME_RATE,
                     image_size=(video.height, video.width), benchmark=BENCHMARK,
-                    has_ground_truth=self._gt is not None, synthetic=self.synthetic)
+                    has_ground_truth=self._gt is not None, synthetic=self.synthetic,
+                    detection_scores=declared_range(BENCHMARK).info())
 
     def _length(self) -> int:
         return self._sequence.length

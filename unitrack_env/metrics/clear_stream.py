@@ -106,6 +106,9 @@ class StreamingClear:
     totals: ClearTotals = field(default_factory=ClearTotals, init=False)
     _last_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
     _prev_step_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
+    #: Matches of the last frame with ground truth and tracker boxes, gt id -> tracker id
+    #: (the previous-frame record; read by the py-motmetrics cross-check).
+    frame_matches: dict[int, int] = field(default_factory=dict, init=False, repr=False)
 
     def reset(self) -> None:
         """Forget all matches and totals (start of a sequence)."""
@@ -160,7 +163,8 @@ class StreamingClear:
             if last is not None and last != t:
                 idsw += 1
             self._last_match[g] = t
-        self._prev_step_match = dict(zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
+        self.frame_matches = self._prev_step_match = dict(
+            zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
 
         tp = len(rows)
         result = FrameClear(
