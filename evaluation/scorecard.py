@@ -19,9 +19,9 @@ As in the paper's Table 2 protocol, the association heads run without motion cue
 (``use_motion=False``: "motion cues are discarded to better highlight distinctions between
 different representations"); ``motion=True`` keeps them.
 
-``runtime`` picks the inference runtime of every appearance model (``"auto"``: the fastest
-installed, e.g. OpenVINO; see :mod:`~unitrack_env.agents.appearance.runtime`). It changes the
-speed, not the representation: features agree with torch's to float rounding.
+``runtime`` picks the inference runtime of every appearance model (default ``"auto"``: the
+fastest installed, checked against torch; see :mod:`~unitrack_env.agents.appearance.runtime`);
+the card names it. Cells are played longest first, with an ETA (:mod:`.scorecard_eta`).
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import json
 import math
 import os
 import tempfile
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -38,6 +39,7 @@ from typing import Any
 
 import unitrack_env
 from unitrack_env.evaluation.scorecard_report import merge_cards as merge_cards
+from unitrack_env.evaluation.scorecard_report import runtime_label
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
 
@@ -194,6 +196,7 @@ class Cell:
     sequence: str
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     agent_kwargs: dict[str, Any] = field(default_factory=dict)
+    frames: int = 0
 
     @property
     def folder(self) -> Path:
@@ -226,6 +229,7 @@ def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *
         try:
             base = env.unwrapped
             sequences = [s for s in base.sequence_names if base.has_ground_truth(s)]
+            frames = {s: base.sequence_length(s) for s in sequences}
         finally:
             env.close()
         rows = [(m.name, m.agent_kwargs() | ({"runtime": runtime} if runtime else {}))
@@ -236,7 +240,7 @@ def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *
                 if head.association and not motion:
                     kwargs["use_motion"] = False
                 cells += [Cell(model, name, head.label, head.agent, source.env_id, sequence,
-                               env_kwargs, kwargs) for sequence in sequences]
+                               env_kwargs, kwargs, frames[sequence]) for sequence in sequences]
     return cells, sources
 
 
@@ -248,6 +252,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     """
     from unitrack_env.evaluation.runner import run
 
+    started = time.monotonic()
     if threads:
         import torch
 
@@ -263,7 +268,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
                  for sub in ("data", "sequences") for path in (out / sub).rglob("*")
                  if path.is_file()}
         metrics = report.scores.per_sequence.get(cell.sequence, {}) if report.scores else {}
-    return {"files": files, "metrics": metrics,
+    return {"files": files, "metrics": metrics, "seconds": time.monotonic() - started,
             "warnings": sorted({str(w.message) for w in caught})}
 
 
@@ -357,16 +362,27 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
 
 
 def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
-              on_progress: Callable[[int, int, Cell | None], None] | None) -> None:
-    """Play and store every cell not done yet; each warning of the cells is shown once."""
-    from unitrack_env.evaluation.backends import make_backend
-    from unitrack_env.evaluation.runner import RunFailed
-    from unitrack_env.evaluation.workers import SequenceFailure
+              on_progress: Callable[[int, int, Cell | None], None] | None,
+              on_estimate: Callable[[float], None] | None = None,
+              torch_runtime: bool = False) -> None:
+    """Play and store every cell not done yet, longest first; each warning is shown once.
 
-    todo = [c for c in cells if not cell_done(out, c)]
+    ``on_estimate`` gets the seconds left (:class:`~.scorecard_eta.CellClock`) at the start
+    and after every cell.
+    """
+    from .backends import make_backend
+    from .runner import RunFailed
+    from .scorecard_eta import schedule
+    from .workers import SequenceFailure
+
+    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE,
+                           1 if backend == "pool" and workers <= 1 else workers, torch_runtime)
+    position = {id(cell): i for i, cell in enumerate(todo)}
     done = len(cells) - len(todo)
     if on_progress is not None:
         on_progress(done, len(cells), None)
+    if on_estimate is not None:
+        on_estimate(clock.remaining())
     failures: dict[str, str] = {}
     shown: set[str] = set()
     with make_backend(backend, workers=workers, address=address) as run_cells:
@@ -380,8 +396,12 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
                         warnings.warn(text, UserWarning, stacklevel=3)
                 store_cell(out, cell, payload)
                 done += 1
+            seconds = None if isinstance(payload, BaseException) else payload.get("seconds")
+            clock.finished(position.get(id(cell), 0), seconds)
             if on_progress is not None:
                 on_progress(done, len(cells), cell)
+            if on_estimate is not None:
+                on_estimate(clock.remaining())
     if failures:
         raise RunFailed(failures, out)
 
@@ -391,7 +411,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
               backend: str = "pool", workers: int = 1, address: str | None = None,
               motion: bool = False, runtime: str | None = None, radar_scale: str = "rank",
               on_progress: Callable[[int, int, Cell | None], None] | None = None,
-              ) -> dict[str, Any]:
+              on_estimate: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Play, store and score every cell; write the outputs; return the scorecard.
 
     Args:
@@ -408,6 +428,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
             ``onnxruntime``, ``auto``; None: ``$UNITRACK_RUNTIME``, else torch).
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
+        on_estimate: called with the estimated seconds left, at the start and per cell.
     """
     from unitrack_env.evaluation.runner import check_out_folder
 
@@ -418,12 +439,12 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime
 
-    resolve_runtime(runtime)  # a runtime that is not installed: one error now, not one per cell
+    chosen = resolve_runtime(runtime)  # not installed: one error now, not one per cell
     out = Path(out)
     check_out_folder(out)
     cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
     _play_all(out, cells, backend=backend, workers=workers, address=address,
-              on_progress=on_progress)
-    card = combine(out, cells, sources)
+              on_progress=on_progress, on_estimate=on_estimate, torch_runtime=chosen == "torch")
+    card = combine(out, cells, sources) | {"runtime": runtime_label(runtime, chosen)}
     write_outputs(out, card, radar_scale=radar_scale)
     return card
