@@ -17,7 +17,8 @@ def _hermetic_environment(tmp_path_factory: pytest.TempPathFactory):
     """Generate synthetic data into a per-session cache; ignore a user's UNITRACK_DATA.
 
     The feature cache (on by default) and the compiled-runtime cache go to per-session
-    folders too, never the user's; a user's UNITRACK_RUNTIME does not change the results (tests run torch).
+    folders too, never the user's; a user's UNITRACK_RUNTIME does not change the results
+    (tests run torch).
     """
     keys = ("UNITRACK_CACHE", "UNITRACK_DATA", "UNITRACK_FEATURE_CACHE",
             "UNITRACK_FEATURE_CACHE_MAX", "UNITRACK_FEATURE_CACHE_RUN", "UNITRACK_RUNTIME",

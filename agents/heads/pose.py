@@ -30,6 +30,7 @@ correspondence).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,6 +39,7 @@ import numpy as np
 import torch
 
 from unitrack_env.agents.appearance import AppearanceModel, AppearanceSpec, torch_threads
+from unitrack_env.agents.appearance.cached_model import with_cache
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.vos import make_propagation_config
 from unitrack_env.agents.primitives.label_propagation import LabelPropagator
@@ -72,6 +74,7 @@ class UniTrackPoseConfig(AppearanceSpec):
         refine_radius: Soft-argmax neighbourhood half-side (0: plain argmax).
         min_peak: Peak below which a joint keeps its previous position.
         propagation: Fields of :class:`LabelPropagationConfig` to override.
+        feature_cache: The on-disk feature cache, float32 (as ``unitrack-vos``'s).
     """
 
     input_size: tuple[int, int] | None = POSE_INPUT_SIZE
@@ -80,6 +83,7 @@ class UniTrackPoseConfig(AppearanceSpec):
     refine_radius: int = REFINE_RADIUS
     min_peak: float = MIN_PEAK
     propagation: dict[str, Any] | None = None
+    feature_cache: str | os.PathLike[str] | bool | None = True
 
 
 def belief_maps(points: np.ndarray, shape: tuple[int, int], sigma: float) -> torch.Tensor:
@@ -144,6 +148,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config, self.model = UniTrackPoseConfig.configure(self.name, options, appearance_model)
+        self.cached = with_cache(self.model, self.config.feature_cache)
         self.propagator = LabelPropagator(make_propagation_config(self.config.propagation))
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None
@@ -165,7 +170,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         if size is not None and (frame.shape[1], frame.shape[0]) != tuple(size):
             frame = cv2.resize(np.ascontiguousarray(frame), tuple(size),
                                interpolation=cv2.INTER_LINEAR)
-        return self.model.features(frame)[0]
+        return self.cached.features(frame)[0]
 
     # ------------------------------------------------------------------ episode
     def reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
