@@ -35,7 +35,8 @@ torch). Only torch runs on CUDA; ``"auto"`` on a CUDA device is torch.
   and never recomputed. A size that fails runs in eager torch, with a warning.
 * **Warm processes.** Compiled engines are kept per process (keyed by graph file, shape and
   threads), so a worker that builds the same model again for its next cell neither re-exports
-  nor recompiles it.
+  nor recompiles it; OpenVINO's compiled blobs are cached on disk too (``<cache dir>/openvino``)
+  for the other processes.
 """
 
 from __future__ import annotations
@@ -252,7 +253,8 @@ class CompiledBackbone:
         engine = _ENGINES.get(memo)
         if engine is None:
             export_onnx(self.network, height, width, path)
-            engine = _ENGINES[memo] = _compile(self.runtime, path, shape, self.num_threads)
+            engine = _ENGINES[memo] = _compile(self.runtime, path, shape, self.num_threads,
+                                               self.cache_dir / "openvino")
         return engine
 
     def _run(self, array: np.ndarray) -> torch.Tensor:
@@ -301,12 +303,19 @@ class CompiledBackbone:
         return self._run(np.ascontiguousarray(x.detach().to("cpu", torch.float32).numpy()))
 
 
-def _compile(runtime: str, path: Path, shape: tuple[int, int, int, int], threads: int) -> Any:
-    """An engine for the graph at ``path``: OpenVINO for the full ``shape``, else ORT."""
+def _compile(runtime: str, path: Path, shape: tuple[int, int, int, int], threads: int,
+             blobs: Path) -> Any:
+    """An engine for the graph at ``path``: OpenVINO for the full ``shape``, else ORT.
+
+    OpenVINO keeps its compiled blobs in ``blobs`` (its model cache), so another process
+    (a pool worker) loads them instead of compiling again.
+    """
     if runtime == OPENVINO:
         import openvino as ov
 
         core = ov.Core()
+        with contextlib.suppress(Exception):  # an optional speed-up; compiling still works
+            core.set_property({"CACHE_DIR": str(blobs)})
         model = core.read_model(str(path))
         model.reshape({model.inputs[0].any_name: ov.PartialShape(list(shape))})
         return core.compile_model(model, "CPU", {
