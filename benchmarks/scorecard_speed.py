@@ -35,10 +35,14 @@ def _child(args: argparse.Namespace) -> None:
 
     start = time.monotonic()
     log: list[tuple[float, float]] = []
+
+    def estimate(left: float) -> None:  # written as it comes, for a run still going
+        log.append((time.monotonic() - start, left))
+        Path(args.eta_log).write_text(json.dumps({"total": None, "estimates": log}))
+
     sc.scorecard([sc.ModelSpec.parse(m) for m in args.model], out=args.out,
                  tasks=args.tasks.split(",") if args.tasks else None, data=args.data,
-                 workers=args.workers,
-                 on_estimate=lambda left: log.append((time.monotonic() - start, left)))
+                 workers=args.workers, on_estimate=estimate)
     total = time.monotonic() - start
     Path(args.eta_log).write_text(json.dumps({"total": total, "estimates": log}))
 
