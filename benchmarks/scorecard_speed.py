@@ -5,7 +5,8 @@ Runs ``unitrack scorecard`` with the same arguments from a ``git worktree`` of t
 and from this checkout, alternating (``--repeats``), or both at once (``--concurrent``: on a
 machine shared with other jobs, both then see the same load). Each run starts with empty
 feature and runtime caches (a first run, as a new user sees it). Prints the wall times, their
-ratio, the largest difference between the two tables per column, and how the ETA of this
+ratio (and of the CPU seconds, the fairer figure on a machine shared with other jobs), the
+largest difference between the two tables per column, and how the ETA of this
 checkout's run compared with its real duration (after 1 s, at 10%, 50% and 90% of the run).
 
 ``--compare OLD_OUT NEW_OUT`` instead compares two finished or partly finished output folders
@@ -135,15 +136,20 @@ def main() -> None:
         scratch = Path(tempfile.mkdtemp(prefix="scorecard-speed-"))
         batches = [kinds] if args.concurrent else [[k] for k in kinds]
         walls: dict[str, float] = {}
+        cpu: dict[str, float] = {}
         for batch in batches:
             started = {k: _start(args, k, scratch) for k in batch}
             for kind, (process, began) in started.items():
-                if process.wait() != 0:
-                    raise SystemExit(f"{kind} scorecard failed (exit {process.returncode})")
+                _, status, usage = os.wait4(process.pid, 0)  # CPU seconds, workers included
+                if status != 0:
+                    raise SystemExit(f"{kind} scorecard failed (wait status {status})")
                 walls[kind] = time.monotonic() - began
-        print(f"run {repeat + 1}: " + ", ".join(f"{k} {v:.0f} s" for k, v in walls.items()))
+                cpu[kind] = usage.ru_utime + usage.ru_stime
+        print(f"run {repeat + 1}: " + ", ".join(f"{k} {walls[k]:.0f} s wall, {cpu[k]:.0f} s CPU"
+                                                 for k in walls))
         if len(walls) == 2:
-            print(f"  old / new = x{walls['old'] / walls['new']:.2f}")
+            print(f"  old / new = x{walls['old'] / walls['new']:.2f} wall, "
+                  f"x{cpu['old'] / cpu['new']:.2f} CPU")
             worst = _table_difference(scratch / "old" / "out", scratch / "new" / "out")
             for column, diff in sorted(worst.items(), key=lambda kv: -kv[1])[:8]:
                 print(f"  table moved {diff:.4f} in {column}")
