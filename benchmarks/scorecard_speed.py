@@ -66,6 +66,7 @@ def _start(args: argparse.Namespace, which: str, scratch: Path) -> tuple[subproc
                UNITRACK_RUNTIME_CACHE=str(scratch / which / "runtime"),
                XDG_CACHE_HOME=str(scratch / which / "xdg"))
     env.pop("UNITRACK_RUNTIME", None)  # each commit's own default
+    (scratch / which).mkdir(parents=True, exist_ok=True)
     command = _command(args, which, scratch / which / "out", scratch / which / "eta.json")
     return subprocess.Popen(["nice", "-n", "5", *command], cwd=root, env=env,
                             stdout=subprocess.DEVNULL), time.monotonic()
