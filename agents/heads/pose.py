@@ -148,13 +148,13 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config, self.model = UniTrackPoseConfig.configure(self.name, options, appearance_model)
-        self.cached = with_cache(self.model, self.config.feature_cache)
         self.propagator = LabelPropagator(make_propagation_config(self.config.propagation))
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None
         self._first_answer: np.ndarray | None = None
         self._frame_size = (1, 1)  # (width, height)
         self._grid = (1, 1)  # (w, h) of the feature map
+        self.cached = with_cache(self.model, self.config.feature_cache)  # float32: exact
 
     # ------------------------------------------------------------------ coordinates
     def _to_grid(self, points: np.ndarray) -> np.ndarray:
