@@ -251,8 +251,10 @@ def test_the_cell_progress_bar_draws(capsys):
 
     with cell_progress(enabled=True) as update:
         update(0, 2, None)
+        update.estimate(95.0)  # known before the first cell ends
         update(1, 2, SimpleNamespace(label="imagenet-lite0 / vos UniTrack / " + "x" * 80))
-    assert "cells" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "cells" in err and "ETA 0:01" in err  # (narrow console: the rest is cut)
 
 
 def test_a_bad_checkpoint_or_layer_is_refused_before_any_cell(tmp_path):
