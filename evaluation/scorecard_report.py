@@ -178,5 +178,6 @@ def merge_cards(paths: Sequence[Path]) -> dict[str, Any]:
             merged["rows"].append({**row, "model": rename[row["model"]]})
         merged["tasks"] += [t for t in card["tasks"] if t not in merged["tasks"]]
     runtimes = dict.fromkeys(card.get("runtime") or "unrecorded" for _, card in cards)
-    merged["runtime"] = " / ".join(runtimes)  # each file's, in order
+    if set(runtimes) != {"unrecorded"}:
+        merged["runtime"] = " / ".join(runtimes)  # each file's, in order
     return merged
