@@ -101,7 +101,7 @@ def compare_folders(old: Path, new: Path) -> None:
     """Per-cell seconds of the cells both folders finished (sequence records)."""
     def seconds(out: Path) -> dict[str, float]:
         return {str(p.relative_to(out)): json.loads(p.read_text())["seconds"]
-                for p in (out / "cells").rglob("sequences/*.json")}
+                for p in (out / "cells").rglob("*.json") if "sequences" in p.parts}
 
     a, b = seconds(old), seconds(new)
     common = sorted(set(a) & set(b))
