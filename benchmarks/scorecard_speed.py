@@ -140,8 +140,12 @@ def main() -> None:
         cpu: dict[str, float] = {}
         for batch in batches:
             started = {k: _start(args, k, scratch) for k in batch}
-            for kind, (process, began) in started.items():
-                _, status, usage = os.wait4(process.pid, 0)  # CPU seconds, workers included
+            kinds_of = {process.pid: (k, began) for k, (process, began) in started.items()}
+            while kinds_of:  # whichever ends first; CPU seconds include its workers
+                pid, status, usage = os.wait4(-1, 0)
+                if pid not in kinds_of:
+                    continue
+                kind, began = kinds_of.pop(pid)
                 if status != 0:
                     raise SystemExit(f"{kind} scorecard failed (wait status {status})")
                 walls[kind] = time.monotonic() - began
