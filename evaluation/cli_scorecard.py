@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-from collections.abc import Callable, Iterator
+import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +35,8 @@ def add_options(card: argparse.ArgumentParser) -> None:
                       "association heads (the paper's Table 2 drops them)")
     card.add_argument("--runtime", choices=("torch", "openvino", "onnxruntime", "auto"),
                       help="inference runtime of the appearance models: auto picks the "
-                      "fastest installed (default: $UNITRACK_RUNTIME, else torch)")
+                      "fastest installed, checked against torch per model and input size "
+                      "(default: $UNITRACK_RUNTIME, else auto)")
     card.add_argument("--radar-scale", choices=("rank", "value"), default="rank",
                       help="radar axes: rank among the models (the paper's) or the value")
     card.add_argument("--compare", nargs="+", metavar="SCORECARD_JSON",
@@ -63,18 +65,62 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
                                 workers=args.workers, address=args.address,
                                 motion=args.motion, runtime=args.runtime,
                                 radar_scale=args.radar_scale,
-                                on_progress=progress)
+                                on_progress=progress, on_estimate=progress.estimate)
         files = sorted(out.glob("scorecard.*"))
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)
     console.print("wrote " + ", ".join(str(f) for f in files), markup=False, soft_wrap=True)
     return 0
 
 
+class _Update:
+    """The scorecard's callbacks into the bar.
+
+    ``update(done, total, cell)`` per cell; ``update.estimate(seconds_left)`` whenever the
+    scorecard recomputes its ETA.
+    """
+
+    def __init__(self, progress: Any = None, task: Any = None) -> None:
+        self.progress, self.task = progress, task
+
+    def __call__(self, done: int, total: int, cell: Any) -> None:
+        if self.progress is not None:
+            self.progress.update(self.task, completed=done, total=total,
+                                 description="" if cell is None else cell.label[-48:])
+
+    def estimate(self, seconds: float) -> None:
+        if self.progress is not None:
+            self.progress.update(self.task, eta=(time.monotonic(), seconds))
+
+
+def _eta_column() -> Any:
+    from rich.progress import ProgressColumn
+    from rich.text import Text
+
+    class EtaColumn(ProgressColumn):
+        """The scorecard's own ETA, counting down between cells.
+
+        From the cells' frames and input sizes, corrected as they finish; rich's own column
+        would wait for two finished cells.
+        """
+
+        max_refresh = 1.0
+
+        def render(self, task: Any) -> Text:
+            stamp, seconds = task.fields.get("eta", (None, None))
+            if stamp is None or task.finished:
+                return Text("-:--:--", style="progress.remaining")
+            left = max(0, round(seconds - (time.monotonic() - stamp)))
+            return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d}",
+                        style="progress.remaining")
+
+    return EtaColumn()
+
+
 @contextlib.contextmanager
-def cell_progress(enabled: bool) -> Iterator[Callable[[int, int, Any], None]]:
+def cell_progress(enabled: bool) -> Iterator[_Update]:
     """A progress bar over scorecard cells: done / all, ETA, the cell that just finished."""
     if not enabled:
-        yield lambda done, total, cell: None
+        yield _Update()
         return
     from rich.progress import (
         BarColumn,
@@ -82,19 +128,12 @@ def cell_progress(enabled: bool) -> Iterator[Callable[[int, int, Any], None]]:
         Progress,
         TextColumn,
         TimeElapsedColumn,
-        TimeRemainingColumn,
     )
     from rich.table import Column
 
     with Progress(TextColumn("cells"), BarColumn(bar_width=20), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                  TimeElapsedColumn(), TextColumn("ETA"), _eta_column(),
                   TextColumn("{task.description}",
                              table_column=Column(no_wrap=True, overflow="ellipsis")),
                   console=Console(stderr=True, highlight=False, soft_wrap=True)) as progress:
-        task = progress.add_task("", total=None)
-
-        def update(done: int, total: int, cell: Any) -> None:
-            progress.update(task, completed=done, total=total,
-                            description="" if cell is None else cell.label[-48:])
-
-        yield update
+        yield _Update(progress, progress.add_task("", total=None))

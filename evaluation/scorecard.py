@@ -14,6 +14,7 @@ import json
 import math
 import os
 import tempfile
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -22,6 +23,8 @@ from typing import Any
 
 import unitrack_env
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
+
+from .scorecard_report import runtime_label
 
 
 @dataclass(frozen=True)
@@ -177,6 +180,7 @@ class Cell:
     sequence: str
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     agent_kwargs: dict[str, Any] = field(default_factory=dict)
+    frames: int = 0
 
     @property
     def folder(self) -> Path:
@@ -209,6 +213,7 @@ def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *
         try:
             base = env.unwrapped
             sequences = [s for s in base.sequence_names if base.has_ground_truth(s)]
+            frames = {s: base.sequence_length(s) for s in sequences}
         finally:
             env.close()
         rows = [(m.name, m.agent_kwargs() | ({"runtime": runtime} if runtime else {}))
@@ -219,7 +224,7 @@ def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *
                 if head.association and not motion:
                     kwargs["use_motion"] = False
                 cells += [Cell(model, name, head.label, head.agent, source.env_id, sequence,
-                               env_kwargs, kwargs) for sequence in sequences]
+                               env_kwargs, kwargs, frames[sequence]) for sequence in sequences]
     return cells, sources
 
 
@@ -231,6 +236,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     """
     from .runner import run
 
+    started = time.monotonic()
     if threads:
         import torch
 
@@ -246,7 +252,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
                  for sub in ("data", "sequences") for path in (out / sub).rglob("*")
                  if path.is_file()}
         metrics = report.scores.per_sequence.get(cell.sequence, {}) if report.scores else {}
-    return {"files": files, "metrics": metrics,
+    return {"files": files, "metrics": metrics, "seconds": time.monotonic() - started,
             "warnings": sorted({str(w.message) for w in caught})}
 
 
@@ -340,16 +346,27 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
 
 
 def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
-              on_progress: Callable[[int, int, Cell | None], None] | None) -> None:
-    """Play and store every cell not done yet; each warning of the cells is shown once."""
+              on_progress: Callable[[int, int, Cell | None], None] | None,
+              on_estimate: Callable[[float], None] | None = None,
+              torch_runtime: bool = False) -> None:
+    """Play and store every cell not done yet, longest first; each warning is shown once.
+
+    ``on_estimate`` gets the seconds left (:class:`~.scorecard_eta.CellClock`) at the start
+    and after every cell.
+    """
     from .backends import make_backend
     from .runner import RunFailed
+    from .scorecard_eta import schedule
     from .workers import SequenceFailure
 
-    todo = [c for c in cells if not cell_done(out, c)]
+    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE,
+                           1 if backend == "pool" and workers <= 1 else workers, torch_runtime)
+    position = {id(cell): i for i, cell in enumerate(todo)}
     done = len(cells) - len(todo)
     if on_progress is not None:
         on_progress(done, len(cells), None)
+    if on_estimate is not None:
+        on_estimate(clock.remaining())
     failures: dict[str, str] = {}
     shown: set[str] = set()
     with make_backend(backend, workers=workers, address=address) as run_cells:
@@ -363,8 +380,12 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
                         warnings.warn(text, UserWarning, stacklevel=3)
                 store_cell(out, cell, payload)
                 done += 1
+            seconds = None if isinstance(payload, BaseException) else payload.get("seconds")
+            clock.finished(position.get(id(cell), 0), seconds)
             if on_progress is not None:
                 on_progress(done, len(cells), cell)
+            if on_estimate is not None:
+                on_estimate(clock.remaining())
     if failures:
         raise RunFailed(failures, out)
 
@@ -374,7 +395,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
               backend: str = "pool", workers: int = 1, address: str | None = None,
               motion: bool = False, runtime: str | None = None, radar_scale: str = "rank",
               on_progress: Callable[[int, int, Cell | None], None] | None = None,
-              ) -> dict[str, Any]:
+              on_estimate: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Play, store and score every cell; write the outputs; return the scorecard.
 
     Args:
@@ -391,6 +412,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
             ``onnxruntime``, ``auto``; None: ``$UNITRACK_RUNTIME``, else torch).
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
+        on_estimate: called with the estimated seconds left, at the start and per cell.
     """
     from .runner import check_out_folder
 
@@ -401,15 +423,16 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime
 
-    resolve_runtime(runtime)  # a runtime that is not installed: one error now, not one per cell
-    out = Path(out)
-    check_out_folder(out)
     from .ownership import hold_folder
 
+    chosen = resolve_runtime(runtime)  # not installed: one error now, not one per cell
+    out = Path(out)
+    check_out_folder(out)
     with hold_folder(out, "scorecard"):  # one scorecard at a time (each cell run locks too)
         cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
         _play_all(out, cells, backend=backend, workers=workers, address=address,
-                  on_progress=on_progress)
-        card = combine(out, cells, sources)
+                  on_progress=on_progress, on_estimate=on_estimate,
+                  torch_runtime=chosen == "torch")
+        card = combine(out, cells, sources) | {"runtime": runtime_label(runtime, chosen)}
         write_outputs(out, card, radar_scale=radar_scale)
     return card

@@ -102,7 +102,17 @@ def markdown_table(card: dict[str, Any]) -> str:
                  "data, but a small sample of the benchmark.")
     lines.append("Association heads without motion cues, as in the paper's Table 2, unless "
                  "the scorecard was made with --motion.")
+    if card.get("runtime"):
+        lines.append(f"Appearance models ran on {card['runtime']}.")
     return "\n".join(lines) + "\n"
+
+
+def runtime_label(runtime: str | None, chosen: str) -> str:
+    """How the appearance models ran, for the card: ``openvino (auto, checked against torch)``."""
+    from unitrack_env.agents.appearance.runtime import TORCH, is_auto
+
+    return f"{chosen} (auto, checked against torch)" if is_auto(runtime) and chosen != TORCH \
+        else chosen
 
 
 def rows_csv(card: dict[str, Any]) -> str:
@@ -167,4 +177,7 @@ def merge_cards(paths: Sequence[Path]) -> dict[str, Any]:
                 continue
             merged["rows"].append({**row, "model": rename[row["model"]]})
         merged["tasks"] += [t for t in card["tasks"] if t not in merged["tasks"]]
+    runtimes = dict.fromkeys(card.get("runtime") or "unrecorded" for _, card in cards)
+    if set(runtimes) != {"unrecorded"}:
+        merged["runtime"] = " / ".join(runtimes)  # each file's, in order
     return merged

@@ -17,7 +17,8 @@ def _hermetic_environment(tmp_path_factory: pytest.TempPathFactory):
     """Generate synthetic data into a per-session cache; ignore a user's UNITRACK_DATA.
 
     The feature cache (on by default) and the compiled-runtime cache go to per-session
-    folders too, never the user's; a user's UNITRACK_RUNTIME does not change the results.
+    folders too, never the user's; a user's UNITRACK_RUNTIME does not change the results
+    (tests run torch).
     """
     keys = ("UNITRACK_CACHE", "UNITRACK_DATA", "UNITRACK_FEATURE_CACHE",
             "UNITRACK_FEATURE_CACHE_MAX", "UNITRACK_FEATURE_CACHE_RUN", "UNITRACK_RUNTIME",
@@ -28,7 +29,9 @@ def _hermetic_environment(tmp_path_factory: pytest.TempPathFactory):
     os.environ.pop("UNITRACK_FEATURE_CACHE_MAX", None)
     os.environ.pop("UNITRACK_FEATURE_CACHE_RUN", None)
     os.environ.pop("UNITRACK_DATA", None)
-    os.environ.pop("UNITRACK_RUNTIME", None)  # torch, the reference, unless a test says
+    # torch, the reference, unless a test says (the default, "auto", would compile OpenVINO
+    # in every test that builds a model)
+    os.environ["UNITRACK_RUNTIME"] = "torch"
     os.environ["UNITRACK_RUNTIME_CACHE"] = str(tmp_path_factory.mktemp("runtime-cache"))
     yield
     for key, value in saved.items():

@@ -141,3 +141,19 @@ class CachedAppearanceModel:
     def flush_stats(self) -> None:
         """Record the cache's counters on disk (see :meth:`FeatureCache.flush_stats`)."""
         self.cache.flush_stats()
+
+
+def with_cache(model: AppearanceModel, option: FeatureCache | str | os.PathLike[str] | bool | None,
+               *, dtype: type[np.floating] = np.float32,
+               max_size: int | str | None = None) -> AppearanceModel | CachedAppearanceModel:
+    """``model`` served through the cache ``option`` names, or ``model`` itself.
+
+    The propagation heads' use: float32 entries by default, so their features (and results)
+    are exactly the uncached ones, while a frame a head has seen before (a rerun, another head
+    at the same input size) is read instead of computed. No cache (False, None, or
+    ``$UNITRACK_FEATURE_CACHE=off``), or an injected model without an identity: ``model``.
+    """
+    if not hasattr(model, "identity"):
+        return model
+    cache = resolve_cache(option, max_size=max_size, dtype=dtype)
+    return model if cache is None else CachedAppearanceModel(model, cache)

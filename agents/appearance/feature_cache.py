@@ -45,6 +45,7 @@ def resolve_cache(
     spec: FeatureCache | str | os.PathLike[str] | bool | None,
     *,
     max_size: int | str | None = None,
+    dtype: type[np.floating] = DEFAULT_CACHE_DTYPE,
 ) -> FeatureCache | None:
     """The cache an agent option asks for.
 
@@ -52,6 +53,8 @@ def resolve_cache(
         spec: True: the default cache (:func:`default_cache_dir`; None when the environment
             turns it off); False or None: no cache; a folder; or a :class:`FeatureCache`.
         max_size: Cap for a cache built here (None: :func:`default_max_size`).
+        dtype: On-disk dtype of a cache built here (float32: exact features, as the
+            propagation heads use; entries of each dtype live apart).
     """
     if isinstance(spec, FeatureCache):
         return spec
@@ -59,10 +62,10 @@ def resolve_cache(
         return None
     if spec is True:
         root = default_cache_dir()
-        return None if root is None else FeatureCache(root, max_size=max_size)
+        return None if root is None else FeatureCache(root, max_size=max_size, dtype=dtype)
     if isinstance(spec, str) and spec.strip().lower() in _OFF_VALUES:
         return None
-    return FeatureCache(spec, max_size=max_size)
+    return FeatureCache(spec, max_size=max_size, dtype=dtype)
 
 
 # ---------------------------------------------------------------------------- the cache

@@ -29,6 +29,7 @@ from .runtime import (
     TORCH,
     CompiledBackbone,
     FeatureNetwork,
+    is_auto,
     resolve_runtime,
 )
 from .weights import (
@@ -91,8 +92,9 @@ class AppearanceModel:
         runtime: Engine that runs the network: ``"torch"`` (eager, the reference; the only
             one for CUDA), ``"openvino"`` or ``"onnxruntime"`` (the network exported to ONNX
             once per input size, float32; optional extras ``unitrack-env[openvino]`` /
-            ``[onnxruntime]``), ``"auto"`` (the fastest installed) or None (the environment
-            variable ``UNITRACK_RUNTIME``, default ``"torch"``). See
+            ``[onnxruntime]``), ``"auto"`` (the fastest installed, checked against torch per
+            input size) or None (the environment variable ``UNITRACK_RUNTIME``, default
+            ``"auto"``). See
             :mod:`~unitrack_env.agents.appearance.runtime`.
         runtime_cache: Directory of the exported graphs (None: ``$UNITRACK_RUNTIME_CACHE`` or
             ``~/.cache/unitrack_env/runtime``).
@@ -145,7 +147,7 @@ class AppearanceModel:
             self.arch, self.layer, loaded.name, weights_digest(self.module, loaded.required),
             self.mean, self.std, self.runtime,
         )
-        self._prepare_inference(runtime_cache)
+        self._prepare_inference(runtime_cache, verify=is_auto(runtime))
 
     # ------------------------------------------------------------------ construction
     def _place(self, loaded: LoadedWeights, mean: Sequence[float] | None,
@@ -162,14 +164,15 @@ class AppearanceModel:
         self.channels = sum(self.module.layer_channels(name) for name in self.layers)
         self.stride = FEATURE_STRIDE
 
-    def _prepare_inference(self, runtime_cache: str | os.PathLike[str] | None) -> None:
+    def _prepare_inference(self, runtime_cache: str | os.PathLike[str] | None,
+                           verify: bool = False) -> None:
         """The network the features come from (eager, or compiled for ``self.runtime``)."""
         self._network = FeatureNetwork(self.module, self.layers, combine_layers)
         self._compiled: CompiledBackbone | None = None
         if self.runtime != TORCH:
             self._compiled = CompiledBackbone(
                 self.runtime, self._network, replace(self.identity, runtime=TORCH).key(),
-                num_threads=self.num_threads, cache_dir=runtime_cache,
+                num_threads=self.num_threads, cache_dir=runtime_cache, verify=verify,
             )
         self._mean_t = torch.tensor(self.mean, device=self.device).view(1, 3, 1, 1)
         self._std_t = torch.tensor(self.std, device=self.device).view(1, 3, 1, 1)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import json
 import os
 import tempfile
 import warnings
@@ -48,6 +49,13 @@ RUNTIME_EXTRAS: dict[str, str] = {OPENVINO: "openvino", ONNXRUNTIME: "onnxruntim
 ONNX_OPSET: int = 17
 """ONNX opset of the exported graphs."""
 
+MIN_COSINE: float = 0.9999
+"""Least cosine between a compiled runtime's and eager torch's features for ``"auto"`` to use
+it (measured: OpenVINO and ONNX Runtime give 1.0000000 on every architecture here)."""
+
+_ENGINES: dict[tuple[Any, ...], Any] = {}
+"""Compiled engines of this process, kept across models (warm workers)."""
+
 _IMPORT_NAMES: dict[str, tuple[str, ...]] = {
     OPENVINO: ("openvino", "onnx"), ONNXRUNTIME: ("onnxruntime", "onnx"), TORCH: (),
 }
@@ -70,7 +78,7 @@ def resolve_runtime(name: str | None, device: torch.device | str = "cpu") -> str
 
     Args:
         name: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` (the fastest
-            installed, :data:`AUTO_ORDER`) or None (``$UNITRACK_RUNTIME``, default torch).
+            installed, :data:`AUTO_ORDER`) or None (``$UNITRACK_RUNTIME``, default auto).
         device: The model's device; only torch runs on a non-CPU device.
 
     Raises:
@@ -78,7 +86,7 @@ def resolve_runtime(name: str | None, device: torch.device | str = "cpu") -> str
         ImportError: The named runtime is not installed (the message names the extra).
     """
     if name is None:
-        name = os.environ.get(RUNTIME_ENV, "").strip() or TORCH
+        name = os.environ.get(RUNTIME_ENV, "").strip() or AUTO
     device = torch.device(device)
     if name == AUTO:
         if device.type != "cpu":
@@ -97,6 +105,13 @@ def resolve_runtime(name: str | None, device: torch.device | str = "cpu") -> str
             f"'unitrack-env[{RUNTIME_EXTRAS[name]}]'"
         )
     return name
+
+
+def is_auto(name: str | None) -> bool:
+    """Whether the option value leaves the choice to :func:`resolve_runtime` (checked)."""
+    if name is None:
+        name = os.environ.get(RUNTIME_ENV, "").strip() or AUTO
+    return name == AUTO
 
 
 def default_cache_dir() -> Path:
@@ -123,6 +138,9 @@ class FeatureNetwork(nn.Module):
         self.module = module
         self.layers = layers
         self.combine = combine
+        # the wrapper takes the backbone's mode: torch.onnx.export puts every submodule back
+        # into the wrapper's mode afterwards (a fresh module is in training mode)
+        self.train(module.training)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Normalised images ``(B, 3, H, W)`` -> features ``(B, C, h, w)``."""
@@ -170,11 +188,16 @@ class CompiledBackbone:
         key: Identity key of the network (weights digest, layer, ...): part of file names.
         num_threads: Engine threads (None: ``torch.get_num_threads()`` now).
         cache_dir: Directory of exported graphs (None: :func:`default_cache_dir`).
+        verify: Check each input size against eager torch once (``runtime="auto"``); a size
+            whose features differ (cosine < :data:`MIN_COSINE`) runs in eager torch.
+
+    Attributes:
+        fallbacks: Input sizes ``(H, W)`` that failed the check and run in eager torch.
     """
 
     def __init__(self, runtime: str, network: nn.Module, key: str, *,
-                 num_threads: int | None = None, cache_dir: str | os.PathLike[str] | None = None
-                 ) -> None:
+                 num_threads: int | None = None,
+                 cache_dir: str | os.PathLike[str] | None = None, verify: bool = False) -> None:
         if runtime not in (OPENVINO, ONNXRUNTIME):
             raise ValueError(f"CompiledBackbone runs {OPENVINO!r} or {ONNXRUNTIME!r}, "
                              f"not {runtime!r}")
@@ -183,8 +206,9 @@ class CompiledBackbone:
         self.key = key
         self.num_threads = num_threads or torch.get_num_threads()
         self.cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-        self._compiled: dict[tuple[int, ...], Any] = {}
-        self._core: Any = None
+        self.verify = verify
+        self.fallbacks: set[tuple[int, int]] = set()
+        self._checked: set[tuple[int, int]] = set()
 
     def graph_path(self, height: int, width: int) -> Path:
         """The cached ONNX file of one input size."""
@@ -193,41 +217,93 @@ class CompiledBackbone:
 
     def _engine(self, shape: tuple[int, int, int, int]) -> Any:
         batch, _, height, width = shape
-        key = shape if self.runtime == OPENVINO else (height, width)
-        engine = self._compiled.get(key)
-        if engine is not None:
-            return engine
-        path = export_onnx(self.network, height, width, self.graph_path(height, width))
-        if self.runtime == OPENVINO:
-            import openvino as ov
-
-            if self._core is None:
-                self._core = ov.Core()
-            model = self._core.read_model(str(path))
-            model.reshape({model.inputs[0].any_name: ov.PartialShape(list(shape))})
-            engine = self._core.compile_model(model, "CPU", {
-                "INFERENCE_PRECISION_HINT": "f32",
-                "PERFORMANCE_HINT": "LATENCY",
-                "INFERENCE_NUM_THREADS": self.num_threads,
-            })
-        else:
-            import onnxruntime as ort
-
-            options = ort.SessionOptions()
-            options.intra_op_num_threads = self.num_threads
-            options.inter_op_num_threads = 1
-            options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-            engine = ort.InferenceSession(str(path), options,
-                                          providers=["CPUExecutionProvider"])
-        self._compiled[key] = engine
+        path = self.graph_path(height, width)
+        memo = (self.runtime, str(path), shape if self.runtime == OPENVINO else (height, width),
+                self.num_threads)
+        engine = _ENGINES.get(memo)
+        if engine is None:
+            export_onnx(self.network, height, width, path)
+            engine = _ENGINES[memo] = _compile(self.runtime, path, shape, self.num_threads,
+                                               self.cache_dir / "openvino")
         return engine
 
-    def __call__(self, x: torch.Tensor) -> torch.Tensor:
-        """Features of normalised images ``(B, 3, H, W)`` (float32 CPU tensor)."""
-        array = np.ascontiguousarray(x.detach().to("cpu", torch.float32).numpy())
+    def _run(self, array: np.ndarray) -> torch.Tensor:
         engine = self._engine(tuple(array.shape))
         if self.runtime == OPENVINO:
             out = engine(array)[engine.outputs[0]]
         else:
             out = engine.run(None, {"images": array})[0]
         return torch.from_numpy(np.array(out, dtype=np.float32, copy=True))
+
+    def check(self, height: int, width: int) -> float:
+        """Cosine between this engine's and eager torch's features of a fixed input.
+
+        Computed once per model and size; the verdict is stored beside the graph and read back
+        afterwards. A size below :data:`MIN_COSINE` joins :attr:`fallbacks` (with a warning).
+        """
+        record = self.graph_path(height, width).with_suffix(f".{self.runtime}.check.json")
+        try:
+            cosine = float(json.loads(record.read_text())["cosine"])
+        except (OSError, ValueError, KeyError, TypeError):
+            generator = torch.Generator().manual_seed(0)
+            x = torch.randn(1, 3, height, width, generator=generator)
+            with torch.inference_mode():
+                reference = self.network(x).float().flatten()
+            ours = self._run(x.numpy()).flatten()
+            cosine = float(torch.nn.functional.cosine_similarity(reference, ours, dim=0))
+            text = json.dumps({"cosine": cosine, "min_cosine": MIN_COSINE,
+                               "runtime": self.runtime, "size": [height, width]})
+            with contextlib.suppress(OSError):
+                _write_atomic(record, text)
+        self._checked.add((height, width))
+        if cosine < MIN_COSINE:
+            self.fallbacks.add((height, width))
+            warnings.warn(f"runtime {self.runtime!r} differs from torch on this model at "
+                          f"{height}x{width} (feature cosine {cosine:.6f} < {MIN_COSINE}); "
+                          "that size runs in eager torch", UserWarning, stacklevel=3)
+        return cosine
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        """Features of normalised images ``(B, 3, H, W)`` (float32 CPU tensor)."""
+        size = (int(x.shape[2]), int(x.shape[3]))
+        if self.verify and size not in self._checked:
+            self.check(*size)
+        if size in self.fallbacks:
+            return self.network(x).float().contiguous()
+        return self._run(np.ascontiguousarray(x.detach().to("cpu", torch.float32).numpy()))
+
+
+def _compile(runtime: str, path: Path, shape: tuple[int, int, int, int], threads: int,
+             blobs: Path) -> Any:
+    """An engine for the graph at ``path``: OpenVINO for the full ``shape``, else ORT.
+
+    OpenVINO keeps its compiled blobs in ``blobs`` (its model cache), so another process
+    (a pool worker) loads them instead of compiling again.
+    """
+    if runtime == OPENVINO:
+        import openvino as ov
+
+        core = ov.Core()
+        with contextlib.suppress(Exception):  # an optional speed-up; compiling still works
+            core.set_property({"CACHE_DIR": str(blobs)})
+        model = core.read_model(str(path))
+        model.reshape({model.inputs[0].any_name: ov.PartialShape(list(shape))})
+        return core.compile_model(model, "CPU", {
+            "INFERENCE_PRECISION_HINT": "f32",
+            "PERFORMANCE_HINT": "LATENCY",
+            "INFERENCE_NUM_THREADS": threads,
+        })
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    handle, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".tmp", dir=path.parent)
+    with os.fdopen(handle, "w") as stream:
+        stream.write(text)
+    os.replace(tmp, path)

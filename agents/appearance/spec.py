@@ -31,7 +31,7 @@ class AppearanceSpec:
         device: Torch device.
         num_threads: Torch threads while the agent acts (None: torch's setting).
         runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` (fastest
-            installed) or None (``$UNITRACK_RUNTIME``, default torch).
+            installed) or None (``$UNITRACK_RUNTIME``, default auto).
     """
 
     weights: str = "imagenet-lite0"

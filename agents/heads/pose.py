@@ -7,6 +7,7 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,6 +15,7 @@ import cv2
 import numpy as np
 import torch
 
+from ..appearance.cached_model import with_cache
 from ..appearance.model import AppearanceModel, torch_threads
 from ..appearance.spec import AppearanceSpec
 from ..base import Agent
@@ -50,6 +52,7 @@ class UniTrackPoseConfig(AppearanceSpec):
         refine_radius: Soft-argmax neighbourhood half-side (0: plain argmax).
         min_peak: Peak below which a joint keeps its previous position.
         propagation: Fields of :class:`LabelPropagationConfig` to override.
+        feature_cache: The on-disk feature cache, float32 (as ``unitrack-vos``'s).
     """
 
     input_size: tuple[int, int] | None = POSE_INPUT_SIZE
@@ -58,6 +61,7 @@ class UniTrackPoseConfig(AppearanceSpec):
     refine_radius: int = REFINE_RADIUS
     min_peak: float = MIN_PEAK
     propagation: dict[str, Any] | None = None
+    feature_cache: str | os.PathLike[str] | bool | None = True
 
 
 def belief_maps(points: np.ndarray, shape: tuple[int, int], sigma: float) -> torch.Tensor:
@@ -128,6 +132,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         self._first_answer: np.ndarray | None = None
         self._frame_size = (1, 1)  # (width, height)
         self._grid = (1, 1)  # (w, h) of the feature map
+        self.cached = with_cache(self.model, self.config.feature_cache)  # float32: exact
 
     # ------------------------------------------------------------------ coordinates
     def _to_grid(self, points: np.ndarray) -> np.ndarray:
@@ -143,7 +148,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         if size is not None and (frame.shape[1], frame.shape[0]) != tuple(size):
             frame = cv2.resize(np.ascontiguousarray(frame), tuple(size),
                                interpolation=cv2.INTER_LINEAR)
-        return self.model.features(frame)[0]
+        return self.cached.features(frame)[0]
 
     # ------------------------------------------------------------------ episode
     def reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:

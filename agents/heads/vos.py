@@ -5,6 +5,7 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -12,6 +13,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..appearance.cached_model import with_cache
 from ..appearance.model import AppearanceModel, torch_threads
 from ..appearance.spec import AppearanceSpec
 from ..base import Agent
@@ -34,10 +36,14 @@ class UniTrackVOSConfig(AppearanceSpec):
             radius, topk, temperature, ...).
         antialias: Antialias the bilinear downsampling of the first frame's labels to the
             feature grid (averages each cell's pixels instead of sampling 2 x 2 of them).
+        feature_cache: The on-disk feature cache (True: the default folder; a folder; False:
+            none), float32 entries: the same features, read instead of computed when a frame
+            was seen before (:func:`~unitrack_env.agents.appearance.cached_model.with_cache`).
     """
 
     propagation: dict[str, Any] | None = None
     antialias: bool = True
+    feature_cache: str | os.PathLike[str] | bool | None = True
 
     def propagation_config(self) -> LabelPropagationConfig:
         """The :class:`LabelPropagationConfig` these options describe."""
@@ -90,6 +96,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config, self.model = UniTrackVOSConfig.configure(self.name, options, appearance_model)
+        self.cached = with_cache(self.model, self.config.feature_cache)
         self.propagator = LabelPropagator(self.config.propagation_config())
         self.object_ids: tuple[int, ...] = ()
         self._first_answer: np.ndarray | None = None
@@ -113,7 +120,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
                 "unitrack-vos needs the decoded frames (decode_frames=True)"
             )
         with torch_threads(self.config.num_threads):
-            features = self.model.features(frame)[0]
+            features = self.cached.features(frame)[0]
             onehot = labels_to_onehot(labels, self.object_ids).to(features.device)
             small = F.interpolate(onehot[None], size=features.shape[1:], mode="bilinear",
                                   align_corners=False, antialias=self.config.antialias)[0]
@@ -127,7 +134,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
         if self.propagator.memory_length == 0:
             raise RuntimeError("call reset() with the first observation before act()")
         with torch_threads(self.config.num_threads), torch.inference_mode():
-            features = self.model.features(observation["frame"])[0]
+            features = self.cached.features(observation["frame"])[0]
             soft = self.propagator.step(features)
             return self.decode(soft)
 

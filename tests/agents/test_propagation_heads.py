@@ -80,6 +80,26 @@ def test_vos_first_answer_and_void(model):
     assert set(np.unique(again)) <= {0, 2} and (again[12:28, 12:28] == 2).all()
 
 
+def test_propagation_heads_read_exact_features_from_the_cache(model, tmp_path):
+    """float32 entries: a second agent on the same frames reads them, with the same answer."""
+    labels = np.zeros((48, 64), np.uint8)
+    labels[10:30, 10:30] = 1
+    rng = np.random.default_rng(1)
+    frames = [rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for _ in range(3)]
+    answers, agents = [], []
+    for cache in (tmp_path, tmp_path, False):
+        agent = make_agent("unitrack-vos", appearance_model=model, feature_cache=cache, **ONE)
+        agent.reset({"frame": frames[0], "init_labels": labels, "num_objects": 1}, {})
+        answers.append([agent.act({"frame": f}) for f in frames])
+        agents.append(agent)
+    assert agents[1].cached.cache.stats.hits == 3 and agents[1].cached.cache.stats.misses == 0
+    assert agents[2].cached is model
+    for ours in answers[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(answers[0], ours, strict=True))
+    pose = make_agent("unitrack-pose", appearance_model=model, feature_cache=tmp_path)
+    assert pose.cached.cache.dtype == np.float32
+
+
 def test_pose_decoding_is_subcell():
     import torch
 

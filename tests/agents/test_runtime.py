@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
 
 import cv2
@@ -34,11 +35,12 @@ def _compiled(name: str, cache: Path, **kwargs) -> AppearanceModel:
 
 
 # ---------------------------------------------------------------------- choice
-def test_default_is_torch_unless_the_environment_says_otherwise(monkeypatch):
+def test_default_is_auto_unless_the_environment_says_otherwise(monkeypatch):
     monkeypatch.delenv(rt.RUNTIME_ENV, raising=False)
-    assert rt.resolve_runtime(None) == "torch"
+    assert rt.resolve_runtime(None) == rt.resolve_runtime("auto")
+    assert rt.is_auto(None) and not rt.is_auto("openvino")
     monkeypatch.setenv(rt.RUNTIME_ENV, "torch")
-    assert rt.resolve_runtime(None) == "torch"
+    assert rt.resolve_runtime(None) == "torch" and not rt.is_auto(None)
     monkeypatch.setenv(rt.RUNTIME_ENV, "nonsense")
     with pytest.raises(ValueError, match="valid"):
         rt.resolve_runtime(None)
@@ -103,6 +105,27 @@ def test_exported_graph_is_cached_on_disk_and_reused(name, tmp_path):
     other = _compiled(name, tmp_path, layer="stage3")  # other network: its own file
     other.features(np.zeros((40, 48, 3), np.uint8))
     assert len(list(tmp_path.glob("*.onnx"))) == 2
+
+
+@pytest.mark.parametrize("name", COMPILED)
+def test_auto_checks_each_size_once_records_it_and_falls_back_to_torch(name, tmp_path,
+                                                                       monkeypatch):
+    model = _compiled(name, tmp_path, weights="random", arch="resnet18")
+    model._compiled.verify = True
+    rng = np.random.default_rng(0)
+    model.features(rng.integers(0, 255, (64, 96, 3), np.uint8))
+    records = list(tmp_path.glob(f"*.{name}.check.json"))
+    assert len(records) == 1 and json.loads(records[0].read_text())["cosine"] >= rt.MIN_COSINE
+    network, model._compiled.network = model._compiled.network, None
+    assert model._compiled.check(64, 96) >= rt.MIN_COSINE  # the record is read, not recomputed
+    model._compiled.network = network
+    monkeypatch.setattr(rt, "MIN_COSINE", 1.5)  # another size that no runtime can pass
+    frame = rng.integers(0, 255, (32, 48, 3), np.uint8)
+    with pytest.warns(UserWarning, match="runs in eager torch"):
+        ours = model.features(frame)
+    assert model._compiled.fallbacks == {(32, 48)}
+    reference = AppearanceModel("random", arch="resnet18", runtime="torch").features(frame)
+    assert torch.equal(ours, reference)
 
 
 @pytest.mark.parametrize("name", COMPILED)

@@ -157,16 +157,24 @@ def test_scorecard_on_ray_equals_the_pool(pose_card, tmp_path):
 
 
 @pytest.mark.slow
-def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path):
+def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path, monkeypatch):
     """The acceptance command; the docs page shows its table and chart."""
     out = tmp_path / "sc"
-    # The torch runtime, as the documented table was made: the random ResNet-18's features
-    # have near-ties that another runtime's rounding flips (with --runtime auto, i.e.
-    # OpenVINO, the random row's VOS J-Mean read 67.7 instead of 66.6).
+    # The runtime the documented table names in its footer ("Appearance models ran on ..."):
+    # the random ResNet-18's features have near-ties that each runtime's rounding settles its
+    # own way (its VOS J-Mean read 66.6 with torch, 67.7 with OpenVINO), so the check replays
+    # the table's own runtime; the default (auto) when the footer names a checked one.
+    page = (REPO / "docs" / "evaluate-your-representation.md").read_text()
+    named = re.search(r"Appearance models ran on (\w+)( \(auto)?", page)
+    if named is None or named.group(2):
+        monkeypatch.delenv("UNITRACK_RUNTIME")
+    else:
+        monkeypatch.setenv("UNITRACK_RUNTIME", named.group(1))
     assert main(["scorecard", "--model", "imagenet-lite0", "--model", "random", "--data",
                  str(shared_data), "--out", str(out), "--workers", "2", "--quiet"]) == 0
     card = json.loads((out / "scorecard.json").read_text())
     assert card["tasks"] == list(sc.TASKS)
+    assert f"Appearance models ran on {card['runtime']}." in (out / "scorecard.md").read_text()
     assert {card["sources"][t]["kind"] for t in ("sot", "vos", "mot", "posetrack",
                                                  "pose-prop")} == {"fixture"}
     assert card["sources"]["mots"]["kind"] == card["sources"]["vis"]["kind"] == "synthetic"
@@ -191,7 +199,6 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path):
     # association and propagation columns stay within 0.2 points, but a single-object tracker
     # carries every frame's rounding into the next frame's search window, so SOT columns get
     # 1 point (CI's machine measured SOT AUC (XCorr) 60.2 where this one measured 60.5).
-    page = (REPO / "docs" / "evaluate-your-representation.md").read_text()
     pattern = r"\| (imagenet-lite0|random|\*baseline.*?\*) \|(.*)\|"
     shown = re.findall(pattern, page)
     table = markdown_table(card)
@@ -244,8 +251,10 @@ def test_the_cell_progress_bar_draws(capsys):
 
     with cell_progress(enabled=True) as update:
         update(0, 2, None)
+        update.estimate(95.0)  # known before the first cell ends
         update(1, 2, SimpleNamespace(label="imagenet-lite0 / vos UniTrack / " + "x" * 80))
-    assert "cells" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "cells" in err and "ETA 0:01" in err  # (narrow console: the rest is cut)
 
 
 def test_a_bad_checkpoint_or_layer_is_refused_before_any_cell(tmp_path):
