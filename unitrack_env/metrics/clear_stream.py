@@ -122,6 +122,11 @@ class StreamingClear:
     totals: ClearTotals = field(default_factory=ClearTotals, init=False)
     _last_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
     _prev_step_match: dict[int, int] = field(default_factory=dict, init=False, repr=False)
+    #: ``(gt rows, tracker columns)`` matched in the last :meth:`update` (indices into its
+    #: inputs), for per-frame error events (:mod:`unitrack_env.metrics.events_mot`).
+    last_match: tuple[np.ndarray, np.ndarray] = field(
+        default_factory=lambda: (np.zeros(0, np.int64), np.zeros(0, np.int64)), init=False,
+        repr=False)
 
     def reset(self) -> None:
         """Forget all matches and totals (start of a sequence)."""
@@ -153,6 +158,7 @@ class StreamingClear:
         g_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
         t_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
         n, k = len(g_ids), len(t_ids)
+        self.last_match = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         if n == 0 or k == 0:
             result = FrameClear(tp=0, fp=k, fn=n, idsw=0)
             self.totals.add(result)
@@ -169,6 +175,7 @@ class StreamingClear:
         rows, cols = linear_sum_assignment(-score)
         matched = score[rows, cols] > EPS
         rows, cols = rows[matched], cols[matched]
+        self.last_match = (rows, cols)
 
         idsw = 0
         for g, t in zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True):
