@@ -319,6 +319,10 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
         payload["note"] = "this split has no ground truth; results were written, not scored"
     atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
                                                        allow_nan=False))
+    if scores is not None:  # per-frame error events beside the results (never fails the run)
+        from .events import write_run_events
+
+        write_run_events(out, bench, with_gt)
     return scores
 
 

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 from scipy.optimize import linear_sum_assignment
 
 from unitrack_env.metrics.clear_stream import StreamingClear
@@ -48,9 +49,9 @@ class MotStats:
         gt_det: ``(F, G)`` 1 where gt id ``g`` is present in the frame.
         trk_det: ``(F, K)`` 1 where track id ``k`` is present.
         id_pairs: ``(P, 2)`` (gt index, track index) of pairs with IoU >= 0.5 somewhere.
-        id_match: ``(F, P)`` 1 where the pair has IoU >= 0.5 in the frame.
+        id_match: sparse ``(F, P)``, 1 where the pair has IoU >= 0.5 in the frame.
         hota_pairs: ``(Q, 2)`` (gt index, track index) of pairs HOTA matched somewhere.
-        hota_match: ``(A, F, Q)`` 1 where the pair is matched at alpha ``a`` in the frame.
+        hota_match: ``A`` sparse ``(F, Q)``, 1 where the pair is matched at that alpha.
         hota_tp: ``(F, A)`` HOTA true positives per frame and alpha.
     """
 
@@ -58,9 +59,9 @@ class MotStats:
     gt_det: np.ndarray
     trk_det: np.ndarray
     id_pairs: np.ndarray
-    id_match: np.ndarray
+    id_match: sparse.csc_matrix
     hota_pairs: np.ndarray
-    hota_match: np.ndarray
+    hota_match: list[sparse.csc_matrix]
     hota_tp: np.ndarray
 
     @property
@@ -96,14 +97,19 @@ def _hota_alignment(frames: Sequence[PreprocessedFrame], gi: dict[int, int],
 
 
 def _pair_table(entries: list[tuple[int, int, int]], num_frames: int,
-                depth: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """``(pairs, (depth, F, P) indicator)`` from ``(layer * F + frame, g, k)`` entries."""
+                depth: int = 1) -> tuple[np.ndarray, list[sparse.csc_matrix]]:
+    """``(pairs, depth x sparse (F, P) indicators)`` from ``(layer * F + frame, g, k)``."""
     pairs = sorted({(g, k) for _, g, k in entries})
     where = {p: i for i, p in enumerate(pairs)}
-    table = np.zeros((depth, num_frames, len(pairs)))
-    for slot, g, k in entries:
-        table[slot // num_frames, slot % num_frames, where[(g, k)]] = 1.0
-    return np.array(pairs, dtype=np.int64).reshape(-1, 2), table
+    slots = np.array([e[0] for e in entries], dtype=np.int64)
+    cols = np.array([where[(g, k)] for _, g, k in entries], dtype=np.int64)
+    tables = []
+    for layer in range(depth):
+        sel = slots // num_frames == layer
+        tables.append(sparse.csc_matrix(
+            (np.ones(int(sel.sum())), (slots[sel] % num_frames, cols[sel])),
+            shape=(num_frames, len(pairs))))
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2), tables
 
 
 def mot_stats(frames: Sequence[PreprocessedFrame]) -> MotStats:
@@ -141,6 +147,11 @@ def mot_stats(frames: Sequence[PreprocessedFrame]) -> MotStats:
                     hota_tp)
 
 
+def _dot(w: np.ndarray, table: sparse.csc_matrix) -> np.ndarray:
+    """``w @ table`` for a dense ``(B, F)`` and a sparse ``(F, P)``, dense ``(B, P)``."""
+    return np.asarray((table.T @ w.T).T)
+
+
 #: Sums that combine over sequences (TrackEval's combine_sequences for these metrics).
 SUM_FIELDS: tuple[str, ...] = ("tp", "fp", "fn", "idsw", "idtp", "n_gt", "n_trk")
 
@@ -156,7 +167,7 @@ def weighted_sums(stats: MotStats, weights: np.ndarray) -> dict[str, np.ndarray]
     gtc, trkc = w @ stats.gt_det, w @ stats.trk_det
     out = {"tp": clear[:, 0], "fp": clear[:, 1], "fn": clear[:, 2], "idsw": clear[:, 3],
            "n_gt": gtc.sum(1), "n_trk": trkc.sum(1)}
-    pm = w @ stats.id_match
+    pm = _dot(w, stats.id_match)
     idtp = np.zeros(len(w))
     if pm.shape[1]:
         g, k = stats.id_pairs[:, 0], stats.id_pairs[:, 1]
@@ -172,7 +183,7 @@ def weighted_sums(stats: MotStats, weights: np.ndarray) -> dict[str, np.ndarray]
         g, k = stats.hota_pairs[:, 0], stats.hota_pairs[:, 1]
         base = gtc[:, g] + trkc[:, k]
         for a in range(len(ALPHAS)):
-            mc = w @ stats.hota_match[a]
+            mc = _dot(w, stats.hota_match[a])
             ass[:, a] = (mc * mc / np.maximum(1.0, base - mc)).sum(1)
     out["hota_ass"] = ass
     return out
