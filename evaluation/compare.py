@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import norm as NORMAL
 
 from unitrack_env.metrics.events_mot import preprocessed_frames, read_gt_rows
 from unitrack_env.metrics.mot_stats import (
@@ -107,7 +108,8 @@ class Comparison:
 
 def compare_stats(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats], *,
                   resamples: int = 1000, seed: int = 0, level: str = "frames",
-                  block: int | None = None) -> tuple[dict[str, dict[str, MetricDiff]], dict]:
+                  block: int | None = None,
+                  method: str = "bc") -> tuple[dict[str, dict[str, MetricDiff]], dict]:
     """Paired bootstrap of per-sequence statistics; returns ``(rows, block lengths)``."""
     if level not in ("frames", "sequences"):
         raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
@@ -126,24 +128,50 @@ def compare_stats(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats], *,
         parts_b.append(sb)
         points_a.append(pa)
         points_b.append(pb)
-        rows[name] = _diffs(pa, pb, sa, sb)
+        rows[name] = _diffs(pa, pb, sa, sb, method)
     counts = None
     if level == "sequences":
         counts = rng.multinomial(len(names), np.full(len(names), 1 / len(names)), resamples)
     rows[COMBINED] = _diffs(add_sums(points_a), add_sums(points_b),
-                            add_sums(parts_a, counts), add_sums(parts_b, counts))
+                            add_sums(parts_a, counts), add_sums(parts_b, counts), method)
     return rows, blocks
 
 
-def _diffs(point_a: dict, point_b: dict, boot_a: dict, boot_b: dict) -> dict[str, MetricDiff]:
+#: Interval methods: percentile, basic (reflected) and bias-corrected percentile.
+INTERVALS: tuple[str, ...] = ("bc", "percentile", "basic")
+
+
+def interval(point: float, boot: np.ndarray, method: str = "bc") -> tuple[float, float]:
+    """The 95% interval of ``point`` from its bootstrap replicates ``boot``.
+
+    ``bc`` (the default) shifts the percentiles by the bootstrap's median bias (Efron's
+    bias-corrected percentile): IDF1 and HOTA re-optimise an assignment, so their resampled
+    values sit systematically off the point estimate and plain percentiles would miss it.
+    """
+    if method == "percentile":
+        low, high = np.percentile(boot, [2.5, 97.5])
+    elif method == "basic":
+        q_low, q_high = np.percentile(boot, [2.5, 97.5])
+        low, high = 2 * point - q_high, 2 * point - q_low
+    elif method == "bc":
+        below = (np.sum(boot < point) + 0.5 * np.sum(boot == point)) / len(boot)
+        z0 = NORMAL.ppf(min(max(below, 0.5 / len(boot)), 1 - 0.5 / len(boot)))
+        levels = NORMAL.cdf(2 * z0 + np.array([-1.959964, 1.959964]))
+        low, high = np.percentile(boot, 100 * levels)
+    else:
+        raise ValueError(f"interval must be one of {INTERVALS}, got {method!r}")
+    return float(low), float(high)
+
+
+def _diffs(point_a: dict, point_b: dict, boot_a: dict, boot_b: dict,
+           method: str = "bc") -> dict[str, MetricDiff]:
     ma, mb = metrics_from_sums(point_a), metrics_from_sums(point_b)
     ba, bb = metrics_from_sums(boot_a), metrics_from_sums(boot_b)
     out = {}
     for name in MOT_STAT_METRICS:
-        d = ba[name] - bb[name]
-        low, high = np.percentile(d, [2.5, 97.5])
-        out[name] = MetricDiff(float(ma[name][0]), float(mb[name][0]),
-                               float(ma[name][0] - mb[name][0]), float(low), float(high))
+        point = float(ma[name][0] - mb[name][0])
+        low, high = interval(point, ba[name] - bb[name], method)
+        out[name] = MetricDiff(float(ma[name][0]), float(mb[name][0]), point, low, high)
     return out
 
 
