@@ -125,3 +125,22 @@ def test_compare_command(two_runs, capsys, tmp_path) -> None:
     (other / "metrics.json").write_text(json.dumps(metrics))
     assert main(["compare", str(a), str(other)]) == 2
     assert "no scored sequence in common" in capsys.readouterr().err
+
+
+def test_run_and_scorecard_intervals(two_runs, tmp_path) -> None:
+    from unitrack_env.evaluation.intervals import run_intervals, write_card_intervals
+
+    a, _ = two_runs
+    combined = json.loads((a / "metrics.json").read_text())["combined"]
+    intervals = run_intervals(a, resamples=200)
+    assert set(intervals) == {"HOTA", "DetA", "AssA", "IDF1", "MOTA"}
+    for name, (low, high) in intervals.items():
+        assert low < high and low - 0.05 < combined[name] < high + 0.05, name
+    out = tmp_path / "sc"
+    shutil.copytree(a, out / "cells" / "m" / "mot" / "UniTrack")
+    card = {"models": ["m"], "tasks": ["mot"], "rows": [
+        {"model": "m", "task": "mot", "head": "UniTrack", "combined": combined}]}
+    md, js = write_card_intervals(out, card, resamples=100)
+    cells = {c["metric"]: c for c in json.loads(js.read_text())}
+    assert cells["IDF1"]["low"] < cells["IDF1"]["value"] < cells["IDF1"]["high"]
+    assert "| m | mot | UniTrack | HOTA |" in md.read_text()
