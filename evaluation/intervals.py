@@ -97,9 +97,8 @@ def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
 def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                          resamples: int = 1000) -> list[Path]:
     """``scorecard_ci.md`` and ``scorecard_ci.json``: each cell's value with its interval."""
-    from .scorecard_report import columns, value
-
     from .scorecard import BASELINE, TASKS
+    from .scorecard_report import columns, value
 
     found = card_intervals(out, card, resamples=resamples)
     lines = ["| model | task | head | metric | value | 95% interval |", "|---|---|---|---|---|---|"]

@@ -174,8 +174,7 @@ class StreamingClear:
         score[sim < self.threshold - EPS] = 0.0
         rows, cols = linear_sum_assignment(-score)
         matched = score[rows, cols] > EPS
-        rows, cols = rows[matched], cols[matched]
-        self.last_match = (rows, cols)
+        rows, cols = self.last_match = rows[matched], cols[matched]
 
         idsw = 0
         for g, t in zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True):
