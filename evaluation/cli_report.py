@@ -113,11 +113,11 @@ def comparison_lines(comp: Any) -> list[str]:
     for name, row in comp.rows.items():
         frames = comp.frames.get(name, sum(comp.frames.values()))
         for metric, d in row.items():
-            star = " *" if d.significant else ""
+            star = " *" if d.significant else "" if d.reliable else " (too little data)"
             lines.append(f"{name:<18} {metric:<6} {100 * d.a:7.1f} {100 * d.b:7.1f} "
                          f"{100 * d.diff:+7.1f} [{100 * d.low:+6.1f}, {100 * d.high:+6.1f}]"
                          f"  {frames}{star}")
-    lines.append("* the interval excludes 0")
+    lines.append("* the interval excludes 0 (and rests on enough frames to say so)")
     lines += [f"note: {n}" for n in comp.notes]
     return lines
 

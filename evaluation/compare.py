@@ -78,11 +78,12 @@ class MetricDiff:
     diff: float
     low: float
     high: float
+    reliable: bool = True
 
     @property
     def significant(self) -> bool:
-        """Whether the 95% interval excludes 0."""
-        return self.low > 0 or self.high < 0
+        """Whether the 95% interval excludes 0 and rests on enough data to say so."""
+        return self.reliable and (self.low > 0 or self.high < 0)
 
 
 @dataclass
@@ -202,24 +203,40 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
                                  block=block)
     frames = {s: stats_a[s].num_frames for s in common}
     notes = few_data_notes(frames, blocks, level)
+    for name in unreliable_rows(frames, blocks):
+        for d in rows[name].values():
+            d.reliable = False
     skipped = sorted(set(seq_a) ^ set(seq_b))
     if skipped:
         notes.append(f"not in both runs, left out: {', '.join(skipped)}")
     return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes)
 
 
+def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:
+    return {name: math.ceil(n / blocks[name]) for name, n in frames.items()}
+
+
+def unreliable_rows(frames: dict[str, int], blocks: dict[str, int]) -> list[str]:
+    """Rows whose interval rests on too few blocks (:data:`MIN_BLOCKS` per sequence, twice
+    that in all for the combined row)."""
+    counts = _block_count(frames, blocks)
+    out = [name for name, count in counts.items() if count < MIN_BLOCKS]
+    return out + ([COMBINED] if sum(counts.values()) < 2 * MIN_BLOCKS else [])
+
+
 def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str) -> list[str]:
     """Plain warnings where too little data makes the intervals wide or unreliable."""
     notes = []
-    for name, n in frames.items():
-        count = math.ceil(n / blocks[name])
-        if count < MIN_BLOCKS:
-            notes.append(f"{name}: only {n} frames ({count} blocks of {blocks[name]}): its "
-                         "interval rests on too little data and is wide and unreliable")
-    total = sum(math.ceil(n / blocks[s]) for s, n in frames.items())
-    if total < MIN_BLOCKS:
-        notes.append(f"{COMBINED}: {sum(frames.values())} frames in all: too little data for "
-                     "a trustworthy interval; do not read a difference into it")
+    counts = _block_count(frames, blocks)
+    for name in unreliable_rows(frames, blocks):
+        if name == COMBINED:
+            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all "
+                         f"({sum(counts.values())} blocks): too little data for a trustworthy "
+                         "interval; do not read a difference into it")
+        else:
+            notes.append(f"{name}: only {frames[name]} frames ({counts[name]} blocks of "
+                         f"{blocks[name]}): too little data, its interval is not trustworthy "
+                         "(so few blocks cannot show how much the difference varies)")
     if level == "sequences" and len(frames) < 10:
         notes.append(f"resampling {len(frames)} sequences: the sequence-level interval is "
                      "unstable with fewer than 10 sequences")

@@ -72,7 +72,8 @@ def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
                         + number_cell(d.a, percent=True) + number_cell(d.b, percent=True)
                         + number_cell(d.diff, percent=True)
                         + f'<td data-value="{d.low!r}">[{100 * d.low:+.1f}, '
-                          f'{100 * d.high:+.1f}]</td></tr>')
+                          f'{100 * d.high:+.1f}]{"" if d.reliable else " (too little data)"}'
+                          "</td></tr>")
     notes = "".join(f'<p class="note">{esc(n)}</p>' for n in comp.notes)
     metrics = list(comp.rows["COMBINED"])
     return (f'<h2 id="compare">Comparison</h2><p>A = {esc(run_a.name)}, B = {esc(run_b.name)}: '

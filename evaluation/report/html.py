@@ -82,26 +82,32 @@ MOT_LANES = (("fn", "#e67e22", "misses (FN)"), ("fp", "#8e44ad", "false positive
              ("idsw", "#c0392b", "ID switches"), ("frag", "#2980b9", "fragmentations"))
 
 
-def mot_timeline(events: pd.DataFrame, num_frames: int, width: int = 1000) -> str:
-    """An SVG with one lane per MOT event type: a bar per frame, height = count."""
+def mot_timeline(events: pd.DataFrame, num_frames: int, width: int = 1000,
+                 max_bars: int = 800) -> str:
+    """An SVG with one lane per MOT event type: a bar per frame (or per bin of frames on a
+    long sequence, so the page stays small), height = count."""
     lane, label_w = 26, 110
     height = lane * len(MOT_LANES) + 18
+    size = max(1, math.ceil(num_frames / max_bars))  # frames per bar
     scale = (width - label_w) / max(1, num_frames)
     parts = [f'<svg class="timeline" width="{width}" height="{height}" '
              f'viewBox="0 0 {width} {height}" role="img" aria-label="error events over time">']
     for i, (kind, colour, label) in enumerate(MOT_LANES):
         y0 = i * lane
-        counts = events.loc[events["type"] == kind, "frame"].value_counts()
+        frames = events.loc[events["type"] == kind, "frame"].to_numpy(dtype=np.int64)
+        counts = pd.Series((frames - 1) // size).value_counts()
         top = max(1, int(counts.max())) if len(counts) else 1
-        parts.append(f'<text x="0" y="{y0 + 16}">{esc(label)} ({int(counts.sum())})</text>')
+        parts.append(f'<text x="0" y="{y0 + 16}">{esc(label)} ({len(frames)})</text>')
         parts.append(f'<line x1="{label_w}" x2="{width}" y1="{y0 + lane - 2}" '
                      f'y2="{y0 + lane - 2}" stroke="#ccc"/>')
-        for frame, count in counts.items():
+        for start, count in counts.items():
             h = max(2.0, (lane - 6) * count / top)
-            x = label_w + (int(frame) - 1) * scale
+            x = label_w + int(start) * size * scale
+            first = int(start) * size + 1
+            where = f"frame {first}" if size == 1 else f"frames {first}-{first + size - 1}"
             parts.append(f'<rect class="ev-{kind}" x="{x:.1f}" y="{y0 + lane - 2 - h:.1f}" '
-                         f'width="{max(1.0, scale):.1f}" height="{h:.1f}" fill="{colour}">'
-                         f'<title>frame {int(frame)}: {int(count)} {kind}</title></rect>')
+                         f'width="{max(1.0, size * scale):.1f}" height="{h:.1f}" '
+                         f'fill="{colour}"><title>{where}: {int(count)} {kind}</title></rect>')
     parts.append(_axis(num_frames, label_w, width, lane * len(MOT_LANES) + 14))
     parts.append("</svg>")
     return "".join(parts)

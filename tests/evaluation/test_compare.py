@@ -97,6 +97,9 @@ def test_too_little_data_is_said_plainly(two_runs, tmp_path) -> None:
 
     notes = few_data_notes({"tiny": frames}, blocks, "frames")
     assert any("too little data" in n for n in notes)
+    from unitrack_env.evaluation.compare import unreliable_rows
+
+    assert unreliable_rows({"tiny": frames}, blocks) == ["tiny", COMBINED]
     assert any("tiny: only 4 frames" in n for n in notes)
 
 
