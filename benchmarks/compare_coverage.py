@@ -119,7 +119,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=200)
     ap.add_argument("--resamples", type=int, default=400)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--intervals", default="bc", help="comma-separated interval methods "
+    ap.add_argument("--intervals", default="percentile", help="comma-separated interval methods "
                     "(bc, percentile, basic) measured side by side")
     ap.add_argument("--blocks", default="auto", help="comma-separated block lengths to "
                     "measure side by side on the same data sets (auto: the default rule)")
@@ -129,6 +129,7 @@ def main() -> None:
     truth_runs = [point_diff(*dataset(args.sequences, args.frames, rng))
                   for _ in range(args.truth)]
     truth = {m: float(np.mean([d[m] for d in truth_runs])) for m in MOT_STAT_METRICS}
+    spread = {m: float(np.std([d[m] for d in truth_runs], ddof=1)) for m in MOT_STAT_METRICS}
     blocks = [None if b == "auto" else int(b) for b in args.blocks.split(",")]
     methods = args.intervals.split(",")
     hits = {(b, i, m): 0 for b in blocks for i in methods for m in MOT_STAT_METRICS}
@@ -146,13 +147,13 @@ def main() -> None:
           f"{args.resamples} paired block-bootstrap resamples each; true difference from "
           f"{args.truth} more data sets ({time.perf_counter() - start:.0f} s)")
     print(f"{'block':<6} {'interval':<10} {'metric':<6} {'true A-B':>9} {'coverage':>9} "
-          f"{'mean width':>11}")
+          f"{'mean width':>11} {'4 x SD of A-B':>14}")
     for b in blocks:
         for i in methods:
             for m in MOT_STAT_METRICS:
                 print(f"{b or block_length(args.frames):<6} {i:<10} {m:<6} "
                       f"{100 * truth[m]:>+9.2f} {100 * hits[b, i, m] / args.reps:>8.1f}% "
-                      f"{100 * np.mean(widths[b, i, m]):>10.2f}")
+                      f"{100 * np.mean(widths[b, i, m]):>10.2f} {400 * spread[m]:>14.2f}")
     print(f"(a coverage within ±{100 * 1.96 * np.sqrt(0.95 * 0.05 / args.reps):.1f} points "
           f"of 95% is consistent with 95% at {args.reps} data sets)")
 

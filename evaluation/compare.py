@@ -7,19 +7,22 @@ The SAME resample is applied to both runs (paired), and HOTA, DetA, AssA, IDF1 a
 recomputed on it from the official per-frame matching (:mod:`unitrack_env.metrics.mot_stats`
 says what is exact: IDF1 exactly, MOTA up to block seams, HOTA with the per-frame matching
 kept). Combined metrics sum the per-sequence statistics as TrackEval's COMBINED row does.
-The interval is the 2.5-97.5 percentile of the ``B`` paired differences.
+The interval is the 2.5-97.5 percentile of the ``B`` paired differences (see
+:func:`interval` for the alternatives measured).
 
-Block length: ``L = ceil(1.5 * F ** (1/3))`` frames for a sequence of ``F`` frames (the
-``F ** (1/3)`` rate is the optimal order for block-bootstrap variance estimates, Hall,
-Horowitz & Jing 1995; the factor 1.5 because tracking errors come in bursts, occlusions and
-missed tracks last seconds): 11 frames for PETS09's 400. Blocks keep the bursts and the
-within-block correlation; weights keep every track id, so no switch is invented at a seam.
+Block length: ``L = max(ceil(1.5 * F ** (1/3)), ceil(F / 10))`` frames for a sequence of
+``F`` frames, i.e. ten blocks per sequence (40 frames for PETS09's 400). ``F ** (1/3)`` is the
+textbook order for block-bootstrap variance estimates (Hall, Horowitz & Jing 1995), but
+identity metrics depend on whole tracks: the coverage simulation undercovered with blocks of
+9-20 frames and came closest to 95% with blocks of a tenth to a fifth of the sequence. Blocks
+keep the bursts of misses and the within-block correlation; weights keep every track id, so
+no switch is invented at a seam.
 
 ``level="frames"`` (default) treats the sequences as fixed and asks how much the difference
 would move on more footage like them; ``level="sequences"`` also resamples the sequences
 (to generalise to new scenes; it needs many sequences, with 2-4 it is unstable). With few
-frames per sequence (fewer than 10 blocks) the interval is wide and unreliable, and the
-report says so. ``benchmarks/compare_coverage.py`` measures the coverage by simulation.
+frames (a sequence of fewer than 10 blocks, i.e. under ~40 frames) the interval is not
+trustworthy: such rows are marked "too little data" and never called significant. ``benchmarks/compare_coverage.py`` measures the coverage by simulation.
 """
 
 from __future__ import annotations
@@ -53,7 +56,8 @@ MIN_BLOCKS: int = 10
 
 def block_length(num_frames: int) -> int:
     """The block length used for a sequence of ``num_frames`` (see the module docstring)."""
-    return max(1, min(num_frames, math.ceil(1.5 * num_frames ** (1 / 3))))
+    rule = max(math.ceil(1.5 * num_frames ** (1 / 3)), math.ceil(num_frames / MIN_BLOCKS))
+    return max(1, min(num_frames, rule))
 
 
 def block_weights(num_frames: int, resamples: int, rng: np.random.Generator,
@@ -110,7 +114,7 @@ class Comparison:
 def compare_stats(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats], *,
                   resamples: int = 1000, seed: int = 0, level: str = "frames",
                   block: int | None = None,
-                  method: str = "bc") -> tuple[dict[str, dict[str, MetricDiff]], dict]:
+                  method: str = "percentile") -> tuple[dict[str, dict[str, MetricDiff]], dict]:
     """Paired bootstrap of per-sequence statistics; returns ``(rows, block lengths)``."""
     if level not in ("frames", "sequences"):
         raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
@@ -139,15 +143,17 @@ def compare_stats(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats], *,
 
 
 #: Interval methods: percentile, basic (reflected) and bias-corrected percentile.
-INTERVALS: tuple[str, ...] = ("bc", "percentile", "basic")
+INTERVALS: tuple[str, ...] = ("percentile", "bc", "basic")
 
 
-def interval(point: float, boot: np.ndarray, method: str = "bc") -> tuple[float, float]:
+def interval(point: float, boot: np.ndarray, method: str = "percentile") -> tuple[float, float]:
     """The 95% interval of ``point`` from its bootstrap replicates ``boot``.
 
-    ``bc`` (the default) shifts the percentiles by the bootstrap's median bias (Efron's
-    bias-corrected percentile): IDF1 and HOTA re-optimise an assignment, so their resampled
-    values sit systematically off the point estimate and plain percentiles would miss it.
+    ``percentile`` (the default) is the 2.5-97.5 percentile of the replicates; ``bc`` shifts
+    them by the bootstrap's median bias (Efron's bias-corrected percentile) and ``basic``
+    reflects them around ``point``. In the coverage simulation
+    (``benchmarks/compare_coverage.py``) the plain percentiles covered best: the bias of the
+    resampled IDF1/HOTA does not carry over to the estimate.
     """
     if method == "percentile":
         low, high = np.percentile(boot, [2.5, 97.5])
@@ -165,7 +171,7 @@ def interval(point: float, boot: np.ndarray, method: str = "bc") -> tuple[float,
 
 
 def _diffs(point_a: dict, point_b: dict, boot_a: dict, boot_b: dict,
-           method: str = "bc") -> dict[str, MetricDiff]:
+           method: str = "percentile") -> dict[str, MetricDiff]:
     ma, mb = metrics_from_sums(point_a), metrics_from_sums(point_b)
     ba, bb = metrics_from_sums(boot_a), metrics_from_sums(boot_b)
     out = {}
@@ -217,11 +223,13 @@ def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, in
 
 
 def unreliable_rows(frames: dict[str, int], blocks: dict[str, int]) -> list[str]:
-    """Rows whose interval rests on too few blocks (:data:`MIN_BLOCKS` per sequence, twice
-    that in all for the combined row)."""
+    """Rows whose interval rests on too few blocks.
+
+    A sequence needs :data:`MIN_BLOCKS` blocks; the combined row needs one such sequence.
+    """
     counts = _block_count(frames, blocks)
     out = [name for name, count in counts.items() if count < MIN_BLOCKS]
-    return out + ([COMBINED] if sum(counts.values()) < 2 * MIN_BLOCKS else [])
+    return out + ([COMBINED] if len(out) == len(counts) else [])
 
 
 def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str) -> list[str]:
@@ -230,9 +238,9 @@ def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str) -
     counts = _block_count(frames, blocks)
     for name in unreliable_rows(frames, blocks):
         if name == COMBINED:
-            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all "
-                         f"({sum(counts.values())} blocks): too little data for a trustworthy "
-                         "interval; do not read a difference into it")
+            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all, no sequence with "
+                         f"{MIN_BLOCKS} blocks: too little data for a trustworthy interval; do "
+                         "not read a difference into it")
         else:
             notes.append(f"{name}: only {frames[name]} frames ({counts[name]} blocks of "
                          f"{blocks[name]}): too little data, its interval is not trustworthy "

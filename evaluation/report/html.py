@@ -84,8 +84,10 @@ MOT_LANES = (("fn", "#e67e22", "misses (FN)"), ("fp", "#8e44ad", "false positive
 
 def mot_timeline(events: pd.DataFrame, num_frames: int, width: int = 1000,
                  max_bars: int = 800) -> str:
-    """An SVG with one lane per MOT event type: a bar per frame (or per bin of frames on a
-    long sequence, so the page stays small), height = count."""
+    """An SVG with one lane per MOT event type, bar height = count.
+
+    One bar per frame, or per bin of frames on a long sequence, so the page stays small.
+    """
     lane, label_w = 26, 110
     height = lane * len(MOT_LANES) + 18
     size = max(1, math.ceil(num_frames / max_bars))  # frames per bar

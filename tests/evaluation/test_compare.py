@@ -37,7 +37,8 @@ def two_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 def test_block_weights_are_circular_blocks() -> None:
     w = block_weights(10, 500, np.random.default_rng(0), length=3)
     assert w.shape == (500, 10) and (w.sum(1) == 10).all()
-    assert block_length(400) == 12 and block_length(4) == 3 and block_length(1) == 1
+    assert block_length(400) == 40 and block_length(4) == 3 and block_length(1) == 1
+    assert block_length(8) == 3 and block_length(1000) == 100  # ten blocks when long enough
     # every frame is drawn equally often on average (circular blocks have no edge effect)
     assert np.allclose(w.mean(0), 1.0, atol=0.15)
     single = block_weights(5, 1, np.random.default_rng(1), length=5)
@@ -76,7 +77,7 @@ def test_two_runs_have_paired_intervals_around_their_difference(two_runs) -> Non
         for name, d in row.items():
             assert d.a == pytest.approx(expected[name], abs=1e-9), (seq, name)
             assert np.isfinite([d.low, d.high]).all() and d.low <= d.high
-            assert d.significant == (d.low > 0 or d.high < 0)
+            assert d.significant == (d.reliable and (d.low > 0 or d.high < 0))
     again = compare_runs(a, b, resamples=300, seed=1)
     assert again.to_json() == comp.to_json()  # seeded
 
