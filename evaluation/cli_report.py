@@ -59,8 +59,10 @@ def add_parsers(sub: Any) -> None:
                     help="resample frame blocks within each sequence (default) or also the "
                     "sequences (needs many sequences)")
     cp.add_argument("--block", type=positive_int,
-                    help="block length in frames (default: ceil(1.5 * frames ** (1/3)))")
-    cp.add_argument("--format", choices=("table", "json"), default="table")
+                    help="block length in frames (default: a tenth of the sequence, at least "
+                    "ceil(1.5 * frames ** (1/3)))")
+    cp.add_argument("--format", choices=("table", "json"), default="table",
+                    help="a table in percent (default) or every number as JSON")
     cp.set_defaults(func=_cmd_compare)
 
     rp = command("report", "write a self-contained HTML report of runs (or a scorecard "
