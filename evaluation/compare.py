@@ -22,7 +22,8 @@ no switch is invented at a seam.
 would move on more footage like them; ``level="sequences"`` also resamples the sequences
 (to generalise to new scenes; it needs many sequences, with 2-4 it is unstable). With few
 frames (a sequence of fewer than 10 blocks, i.e. under ~40 frames) the interval is not
-trustworthy: such rows are marked "too little data" and never called significant. ``benchmarks/compare_coverage.py`` measures the coverage by simulation.
+trustworthy: such rows are marked "too little data" and never called significant.
+``benchmarks/compare_coverage.py`` measures the coverage by simulation.
 """
 
 from __future__ import annotations

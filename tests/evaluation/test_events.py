@@ -128,3 +128,21 @@ def test_unitrack_head_on_s2l1_events_sum_to_trackeval(tmp_path: Path, mot15_roo
         env_kwargs={"root": str(mot15_root)},
         agent_kwargs={"new_track_score": 50.0, "num_threads": 2, "runtime": "auto"})
     assert_counts_match(out)
+
+
+def test_sot_and_vos_events_give_back_the_official_means(tmp_path: Path) -> None:
+    sot = tmp_path / "sot"
+    run("UniTrack/OTB-v0", "repeat-box", out=sot, progress=False)
+    metrics = json.loads((sot / "metrics.json").read_text())["per_sequence"]
+    events = load_events(sot)
+    assert set(events["type"]) == {"frame"}
+    for seq, frames in events.groupby("sequence"):
+        success = (frames["iou"].to_numpy()[:, None] > np.linspace(0, 1, 21)).mean()
+        assert success == pytest.approx(metrics[seq]["AUC"], abs=1e-3), seq
+        assert frames["frame"].tolist() == list(range(1, len(frames) + 1))
+    vos = tmp_path / "vos"
+    run("UniTrack/DAVIS-v0", "repeat-mask", out=vos, progress=False)
+    metrics = json.loads((vos / "metrics.json").read_text())["per_sequence"]
+    for seq, frames in load_events(vos).groupby("sequence"):
+        j_mean = frames.groupby("object")["j"].mean().mean()
+        assert j_mean == pytest.approx(metrics[seq]["J-Mean"], abs=1e-3), seq
