@@ -168,7 +168,23 @@ def scorecard_section(folder: Path, out: Path) -> str:
             radar = f'<p><img src="{src.name}" alt="radar chart" style="max-width:600px"></p>'
             break
     return ('<h2 id="scorecard">Scorecard</h2>' + table(headers, rows, table_id="metrics-table")
-            + radar)
+            + radar + _card_intervals(folder))
+
+
+def _card_intervals(folder: Path) -> str:
+    """The cells' 95% intervals when the scorecard was made with ``--ci``."""
+    path = folder / "scorecard_ci.json"
+    if not path.is_file():
+        return ""
+    rows = []
+    for c in json.loads(path.read_text(encoding="utf-8")):
+        ci = "-" if c["low"] is None else f"[{100 * c['low']:.1f}, {100 * c['high']:.1f}]"
+        rows.append(f'<tr><td class="text">{esc(c["model"])}</td><td class="text">'
+                    f'{esc(c["task"])} {esc(c["head"])}</td><td>{esc(c["metric"])}</td>'
+                    + number_cell(c["value"], percent=True) + f"<td>{ci}</td></tr>")
+    return ("<h3>95% intervals (block bootstrap over frames)</h3>"
+            + table(["model", "cell", "metric", "value", "95% interval"], rows,
+                    table_id="ci-table"))
 
 
 def _legend() -> str:

@@ -59,10 +59,14 @@ def test_report_of_a_scorecard_folder(tmp_path) -> None:
     folder.mkdir()
     (folder / "scorecard.json").write_text(json.dumps(card))
     (folder / "scorecard.svg").write_text("<svg xmlns='http://www.w3.org/2000/svg'/>")
+    (folder / "scorecard_ci.json").write_text(json.dumps([
+        {"model": "m", "task": "mot", "head": "UniTrack", "metric": "IDF1", "value": 0.5,
+         "low": 0.41, "high": 0.58}]))
     assert main(["report", str(folder), "--out", str(tmp_path / "r")]) == 0
     page = (tmp_path / "r" / "index.html").read_text()
     assert 'id="scorecard"' in page and 'data-sequence="m"' in page
     assert (tmp_path / "r" / "scorecard.svg").is_file()
+    assert 'id="ci-table"' in page and "[41.0, 58.0]" in page
 
 
 def test_bad_input_is_one_line(tmp_path, capsys) -> None:
