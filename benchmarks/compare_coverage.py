@@ -9,8 +9,8 @@ then ``--reps`` fresh data sets each get a paired block-bootstrap interval
 (:func:`unitrack_env.evaluation.compare.compare_stats`), and the script prints how often the
 interval holds the true difference (it should be close to 95%), with the mean width.
 
-    python benchmarks/compare_coverage.py            # 200 data sets of 2 x 200 frames
-    python benchmarks/compare_coverage.py --reps 50 --truth 100 --frames 100   # quicker
+    python benchmarks/compare_coverage.py --intervals percentile,bc    # docs/report.md
+    python benchmarks/compare_coverage.py --frames 200 --blocks auto,9,20   # block lengths
 """
 
 from __future__ import annotations
@@ -113,12 +113,12 @@ def point_diff(sa: dict[str, MotStats], sb: dict[str, MotStats]) -> dict[str, fl
 def main() -> None:
     """Measure and print the coverage."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--reps", type=int, default=200, help="data sets with an interval")
-    ap.add_argument("--truth", type=int, default=300, help="data sets for the true difference")
-    ap.add_argument("--sequences", type=int, default=2)
-    ap.add_argument("--frames", type=int, default=200)
-    ap.add_argument("--resamples", type=int, default=400)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--reps", type=int, default=50, help="data sets with an interval")
+    ap.add_argument("--truth", type=int, default=50, help="data sets for the true difference")
+    ap.add_argument("--sequences", type=int, default=2, help="sequences per data set")
+    ap.add_argument("--frames", type=int, default=400, help="frames per sequence")
+    ap.add_argument("--resamples", type=int, default=200, help="bootstrap resamples")
+    ap.add_argument("--seed", type=int, default=2, help="random seed")
     ap.add_argument("--intervals", default="percentile", help="comma-separated interval methods "
                     "(bc, percentile, basic) measured side by side")
     ap.add_argument("--blocks", default="auto", help="comma-separated block lengths to "

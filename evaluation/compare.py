@@ -13,8 +13,8 @@ The interval is the 2.5-97.5 percentile of the ``B`` paired differences (see
 Block length: ``L = max(ceil(1.5 * F ** (1/3)), ceil(F / 10))`` frames for a sequence of
 ``F`` frames, i.e. ten blocks per sequence (40 frames for PETS09's 400). ``F ** (1/3)`` is the
 textbook order for block-bootstrap variance estimates (Hall, Horowitz & Jing 1995), but
-identity metrics depend on whole tracks: the coverage simulation undercovered with blocks of
-9-20 frames and came closest to 95% with blocks of a tenth to a fifth of the sequence. Blocks
+identity metrics depend on whole tracks: in the coverage simulation longer blocks covered
+better, yet even these intervals are too narrow (82-90% instead of 95%, docs/report.md). Blocks
 keep the bursts of misses and the within-block correlation; weights keep every track id, so
 no switch is invented at a seam.
 
