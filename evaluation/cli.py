@@ -398,6 +398,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cache_cli import add_parser as add_cache_parser
 
     add_cache_parser(sub)  # unitrack cache info|prune|clear
+    from .cli_report import add_parsers as add_report_parsers
+
+    add_report_parsers(sub)  # unitrack events|compare|report
     return parser
 
 

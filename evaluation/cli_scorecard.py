@@ -42,6 +42,8 @@ def add_options(card: argparse.ArgumentParser) -> None:
     card.add_argument("--compare", nargs="+", metavar="SCORECARD_JSON",
                       help="redraw earlier scorecard.json files together (plays nothing)")
     card.add_argument("--quiet", action="store_true", help="no progress bar")
+    card.add_argument("--ci", action="store_true", help="also write each cell's 95%% bootstrap "
+                      "interval (scorecard_ci.md/.json; see docs/report.md)")
     card.set_defaults(func=run_command)
 
 
@@ -67,6 +69,10 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
                                 radar_scale=args.radar_scale,
                                 on_progress=progress, on_estimate=progress.estimate)
         files = sorted(out.glob("scorecard.*"))
+    if args.ci:
+        from .intervals import write_card_intervals
+
+        files += write_card_intervals(out, card)
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)
     console.print("wrote " + ", ".join(str(f) for f in files), markup=False, soft_wrap=True)
     return 0

@@ -331,7 +331,7 @@ def clear_ours(manifest: Manifest, names: Iterable[str]) -> list[str]:
     for path in owned_files(manifest, names):
         with contextlib.suppress(FileNotFoundError):
             path.unlink()
-    for sub in ("data", "sequences"):
+    for sub in ("data", "sequences", "events"):
         for root, _, _ in sorted(os.walk(out / sub), key=lambda item: -len(item[0])):
             with contextlib.suppress(OSError):
                 Path(root).rmdir()  # only empty folders go

@@ -264,6 +264,10 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
         payload["note"] = "this split has no ground truth; results were written, not scored"
     atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
                                                        allow_nan=False))
+    if scores is not None:  # per-frame error events beside the results (never fails the run)
+        from .events import write_run_events
+
+        write_run_events(out, bench, with_gt)
     return scores
 
 
@@ -380,6 +384,8 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
         raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(_record_path(out, name).read_text()))
-    manifest.add(out / "metrics.json")
+    from .events import events_path
+
+    manifest.add(out / "metrics.json", *(events_path(out, name) for name in names))
     scores = _score_and_write(out, spec, bench, names, records)
     return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed)

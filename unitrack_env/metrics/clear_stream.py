@@ -109,6 +109,11 @@ class StreamingClear:
     #: Matches of the last frame with ground truth and tracker boxes, gt id -> tracker id
     #: (the previous-frame record; read by the py-motmetrics cross-check).
     frame_matches: dict[int, int] = field(default_factory=dict, init=False, repr=False)
+    #: ``(gt rows, tracker columns)`` matched in the last :meth:`update` (indices into its
+    #: inputs), for per-frame error events (:mod:`unitrack_env.metrics.events_mot`).
+    last_match: tuple[np.ndarray, np.ndarray] = field(
+        default_factory=lambda: (np.zeros(0, np.int64), np.zeros(0, np.int64)), init=False,
+        repr=False)
 
     def reset(self) -> None:
         """Forget all matches and totals (start of a sequence)."""
@@ -140,6 +145,7 @@ class StreamingClear:
         g_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
         t_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
         n, k = len(g_ids), len(t_ids)
+        self.last_match = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         if n == 0 or k == 0:
             result = FrameClear(tp=0, fp=k, fn=n, idsw=0)
             self.totals.add(result)
@@ -155,7 +161,7 @@ class StreamingClear:
         score[sim < self.threshold - EPS] = 0.0
         rows, cols = linear_sum_assignment(-score)
         matched = score[rows, cols] > EPS
-        rows, cols = rows[matched], cols[matched]
+        rows, cols = self.last_match = rows[matched], cols[matched]
 
         idsw = 0
         for g, t in zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True):
@@ -167,13 +173,8 @@ class StreamingClear:
             zip(g_ids[rows].tolist(), t_ids[cols].tolist(), strict=True))
 
         tp = len(rows)
-        result = FrameClear(
-            tp=tp,
-            fp=k - tp,
-            fn=n - tp,
-            idsw=idsw,
-            iou_sum=float(sim[rows, cols].sum()) if tp else 0.0,
-        )
+        result = FrameClear(tp=tp, fp=k - tp, fn=n - tp, idsw=idsw,
+                            iou_sum=float(sim[rows, cols].sum()) if tp else 0.0)
         self.totals.add(result)
         return result
 

@@ -1,0 +1,194 @@
+"""Error events of a run, per frame: computed from its result files, stored beside them.
+
+More in docs/module-notes.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from unitrack_env.benchmarks import benchmark_for
+from unitrack_env.benchmarks.base import Benchmark
+from unitrack_env.metrics.events_mot import (
+    EVENT_COLUMNS,
+    EventRows,
+    mot_sequence_events,
+    read_gt_rows,
+)
+
+#: Sub-folder of a run folder holding the event tables.
+EVENTS_DIR: str = "events"
+
+#: Tasks whose events are computed.
+EVENT_TASKS: tuple[str, ...] = ("mot", "sot", "vos", "pose-prop")
+
+
+def events_path(run: str | os.PathLike, sequence: str) -> Path:
+    """``<run>/events/<sequence>.csv.gz``."""
+    return Path(run) / EVENTS_DIR / f"{sequence}.csv.gz"
+
+
+def run_benchmark(run: str | os.PathLike) -> Benchmark:
+    """The benchmark a run folder was scored with (from its ``run.json``)."""
+    path = Path(run) / "run.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: not a run folder of `unitrack evaluate` (no run.json)")
+    spec = json.loads(path.read_text(encoding="utf-8"))
+    import unitrack_env
+
+    unitrack_env.register_all()
+    return benchmark_for(spec["env_id"], **spec.get("env_kwargs", {}))
+
+
+def run_sequences(run: str | os.PathLike) -> list[str]:
+    """The scored sequences of a run (``metrics.json``'s per-sequence rows)."""
+    path = Path(run) / "metrics.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: the run has no metrics (not finished or not scored)")
+    return list(json.loads(path.read_text(encoding="utf-8")).get("per_sequence", {}))
+
+
+def sequence_events(bench: Benchmark, folder: str | os.PathLike, sequence: str) -> EventRows:
+    """Events of one sequence's result files in ``folder`` (the run's ``data/``)."""
+    if bench.task == "mot":
+        seq_dir = bench.dataset.split_dir / sequence
+        return mot_sequence_events(sequence, read_gt_rows(seq_dir), bench.read(folder, sequence),
+                                   bench.sequence_length(sequence), bench.name)
+    if bench.task == "sot":
+        return _sot_events(bench, folder, sequence)
+    if bench.task == "vos":
+        return _vos_events(bench, folder, sequence)
+    if bench.task == "pose-prop":
+        return _pose_events(bench, folder, sequence)
+    raise ValueError(f"no per-frame events for task '{bench.task}' (events exist for "
+                     f"{', '.join(EVENT_TASKS)})")
+
+
+def _sot_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
+    from unitrack_env.metrics.sot import (
+        center_error_per_frame,
+        overlap_per_frame,
+        repair_predictions,
+    )
+
+    gt = bench.load(sequence).boxes
+    pred = repair_predictions(bench.read(folder, sequence), gt, init_from_gt=True)
+    iou, err = overlap_per_frame(pred, gt), center_error_per_frame(pred, gt)
+    rows = EventRows(sequence)
+    for t in range(len(gt)):
+        rows.add(t + 1, "frame", iou=float(iou[t]), center_error=float(err[t]),
+                 **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
+                 **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
+    return rows
+
+
+def _vos_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
+    from unitrack_env.metrics.vos import frame_scores
+
+    seq = bench.load(sequence)
+    gt = seq.read_annotations()
+    rows = EventRows(sequence)
+    for t in range(1, seq.num_frames - 1):  # DAVIS scores all but the first and last frame
+        j, f = frame_scores(gt[t], bench.read_frame(folder, seq, t), seq.object_ids)
+        for k, obj in enumerate(seq.object_ids):
+            rows.add(t + 1, "frame", object=int(obj), j=float(j[k]), f=float(f[k]))
+    return rows
+
+
+def _pose_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
+    from unitrack_env.metrics.pose import frame_pck
+
+    pred, gt = bench.read(folder, sequence), bench.ground_truth(sequence)
+    rows = EventRows(sequence)
+    for t in range(min(len(pred), len(gt))):
+        rows.add(t + 1, "frame", pck=frame_pck(pred[t], gt[t], method=bench.normaliser))
+    return rows
+
+
+def to_frame(rows: EventRows) -> pd.DataFrame:
+    """An event table as a DataFrame with :data:`EVENT_COLUMNS`."""
+    df = pd.DataFrame(rows.columns, columns=list(EVENT_COLUMNS))
+    for col in ("gt_id", "track_id", "prev_track_id", "object"):
+        df[col] = df[col].astype("Int64")
+    return df
+
+
+def write_sequence_events(run: str | os.PathLike, bench: Benchmark, sequence: str) -> Path:
+    """Compute and write ``<run>/events/<sequence>.csv.gz`` (atomically); return its path."""
+    df = to_frame(sequence_events(bench, Path(run) / "data", sequence))
+    path = events_path(run, sequence)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    df.to_csv(tmp, index=False, compression="gzip", float_format="%.4f")
+    os.replace(tmp, path)
+    return path
+
+
+def write_run_events(out: str | os.PathLike, bench: Benchmark, sequences: list[str]) -> None:
+    """The runner's hook: write the events of every scored sequence of a finished run.
+
+    Never fails the run: a sequence whose events cannot be computed gets a warning (the
+    results and metrics are already written).
+    """
+    if bench.task not in EVENT_TASKS:
+        return
+    for name in sequences:
+        try:
+            write_sequence_events(out, bench, name)
+        except Exception as exc:  # noqa: BLE001 - events are extra; the scores stand
+            warnings.warn(f"events of {name} were not written: {exc}", stacklevel=2)
+
+
+def load_events(run: str | os.PathLike, sequence: str | None = None,
+                type: str | None = None) -> pd.DataFrame:  # noqa: A002 - the CLI's name
+    """The error events of a run folder as a DataFrame (one row per event).
+
+    Args:
+        run: a run folder of ``unitrack evaluate``.
+        sequence: only this sequence (default: every scored sequence).
+        type: only this event type (``tp``, ``fp``, ``fn``, ``idsw``, ``frag``, ``frame``).
+
+    Events missing from the folder (a run made before events existed) are computed from the
+    result files and the ground truth, and written for next time.
+    """
+    names = run_sequences(run)
+    if sequence is not None:
+        if sequence not in names:
+            raise ValueError(f"sequence '{sequence}' is not scored in {run} "
+                             f"(scored: {', '.join(names) or 'none'})")
+        names = [sequence]
+    bench: Benchmark | None = None
+    parts = []
+    for name in names:
+        path = events_path(run, name)
+        if not path.is_file():
+            bench = bench or run_benchmark(run)
+            write_sequence_events(run, bench, name)
+        parts.append(pd.read_csv(path, dtype={"sequence": str, "type": str},
+                                 keep_default_na=True))
+    df = (pd.concat(parts, ignore_index=True) if parts
+          else pd.DataFrame(columns=list(EVENT_COLUMNS)))
+    for col in ("gt_id", "track_id", "prev_track_id", "object"):
+        df[col] = df[col].astype("Int64")
+    if type is not None:
+        df = df[df["type"] == type].reset_index(drop=True)
+    return df
+
+
+def event_counts(df: pd.DataFrame) -> dict[str, dict[str, int]]:
+    """``{sequence: {type: count}}`` of an event table."""
+    table = df.groupby(["sequence", "type"]).size()
+    out: dict[str, dict[str, int]] = {}
+    for (seq, kind), count in table.items():
+        out.setdefault(str(seq), {})[str(kind)] = int(count)
+    return out
+
+
+__all__ = ["EVENTS_DIR", "event_counts", "events_path", "load_events", "run_benchmark",
+           "sequence_events", "write_run_events"]

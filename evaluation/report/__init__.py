@@ -1,0 +1,1 @@
+"""The static HTML report of runs (``unitrack report``): see :mod:`.build`."""

@@ -1,0 +1,80 @@
+"""`unitrack report`: a self-contained HTML page built from run folders (no browser here;
+tests/evaluation/test_report_browser.py opens it in Chromium)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from unitrack_env.evaluation.cli import main
+from unitrack_env.evaluation.report.thumbs import miss_bursts, sample
+from unitrack_env.evaluation.runner import run
+
+ENV = "UniTrack/MOT16-v0"
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("report")
+    run(ENV, "iou", out=root / "a", progress=False, env_kwargs={"decode_frames": False})
+    run(ENV, "iou", out=root / "b", progress=False, env_kwargs={"decode_frames": False},
+        agent_kwargs={"iou_threshold": 0.7})
+    (root / "a" / "videos").mkdir()
+    (root / "a" / "videos" / "SYN-01.mp4").write_bytes(b"not really a video")
+    return root / "a", root / "b"
+
+
+def test_report_is_self_contained_and_complete(runs, tmp_path, capsys) -> None:
+    a, b = runs
+    out = tmp_path / "report"
+    assert main(["report", str(a), str(b), "--out", str(out), "--thumbnails", "3",
+                 "--resamples", "50"]) == 0
+    assert "report:" in capsys.readouterr().out
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert not re.search(r"(src|href)=\"(https?:)?//", page), "nothing may load from the web"
+    assert "<script src" not in page and "<link" not in page
+    for seq in json.loads((a / "metrics.json").read_text())["per_sequence"]:
+        assert page.count(f'data-sequence="{seq}" data-run=') == 2  # one row per run
+        assert f'<section class="sequence" data-sequence="{seq}">' in page
+    assert 'id="compare-table"' in page and "95% interval" in page
+    thumbs = re.findall(r'<img loading="lazy" class="thumb (\w+)"[^>]* src="([^"]+)"', page)
+    assert thumbs and {kind for kind, _ in thumbs} <= {"idsw", "miss"}
+    assert sum(kind == "idsw" for kind, _ in thumbs) <= 3 * 4  # sampled: 3 per sequence & run
+    for _, src in thumbs:
+        assert (out / src).is_file() and (out / src.replace(".jpg", "-full.jpg")).is_file()
+    assert "SYN-01.mp4#t=" in page  # click-through to the clip `render` made
+    assert len(page) < 400_000
+
+
+def test_report_of_a_scorecard_folder(tmp_path) -> None:
+    card = {"version": 1, "models": ["m"], "tasks": ["mot"],
+            "sources": {"mot": {"kind": "synthetic", "root": None, "env_id": ENV}},
+            "rows": [{"model": "m", "task": "mot", "head": "UniTrack", "combined":
+                      {"IDF1": 0.5, "HOTA": 0.4}, "per_sequence": {}}]}
+    folder = tmp_path / "sc"
+    folder.mkdir()
+    (folder / "scorecard.json").write_text(json.dumps(card))
+    (folder / "scorecard.svg").write_text("<svg xmlns='http://www.w3.org/2000/svg'/>")
+    (folder / "scorecard_ci.json").write_text(json.dumps([
+        {"model": "m", "task": "mot", "head": "UniTrack", "metric": "IDF1", "value": 0.5,
+         "low": 0.41, "high": 0.58}]))
+    assert main(["report", str(folder), "--out", str(tmp_path / "r")]) == 0
+    page = (tmp_path / "r" / "index.html").read_text()
+    assert 'id="scorecard"' in page and 'data-sequence="m"' in page
+    assert (tmp_path / "r" / "scorecard.svg").is_file()
+    assert 'id="ci-table"' in page and "[41.0, 58.0]" in page
+
+
+def test_bad_input_is_one_line(tmp_path, capsys) -> None:
+    assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "r")]) == 2
+    assert "not a finished run" in capsys.readouterr().err
+
+
+def test_miss_bursts_and_sampling() -> None:
+    fn = pd.DataFrame({"gt_id": [1, 1, 1, 2, 1], "frame": [3, 4, 5, 4, 9]})
+    assert sorted(miss_bursts(fn)) == [(1, 3, 3), (1, 9, 1), (2, 4, 1)]
+    assert sample(list(range(10)), 3) == [0, 3, 6] and sample([1], 5) == [1]

@@ -1,0 +1,173 @@
+"""The HTML report as a person sees it: opened in headless Chromium, screenshot, DOM checked.
+
+Chromium is driven through the DevTools protocol over a pipe (``--remote-debugging-pipe``:
+NUL-terminated JSON on file descriptors 3 and 4), so neither websockets nor playwright are
+needed. `.ci/run` installs Debian's ``chromium`` when it is missing; elsewhere the test skips
+and says why.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from unitrack_env.evaluation.report.build import build_report
+from unitrack_env.evaluation.runner import run
+
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                  "--no-first-run", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--remote-debugging-pipe",
+                  "--window-size=1280,1600"]
+
+
+def chromium() -> str:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    pytest.skip("no chromium on PATH (`apt-get install -y chromium`; .ci/run installs it)")
+
+
+def _onto_3_and_4(read_end: int, write_end: int) -> None:
+    """In the child: Chromium reads commands on fd 3 and writes replies on fd 4."""
+    a, b = os.dup(read_end), os.dup(write_end)  # out of the way of 3 and 4 first
+    os.dup2(a, 3)
+    os.dup2(b, 4)
+
+
+class Browser:
+    """A minimal DevTools-protocol client over Chromium's debugging pipe."""
+
+    def __init__(self, profile: Path) -> None:
+        cmd_r, cmd_w = os.pipe()  # we write commands, chromium reads fd 3
+        res_r, res_w = os.pipe()  # chromium writes fd 4, we read
+        self.proc = subprocess.Popen(
+            [chromium(), *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "about:blank"],
+            pass_fds=(cmd_r, res_w, 3, 4), stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL, preexec_fn=lambda: _onto_3_and_4(cmd_r, res_w))
+        os.close(cmd_r)
+        os.close(res_w)
+        self.out, self.inp = os.fdopen(cmd_w, "wb"), os.fdopen(res_r, "rb")
+        self.next_id, self.session = 0, None
+        self.buffer = b""
+
+    def _read(self) -> dict[str, Any]:
+        while b"\0" not in self.buffer:
+            chunk = os.read(self.inp.fileno(), 1 << 20)
+            if not chunk:
+                raise RuntimeError("chromium closed the debugging pipe")
+            self.buffer += chunk
+        message, self.buffer = self.buffer.split(b"\0", 1)
+        return json.loads(message)
+
+    def send(self, method: str, session: bool = True, **params: Any) -> dict[str, Any]:
+        self.next_id += 1
+        message = {"id": self.next_id, "method": method, "params": params}
+        if session and self.session:
+            message["sessionId"] = self.session
+        self.out.write(json.dumps(message).encode() + b"\0")
+        self.out.flush()
+        while True:
+            reply = self._read()
+            if reply.get("id") == self.next_id:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply.get("result", {})
+
+    def wait_event(self, method: str) -> None:
+        while self._read().get("method") != method:
+            pass
+
+    def open(self, url: str) -> None:
+        target = self.send("Target.createTarget", session=False, url="about:blank")
+        self.session = self.send("Target.attachToTarget", session=False,
+                                 targetId=target["targetId"], flatten=True)["sessionId"]
+        self.send("Page.enable")
+        self.send("Page.navigate", url=url)
+        self.wait_event("Page.loadEventFired")
+
+    def js(self, expression: str) -> Any:
+        result = self.send("Runtime.evaluate", expression=expression, returnByValue=True,
+                           awaitPromise=True)
+        if "exceptionDetails" in result:
+            raise RuntimeError(f"{expression}: {result['exceptionDetails']}")
+        return result["result"].get("value")
+
+    def screenshot(self, path: Path) -> None:
+        data = self.send("Page.captureScreenshot", format="png")["data"]
+        path.write_bytes(base64.b64decode(data))
+
+    def close(self) -> None:
+        try:
+            self.send("Browser.close", session=False)
+        except (RuntimeError, OSError):
+            pass
+        try:
+            self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def colour_pixels(path: Path, colour: tuple[int, int, int], tolerance: int = 70) -> int:
+    """How many pixels of an image are within ``tolerance`` of ``colour`` in each channel."""
+    rgb = np.asarray(Image.open(path).convert("RGB"), dtype=np.int32)
+    return int((np.abs(rgb - np.array(colour)).max(axis=2) <= tolerance).sum())
+
+
+@pytest.mark.slow
+def test_report_in_chromium(tmp_path: Path) -> None:
+    from unitrack_env.evaluation.report.thumbs import GT_COLOUR, TRACK_COLOUR
+
+    chromium()
+    runs = tmp_path / "runs"
+    run("UniTrack/MOT16-v0", "iou", out=runs / "iou", progress=False)
+    run("UniTrack/MOT16-v0", "iou", out=runs / "iou-strict", progress=False,
+        agent_kwargs={"iou_threshold": 0.7})
+    index = build_report([runs / "iou", runs / "iou-strict"], tmp_path / "report",
+                         resamples=100)
+    sequences = json.loads((runs / "iou" / "metrics.json").read_text())["per_sequence"]
+
+    browser = Browser(tmp_path / "profile")
+    try:
+        browser.open(index.resolve().as_uri())
+        browser.screenshot(tmp_path / "report.png")
+        rows = browser.js("Array.from(document.querySelectorAll('#metrics-table tbody tr'))"
+                          ".map(r => r.dataset.sequence)")
+        thumb = browser.js("(() => {const i = document.querySelector('img.thumb.idsw');"
+                           "if (!i) return null; i.scrollIntoView();"
+                           "return new Promise(ok => {const done = () => ok({src: "
+                           "i.getAttribute('src'), w: i.naturalWidth});"
+                           "i.complete ? done() : i.addEventListener('load', done)})})()")
+        col = browser.js("Array.from(document.querySelectorAll('#metrics-table th'))"
+                         ".findIndex(h => h.textContent.startsWith('HOTA'))")
+        values = ("Array.from(document.querySelectorAll('#metrics-table tbody tr'))"
+                  f".map(r => parseFloat(r.cells[{col}].dataset.value))")
+        browser.js(f"document.querySelectorAll('#metrics-table th')[{col}].click()")
+        ascending = browser.js(values)
+        browser.js(f"document.querySelectorAll('#metrics-table th')[{col}].click()")
+        descending = browser.js(values)
+    finally:
+        browser.close()
+
+    width, height = Image.open(tmp_path / "report.png").size
+    assert width == 1280 and height > 800, "the screenshot is not the page"
+    shot = np.asarray(Image.open(tmp_path / "report.png").convert("L"))
+    assert shot.std() > 10, "the screenshot is blank"
+    for seq in [*sequences, "COMBINED"]:
+        assert seq in rows, f"no metrics row for {seq}"
+    assert thumb is not None, "the report shows no ID-switch thumbnail"
+    assert thumb["w"] > 0, "the switch thumbnail did not load in the browser"
+    picture = index.parent / thumb["src"]
+    assert colour_pixels(picture, GT_COLOUR) > 50, "no ground-truth box on the thumbnail"
+    assert colour_pixels(picture, TRACK_COLOUR) > 50, "no track box on the thumbnail"
+    assert ascending == sorted(ascending) and descending == sorted(ascending, reverse=True)
+    assert ascending != descending
