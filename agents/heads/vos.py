@@ -5,12 +5,13 @@ and pose propagation"):
 
 1. At reset, the first frame's label map (0 background, ``k`` object ``k``, 255 void) becomes
    one-hot channels ``[background, object_1, ...]`` (void counts as background), downsampled
-   bilinearly to the feature grid ``(ceil(H/8), ceil(W/8))``; the first frame's features
+   bilinearly to the feature grid ``(ceil(H/s), ceil(W/s))`` (``s`` the model's stride); the first frame's features
    and these soft labels start the memory bank of
    :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`.
 2. The first step answers the first frame itself with the given labels (void as background).
 3. Every later frame: one backbone pass at full resolution (DAVIS 480p), propagation of the
-   soft labels (first frame + 5 latest predictions, radius 12, top-10, temperature 0.05),
+   soft labels (first frame + 5 latest predictions, radius 12 cells at stride 8 -- 96 pixels
+   at any stride --, top-10, temperature 0.05),
    bilinear upsampling of the soft labels to the frame size, argmax, channel -> object label.
 
 Features are computed once per frame (the first frame's at reset) under
@@ -103,7 +104,8 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config, self.model = UniTrackVOSConfig.configure(self.name, options, appearance_model)
-        self.propagator = LabelPropagator(self.config.propagation_config())
+        self.propagator = LabelPropagator(
+            self.config.propagation_config().for_stride(self.model.stride))
         self.object_ids: tuple[int, ...] = ()
         self._first_answer: np.ndarray | None = None
         self._lookup = np.zeros(1, np.uint8)
