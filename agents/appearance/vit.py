@@ -207,26 +207,40 @@ class VisionTransformer(nn.Module):
         if self.stride_option is not None and self.stride_option.stride > spec.patch:
             raise ValueError(f"stride {self.stride_option.stride} of {arch} exceeds its patch "
                              f"size {spec.patch}; give a stride <= {spec.patch}")
-        self.cls_token = nn.Parameter(torch.zeros(1, 1, spec.dim))
-        self.pos_embed = nn.Parameter(torch.zeros(1, 1 + spec.pos_grid ** 2, spec.dim))
-        if spec.registers:
-            self.register_tokens = nn.Parameter(torch.zeros(1, spec.registers, spec.dim))
-        self.patch_embed = PatchEmbed(spec.patch, spec.dim)
-        self.blocks = nn.ModuleList(Block(spec.dim, spec.heads) for _ in range(spec.depth))
-        self.norm = nn.LayerNorm(spec.dim, eps=LN_EPS)
-        self._init_weights()
+        device = torch.empty(0).device  # "meta" when probing shapes
+        with torch.device("meta"):  # allocate once, initialise once (below)
+            self.cls_token = nn.Parameter(torch.zeros(1, 1, spec.dim))
+            self.pos_embed = nn.Parameter(torch.zeros(1, 1 + spec.pos_grid ** 2, spec.dim))
+            if spec.registers:
+                self.register_tokens = nn.Parameter(torch.zeros(1, spec.registers, spec.dim))
+            self.patch_embed = PatchEmbed(spec.patch, spec.dim)
+            self.blocks = nn.ModuleList(Block(spec.dim, spec.heads) for _ in range(spec.depth))
+            self.norm = nn.LayerNorm(spec.dim, eps=LN_EPS)
+        self.to_empty(device=device)
+        if device.type != "meta":
+            self._init_weights()
 
     def _init_weights(self) -> None:
-        """Truncated-normal (std 0.02) linear weights and position embedding, zero biases,
-        class token and registers ~ N(0, 1e-6): the usual random initialisation of a ViT."""
-        nn.init.trunc_normal_(self.pos_embed, std=0.02)
+        """The usual random ViT: linear weights and position embedding ~ N(0, 0.02^2) (timm's
+        ``trunc_normal_(std=.02)`` truncates at +-2, i.e. never), zero biases, class token and
+        registers ~ N(0, 1e-6^2), unit norms and layer scales, the patch convolution as
+        torch's default (uniform, bound ``1/sqrt(fan_in)``)."""
+        nn.init.normal_(self.pos_embed, std=0.02)
         nn.init.normal_(self.cls_token, std=1e-6)
         if self.spec.registers:
             nn.init.normal_(self.register_tokens, std=1e-6)
+        bound = 1 / math.sqrt(3 * self.spec.patch ** 2)
+        nn.init.uniform_(self.patch_embed.proj.weight, -bound, bound)
+        nn.init.uniform_(self.patch_embed.proj.bias, -bound, bound)
         for m in self.modules():
             if isinstance(m, nn.Linear):
-                nn.init.trunc_normal_(m.weight, std=0.02)
+                nn.init.normal_(m.weight, std=0.02)
                 nn.init.zeros_(m.bias)
+            elif isinstance(m, nn.LayerNorm):
+                nn.init.ones_(m.weight)
+                nn.init.zeros_(m.bias)
+            elif isinstance(m, LayerScale):
+                nn.init.ones_(m.gamma)
 
     @property
     def embed_stride(self) -> int:
