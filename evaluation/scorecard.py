@@ -106,8 +106,10 @@ BASELINE = "baseline (no appearance)"
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """One appearance model (a scorecard row):
-    ``weights[,arch=..][,layer=..][,stride=..][,label=..]`` (``stride``: ViT only)."""
+    """One appearance model (a scorecard row).
+
+    ``weights[,arch=..][,layer=..][,stride=..][,label=..]`` (``stride``: ViT only).
+    """
 
     weights: str
     arch: str | None = None

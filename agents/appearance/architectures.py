@@ -1,7 +1,8 @@
 """The backbones an appearance model can build, their output layers and hypercolumns.
 
 :func:`build_network` makes the ``nn.Module`` of an architecture (:data:`ARCHITECTURES`) run
-at stride 8 up to its output layer(s) (a ViT at its patch size, or its ``stride`` option); :func:`split_layers` reads a ``layer`` option (one
+at stride 8 up to its output layer(s) (a ViT at its patch size, or its ``stride`` option);
+:func:`split_layers` reads a ``layer`` option (one
 layer, or a hypercolumn such as ``"stage3+stage5"``) and :func:`combine_layers` joins the
 per-layer maps of a hypercolumn.
 """

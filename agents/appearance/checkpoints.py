@@ -293,8 +293,10 @@ def choose_remap(
     *,
     path: str | os.PathLike[str] | None = None,
 ) -> KeyRemap:
-    """Pick the remap under which the most model keys match (ties: the fewest keys left
-    over, then table order)."""
+    """Pick the remap under which the most model keys match.
+
+    Ties: the fewest keys left over, then table order.
+    """
     best: tuple[tuple[int, int], KeyRemap] | None = None
     errors = []
     for remap in remaps.values():

@@ -109,11 +109,12 @@ class AppearanceModel:
             ``"torchvision:<Enum>.<MEMBER>"`` string, or a checkpoint file path.
         arch: ``"efficientnet-lite0"``, ``"resnet18"``, ``"resnet34"``, ``"resnet50"``,
             ``"resnet101"`` or a ViT (``"vit_small_patch14"``, ``"vit_base_patch8"``, ...,
-            ``_reg4`` with registers; :data:`~.vit.VIT_SPECS`). None: the weights' own architecture (inferred from the keys for
-            a file; ResNet-18 for random init).
+            ``_reg4`` with registers; :data:`~.vit.VIT_SPECS`). None: the weights' own
+            architecture (inferred from the keys for a file; ResNet-18 for random init).
         layer: Output layer (ResNet ``"layer2"``..``"layer4"``; EfficientNet ``"stage3"``..
-            ``"head"``; ViT ``"block1"``..``"block12"``), or several joined by ``"+"`` for a hypercolumn (see
-            :func:`split_layers`). None: :data:`DEFAULT_LAYERS`. Each must have stride 8.
+            ``"head"``; ViT ``"block1"``..``"block12"``), or several joined by ``"+"`` for a
+            hypercolumn (see :func:`split_layers`). None: :data:`DEFAULT_LAYERS`. Each CNN
+            layer must have stride 8.
         device: Torch device for the network and the returned features.
         num_threads: When given, ``torch.set_num_threads(num_threads)`` for the duration of
             each forward pass (the previous setting is restored afterwards).

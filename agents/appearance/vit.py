@@ -75,8 +75,10 @@ class ViTSpec:
 
     @property
     def pos_grid(self) -> int:
-        """Side of the trained position-embedding grid: 37 for patch 14 (DINOv2's 518 px),
-        else 224 / patch (DINO, MAE, timm at 224 px)."""
+        """Side of the trained position-embedding grid.
+
+        37 for patch 14 (DINOv2's 518 px), else 224 / patch (DINO, MAE, timm at 224 px).
+        """
         return 37 if self.patch == 14 else 224 // self.patch
 
     @property
@@ -221,10 +223,13 @@ class VisionTransformer(nn.Module):
             self._init_weights()
 
     def _init_weights(self) -> None:
-        """The usual random ViT: linear weights and position embedding ~ N(0, 0.02^2) (timm's
+        """The usual random ViT initialisation.
+
+        Linear weights and position embedding ~ N(0, 0.02^2) (timm's
         ``trunc_normal_(std=.02)`` truncates at +-2, i.e. never), zero biases, class token and
         registers ~ N(0, 1e-6^2), unit norms and layer scales, the patch convolution as
-        torch's default (uniform, bound ``1/sqrt(fan_in)``)."""
+        torch's default (uniform, bound ``1/sqrt(fan_in)``).
+        """
         nn.init.normal_(self.pos_embed, std=0.02)
         nn.init.normal_(self.cls_token, std=1e-6)
         if self.spec.registers:
@@ -271,8 +276,11 @@ class VisionTransformer(nn.Module):
         return int(layer.removeprefix("block"))
 
     def position_embedding(self, grid_h: int, grid_w: int) -> torch.Tensor:
-        """``(1, 1 + grid_h * grid_w, dim)``: the class position, then the patch grid resized
-        bicubically from the trained grid (unchanged when the sizes agree)."""
+        """Position embedding ``(1, 1 + grid_h * grid_w, dim)`` of a token grid.
+
+        The class position, then the patch grid resized bicubically from the trained grid
+        (unchanged when the sizes agree).
+        """
         side = self.spec.pos_grid
         cls_pos, patch_pos = self.pos_embed[:, :1], self.pos_embed[:, 1:]
         if (grid_h, grid_w) != (side, side):
@@ -329,9 +337,11 @@ class VisionTransformer(nn.Module):
 
 
 def infer_vit_arch(state: Mapping[str, torch.Tensor]) -> str | None:
-    """The ViT architecture of timm-layout keys: width and patch from
-    ``patch_embed.proj.weight``, depth from the ``blocks.<i>`` keys, registers from
-    ``register_tokens``. None when no :data:`VIT_SPECS` entry matches."""
+    """The ViT architecture of timm-layout keys.
+
+    Width and patch from ``patch_embed.proj.weight``, depth from the ``blocks.<i>`` keys,
+    registers from ``register_tokens``. None when no :data:`VIT_SPECS` entry matches.
+    """
     proj = state.get("patch_embed.proj.weight")
     if proj is None or proj.ndim != 4 or proj.shape[-1] != proj.shape[-2]:
         return None

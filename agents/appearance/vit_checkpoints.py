@@ -67,8 +67,11 @@ def apply_key_rules(
     drop_prefixes: tuple[str, ...],
     rename_prefixes: tuple[tuple[str, str], ...],
 ) -> dict[str, torch.Tensor]:
-    """``state`` without the keys under ``drop_prefixes``, then each ``(old, new)`` prefix
-    renamed when no key already starts with ``new`` (so a file with both keeps its ``new``)."""
+    """``state`` without the keys under ``drop_prefixes``, prefixes renamed.
+
+    Each ``(old, new)`` prefix is renamed when no key already starts with ``new`` (so a file
+    with both keeps its ``new``).
+    """
     kept = {k: v for k, v in state.items() if not k.startswith(drop_prefixes)}
     for old, new in rename_prefixes:
         if any(k.startswith(new) for k in kept):

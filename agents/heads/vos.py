@@ -5,8 +5,8 @@ and pose propagation"):
 
 1. At reset, the first frame's label map (0 background, ``k`` object ``k``, 255 void) becomes
    one-hot channels ``[background, object_1, ...]`` (void counts as background), downsampled
-   bilinearly to the feature grid ``(ceil(H/s), ceil(W/s))`` (``s`` the model's stride); the first frame's features
-   and these soft labels start the memory bank of
+   bilinearly to the feature grid ``(ceil(H/s), ceil(W/s))`` (``s`` the model's stride); the
+   first frame's features and these soft labels start the memory bank of
    :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`.
 2. The first step answers the first frame itself with the given labels (void as background).
 3. Every later frame: one backbone pass at full resolution (DAVIS 480p), propagation of the

@@ -9,9 +9,8 @@ described in :mod:`unitrack_env.agents.primitives.box_propagation`.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import math
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np

@@ -129,8 +129,11 @@ class LabelPropagationConfig:
     affinity_dtype: str = "float32"
 
     def for_stride(self, stride: int) -> LabelPropagationConfig:
-        """These options for a model whose feature cell is ``stride`` pixels: the radii
-        rescaled from ``radius_stride`` (unchanged when equal or ``radius_stride`` is None)."""
+        """These options for a model whose feature cell is ``stride`` pixels.
+
+        The radii are rescaled from ``radius_stride`` (unchanged when equal, or when
+        ``radius_stride`` is None).
+        """
         if self.radius_stride is None or stride == self.radius_stride:
             return self
         scale = self.radius_stride / stride

@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from unitrack_env.agents.appearance.checkpoints import CheckpointError
 from unitrack_env.agents.appearance.model import AppearanceModel
-from unitrack_env.agents.appearance.resnet import ResNet
 from unitrack_env.agents.appearance.vit import VIT_SPECS, VisionTransformer, infer_vit_arch
 
 LN_EPS = 1e-6
@@ -179,3 +177,16 @@ def test_infer_arch_from_shapes() -> None:
         for arch in ("vit_base_patch8", "vit_large_patch14_reg4", "vit_small_patch16"):
             assert infer_vit_arch(VisionTransformer(arch).state_dict()) == arch
     assert infer_vit_arch({"conv1.weight": torch.zeros(64, 3, 7, 7)}) is None
+
+
+def test_exported_runtime_matches_torch(tmp_path: Path) -> None:
+    """ViT-S/14 through ONNX Runtime (the export every compiled runtime uses) = torch."""
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnx")
+    image = np.random.default_rng(1).integers(0, 256, (2, 60, 90, 3), dtype=np.uint8)
+    eager = AppearanceModel("random", arch="vit_small_patch14_reg4", layer="block3")
+    compiled = AppearanceModel("random", arch="vit_small_patch14_reg4", layer="block3",
+                               runtime="onnxruntime", runtime_cache=tmp_path)
+    a, b = eager.features(image), compiled.features(image)
+    assert a.shape == b.shape == (2, 384, 5, 7)
+    assert torch.nn.functional.cosine_similarity(a, b, dim=1).min() >= 0.9999

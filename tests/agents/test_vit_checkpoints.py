@@ -7,13 +7,12 @@ from pathlib import Path
 
 import pytest
 import torch
+from test_vit import official_state, with_layerscale  # the same folder (pytest prepends it)
 
 from unitrack_env.agents.appearance.checkpoints import CheckpointError
 from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.appearance.resnet import ResNet
 from unitrack_env.agents.appearance.vit import VIT_SPECS
-
-from test_vit import official_state, with_layerscale  # the same folder (pytest prepends it)
 
 S16 = "vit_small_patch16"
 
@@ -43,7 +42,8 @@ def _mae_pretrain(s: dict[str, torch.Tensor]) -> object:
 
 def _mae_finetuned(s: dict[str, torch.Tensor]) -> object:
     tuned = {("fc_norm." + k[5:] if k.startswith("norm.") else k): v for k, v in s.items()}
-    return {"model": tuned | {"head.weight": torch.zeros(1000, 384), "head.bias": torch.zeros(1000)}}
+    head = {"head.weight": torch.zeros(1000, 384), "head.bias": torch.zeros(1000)}
+    return {"model": tuned | head}
 
 
 def _timm(s: dict[str, torch.Tensor]) -> object:
