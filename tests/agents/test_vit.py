@@ -12,6 +12,12 @@ import torch
 
 from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.appearance.vit import VIT_SPECS, VisionTransformer, infer_vit_arch
+from unitrack_env.agents.base import make_agent
+from unitrack_env.agents.heads.vos import make_propagation_config
+from unitrack_env.agents.primitives.box_propagation import BoxPropagationConfig
+from unitrack_env.agents.primitives.box_response import XCorrHead
+from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
+from unitrack_env.evaluation.scorecard import ModelSpec
 
 LN_EPS = 1e-6
 
@@ -190,3 +196,26 @@ def test_exported_runtime_matches_torch(tmp_path: Path) -> None:
     a, b = eager.features(image), compiled.features(image)
     assert a.shape == b.shape == (2, 384, 5, 7)
     assert torch.nn.functional.cosine_similarity(a, b, dim=1).min() >= 0.9999
+
+
+def test_heads_keep_their_reach_in_pixels_at_another_stride() -> None:
+    config = LabelPropagationConfig()
+    assert config.for_stride(8) is config
+    s14 = config.for_stride(14)
+    assert s14.radius == pytest.approx(12 * 8 / 14) and s14.first_frame_radius is None
+    assert s14.for_stride(14) is s14 and s14.for_stride(8).radius == pytest.approx(12)
+    assert LabelPropagationConfig(radius_stride=None).for_stride(14).radius == 12
+    assert make_propagation_config({"radius": 6}, 16).radius == 3
+    head = XCorrHead(BoxPropagationConfig(method="xcorr"))
+    for size, side in ((65, 14), (38, 8), (33, 7)):  # strides 8, 14, 16 of a 520 crop
+        head.init(torch.zeros(1, 4, size, size))
+        assert head.template is not None and head.template.shape[-1] == side
+
+
+def test_scorecard_model_option_stride() -> None:
+    spec = ModelSpec.parse("random,arch=vit_small_patch14,layer=block9,stride=8-upsample")
+    assert spec.agent_kwargs() == {"weights": "random", "arch": "vit_small_patch14",
+                                   "layer": "block9", "stride": "8-upsample"}
+    assert spec.name == "random+vit_small_patch14+block9+s8-upsample"
+    vos = make_agent("unitrack-vos", weights="random", arch="vit_small_patch16", layer="block1")
+    assert vos.model.stride == 16 and vos.propagator.config.radius == pytest.approx(6)
