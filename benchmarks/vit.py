@@ -67,11 +67,13 @@ def best_of(candidates: dict[str, Callable[[], float]], repeats: int) -> dict[st
     return {name: min(values) for name, values in times.items()}
 
 
-def backbone(models: dict[str, AppearanceModel], repeats: int) -> None:
+def backbone(models: dict[str, AppearanceModel], repeats: int, sizes: list[str]) -> None:
     rng = np.random.default_rng(0)
     print("\n== backbone: ms per call (fastest round) ==")
     print(f"{'input':<14}" + "".join(f"{name:>22}" for name in models))
     for label, (batch, height, width) in SIZES.items():
+        if label.split()[0] not in sizes:
+            continue
         images = rng.integers(0, 256, (batch, height, width, 3), dtype=np.uint8)
         for model in models.values():
             model.features(images)  # warm-up (and export/compile for a compiled runtime)
@@ -134,6 +136,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--parts", default="backbone,heads")
     parser.add_argument("--models", default=",".join(MODELS))
+    parser.add_argument("--sizes", default="sot,vos,mot", help="backbone input sizes")
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--threads", type=int, default=2)
@@ -146,7 +149,7 @@ def main() -> None:
           + ", ".join(f"{n} (stride {m.stride})" for n, m in models.items()))
     parts = args.parts.split(",")
     if "backbone" in parts:
-        backbone(models, args.repeats)
+        backbone(models, args.repeats, args.sizes.split(","))
     if "heads" in parts:
         heads(models, args.frames, args.repeats)
 
