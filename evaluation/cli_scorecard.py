@@ -17,7 +17,8 @@ from .cli_types import positive_int
 
 def add_options(card: argparse.ArgumentParser) -> None:
     """The options of ``unitrack scorecard``."""
-    card.add_argument("--model", action="append", metavar="WEIGHTS[,arch=A][,layer=L][,label=N]",
+    card.add_argument("--model", action="append",
+                      metavar="WEIGHTS[,arch=A][,layer=L][,stride=S][,label=N]",
                       help="an appearance model (a row): imagenet-lite0, random, or a "
                       "checkpoint file, with options (repeatable)")
     card.add_argument("--data", help="folder holding benchmark folders (MOT17/, DAVIS/, ...; "

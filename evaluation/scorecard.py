@@ -92,12 +92,16 @@ BASELINE = "baseline (no appearance)"
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """One appearance model (a scorecard row): ``weights[,arch=..][,layer=..][,label=..]``."""
+    """One appearance model (a scorecard row).
+
+    ``weights[,arch=..][,layer=..][,stride=..][,label=..]`` (``stride``: ViT only).
+    """
 
     weights: str
     arch: str | None = None
     layer: str | None = None
     label: str = ""
+    stride: str | None = None
 
     @classmethod
     def parse(cls, text: str) -> ModelSpec:
@@ -106,13 +110,15 @@ class ModelSpec:
         values: dict[str, str] = {}
         for option in options:
             key, sep, value = option.partition("=")
-            if not sep or key not in ("arch", "layer", "label"):
-                raise ValueError(f"--model '{text}': options are arch=, layer= and label= "
+            if not sep or key not in ("arch", "layer", "stride", "label"):
+                raise ValueError(f"--model '{text}': options are arch=, layer=, stride= and "
+                                 "label= "
                                  f"(comma-separated after the weights); got '{option}'")
             values[key] = value
         if not weights:
             raise ValueError(f"--model '{text}' names no weights")
-        return cls(weights, values.get("arch"), values.get("layer"), values.get("label", ""))
+        return cls(weights, values.get("arch"), values.get("layer"), values.get("label", ""),
+                   values.get("stride"))
 
     @property
     def name(self) -> str:
@@ -121,7 +127,8 @@ class ModelSpec:
             return self.label
         base = Path(self.weights).stem if os.sep in self.weights or "." in self.weights \
             else self.weights
-        return "+".join(part for part in (base, self.arch, self.layer) if part)
+        stride = f"s{self.stride}" if self.stride else ""
+        return "+".join(part for part in (base, self.arch, self.layer, stride) if part)
 
     def agent_kwargs(self) -> dict[str, Any]:
         """The appearance options every UniTrack head takes.
@@ -136,6 +143,8 @@ class ModelSpec:
             kwargs["arch"] = self.arch
         if self.layer:
             kwargs["layer"] = self.layer
+        if self.stride:
+            kwargs["stride"] = self.stride
         return kwargs
 
 
@@ -341,7 +350,7 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
     from unitrack_env.agents.appearance.weights import load_weights
 
     for model in models:  # a bad checkpoint or layer is one error now, not one per cell later
-        load_weights(model.weights, arch=model.arch, layer=model.layer)
+        load_weights(model.weights, arch=model.arch, layer=model.layer, stride=model.stride)
     return names, data_path
 
 

@@ -1,7 +1,8 @@
 """The backbones an appearance model can build, their output layers and hypercolumns.
 
 :func:`build_network` makes the ``nn.Module`` of an architecture (:data:`ARCHITECTURES`) run
-at stride 8 up to its output layer(s); :func:`split_layers` reads a ``layer`` option (one
+at stride 8 up to its output layer(s) (a ViT at its patch size, or its ``stride`` option);
+:func:`split_layers` reads a ``layer`` option (one
 layer, or a hypercolumn such as ``"stage3+stage5"``) and :func:`combine_layers` joins the
 per-layer maps of a hypercolumn.
 """
@@ -18,18 +19,21 @@ from torch import nn
 
 from .efficientnet_lite import LITE0_LAYERS, EfficientNetLite0
 from .resnet import RESNET_SPECS, ResNet
+from .vit import VIT_SPECS, StrideOption, VisionTransformer
 
 FEATURE_STRIDE: int = 8
-"""Stride of every feature map this model produces (UniTrack's r = 8)."""
+"""Stride of every CNN feature map this model produces (UniTrack's r = 8); a ViT's map has
+the stride of its patches (or of its ``stride`` option), which the heads read from the model."""
 
 EFFICIENTNET_LITE0: str = "efficientnet-lite0"
 """Architecture name of the default backbone."""
 
-ARCHITECTURES: tuple[str, ...] = (EFFICIENTNET_LITE0, *RESNET_SPECS)
+ARCHITECTURES: tuple[str, ...] = (EFFICIENTNET_LITE0, *RESNET_SPECS, *VIT_SPECS)
 """Architectures :class:`AppearanceModel` can build."""
 
 DEFAULT_LAYERS: Mapping[str, str] = MappingProxyType(
-    {EFFICIENTNET_LITE0: "stage5", **{name: "layer3" for name in RESNET_SPECS}}
+    {EFFICIENTNET_LITE0: "stage5", **{name: "layer3" for name in RESNET_SPECS},
+     **{name: spec.layers[-1] for name, spec in VIT_SPECS.items()}}
 )
 """Default output layer per architecture.
 
@@ -43,7 +47,8 @@ vs 0.71), so it is an option, not the default. MOT17 ground-truth boxes (frame 1
 four sequences) all matched by RSM at every stage, mean margin to the best wrong match
 0.575 (stage5) vs 0.543 (stage3). Cost on 2 CPU threads at 1088 x 608: ~0.25 s (stage5) vs
 ~0.14 s (stage3), about ResNet-18 layer3's ~0.20 s. Use ``layer="stage3"`` for the fastest
-features."""
+features. ViT: the last block (``block12``, ``block24`` for ViT-L), as DINO's video
+evaluation uses."""
 
 LAYER_SEPARATOR: str = "+"
 """Joins several layers into one hypercolumn output, e.g. ``"stage3+stage5"``."""
@@ -75,17 +80,30 @@ def combine_layers(maps: list[torch.Tensor]) -> torch.Tensor:
     return torch.cat([F.normalize(m, dim=1, eps=NORM_EPS) * scale for m in maps], 1)
 
 
-def build_network(arch: str, layers: tuple[str, ...], seed: int) -> nn.Module:
+def build_network(arch: str, layers: tuple[str, ...], seed: int,
+                  stride: int | str | StrideOption | None = None) -> nn.Module:
     """The randomly initialised network of ``arch`` whose ``layers`` all have stride 8.
 
     Args:
         arch: One of :data:`ARCHITECTURES`.
         layers: The output layers (see :func:`split_layers`).
         seed: Seed of the initialisation (the global torch RNG is left untouched).
+        stride: ViT only: the :class:`~.vit.StrideOption` (None: the patch size).
 
     Raises:
-        ValueError: An unknown layer, or one whose stride is not :data:`FEATURE_STRIDE`.
+        ValueError: An unknown layer, a CNN layer whose stride is not
+            :data:`FEATURE_STRIDE`, or a ``stride`` for a CNN.
     """
+    if arch in VIT_SPECS:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            vit = VisionTransformer(arch, stride=stride)
+        for layer in layers:
+            vit.layer_stride(layer)  # validates the name
+        return vit
+    if stride is not None:
+        raise ValueError(f"stride={stride!r} applies to ViT architectures only; {arch} "
+                         f"always produces stride-{FEATURE_STRIDE} maps")
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         if arch == EFFICIENTNET_LITE0:

@@ -17,6 +17,8 @@ from torch import nn
 
 from unitrack_env.errors import CheckpointError  # defined there so that it pickles
 
+from .vit_checkpoints import VIT_REMAP_FIELDS, apply_key_rules
+
 IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
 """ImageNet RGB mean of inputs scaled to [0, 1] (torchvision's models and most SSL models)."""
 
@@ -29,9 +31,10 @@ CIFAR_MEAN: tuple[float, float, float] = (0.4914, 0.4822, 0.4465)
 CIFAR_STD: tuple[float, float, float] = (0.2023, 0.1994, 0.2010)
 """CIFAR-style RGB standard deviation that CRW checkpoints were trained with."""
 
-OPTIONAL_KEY_SUFFIXES: tuple[str, ...] = ("num_batches_tracked",)
-"""Buffers that do not affect inference; older torchvision files (e.g. the original
-``resnet18-5c106cde.pth``) lack them, so their absence is reported but never fatal."""
+OPTIONAL_KEY_SUFFIXES: tuple[str, ...] = ("num_batches_tracked", "ls1.gamma", "ls2.gamma")
+"""Keys whose absence is reported but never fatal: buffers that do not affect inference
+(older torchvision files, e.g. ``resnet18-5c106cde.pth``, lack them) and a ViT's layer
+scale, which only DINOv2 trains (kept at ones, the identity, for DINO, MAE and timm files)."""
 
 MAX_DETAIL_CHARS: int = 300
 """Longest excerpt of torch's own loading error quoted in a :class:`CheckpointError`."""
@@ -52,6 +55,9 @@ class KeyRemap:
             Keys that match none are kept unchanged (and usually end up "unexpected").
         squeeze_5d: Turn 5-D kernels ``(out, in, 1, k, k)`` into 2-D ones (TimeCycle's
             3-D convolutions with temporal size 1).
+        drop_prefixes: Keys (after stripping) that are not the backbone, dropped (e.g. a
+            DINO projection ``head.``, MAE's ``decoder_``).
+        rename_prefixes: ``(old, new)`` prefixes renamed when no key starts with ``new``.
         mean: RGB mean the weights were trained with (None: ImageNet's).
         std: RGB standard deviation the weights were trained with (None: ImageNet's).
         description: Where the rule comes from.
@@ -61,6 +67,8 @@ class KeyRemap:
     containers: tuple[str, ...] = ("state_dict", "model")
     strip_prefixes: tuple[str, ...] = ()
     squeeze_5d: bool = False
+    drop_prefixes: tuple[str, ...] = ()
+    rename_prefixes: tuple[tuple[str, str], ...] = ()
     mean: tuple[float, float, float] | None = None
     std: tuple[float, float, float] | None = None
     description: str = ""
@@ -102,6 +110,7 @@ DEFAULT_REMAPS: Mapping[str, KeyRemap] = MappingProxyType({
             ("infomin", "InfoMin"), ("detco", "DetCo"), ("pixpro", "PixPro"),
         )
     },
+    **{key: KeyRemap(key, **fields) for key, fields in VIT_REMAP_FIELDS.items()},
 })
 """Read-only remap table: checkpoint family -> :class:`KeyRemap`. Names listed in the
 UniTrack code facts; the plain-R50 families share one rule and are listed for discoverability."""
@@ -239,6 +248,8 @@ def extract_state_dict(
         if remap.squeeze_5d and value.ndim == 5 and value.shape[2] == 1:
             value = value[:, :, 0]
         renamed[key] = value
+    if remap.drop_prefixes or remap.rename_prefixes:
+        renamed = apply_key_rules(renamed, remap.drop_prefixes, remap.rename_prefixes)
     return renamed
 
 
@@ -270,8 +281,11 @@ def choose_remap(
     *,
     path: str | os.PathLike[str] | None = None,
 ) -> KeyRemap:
-    """Pick the remap under which the most model keys match (ties: table order)."""
-    best: tuple[int, KeyRemap] | None = None
+    """Pick the remap under which the most model keys match.
+
+    Ties: the fewest keys left over, then table order.
+    """
+    best: tuple[tuple[int, int], KeyRemap] | None = None
     errors = []
     for remap in remaps.values():
         try:
@@ -279,10 +293,11 @@ def choose_remap(
         except CheckpointError as exc:
             errors.append(str(exc))
             continue
-        score = sum(
+        matched = sum(
             1 for k, v in state.items()
             if k in model_state and tuple(v.shape) == tuple(model_state[k].shape)
         )
+        score = (matched, -len(state.keys() - model_state.keys()))
         if best is None or score > best[0]:
             best = (score, remap)
     if best is None:

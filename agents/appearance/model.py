@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .architectures import FEATURE_STRIDE, combine_layers
+from .architectures import combine_layers
 from .checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
 from .identity import ModelIdentity, weights_digest
 from .runtime import (
@@ -69,12 +69,14 @@ class AppearanceModel:
     Args:
         weights: Named weights (``"imagenet-lite0"`` default, ``"random"``), a
             ``"torchvision:<Enum>.<MEMBER>"`` string, or a checkpoint file path.
-        arch: ``"efficientnet-lite0"``, ``"resnet18"``, ``"resnet34"``, ``"resnet50"`` or
-            ``"resnet101"``. None: the weights' own architecture (inferred from the keys for
-            a file; ResNet-18 for random init).
+        arch: ``"efficientnet-lite0"``, ``"resnet18"``, ``"resnet34"``, ``"resnet50"``,
+            ``"resnet101"`` or a ViT (``"vit_small_patch14"``, ``"vit_base_patch8"``, ...,
+            ``_reg4`` with registers; :data:`~.vit.VIT_SPECS`). None: the weights' own
+            architecture (inferred from the keys for a file; ResNet-18 for random init).
         layer: Output layer (ResNet ``"layer2"``..``"layer4"``; EfficientNet ``"stage3"``..
-            ``"head"``), or several joined by ``"+"`` for a hypercolumn (see
-            :func:`split_layers`). None: :data:`DEFAULT_LAYERS`. Each must have stride 8.
+            ``"head"``; ViT ``"block1"``..``"block12"``), or several joined by ``"+"`` for a
+            hypercolumn (see :func:`split_layers`). None: :data:`DEFAULT_LAYERS`. Each CNN
+            layer must have stride 8.
         device: Torch device for the network and the returned features.
         num_threads: When given, ``torch.set_num_threads(num_threads)`` for the duration of
             each forward pass (the previous setting is restored afterwards).
@@ -98,6 +100,9 @@ class AppearanceModel:
             :mod:`~unitrack_env.agents.appearance.runtime`.
         runtime_cache: Directory of the exported graphs (None: ``$UNITRACK_RUNTIME_CACHE`` or
             ``~/.cache/unitrack_env/runtime``).
+        stride: ViT only: feature stride below the patch size, ``8`` / ``"8-overlap"``
+            (overlapping patch embedding) or ``"8-upsample"`` (see :mod:`.vit`). None: the
+            patch size.
 
     Attributes:
         module: The ``nn.Module`` (in eval mode, on ``device``).
@@ -105,7 +110,8 @@ class AppearanceModel:
         load_report: :class:`LoadReport` of the weights (None for random init).
         layers: The output layers (one, or the parts of a hypercolumn).
         channels: Channels of the feature map (summed over hypercolumn parts).
-        stride: Always :data:`FEATURE_STRIDE`.
+        stride: Pixels per feature cell: :data:`FEATURE_STRIDE` (8) for the CNNs, the patch
+            size (or the ``stride`` option) for a ViT. Heads read it from here.
         runtime: The concrete runtime (``"auto"`` and None resolved).
 
     Example:
@@ -133,6 +139,7 @@ class AppearanceModel:
         channels_last: bool = False,
         runtime: str | None = None,
         runtime_cache: str | os.PathLike[str] | None = None,
+        stride: int | str | None = None,
     ) -> None:
         if num_threads is not None and num_threads < 1:
             raise ValueError(f"num_threads must be >= 1 or None, got {num_threads}")
@@ -141,10 +148,13 @@ class AppearanceModel:
         self.num_threads = num_threads
         self.runtime = resolve_runtime(runtime, self.device)
         loaded = load_weights(weights, arch=arch, layer=layer, remap=remap, remaps=remaps,
-                              loaders=loaders, allow_partial=allow_partial, seed=seed)
+                              loaders=loaders, allow_partial=allow_partial, seed=seed,
+                              stride=stride)
         self._place(loaded, mean, std, channels_last)
+        option = getattr(self.module, "stride_option", None)  # a ViT's non-default stride
         self.identity = ModelIdentity(
-            self.arch, self.layer, loaded.name, weights_digest(self.module, loaded.required),
+            self.arch, self.layer if option is None else f"{self.layer}@stride{option}",
+            loaded.name, weights_digest(self.module, loaded.required),
             self.mean, self.std, self.runtime,
         )
         self._prepare_inference(runtime_cache, verify=is_auto(runtime))
@@ -162,7 +172,7 @@ class AppearanceModel:
         if channels_last:
             self.module.to(memory_format=torch.channels_last)
         self.channels = sum(self.module.layer_channels(name) for name in self.layers)
-        self.stride = FEATURE_STRIDE
+        self.stride: int = self.module.layer_stride(self.layers[0])
 
     def _prepare_inference(self, runtime_cache: str | os.PathLike[str] | None,
                            verify: bool = False) -> None:
@@ -222,7 +232,7 @@ class AppearanceModel:
         return (x - self._mean_t) / self._std_t
 
     def features(self, images: np.ndarray | Sequence[np.ndarray] | torch.Tensor) -> torch.Tensor:
-        """Feature maps ``(B, C, ceil(H / 8), ceil(W / 8))`` (float32, on ``device``).
+        """Feature maps ``(B, C, ceil(H / s), ceil(W / s))``, ``s`` = :attr:`stride` (float32).
 
         Args:
             images: See :meth:`preprocess`.
@@ -235,18 +245,17 @@ class AppearanceModel:
                 if self.channels_last:
                     x = x.contiguous(memory_format=torch.channels_last)
                 out = self._network(x).contiguous()
-        expected = (math.ceil(x.shape[2] / FEATURE_STRIDE), math.ceil(x.shape[3] / FEATURE_STRIDE))
+        expected = (math.ceil(x.shape[2] / self.stride), math.ceil(x.shape[3] / self.stride))
         if tuple(out.shape[2:]) != expected:  # an architecture bug, never user input
-            raise RuntimeError(f"feature map {tuple(out.shape)} is not stride 8 of {x.shape}")
+            raise RuntimeError(
+                f"feature map {tuple(out.shape)} is not stride {self.stride} of {x.shape}")
         return out
 
     __call__ = features
 
     def feature_shape(self, height: int, width: int) -> tuple[int, int, int]:
         """Shape ``(C, h, w)`` of the feature map of one ``height`` x ``width`` image."""
-        return (
-            self.channels, math.ceil(height / FEATURE_STRIDE), math.ceil(width / FEATURE_STRIDE)
-        )
+        return self.channels, math.ceil(height / self.stride), math.ceil(width / self.stride)
 
     def describe(self) -> dict[str, Any]:
         """A plain dict for logs and reports: identity, channels, stride, device."""

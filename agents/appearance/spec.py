@@ -32,6 +32,8 @@ class AppearanceSpec:
         num_threads: Torch threads while the agent acts (None: torch's setting).
         runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` (fastest
             installed) or None (``$UNITRACK_RUNTIME``, default auto).
+        stride: ViT only: feature stride below the patch size (``8``, ``"8-overlap"``,
+            ``"8-upsample"``); None: the patch size.
     """
 
     weights: str = "imagenet-lite0"
@@ -41,6 +43,7 @@ class AppearanceSpec:
     device: str = "cpu"
     num_threads: int | None = None
     runtime: str | None = None
+    stride: int | str | None = None
 
     @classmethod
     def from_options(cls: type[SpecT], agent: str, options: Mapping[str, Any]) -> SpecT:
@@ -79,4 +82,4 @@ class AppearanceSpec:
         spec = self.appearance()
         return AppearanceModel(spec.weights, arch=spec.arch, layer=spec.layer, remap=spec.remap,
                                device=spec.device, num_threads=spec.num_threads,
-                               runtime=spec.runtime, **extra)
+                               runtime=spec.runtime, stride=spec.stride, **extra)

@@ -46,6 +46,7 @@ from .checkpoints import (
 )
 from .efficientnet_lite import LITE0_MEAN, LITE0_STD
 from .resnet import ResNet, infer_resnet_arch
+from .vit import infer_vit_arch
 
 RANDOM_DEFAULT_ARCH: str = "resnet18"
 """Architecture of ``weights="random"`` when none is given (the paper's baseline is R18)."""
@@ -183,6 +184,7 @@ def load_weights(
     loaders: Mapping[str, WeightsLoader] = DEFAULT_WEIGHT_LOADERS,
     allow_partial: bool = False,
     seed: int = 0,
+    stride: int | str | None = None,
 ) -> LoadedWeights:
     """Resolve ``weights``, build the network they belong to and load them into it.
 
@@ -195,7 +197,7 @@ def load_weights(
     resolved = resolve_weights(weights, arch=arch, remap=remap, loaders=loaders)
     layer = layer if layer is not None else DEFAULT_LAYERS[resolved.arch]
     layers = split_layers(layer)
-    module = build_network(resolved.arch, layers, seed)
+    module = build_network(resolved.arch, layers, seed, stride)
     required = required_prefixes(module, layers)
     report, mean, std = _load_source(module, resolved, required, remap=remap, remaps=remaps,
                                      allow_partial=allow_partial)
@@ -281,7 +283,8 @@ def resolve_weights(
 def infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
     """Architecture of a checkpoint (content ``obj`` of ``path``), from its keys.
 
-    A ResNet's depth from its blocks, or EfficientNet-Lite0 from its ``_conv_stem``.
+    A ResNet's depth from its blocks, EfficientNet-Lite0 from its ``_conv_stem``, or a ViT
+    from its ``patch_embed.proj.weight`` (width, patch), blocks (depth) and registers.
     """
     if isinstance(remap, KeyRemap):
         candidates = [remap]
@@ -303,6 +306,8 @@ def infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
     if arch is None and _holds_lite0(obj, candidates, path):
         arch = EFFICIENTNET_LITE0
     if arch is None:
+        arch = _vit_arch(obj, candidates, path)
+    if arch is None:
         raise CheckpointError(
             path,
             f"cannot infer the architecture from the keys (remap {chosen.name!r}; first keys: "
@@ -320,6 +325,18 @@ def _holds_lite0(obj: Any, remaps: Sequence[KeyRemap], path: Path) -> bool:
         except CheckpointError:
             continue
     return False
+
+
+def _vit_arch(obj: Any, remaps: Sequence[KeyRemap], path: Path) -> str | None:
+    """The ViT architecture of the checkpoint under the first of ``remaps`` that finds one."""
+    for remap in remaps:
+        try:
+            arch = infer_vit_arch(extract_state_dict(obj, remap, path=path))
+        except CheckpointError:
+            continue
+        if arch is not None:
+            return arch
+    return None
 
 
 def _torchvision_weights(spec: str) -> WeightsSource:

@@ -126,7 +126,8 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config, self.model = UniTrackPoseConfig.configure(self.name, options, appearance_model)
-        self.propagator = LabelPropagator(make_propagation_config(self.config.propagation))
+        propagation = make_propagation_config(self.config.propagation, self.model.stride)
+        self.propagator = LabelPropagator(propagation)
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None
         self._first_answer: np.ndarray | None = None

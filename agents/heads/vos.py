@@ -45,15 +45,21 @@ class UniTrackVOSConfig(AppearanceSpec):
     antialias: bool = True
     feature_cache: str | os.PathLike[str] | bool | None = True
 
-    def propagation_config(self) -> LabelPropagationConfig:
-        """The :class:`LabelPropagationConfig` these options describe."""
-        return make_propagation_config(self.propagation)
+    def propagation_config(self, stride: int | None = None) -> LabelPropagationConfig:
+        """The :class:`LabelPropagationConfig` these options describe (for ``stride``)."""
+        return make_propagation_config(self.propagation, stride)
 
 
-def make_propagation_config(options: dict[str, Any] | None) -> LabelPropagationConfig:
-    """A :class:`LabelPropagationConfig` from a dict of overrides, with a clear error."""
+def make_propagation_config(options: dict[str, Any] | None,
+                            stride: int | None = None) -> LabelPropagationConfig:
+    """A :class:`LabelPropagationConfig` from a dict of overrides, with a clear error.
+
+    ``stride``: the model's feature stride; the radii are rescaled to it
+    (:meth:`LabelPropagationConfig.for_stride`). None: as given.
+    """
     try:
-        return LabelPropagationConfig(**(options or {}))
+        config = LabelPropagationConfig(**(options or {}))
+        return config if stride is None else config.for_stride(stride)
     except TypeError as exc:
         valid = ", ".join(f.name for f in fields(LabelPropagationConfig))
         raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
@@ -97,7 +103,7 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
                  **options: Any) -> None:
         self.config, self.model = UniTrackVOSConfig.configure(self.name, options, appearance_model)
         self.cached = with_cache(self.model, self.config.feature_cache)
-        self.propagator = LabelPropagator(self.config.propagation_config())
+        self.propagator = LabelPropagator(self.config.propagation_config(self.model.stride))
         self.object_ids: tuple[int, ...] = ()
         self._first_answer: np.ndarray | None = None
         self._lookup = np.zeros(1, np.uint8)

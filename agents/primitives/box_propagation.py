@@ -105,7 +105,8 @@ class BoxPropagationConfig:
         template_window: DCF only: the features the filter is trained on (first frame and
             updates) are multiplied by a Hann window covering this many target sizes around
             the centre instead of the whole crop (None: the crop-wide window).
-        template_size: XCorr template side (feature pixels).
+        template_size: XCorr template side (feature pixels of the stride-8 map; a model of
+            another stride cuts a template of the same extent in crop pixels).
         dcf_lambda: DCF regularisation.
         dcf_interp: DCF online update momentum (0: no update).
         dcf_sigma_factor: DCF Gaussian label sigma relative to the target size in features.

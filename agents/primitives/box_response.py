@@ -9,6 +9,7 @@ described in :mod:`unitrack_env.agents.primitives.box_propagation`.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import cv2
@@ -120,7 +121,9 @@ class XCorrHead:
     def init(self, features: torch.Tensor) -> None:
         """Cut the central template from the first crop's ``(1, C, s, s)`` features."""
         size = features.shape[-1]
-        t = min(self.config.template_size, size)
+        # template_size is for the stride-8 map of the crop; other strides keep its extent.
+        t = min(max(1, round(self.config.template_size * size
+                             / math.ceil(self.config.crop_size / 8))), size)
         self.start = (size - t) // 2
         self.template = features[:, :, self.start:self.start + t,
                                  self.start:self.start + t].contiguous()

@@ -6,7 +6,7 @@ More in docs/module-notes.md.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 import torch.nn.functional as F
@@ -23,6 +23,9 @@ from .label_windows import WindowSearch
 
 MEMORY_SIZE: int = 6
 """``M``: frames in the memory bank, the first frame plus the ``M - 1`` latest (appendix B.2)."""
+
+RADIUS_STRIDE: int = 8
+"""Feature stride the default radius is given for (UniTrack's stride-8 maps)."""
 
 LOCAL_RADIUS: float = 12.0
 """``r``: local attention radius in feature pixels (Euclidean) for the recent frames."""
@@ -58,9 +61,13 @@ class LabelPropagationConfig:
 
     Attributes:
         memory_size: ``M``, the first frame plus ``M - 1`` latest frames (>= 1).
-        radius: Local attention radius (feature pixels, Euclidean) for the recent frames;
-            None: no limit (dense affinity over every recent frame, slow).
+        radius: Local attention radius (feature pixels at ``radius_stride``, Euclidean) for
+            the recent frames; None: no limit (dense affinity over every recent frame, slow).
         first_frame_radius: Radius for the first frame; None (default): no limit.
+        radius_stride: The feature stride the radii are given for (8: UniTrack's); a model
+            of another stride gets them through :meth:`for_stride`, the same reach in image
+            pixels (12 cells at stride 8 = 96 pixels = 6.9 cells at stride 14). None: the
+            radii are in the model's own feature pixels.
         topk: Memory locations kept per query.
         temperature: Softmax temperature over the kept affinities.
         normalize: L2-normalise every location's feature (cosine affinities).
@@ -79,12 +86,26 @@ class LabelPropagationConfig:
     memory_size: int = MEMORY_SIZE
     radius: float | None = LOCAL_RADIUS
     first_frame_radius: float | None = None
+    radius_stride: int | None = RADIUS_STRIDE
     topk: int = TOP_K
     temperature: float = TEMPERATURE
     normalize: bool = True
     tile_size: int = TILE_SIZE
     max_affinity_elements: int = MAX_AFFINITY_ELEMENTS
     affinity_dtype: str = "float32"
+
+    def for_stride(self, stride: int) -> LabelPropagationConfig:
+        """These options for a model whose feature cell is ``stride`` pixels.
+
+        The radii are rescaled from ``radius_stride`` (unchanged when equal, or when
+        ``radius_stride`` is None).
+        """
+        if self.radius_stride is None or stride == self.radius_stride:
+            return self
+        scale = self.radius_stride / stride
+        return replace(self, radius_stride=stride, **{
+            name: None if getattr(self, name) is None else getattr(self, name) * scale
+            for name in ("radius", "first_frame_radius")})
 
     def __post_init__(self) -> None:
         if self.affinity_dtype not in AFFINITY_DTYPES:
