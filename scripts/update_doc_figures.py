@@ -51,8 +51,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-#: Documents whose tables are checked (docs/envs/ pages are generated from docstrings).
-DOCS = ("README.md", *sorted(f"docs/{p.name}" for p in (REPO / "docs").glob("*.md")))
+#: Pages generated whole by a script whose test keeps them up to date: their figures are
+#: that script's output (docs/envs/*.md come from the env docstrings, tests/test_docs.py).
+GENERATED = {"docs/bad-inputs.md": "python scripts/make_bad_input_docs.py, checked by "
+                                   "tests/corpus/test_bad_inputs.py"}
+#: Documents whose tables are checked.
+DOCS = ("README.md", *sorted(f"docs/{p.name}" for p in (REPO / "docs").glob("*.md")
+                             if f"docs/{p.name}" not in GENERATED))
 #: Replay kinds: who replays a source's cells.
 REPLAYS = ("ci", "slow", "benchmark", "manual", "test")
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?")
@@ -99,8 +104,12 @@ class Figures:
     replays: dict[int, tuple[str, str]] = field(default_factory=dict)
 
     def replay(self, source: int) -> str:
-        """``ci``, ``slow`` (the default), ``benchmark``, ``manual`` or ``test <node>``."""
-        return self.replays.get(source, ("slow", ""))[0]
+        """``ci``, ``slow`` (the default), ``benchmark``, ``manual`` or ``test``."""
+        return self.replays.get(source, ("slow", ""))[0].split(" ", 1)[0]
+
+    def replayed_by(self, source: int) -> str:
+        """The test named by ``replay $N test <file>::<name>`` (empty otherwise)."""
+        return self.replays.get(source, ("", ""))[0].partition(" ")[2].strip()
 
     def tolerance(self, column: str) -> float:
         return next((tol for glob, tol, _ in self.tolerances
@@ -340,7 +349,8 @@ def dry_parse(command: str) -> None:
             try:
                 args = build_parser().parse_args(words[1:])
             except SystemExit:
-                raise ValueError(f"{command}: {err.getvalue().strip()}") from None
+                raise ValueError(f"{command}: {err.getvalue().strip().splitlines()[-1]}") \
+                    from None
         if words[1] in ("evaluate", "render"):
             _env_kwargs(args)
             _agent_kwargs(args)
@@ -350,34 +360,46 @@ def dry_parse(command: str) -> None:
     _dry_parse_script(REPO / words[1], words[2:])
 
 
-class _Parsed(Exception):
-    pass
+#: ``type=`` callables a static parser understands; any other converts to a string.
+_TYPES = {"int": int, "float": float, "str": str, "Path": Path}
+
+
+def _literal(node):
+    """A keyword value of ``add_argument``, or None when it is not a literal."""
+    import ast
+
+    if isinstance(node, ast.Name):
+        return _TYPES.get(node.id, str)
+    if isinstance(node, ast.Attribute):
+        return str
+    try:
+        return ast.literal_eval(node)
+    except ValueError:
+        return None
 
 
 def _dry_parse_script(script: Path, args: list[str]) -> None:
-    """Import ``script`` as ``__main__`` and stop it right after argparse accepted ``args``."""
-    import runpy
+    """Parse ``args`` with the script's ``add_argument`` calls, read from its source.
 
-    original = argparse.ArgumentParser.parse_args
+    Reading the calls (instead of importing the script) keeps the check to milliseconds: a
+    benchmark imports torch and its whole stack before parsing anything.
+    """
+    import ast
 
-    def parse_and_stop(self, argv=None, namespace=None):
-        original(self, argv, namespace)
-        raise _Parsed
-
-    saved = sys.argv
-    sys.argv = [str(script), *args]
-    argparse.ArgumentParser.parse_args = parse_and_stop
+    parser = argparse.ArgumentParser(prog=script.name, exit_on_error=False)
+    for node in ast.walk(ast.parse(script.read_text())):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
+                node.func.attr == "add_argument":
+            names = [_literal(a) for a in node.args]
+            options = {k.arg: _literal(k.value) for k in node.keywords if k.arg}
+            options = {k: v for k, v in options.items() if k != "default" and v is not None}
+            parser.add_argument(*names, **options)
     try:
         with contextlib.redirect_stderr(io.StringIO()) as err:
-            runpy.run_path(str(script), run_name="__main__")
-    except _Parsed:
-        return
-    except SystemExit:
-        raise ValueError(f"{script.name} {shlex.join(args)}: {err.getvalue().strip()}") from None
-    finally:
-        argparse.ArgumentParser.parse_args = original
-        sys.argv = saved
-    raise ValueError(f"{script.name} ran to the end without parsing arguments")
+            parser.parse_args(args)
+    except (argparse.ArgumentError, SystemExit) as exc:
+        text = (err.getvalue().strip() or str(exc)).splitlines()[-1]
+        raise ValueError(f"{script.name} {shlex.join(args)}: {text}") from None
 
 
 # ------------------------------------------------------------------------------ comparing
