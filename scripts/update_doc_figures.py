@@ -13,8 +13,8 @@ from; each command it names is also printed, verbatim, in the visible text of th
 section, so a reader sees it::
 
     <!-- figures
-    $ unitrack evaluate --env UniTrack/MOT15-v0 --root ../shared/data/MOT15 --agent iou --out runs/pets-iou
-    cell PETS09-S2L1 (real, 400 frames) | `iou` <- $1 COMBINED | HOTA / IDF1 / MOTA
+    $ unitrack evaluate --env UniTrack/MOT16-v0 --agent iou --out runs/mot16-iou
+    cell Synthetic MOT16 | `iou` <- $1 COMBINED | HOTA / IDF1 / MOTA
     cell * | * <- $1 * | *
     skip FPS: frames per second of the machine that ran it (a speed figure)
     tolerance SOT* 1.0: why this column moves between CPUs
@@ -77,6 +77,7 @@ class Table:
     box: bool = False
 
     def label(self) -> str:
+        """``doc:line``, how messages name the table."""
         return f"{self.doc}:{self.line}"
 
 
@@ -112,10 +113,12 @@ class Figures:
         return self.replays.get(source, ("", ""))[0].partition(" ")[2].strip()
 
     def tolerance(self, column: str) -> float:
+        """The first matching ``tolerance`` line's value for ``column`` (default 0)."""
         return next((tol for glob, tol, _ in self.tolerances
                      if fnmatch.fnmatchcase(column, glob)), 0.0)
 
     def skipped(self, column: str) -> bool:
+        """Whether a ``skip`` line excuses ``column`` from the comparison."""
         return any(fnmatch.fnmatchcase(column, glob) for glob, _ in self.skips)
 
 
@@ -237,6 +240,7 @@ def figures_of(doc: str) -> tuple[list[Figures], list[Table]]:
 
 
 def all_figures() -> tuple[list[Figures], list[Table]]:
+    """:func:`figures_of` over every checked document."""
     found, missing = [], []
     for doc in DOCS:
         f, m = figures_of(doc)
@@ -405,6 +409,8 @@ def _dry_parse_script(script: Path, args: list[str]) -> None:
 # ------------------------------------------------------------------------------ comparing
 @dataclass
 class Mismatch:
+    """A documented cell and the value its command printed instead."""
+
     figures: Figures
     row: str
     column: str
@@ -439,7 +445,7 @@ def _same(documented: str, replayed: str, tolerance: float) -> bool:
     numbers = [NUMBER.findall(x) for x in (a, b)]
     if not numbers[0] or len(numbers[0]) != len(numbers[1]):
         return False
-    return all(abs(float(x) - float(y)) <= tolerance + 1e-9 for x, y in zip(*numbers))
+    return all(abs(float(x) - float(y)) <= tolerance + 1e-9 for x, y in zip(*numbers, strict=True))
 
 
 def cell_map(figures: Figures) -> dict[tuple[int, int], Cell]:
@@ -507,6 +513,7 @@ def rewrite(mismatches: list[Mismatch]) -> None:
 
 
 def replay_figures(figures: Figures, kinds: set[str], work: Path) -> dict[int, dict]:
+    """Run the table's sources whose replay kind is in ``kinds``; their output rows."""
     outputs = {}
     for n, command in enumerate(figures.sources, start=1):
         if figures.replay(n) in kinds:
@@ -517,6 +524,7 @@ def replay_figures(figures: Figures, kinds: set[str], work: Path) -> dict[int, d
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Replay every table (or those ``--only`` names), then list or rewrite what differs."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="list differences, edit nothing")
     parser.add_argument("--only", default="", help="tables with a command containing this")

@@ -6,9 +6,9 @@ table, an HTML comment names the commands the numbers come from and maps the cel
 each command is also printed, verbatim, in the visible text of the same section::
 
     <!-- figures
-    $ unitrack evaluate --env UniTrack/MOT15-v0 --root ../shared/data/MOT15 --agent iou --out runs/pets-iou
-    cell PETS09-S2L1 (real, 400 frames) | `iou` <- $1 COMBINED | HOTA / IDF1 / MOTA
-    replay $1 ci: the IoU baseline, seconds
+    $ unitrack evaluate --env UniTrack/MOT16-v0 --agent iou --out runs/mot16-iou
+    cell Synthetic MOT16 | `iou` <- $1 COMBINED | HOTA / IDF1 / MOTA
+    replay $1 ci: the IoU baseline on two short clips, seconds
     -->
 
 - ``cell * | * <- $1 * | *``: the table has the command's own rows and metric columns.
