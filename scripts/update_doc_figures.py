@@ -472,6 +472,11 @@ def compare(figures: Figures, outputs: dict[int, dict]) -> list[Mismatch]:
         if expected is not None and not _same(table.rows[i][j], expected, tolerance):
             wrong.append(Mismatch(figures, table.rows[i][0], column, table.rows[i][j],
                                   expected, tolerance, j))
+    shown = {row[0] for row in table.rows}
+    for cell in figures.cells:  # a whole-table cell line: the document shows every row
+        if cell.row == cell.out_row == "*" and cell.source in outputs:
+            wrong += [Mismatch(figures, name, "(row)", "<not in the document>", name, 0.0, 0)
+                      for name in outputs[cell.source] if name not in shown]
     return wrong
 
 

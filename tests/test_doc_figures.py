@@ -172,3 +172,12 @@ def test_tolerances_and_bold_marks():
     assert same("54.1 / 80.0 / 72.9", "54.1 / 80.0 / 72.9", 0.0)
     assert not same("54.1 / 80.0 / 72.9", "51.3 / 73.8 / 61.1", 0.2)
     assert not same("-", "0.0", 1.0)
+
+
+def test_a_row_the_document_lacks_is_reported():
+    figures = next(f for f in FOUND if f.table.doc == "docs/quickstart.md")
+    rows = {row[0]: dict(zip(figures.table.header[1:], row[1:], strict=True))
+            for row in figures.table.rows}
+    rows["SYN-03"] = rows["SYN-01"]
+    [wrong] = figures_module.compare(figures, {1: rows})
+    assert (wrong.row, wrong.documented) == ("SYN-03", "<not in the document>")
