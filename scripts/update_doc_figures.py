@@ -19,6 +19,7 @@ section, so a reader sees it::
     skip FPS: frames per second of the machine that ran it (a speed figure)
     tolerance SOT* 1.0: why this column moves between CPUs
     replay $1 ci: why CI may afford it (ci, slow, benchmark, manual, or test <file>::<name>)
+    ci-env UNITRACK_RUNTIME=auto: why the ci replay may set this (it must not move a figure)
     -->
 
 ``$ command`` lines are the sources (``$1``, ``$2``, ... in order), run from the repository
@@ -103,6 +104,7 @@ class Figures:
     skips: list[tuple[str, str]] = field(default_factory=list)
     tolerances: list[tuple[str, float, str]] = field(default_factory=list)
     replays: dict[int, tuple[str, str]] = field(default_factory=dict)
+    ci_env: dict[str, tuple[str, str]] = field(default_factory=dict)
 
     def replay(self, source: int) -> str:
         """``ci``, ``slow`` (the default), ``benchmark``, ``manual`` or ``test``."""
@@ -215,27 +217,45 @@ def _parse_line(figures: Figures, text: str) -> None:
         head, _, why = text[len("replay "):].partition(": ")
         source, kind = head.split(" ", 1)
         figures.replays[int(source.lstrip("$"))] = (kind.strip(), why.strip())
+    elif text.startswith("ci-env "):
+        head, _, why = text[len("ci-env "):].partition(": ")
+        name, _, value = head.strip().partition("=")
+        figures.ci_env[name] = (value, why.strip())
     else:
         raise ValueError(f"unknown line in a figures comment: {text!r}")
 
 
+def _parsed(doc: str, table: Table, comment: tuple[int, list[str]]) -> Figures:
+    figures = Figures(table, comment[0])
+    for text in comment[1]:
+        try:
+            _parse_line(figures, text)
+        except ValueError as exc:
+            raise ValueError(f"{doc}:{comment[0]}: {exc}") from None
+    return figures
+
+
 def figures_of(doc: str) -> tuple[list[Figures], list[Table]]:
-    """The figures comments of ``doc``, and the numeric tables that have none."""
+    """The figures comments of ``doc``, and the numeric tables that have none.
+
+    A comment above a paragraph instead of a table (figures quoted in prose, e.g. speed
+    figures) gets an empty table: its commands are checked, there are no cells to compare.
+    """
     lines = (REPO / doc).read_text().splitlines()
-    found, missing = [], []
+    found, missing, used = [], [], set()
     for before, table in tables(doc):
         comment = _comment_above(lines, before)
         if comment is None:
             if any(is_numeric(c) for row in table.rows for c in row[1:]):
                 missing.append(table)
             continue
-        figures = Figures(table, comment[0])
-        for text in comment[1]:
-            try:
-                _parse_line(figures, text)
-            except ValueError as exc:
-                raise ValueError(f"{doc}:{comment[0]}: {exc}") from None
-        found.append(figures)
+        used.add(comment[0])
+        found.append(_parsed(doc, table, comment))
+    for i, line in enumerate(lines):
+        if line.strip().startswith("<!-- figures") and i + 1 not in used:
+            end = next(k for k in range(i, len(lines)) if lines[k].rstrip().endswith("-->"))
+            comment = _comment_above(lines, end)
+            found.append(_parsed(doc, Table(doc, i + 1, [], []), comment))
     return found, missing
 
 

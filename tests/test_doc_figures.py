@@ -57,13 +57,28 @@ figures_module = load_figures()
 FOUND, MISSING = figures_module.all_figures()
 
 
+#: Sources whose documented cells wait for a change on another branch, with the reason. Each
+#: is a strict xfail: once the change has landed the replay passes, the xfail fails, and the
+#: entry must go (keyed by the command).
+PENDING = {
+    "unitrack evaluate --env UniTrack/MOT15-v0 --root ../shared/data/MOT15 --agent unitrack "
+    "--out runs/pets-unitrack":
+        "issue 22 item 1: the plain command prints README's PETS09 row once the MOT "
+        "defaults take the score range into account (today it needs new_track_score=50)",
+}
+
+
 def _sources(kind: str) -> list:
-    """(figures, source numbers) of every table with sources replayed as ``kind``."""
+    """(figures, source number) of every source replayed as ``kind``, one test each."""
     out = []
     for figures in FOUND:
-        numbers = [n for n in range(1, len(figures.sources) + 1) if figures.replay(n) == kind]
-        if numbers:
-            out.append(pytest.param(figures, numbers, id=figures.table.label()))
+        for n, command in enumerate(figures.sources, start=1):
+            if figures.replay(n) != kind:
+                continue
+            marks = [pytest.mark.xfail(strict=True, reason=PENDING[command])] \
+                if command in PENDING else []
+            out.append(pytest.param(figures, n, id=f"{figures.table.label()}-${n}",
+                                    marks=marks))
     return out
 
 
@@ -102,6 +117,9 @@ def test_every_numeric_cell_has_a_source_and_every_source_a_replay():
                     problems.append(f"{where}: ${n} names a test that does not exist")
             if kind in ("ci", "slow", "test") and not any(c.source == n for c in figures.cells):
                 problems.append(f"{where}: ${n} is replayed but sources no cell")
+        for name, (_, why) in figures.ci_env.items():
+            if not why:
+                problems.append(f"{where}: ci-env {name} without a reason")
     assert not problems, "\n".join(problems)
 
 
@@ -117,37 +135,39 @@ def test_every_command_parses(command):
     figures_module.dry_parse(command)
 
 
-def _replay(figures, numbers: list[int], tmp_path: Path) -> None:
-    outputs = {}
-    for n in numbers:
-        folder = tmp_path / f"source-{n}"
-        folder.mkdir()
-        outputs[n] = figures_module.run_source(figures.sources[n - 1], folder)
+def _replay(figures, n: int, tmp_path: Path) -> None:
+    outputs = {n: figures_module.run_source(figures.sources[n - 1], tmp_path)}
     wrong = figures_module.compare(figures, outputs)
-    assert not wrong, ("documented cells differ from their commands' output (if the change "
-                       "is intended: python scripts/update_doc_figures.py):\n"
+    assert not wrong, (f"documented cells differ from the output of `{figures.sources[n - 1]}`"
+                       " (if the change is intended: python scripts/update_doc_figures.py):\n"
                        + "\n".join(map(str, wrong)))
 
 
-# Named so that CI's `-m slow -k "scorecard or pets or replay_in_ci"` picks them: seconds.
+# Named so that CI's `-m slow -k "scorecard or pets or replay_in_ci"` picks them. A figures
+# comment's `ci-env` lines apply here only (e.g. a faster runtime whose features equal
+# torch's to float rounding); the slow replays and the update script run the plain commands.
 @pytest.mark.slow
-@pytest.mark.parametrize(("figures", "numbers"), _sources("ci"))
-def test_replay_in_ci(figures, numbers, tmp_path):
-    _replay(figures, numbers, tmp_path)
+@pytest.mark.parametrize(("figures", "n"), _sources("ci"))
+def test_replay_in_ci(figures, n, tmp_path, monkeypatch, request):
+    if any(part.startswith("../shared/") for part in figures.sources[n - 1].split()):
+        request.getfixturevalue("shared_data")  # skips without the fixtures
+    for name, (value, _) in figures.ci_env.items():
+        monkeypatch.setenv(name, value)
+    _replay(figures, n, tmp_path)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("figures", "numbers"), _sources("slow"))
-def test_replay_slow_doc_figures(figures, numbers, tmp_path, shared_data):
-    _replay(figures, numbers, tmp_path)
+@pytest.mark.parametrize(("figures", "n"), _sources("slow"))
+def test_replay_slow_doc_figures(figures, n, tmp_path, shared_data):
+    _replay(figures, n, tmp_path)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("figures", "numbers"), _sources("benchmark"))
-def test_replay_benchmark_doc_figures(figures, numbers, tmp_path, shared_data):
+@pytest.mark.parametrize(("figures", "n"), _sources("benchmark"))
+def test_replay_benchmark_doc_figures(figures, n, tmp_path, shared_data):
     if os.environ.get("UNITRACK_REPLAY_BENCHMARKS") != "1":
         pytest.skip("benchmark figures (network, half an hour): UNITRACK_REPLAY_BENCHMARKS=1")
-    _replay(figures, numbers, tmp_path)
+    _replay(figures, n, tmp_path)
 
 
 def test_a_wrong_cell_is_reported_with_its_documented_and_replayed_value():
@@ -155,6 +175,7 @@ def test_a_wrong_cell_is_reported_with_its_documented_and_replayed_value():
     rows = {row[0]: dict(zip(figures.table.header[1:], row[1:], strict=True))
             for row in figures.table.rows}
     assert figures_module.compare(figures, {1: rows}) == []
+    assert figures_module.compare(figures, {}) == []  # nothing replayed, nothing compared
     rows["COMBINED"]["HOTA"] = "12.3"
     [wrong] = figures_module.compare(figures, {1: rows})
     assert str(wrong) == (f"{figures.table.label()} row 'COMBINED', column 'HOTA': "
