@@ -3,7 +3,7 @@
 Usage:
   python scripts/update_doc_figures.py                 # replay every fixture-based table, rewrite
   python scripts/update_doc_figures.py --check         # replay and list the cells that differ
-  python scripts/update_doc_figures.py --only pets     # only tables whose commands contain "pets"
+  python scripts/update_doc_figures.py --only MOT15    # only the commands that contain "MOT15"
   python scripts/update_doc_figures.py --benchmarks    # also the tables a benchmark script makes
 
 The convention (tests/test_doc_figures.py enforces it): every table of numbers in README.md and
@@ -537,11 +537,15 @@ def rewrite(mismatches: list[Mismatch]) -> None:
         path.write_text("".join(lines))
 
 
-def replay_figures(figures: Figures, kinds: set[str], work: Path) -> dict[int, dict]:
-    """Run the table's sources whose replay kind is in ``kinds``; their output rows."""
+def replay_figures(figures: Figures, kinds: set[str], work: Path, only: str = "") -> dict:
+    """Run the sources replayed as one of ``kinds`` whose command contains ``only``.
+
+    Returns their output rows by source number.
+    """
     outputs = {}
     for n, command in enumerate(figures.sources, start=1):
-        if figures.replay(n) in kinds:
+        if figures.replay(n) in kinds and only in command:
+            print(f"{figures.table.label()}: replaying ${n}: {command}", flush=True)
             folder = work / f"{figures.table.doc.replace('/', '-')}-{figures.table.line}-{n}"
             folder.mkdir(parents=True)
             outputs[n] = run_source(command, folder)
@@ -549,10 +553,10 @@ def replay_figures(figures: Figures, kinds: set[str], work: Path) -> dict[int, d
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Replay every table (or those ``--only`` names), then list or rewrite what differs."""
+    """Replay every command (or those ``--only`` names), then list or rewrite what differs."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="list differences, edit nothing")
-    parser.add_argument("--only", default="", help="tables with a command containing this")
+    parser.add_argument("--only", default="", help="only commands that contain this text")
     parser.add_argument("--benchmarks", action="store_true",
                         help="also replay `replay $N benchmark` sources (slow, may need network)")
     args = parser.parse_args(argv)
@@ -563,11 +567,7 @@ def main(argv: list[str] | None = None) -> int:
     wrong = []
     with tempfile.TemporaryDirectory() as tmp:
         for figures in found:
-            if args.only and not any(args.only in s for s in figures.sources):
-                continue
-            print(f"{figures.table.label()}: replaying {len(figures.sources)} command(s)",
-                  flush=True)
-            wrong += compare(figures, replay_figures(figures, kinds, Path(tmp)))
+            wrong += compare(figures, replay_figures(figures, kinds, Path(tmp), args.only))
     for mismatch in wrong:
         print(mismatch)
     if not args.check and wrong:

@@ -202,3 +202,25 @@ def test_a_row_the_document_lacks_is_reported():
     rows["SYN-03"] = rows["SYN-01"]
     [wrong] = figures_module.compare(figures, {1: rows})
     assert (wrong.row, wrong.documented) == ("SYN-03", "<not in the document>")
+
+
+def test_a_benchmark_table_is_read_by_its_leading_text_cells():
+    """The rows benchmarks/mot_agent.py prints map onto README's MOT cells."""
+    printed = """[accuracy] combined metrics per data set (percent; IDSW count)
+| data | agent | HOTA | IDF1 | MOTA | IDSW | DetA | AssA |
+|---|---|---|---|---|---|---|---|
+| PETS09-S2L1 | roboflow sort | 36.3 | 46.1 | 63.1 | 50 | 40.0 | 33.0 |
+| PETS09-S2L1 | roboflow bytetrack | 37.6 | 50.1 | 72.7 | 40 | 41.0 | 34.0 |
+
+| data | sequence | setting | true_dets |
+|---|---|---|---|
+| PETS09-S2L1 | PETS09-S2L1 | defaults | 4000 |
+"""
+    rows = figures_module._markdown_rows(printed)
+    assert rows["PETS09-S2L1 / roboflow sort"]["IDF1"] == "46.1"
+    assert rows["PETS09-S2L1 / PETS09-S2L1 / defaults"] == {"true_dets": "4000"}
+    readme = next(f for f in FOUND if f.table.doc == "README.md" and f.table.rows)
+    n = next(i for i, c in enumerate(readme.sources, start=1) if "mot_agent.py" in c)
+    wrong = figures_module.compare(readme, {n: rows})
+    assert {(w.row.split()[0], w.column) for w in wrong} == {
+        ("hard", c) for c in ("`unitrack`", "paper setting", "`iou`", "SORT", "ByteTrack")}
