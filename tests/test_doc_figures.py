@@ -224,3 +224,18 @@ def test_a_benchmark_table_is_read_by_its_leading_text_cells():
     wrong = figures_module.compare(readme, {n: rows})
     assert {(w.row.split()[0], w.column) for w in wrong} == {
         ("hard", c) for c in ("`unitrack`", "paper setting", "`iou`", "SORT", "ByteTrack")}
+
+
+def test_the_scorecard_page_reads_back_as_a_scorecard(tmp_path):
+    """What tests/evaluation/test_scorecard.py compares: scorecard.md rows vs the page."""
+    card = next(f for f in FOUND if f.table.doc == "docs/evaluate-your-representation.md")
+    lines = [f"| {' | '.join(card.table.header)} |", "|" + "---|" * len(card.table.header)]
+    lines += [f"| {' | '.join(row)} |" for row in card.table.rows]
+    (tmp_path / "scorecard.md").write_text("\n".join(lines) + "\n\n- SOT*: ...\n")
+    rows = figures_module.scorecard_rows(tmp_path)
+    assert figures_module.compare(card, {1: rows}) == []
+    sot, vos = "SOT* AUC (XCorr) ↑", "VOS* J-Mean ↑"
+    rows["random"][sot] = f"{float(rows['random'][sot]) + 0.9:.1f}"
+    rows["random"][vos] = f"{float(rows['random'][vos]) + 0.3:.1f}"
+    [wrong] = figures_module.compare(card, {1: rows})
+    assert (wrong.row, wrong.column, wrong.tolerance) == ("random", vos, 0.2)
