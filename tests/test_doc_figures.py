@@ -134,7 +134,8 @@ def test_every_command_is_printed_beside_its_table():
                         "(a reader must see them):\n" + "\n".join(hidden))
 
 
-@pytest.mark.parametrize("command", sorted({c for f in FOUND for c in f.sources}))
+@pytest.mark.parametrize("command", sorted({c for f in FOUND for c in f.sources}),
+                         ids=lambda command: re.sub(r"[^\w.=-]+", "_", command)[:90])
 def test_every_command_parses(command):
     figures_module.dry_parse(command)
 
