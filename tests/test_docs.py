@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import re
 import shlex
+import sys
 from pathlib import Path
+
+import gymnasium as gym
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -92,3 +96,31 @@ def test_adding_a_tracker_example_runs(tmp_path, monkeypatch, capsys):
             assert combined["IDF1"] > 0.5, (command, combined)
     finally:
         AGENTS.pop("colour", None)
+
+
+def test_adding_a_task_quotes_the_mean_error_its_commands_print(tmp_path, monkeypatch, capsys):
+    """The one figure in adding-a-task.md's prose is what the doc's own commands print."""
+    import test_adding_a_task as doc  # tests/ is on sys.path (pytest's default import mode)
+
+    sentence = re.search(r"so (\S+)'s mean error of\s+([\d.]+) px reads ([\d.]+)",
+                         doc.DOC.read_text())
+    assert sentence, "adding-a-task.md no longer quotes a mean error: update this test"
+    sequence, error, shown = sentence.groups()
+    with contextlib.ExitStack() as stack:
+        stack.callback(lambda: [sys.modules.pop(m) for m in list(sys.modules)
+                                if m.split(".")[0] == "point_task"])
+        stack.callback(gym.registry.pop, doc.ENV_ID, None)
+        monkeypatch.setattr(doc.registration, "_ADDED", [])
+        folder = tmp_path / "project"
+        for name in doc.PROJECT_FILES:
+            (folder / name).parent.mkdir(parents=True, exist_ok=True)
+            (folder / name).write_text(doc.doc_files()[name])
+        monkeypatch.chdir(folder)
+        monkeypatch.syspath_prepend(str(folder))
+        make, evaluate, _ = doc.doc_commands()
+        doc.run_command(make, monkeypatch)
+        capsys.readouterr()
+        doc.run_command(evaluate, monkeypatch, "--format", "json")
+        value = json.loads(capsys.readouterr().out)["per_sequence"][sequence]["MeanError"]
+    assert f"{value:.{len(error.split('.')[1])}f}" == error
+    assert f"{100 * value:.1f}" == shown  # the table's percent rule
