@@ -158,9 +158,10 @@ def tables(doc: str) -> list[tuple[int, Table]]:
             j = i + 1
             while j < len(lines) and not lines[j].startswith("```"):
                 j += 1
-            body = [row for row in lines[i + 1:j] if row.startswith("│")]
-            found.append((fence - 1, Table(doc, i + 1, _split_row(line, True),
-                                           [_split_row(row, True) for row in body], box=True)))
+            body = [_split_row(row, True) for row in lines[i + 1:j] if row.startswith("│")]
+            for row in body:  # the CLI's "COMBINED (2 of 2 sequences)" is the COMBINED row
+                row[0] = re.sub(r" \(\d+ of \d+ sequences\)$", "", row[0])
+            found.append((fence - 1, Table(doc, i + 1, _split_row(line, True), body, box=True)))
             i, fence = j + 1, None
             continue
         i += 1

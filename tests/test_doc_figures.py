@@ -181,7 +181,8 @@ def test_a_wrong_cell_is_reported_with_its_documented_and_replayed_value():
 
 
 def test_tolerances_and_bold_marks():
-    card = next(f for f in FOUND if f.table.doc == "docs/evaluate-your-representation.md")
+    card = next(f for f in FOUND if f.table.doc == "docs/evaluate-your-representation.md"
+                and f.sources[0].startswith("unitrack scorecard"))
     assert card.tolerance("SOT* AUC (XCorr) ↑") == 1.0
     assert card.tolerance("VOS* J-Mean ↑") == 0.2
     same = figures_module._same
@@ -224,7 +225,8 @@ def test_a_benchmark_table_is_read_by_its_leading_text_cells():
 
 def test_the_scorecard_page_reads_back_as_a_scorecard(tmp_path):
     """What tests/evaluation/test_scorecard.py compares: scorecard.md rows vs the page."""
-    card = next(f for f in FOUND if f.table.doc == "docs/evaluate-your-representation.md")
+    card = next(f for f in FOUND if f.table.doc == "docs/evaluate-your-representation.md"
+                and f.sources[0].startswith("unitrack scorecard"))
     lines = [f"| {' | '.join(card.table.header)} |", "|" + "---|" * len(card.table.header)]
     lines += [f"| {' | '.join(row)} |" for row in card.table.rows]
     (tmp_path / "scorecard.md").write_text("\n".join(lines) + "\n\n- SOT*: ...\n")

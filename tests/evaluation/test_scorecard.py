@@ -170,7 +170,8 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path, monkeypatc
     change no figure.
     """
     out = tmp_path / "sc"
-    figures = doc_figures.figures_of("docs/evaluate-your-representation.md")[0][0]
+    figures = next(f for f in doc_figures.figures_of("docs/evaluate-your-representation.md")[0]
+                   if f.sources[0].startswith("unitrack scorecard"))
     argv = shlex.split(figures.sources[0])[1:]
     argv[argv.index("--out") + 1] = str(out)
     monkeypatch.chdir(REPO)  # the page's paths (../shared/data) are relative to the repository
