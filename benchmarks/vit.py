@@ -24,6 +24,7 @@ overlapping patch embedding, 3x the tokens) and ``vit-s14-s8u`` (``stride="8-ups
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -35,6 +36,9 @@ import numpy as np
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.base import make_agent
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import timed_acts  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / ".." / "shared" / "data"
@@ -103,15 +107,7 @@ def _head_run(env: gym.Env, agent_name: str, sequence: str, model: AppearanceMod
         obs, info = env.reset(options={"sequence": sequence})
         agent.reset(obs, info)
         obs, *_ = env.step(agent.act(obs))  # the first answer: the given target
-        seconds, played = 0.0, 0
-        while played < frames:
-            start = time.perf_counter()
-            action = agent.act(obs)
-            seconds += time.perf_counter() - start
-            played += 1
-            obs, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                break
+        seconds, played, _ = timed_acts(env, agent, obs, frames)
         return seconds / played
     return run
 

@@ -30,7 +30,7 @@ def test_model_specs():
     assert spec.agent_kwargs() == {"weights": "/ckpt/moco_v2.pth", "arch": "resnet50",
                                    "layer": "layer3"}
     assert sc.ModelSpec.parse("random,label=Random Init.").name == "Random Init."
-    with pytest.raises(ValueError, match="options are arch=, layer= and label="):
+    with pytest.raises(ValueError, match="options are arch=, layer=, stride= and label="):
         sc.ModelSpec.parse("random,lr=0.1")
 
 
