@@ -5,12 +5,13 @@ Synthetic scenes come from one stationary process: pedestrians are born (Poisson
 scene (paired) and differ in their miss rate (misses come in bursts: a two-state Markov
 chain), their ID-switch rate, their false positives and their box jitter. The true difference
 of each metric is the mean difference over ``--truth`` independent data sets of the same size;
-then ``--reps`` fresh data sets each get a paired block-bootstrap interval
-(:func:`unitrack_env.evaluation.compare.compare_stats`), and the script prints how often the
-interval holds the true difference (it should be close to 95%), with the mean width.
+then ``--reps`` fresh data sets each get a paired interval per method and block length
+(:func:`unitrack_env.evaluation.compare.compare_stats`: the block jackknife, or the block
+bootstrap's percentile/bc/basic intervals), and the script prints how often the interval holds
+the true difference (it should be close to 95%), with the mean width.
 
-    python benchmarks/compare_coverage.py --intervals percentile,bc    # docs/report.md
-    python benchmarks/compare_coverage.py --frames 200 --blocks auto,9,20   # block lengths
+    python benchmarks/compare_coverage.py --reps 100 --truth 100 \
+        --intervals jackknife,percentile --blocks auto,40                  # docs/report.md
 """
 
 from __future__ import annotations
@@ -119,8 +120,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=400, help="frames per sequence")
     ap.add_argument("--resamples", type=int, default=200, help="bootstrap resamples")
     ap.add_argument("--seed", type=int, default=2, help="random seed")
-    ap.add_argument("--intervals", default="percentile", help="comma-separated interval methods "
-                    "(bc, percentile, basic) measured side by side")
+    ap.add_argument("--intervals", default="jackknife", help="comma-separated interval "
+                    "methods (jackknife, percentile, bc, basic) measured side by side")
     ap.add_argument("--blocks", default="auto", help="comma-separated block lengths to "
                     "measure side by side on the same data sets (auto: the default rule)")
     args = ap.parse_args()
@@ -144,7 +145,7 @@ def main() -> None:
                     hits[b, i, m] += d.low <= truth[m] <= d.high
                     widths[b, i, m].append(d.high - d.low)
     print(f"{args.reps} data sets of {args.sequences} x {args.frames} frames, "
-          f"{args.resamples} paired block-bootstrap resamples each; true difference from "
+          f"{args.resamples} bootstrap resamples where bootstrapped; true difference from "
           f"{args.truth} more data sets ({time.perf_counter() - start:.0f} s)")
     print(f"{'block':<6} {'interval':<10} {'metric':<6} {'true A-B':>9} {'coverage':>9} "
           f"{'mean width':>11} {'4 x SD of A-B':>14}")

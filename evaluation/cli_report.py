@@ -108,8 +108,9 @@ def _missing(value: Any) -> bool:
 def comparison_lines(comp: Any) -> list[str]:
     """A plain-text table of a :class:`~.compare.Comparison`, in percent points."""
     lines = [f"A = {comp.run_a}", f"B = {comp.run_b}",
-             f"paired block bootstrap over frames ({comp.level}), {comp.resamples} resamples; "
-             "95% interval of A - B",
+             (f"paired block jackknife ({comp.level})" if comp.method == "jackknife" else
+              f"paired block bootstrap ({comp.level}), {comp.resamples} resamples")
+             + "; 95% interval of A - B",
              f"{'sequence':<18} {'metric':<6} {'A':>7} {'B':>7} {'A-B':>7} "
              f"{'95% interval':>17}  frames"]
     for name, row in comp.rows.items():

@@ -1,4 +1,9 @@
-"""Paired comparison of two runs with bootstrap confidence intervals.
+"""Paired comparison of two runs with confidence intervals.
+
+The default interval is a paired delete-a-block jackknife: each sequence is cut into
+:data:`BLOCKS` blocks of consecutive frames, the metrics are recomputed with one block left
+out (the same block for both runs), and the difference gets a t interval from the jackknife
+standard error. A block bootstrap is kept for comparison; docs/report.md has the coverage.
 
 More in docs/module-notes.md.
 """
@@ -12,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.stats import norm as NORMAL
+from scipy.stats import t as STUDENT
 
 from unitrack_env.metrics.events_mot import preprocessed_frames, read_gt_rows
 from unitrack_env.metrics.mot_stats import (
@@ -28,14 +34,30 @@ from .events import run_benchmark, run_sequences
 #: Row name of the combined comparison.
 COMBINED: str = "COMBINED"
 
-#: Fewer blocks than this in a sequence makes its interval unreliable.
-MIN_BLOCKS: int = 10
+#: Blocks per sequence of the block jackknife (its block length is a fifth of the sequence).
+BLOCKS: int = 5
+
+#: A sequence needs this many frames (blocks of 20) for an interval worth reading.
+MIN_FRAMES: int = 100
 
 
 def block_length(num_frames: int) -> int:
-    """The block length used for a sequence of ``num_frames`` (see the module docstring)."""
-    rule = max(math.ceil(1.5 * num_frames ** (1 / 3)), math.ceil(num_frames / MIN_BLOCKS))
-    return max(1, min(num_frames, rule))
+    """The block length used for a sequence of ``num_frames``: a fifth of it.
+
+    Association metrics (IDF1, AssA, HOTA) depend on whole identities, which last tens to
+    hundreds of frames; blocks shorter than that understate their variance (docs/report.md).
+    """
+    return max(1, math.ceil(int(num_frames) / BLOCKS))
+
+
+def jackknife_weights(num_frames: int, length: int) -> np.ndarray:
+    """``(k, num_frames)`` frame weights: row ``j`` leaves out the ``j``-th block of ``length``."""
+    n, ell = int(num_frames), max(1, int(length))
+    k = math.ceil(n / ell)
+    weights = np.ones((k, n))
+    for j in range(k):
+        weights[j, j * ell:(j + 1) * ell] = 0.0
+    return weights
 
 
 def block_weights(num_frames: int, resamples: int, rng: np.random.Generator,
@@ -80,11 +102,13 @@ class Comparison:
     resamples: int
     level: str
     notes: list[str] = field(default_factory=list)
+    method: str = "jackknife"
 
     def to_json(self) -> dict:
         """A JSON-friendly form."""
         return {"run_a": self.run_a, "run_b": self.run_b, "resamples": self.resamples,
-                "level": self.level, "frames": self.frames, "block_length": self.blocks,
+                "level": self.level, "method": self.method, "frames": self.frames,
+                "block_length": self.blocks,
                 "notes": self.notes,
                 "rows": {r: {m: vars(d) for m, d in row.items()} for r, row in self.rows.items()}}
 
@@ -92,21 +116,66 @@ class Comparison:
 def compare_stats(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats], *,
                   resamples: int = 1000, seed: int = 0, level: str = "frames",
                   block: int | None = None,
-                  method: str = "percentile") -> tuple[dict[str, dict[str, MetricDiff]], dict]:
-    """Paired bootstrap of per-sequence statistics; returns ``(rows, block lengths)``."""
+                  method: str = "jackknife") -> tuple[dict[str, dict[str, MetricDiff]], dict]:
+    """Paired intervals from per-sequence statistics; returns ``(rows, block lengths)``.
+
+    ``jackknife`` (the default) is the delete-a-block jackknife with a t interval;
+    ``percentile``, ``bc`` and ``basic`` are block-bootstrap intervals (``resamples``, ``seed``).
+    """
     if level not in ("frames", "sequences"):
         raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
+    if method not in INTERVALS:
+        raise ValueError(f"interval must be one of {INTERVALS}, got {method!r}")
+    blocks = {name: block_length(s.num_frames) if block is None
+              else max(1, min(int(block), s.num_frames)) for name, s in stats_a.items()}
+    if method == "jackknife":
+        return _jackknife_rows(stats_a, stats_b, blocks, level), blocks
+    return _bootstrap_rows(stats_a, stats_b, blocks, level, resamples, seed, method), blocks
+
+
+def _point(stats: MotStats) -> dict[str, np.ndarray]:
+    return weighted_sums(stats, np.ones((1, stats.num_frames)))
+
+
+def _swap(total: dict, part: dict, replacement: dict) -> dict:
+    """Combined sums with one sequence's ``part`` replaced (broadcast over replicates)."""
+    return {key: total[key] - part[key] + replacement[key] for key in total}
+
+
+def _jackknife_rows(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats],
+                    blocks: dict[str, int], level: str) -> dict[str, dict[str, MetricDiff]]:
+    names = list(stats_a)
+    pa, pb = [_point(stats_a[n]) for n in names], [_point(stats_b[n]) for n in names]
+    ta, tb = add_sums(pa), add_sums(pb)
+    rows: dict[str, dict[str, MetricDiff]] = {}
+    reps_a, reps_b = [], []
+    for i, name in enumerate(names):
+        w = jackknife_weights(stats_a[name].num_frames, blocks[name])
+        da, db = weighted_sums(stats_a[name], w), weighted_sums(stats_b[name], w)
+        rows[name] = _diffs(pa[i], pb[i], da, db, "jackknife")
+        if level == "frames":  # leave out one block of this sequence, keep the others
+            reps_a.append(_swap(ta, pa[i], da))
+            reps_b.append(_swap(tb, pb[i], db))
+        else:  # leave out this whole sequence
+            reps_a.append(_swap(ta, pa[i], {k: 0 * v for k, v in pa[i].items()}))
+            reps_b.append(_swap(tb, pb[i], {k: 0 * v for k, v in pb[i].items()}))
+    join = {k: np.concatenate([r[k] for r in reps_a]) for k in ta}
+    join_b = {k: np.concatenate([r[k] for r in reps_b]) for k in tb}
+    rows[COMBINED] = _diffs(ta, tb, join, join_b, "jackknife")
+    return rows
+
+
+def _bootstrap_rows(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats],
+                    blocks: dict[str, int], level: str, resamples: int, seed: int,
+                    method: str) -> dict[str, dict[str, MetricDiff]]:
     rng = np.random.default_rng(seed)
     names = list(stats_a)
     rows: dict[str, dict[str, MetricDiff]] = {}
-    parts_a, parts_b, points_a, points_b, blocks = [], [], [], [], {}
+    parts_a, parts_b, points_a, points_b = [], [], [], []
     for name in names:
-        n = stats_a[name].num_frames
-        blocks[name] = block_length(n) if block is None else min(int(block), n)
-        w = block_weights(n, resamples, rng, blocks[name])
-        ones = np.ones((1, n))
+        w = block_weights(stats_a[name].num_frames, resamples, rng, blocks[name])
         sa, sb = weighted_sums(stats_a[name], w), weighted_sums(stats_b[name], w)
-        pa, pb = weighted_sums(stats_a[name], ones), weighted_sums(stats_b[name], ones)
+        pa, pb = _point(stats_a[name]), _point(stats_b[name])
         parts_a.append(sa)
         parts_b.append(sb)
         points_a.append(pa)
@@ -117,22 +186,39 @@ def compare_stats(stats_a: dict[str, MotStats], stats_b: dict[str, MotStats], *,
         counts = rng.multinomial(len(names), np.full(len(names), 1 / len(names)), resamples)
     rows[COMBINED] = _diffs(add_sums(points_a), add_sums(points_b),
                             add_sums(parts_a, counts), add_sums(parts_b, counts), method)
-    return rows, blocks
+    return rows
 
 
-#: Interval methods: percentile, basic (reflected) and bias-corrected percentile.
-INTERVALS: tuple[str, ...] = ("percentile", "bc", "basic")
+#: Interval methods: the block jackknife's t interval (the default), and the block
+#: bootstrap's percentile, basic (reflected) and bias-corrected percentile intervals.
+INTERVALS: tuple[str, ...] = ("jackknife", "percentile", "bc", "basic")
+
+
+def jackknife_interval(point: float, replicates: np.ndarray) -> tuple[float, float]:
+    """``point`` plus or minus ``t(k - 1)`` jackknife standard errors of ``k`` replicates.
+
+    The replicates are the statistic with one block left out each; the t quantile with
+    ``k - 1`` degrees of freedom widens the interval when there are few blocks. With fewer
+    than two replicates there is no spread to measure and the interval is the point.
+    """
+    k = len(replicates)
+    if k < 2:
+        return point, point
+    se = math.sqrt((k - 1) / k * float(np.sum((replicates - replicates.mean()) ** 2)))
+    q = float(STUDENT.ppf(0.975, k - 1))
+    return point - q * se, point + q * se
 
 
 def interval(point: float, boot: np.ndarray, method: str = "percentile") -> tuple[float, float]:
-    """The 95% interval of ``point`` from its bootstrap replicates ``boot``.
+    """The 95% interval of ``point`` from its replicates ``boot``.
 
-    ``percentile`` (the default) is the 2.5-97.5 percentile of the replicates; ``bc`` shifts
-    them by the bootstrap's median bias (Efron's bias-corrected percentile) and ``basic``
-    reflects them around ``point``. In the coverage simulation
-    (``benchmarks/compare_coverage.py``) the plain percentiles covered best: the bias of the
-    resampled IDF1/HOTA does not carry over to the estimate.
+    ``jackknife``: :func:`jackknife_interval` of leave-one-block-out replicates. For bootstrap
+    replicates: ``percentile`` is their 2.5-97.5 percentiles; ``bc`` shifts them by the
+    bootstrap's median bias (Efron's bias-corrected percentile) and ``basic`` reflects them
+    around ``point``. Their coverage is measured by ``benchmarks/compare_coverage.py``.
     """
+    if method == "jackknife":
+        return jackknife_interval(point, boot)
     if method == "percentile":
         low, high = np.percentile(boot, [2.5, 97.5])
     elif method == "basic":
@@ -176,7 +262,8 @@ def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStat
 
 
 def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
-                 seed: int = 0, level: str = "frames", block: int | None = None) -> Comparison:
+                 seed: int = 0, level: str = "frames", block: int | None = None,
+                 method: str = "jackknife") -> Comparison:
     """Compare two MOT run folders on the sequences both scored (see the module docstring)."""
     seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
     common = [s for s in seq_a if s in seq_b]
@@ -184,7 +271,7 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
     stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
     rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed, level=level,
-                                 block=block)
+                                 block=block, method=method)
     frames = {s: stats_a[s].num_frames for s in common}
     notes = few_data_notes(frames, blocks, level)
     for name in unreliable_rows(frames, blocks):
@@ -193,7 +280,8 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
     skipped = sorted(set(seq_a) ^ set(seq_b))
     if skipped:
         notes.append(f"not in both runs, left out: {', '.join(skipped)}")
-    return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes)
+    return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes,
+                      method)
 
 
 def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:
@@ -201,12 +289,14 @@ def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, in
 
 
 def unreliable_rows(frames: dict[str, int], blocks: dict[str, int]) -> list[str]:
-    """Rows whose interval rests on too few blocks.
+    """Rows whose interval rests on too little data.
 
-    A sequence needs :data:`MIN_BLOCKS` blocks; the combined row needs one such sequence.
+    A sequence needs :data:`MIN_FRAMES` frames in at least :data:`BLOCKS` blocks; the
+    combined row needs one such sequence.
     """
     counts = _block_count(frames, blocks)
-    out = [name for name, count in counts.items() if count < MIN_BLOCKS]
+    out = [name for name, count in counts.items()
+           if count < BLOCKS or frames[name] < MIN_FRAMES]
     return out + ([COMBINED] if len(out) == len(counts) else [])
 
 
@@ -217,13 +307,13 @@ def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str) -
     for name in unreliable_rows(frames, blocks):
         if name == COMBINED:
             notes.append(f"{COMBINED}: {sum(frames.values())} frames in all, no sequence with "
-                         f"{MIN_BLOCKS} blocks: too little data for a trustworthy interval; do "
-                         "not read a difference into it")
+                         f"{MIN_FRAMES} frames in {BLOCKS} blocks: too little data for a "
+                         "trustworthy interval; do not read a difference into it")
         else:
             notes.append(f"{name}: only {frames[name]} frames ({counts[name]} blocks of "
                          f"{blocks[name]}): too little data, its interval is not trustworthy "
-                         "(so few blocks cannot show how much the difference varies)")
+                         "(so few frames cannot show how much the difference varies)")
     if level == "sequences" and len(frames) < 10:
-        notes.append(f"resampling {len(frames)} sequences: the sequence-level interval is "
-                     "unstable with fewer than 10 sequences")
+        notes.append(f"leaving out one of {len(frames)} sequences at a time: the "
+                     "sequence-level interval is wide and unstable with fewer than 10 sequences")
     return notes

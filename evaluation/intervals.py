@@ -1,12 +1,12 @@
-"""95% bootstrap intervals of one run's combined metrics, and of every scorecard cell (``--ci``).
+"""95% intervals of one run's combined metrics, and of every scorecard cell (``--ci``).
 
-The resampling is :mod:`~unitrack_env.evaluation.compare`'s: circular blocks of frames within
-each sequence, the interval bias-corrected. Box MOT recomputes HOTA, DetA, AssA, IDF1 and MOTA
-from the per-frame statistics (:mod:`unitrack_env.metrics.mot_stats`). Tasks scored per frame
-use their events: SOT's AUC (each frame's share of the success curve) and Precision@20px,
-VOS's J-Mean, F-Mean and J&F-Mean (means over frames and objects), pose propagation's PCK@0.1
-(the mean of per-frame PCK, which weights frames equally where the official score pools
-joints). Other tasks (MOTS, PoseTrack, VIS) get no interval.
+The method is :mod:`~unitrack_env.evaluation.compare`'s: a delete-a-block jackknife over
+blocks of frames (a fifth of each sequence), with a t interval. Box MOT recomputes HOTA, DetA,
+AssA, IDF1 and MOTA from the per-frame statistics (:mod:`unitrack_env.metrics.mot_stats`).
+Tasks scored per frame use their events: SOT's AUC (each frame's share of the success
+curve) and Precision@20px, VOS's J-Mean, F-Mean and J&F-Mean (means over frames and objects),
+pose propagation's PCK@0.1 (the mean of per-frame PCK, which weights frames equally where the
+official score pools joints). Other tasks (MOTS, PoseTrack, VIS) get no interval.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import pandas as pd
 
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
-from .compare import block_length, block_weights, interval, run_stats
+from .compare import block_length, jackknife_interval, jackknife_weights, run_stats
 from .events import load_events, run_benchmark, run_sequences
 
 #: Per-frame value of each interval metric of a frame-scored task.
@@ -35,47 +35,53 @@ FRAME_METRICS: dict[str, dict[str, Any]] = {
 }
 
 
-def _mot_intervals(run: Path, resamples: int, seed: int) -> dict[str, tuple[float, float]]:
+def _mot_intervals(run: Path) -> dict[str, tuple[float, float]]:
     stats = run_stats(run, run_sequences(run))
-    rng = np.random.default_rng(seed)
-    boot, point = [], []
-    for s in stats.values():
-        boot.append(weighted_sums(s, block_weights(s.num_frames, resamples, rng)))
-        point.append(weighted_sums(s, np.ones((1, s.num_frames))))
-    values, samples = metrics_from_sums(add_sums(point)), metrics_from_sums(add_sums(boot))
-    return {m: interval(float(values[m][0]), samples[m]) for m in values}
+    point = [weighted_sums(s, np.ones((1, s.num_frames))) for s in stats.values()]
+    total = add_sums(point)
+    reps = []
+    for s, p in zip(stats.values(), point, strict=True):
+        left_out = weighted_sums(s, jackknife_weights(s.num_frames, block_length(s.num_frames)))
+        reps.append({k: total[k] - p[k] + left_out[k] for k in total})
+    values = metrics_from_sums(total)
+    samples = metrics_from_sums({k: np.concatenate([r[k] for r in reps]) for k in total})
+    return {m: jackknife_interval(float(values[m][0]), samples[m]) for m in values}
 
 
-def _frame_intervals(run: Path, task: str, resamples: int,
-                     seed: int) -> dict[str, tuple[float, float]]:
+def _frame_intervals(run: Path, task: str) -> dict[str, tuple[float, float]]:
     events = load_events(run, type="frame")
-    rng = np.random.default_rng(seed)
     out = {}
     for metric, per_frame in FRAME_METRICS[task].items():
-        sums, counts, total, n = np.zeros(resamples), np.zeros(resamples), 0.0, 0
+        parts = []  # (per-block sums, per-block counts) of each sequence
         for _, seq in events.groupby("sequence"):
             # one value per frame (the mean over a frame's objects)
             frame_values = pd.Series(per_frame(seq), index=seq["frame"].to_numpy())
             values = frame_values.groupby(level=0).mean().to_numpy()
-            w = block_weights(len(values), resamples, rng, block_length(len(values)))
+            keep = jackknife_weights(len(values), block_length(len(values)))
             ok = np.isfinite(values)
-            sums += w[:, ok] @ values[ok]
-            counts += w[:, ok].sum(1)
-            total, n = total + values[ok].sum(), n + int(ok.sum())
+            parts.append((keep[:, ok] @ values[ok], keep[:, ok].sum(1),
+                          values[ok].sum(), float(ok.sum())))
+        total, n = sum(p[2] for p in parts), sum(p[3] for p in parts)
         if n:
-            out[metric] = interval(total / n, sums / np.maximum(counts, 1))
+            sums = np.concatenate([total - p[2] + p[0] for p in parts])
+            counts = np.concatenate([n - p[3] + p[1] for p in parts])
+            out[metric] = jackknife_interval(total / n, sums / np.maximum(counts, 1))
     return out
 
 
 def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
                   seed: int = 0) -> dict[str, tuple[float, float]]:
-    """``{metric: (low, high)}``: 95% intervals of a run folder's combined metrics."""
+    """``{metric: (low, high)}``: 95% intervals of a run folder's combined metrics.
+
+    ``resamples`` and ``seed`` are accepted for callers but unused: the jackknife is exact.
+    """
+    del resamples, seed
     run = Path(run)
     task = run_benchmark(run).task
     if task == "mot":
-        return _mot_intervals(run, resamples, seed)
+        return _mot_intervals(run)
     if task in FRAME_METRICS:
-        return _frame_intervals(run, task, resamples, seed)
+        return _frame_intervals(run, task)
     return {}
 
 
@@ -116,8 +122,8 @@ def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
             payload.append({"model": model, "task": task, "head": row_head, "metric": metric,
                             "value": number, "low": ci[0] if ci else None,
                             "high": ci[1] if ci else None})
-    lines += ["", f"Block bootstrap over frames ({resamples} resamples, "
-              "bias-corrected 95% intervals); see docs/report.md."]
+    lines += ["", "Delete-a-block jackknife over frames (blocks of a fifth of each sequence, "
+              "t 95% intervals); see docs/report.md."]
     paths = [Path(out) / "scorecard_ci.md", Path(out) / "scorecard_ci.json"]
     paths[0].write_text("\n".join(lines) + "\n", encoding="utf-8")
     paths[1].write_text(json.dumps(payload, indent=2), encoding="utf-8")

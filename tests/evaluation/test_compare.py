@@ -16,6 +16,7 @@ from unitrack_env.evaluation.compare import (
     block_weights,
     compare_runs,
     compare_stats,
+    jackknife_weights,
 )
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.events_mot import preprocessed_frames
@@ -37,16 +38,27 @@ def two_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 def test_block_weights_are_circular_blocks() -> None:
     w = block_weights(10, 500, np.random.default_rng(0), length=3)
     assert w.shape == (500, 10) and (w.sum(1) == 10).all()
-    assert block_length(400) == 40 and block_length(4) == 3 and block_length(1) == 1
-    assert block_length(8) == 3 and block_length(1000) == 100  # ten blocks when long enough
+    # five blocks per sequence: long enough to hold whole identities (docs/report.md)
+    assert block_length(400) == 80 and block_length(4) == 1 and block_length(1) == 1
+    assert block_length(8) == 2 and block_length(1001) == 201
     # every frame is drawn equally often on average (circular blocks have no edge effect)
     assert np.allclose(w.mean(0), 1.0, atol=0.15)
     single = block_weights(5, 1, np.random.default_rng(1), length=5)
     assert (single == 1).all()  # one block of the whole sequence is a rotation of it
 
 
+def test_jackknife_weights_leave_out_one_block_each() -> None:
+    w = jackknife_weights(11, 3)
+    assert w.shape == (4, 11)
+    assert (w.sum(1) == [8, 8, 8, 9]).all()  # the last block is the 2 frames left
+    assert ((1 - w).sum(0) == 1).all()  # every frame is left out exactly once
+    assert (w[1, 3:6] == 0).all() and w[1, :3].all() and w[1, 6:].all()
+
+
 def test_interval_methods() -> None:
-    from unitrack_env.evaluation.compare import interval
+    from scipy.stats import t as student
+
+    from unitrack_env.evaluation.compare import interval, jackknife_interval
 
     boot = np.random.default_rng(0).normal(1.0, 0.1, 4000)
     for method in ("bc", "percentile", "basic"):
@@ -56,6 +68,13 @@ def test_interval_methods() -> None:
     assert shifted_low > 0.85
     with pytest.raises(ValueError, match="interval must be one of"):
         interval(1.0, boot, "normal")
+    # the jackknife of a mean is the textbook t interval: mean +- t(n-1) s / sqrt(n)
+    x = np.random.default_rng(1).normal(2.0, 1.0, 12)
+    left_out = (x.sum() - x) / (len(x) - 1)
+    low, high = jackknife_interval(float(x.mean()), left_out)
+    half = student.ppf(0.975, 11) * x.std(ddof=1) / np.sqrt(12)
+    assert low == pytest.approx(x.mean() - half) and high == pytest.approx(x.mean() + half)
+    assert interval(3.0, left_out[:1], "jackknife") == (3.0, 3.0)  # one block: no spread
 
 
 def test_a_run_against_itself_differs_by_exactly_nothing(two_runs) -> None:
@@ -102,6 +121,37 @@ def test_too_little_data_is_said_plainly(two_runs, tmp_path) -> None:
 
     assert unreliable_rows({"tiny": frames}, blocks) == ["tiny", COMBINED]
     assert any("tiny: only 4 frames" in n for n in notes)
+
+
+def _pair(frames: int, switch_at: int) -> tuple[dict, dict]:
+    gt = np.array([[t, g, 10 + 60 * g + t % 7, 10, 20, 40, 1, -1, -1, -1]
+                   for t in range(1, frames + 1) for g in (1, 2, 3)], dtype=float)
+    trk = gt.copy()
+    trk[:, 1] += 100
+    trk[(trk[:, 0] >= switch_at) & (trk[:, 1] == 101), 1] = 999  # one switch
+    trk = trk[(trk[:, 0] % 9 != 0) | (trk[:, 1] != 102)]  # misses every 9th frame
+    return (mot_stats(preprocessed_frames(gt, gt, frames, "MOT15")),
+            mot_stats(preprocessed_frames(gt, trk, frames, "MOT15")))
+
+
+def test_enough_frames_give_a_reliable_interval_around_the_difference() -> None:
+    from unitrack_env.evaluation.compare import unreliable_rows
+
+    (a1, b1), (a2, b2) = _pair(120, 30), _pair(150, 100)
+    sa, sb = {"s1": a1, "s2": a2}, {"s1": b1, "s2": b2}
+    for method in ("jackknife", "percentile"):
+        rows, blocks = compare_stats(sa, sb, resamples=100, method=method)
+        assert blocks == {"s1": 24, "s2": 30}
+        for row in rows.values():
+            for name, d in row.items():
+                assert d.low <= d.diff <= d.high, (method, name)
+                assert d.diff >= 0  # B is A with a switch and misses
+    assert unreliable_rows({"s1": 120, "s2": 150}, blocks) == []
+    assert unreliable_rows({"s1": 60, "s2": 150}, {"s1": 12, "s2": 30}) == ["s1"]
+    seq_rows, _ = compare_stats(sa, sb, level="sequences")
+    assert seq_rows[COMBINED]["MOTA"].high - seq_rows[COMBINED]["MOTA"].low > 0
+    with pytest.raises(ValueError, match="interval must be one of"):
+        compare_stats(sa, sb, method="normal")
 
 
 def test_sequence_level_resampling_runs(two_runs) -> None:
