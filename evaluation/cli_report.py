@@ -50,17 +50,20 @@ def add_parsers(sub: Any) -> None:
     ev.set_defaults(func=_cmd_events)
 
     cp = command("compare", "compare two runs: per-sequence and combined metrics, the paired "
-                 "difference and its 95%% bootstrap interval")
+                 "difference and its 95%% interval (paired block jackknife)")
     cp.add_argument("runs", nargs=2, metavar="RUN", help="two run folders (A, then B)")
     cp.add_argument("--resamples", type=positive_int, default=1000,
-                    help="bootstrap resamples (default: 1000)")
+                    help="bootstrap resamples of --interval percentile|bc|basic "
+                    "(default: 1000)")
     cp.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    cp.add_argument("--interval", choices=("jackknife", "percentile", "bc", "basic"),
+                    default="jackknife", help="jackknife (default; its coverage is measured "
+                    "in docs/report.md) or a block bootstrap interval")
     cp.add_argument("--level", choices=("frames", "sequences"), default="frames",
-                    help="resample frame blocks within each sequence (default) or also the "
+                    help="leave out frame blocks within each sequence (default) or whole "
                     "sequences (needs many sequences)")
     cp.add_argument("--block", type=positive_int,
-                    help="block length in frames (default: a tenth of the sequence, at least "
-                    "ceil(1.5 * frames ** (1/3)))")
+                    help="block length in frames (default: a fifth of the sequence)")
     cp.add_argument("--format", choices=("table", "json"), default="table",
                     help="a table in percent (default) or every number as JSON")
     cp.set_defaults(func=_cmd_compare)
@@ -129,7 +132,7 @@ def _cmd_compare(args: argparse.Namespace, console: Console) -> int:
     from .compare import compare_runs
 
     comp = compare_runs(args.runs[0], args.runs[1], resamples=args.resamples, seed=args.seed,
-                        level=args.level, block=args.block)
+                        level=args.level, block=args.block, method=args.interval)
     if args.format == "json":
         print(json.dumps(comp.to_json(), indent=2))
     else:

@@ -168,7 +168,9 @@ def test_compare_command(two_runs, capsys, tmp_path) -> None:
     out = capsys.readouterr().out
     for metric in ("HOTA", "IDF1", "MOTA", "DetA", "AssA"):
         assert f"COMBINED           {metric}" in out
-    assert "95% interval" in out
+    assert "95% interval" in out and "paired block jackknife (frames)" in out
+    assert main(["compare", str(a), str(b), "--interval", "percentile", "--resamples", "50"]) == 0
+    assert "paired block bootstrap (frames), 50 resamples" in capsys.readouterr().out
     assert main(["compare", str(a), str(b), "--resamples", "50", "--format", "json"]) == 0
     payload = json.loads(capsys.readouterr().out)
     assert set(payload["rows"]["COMBINED"]) == {"HOTA", "DetA", "AssA", "IDF1", "MOTA"}
