@@ -17,10 +17,12 @@ the true difference (it should be close to 95%), with the mean width.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import t as STUDENT
 
 from unitrack_env.evaluation.compare import COMBINED, block_length, compare_stats
 from unitrack_env.metrics.events_mot import preprocessed_frames
@@ -147,14 +149,24 @@ def main() -> None:
     print(f"{args.reps} data sets of {args.sequences} x {args.frames} frames, "
           f"{args.resamples} bootstrap resamples where bootstrapped; true difference from "
           f"{args.truth} more data sets ({time.perf_counter() - start:.0f} s)")
+    report(args, truth, spread, hits, widths)
+
+
+def report(args: argparse.Namespace, truth: dict, spread: dict, hits: dict,
+           widths: dict) -> None:
+    """Print the coverage table; ``SE / SD`` is the interval's implied standard error
+    (half-width over its quantile: 1.96, or t(k - 1) for the jackknife of k blocks) over the
+    true spread of the estimate across data sets."""
     print(f"{'block':<6} {'interval':<10} {'metric':<6} {'true A-B':>9} {'coverage':>9} "
-          f"{'mean width':>11} {'4 x SD of A-B':>14}")
-    for b in blocks:
-        for i in methods:
-            for m in MOT_STAT_METRICS:
-                print(f"{b or block_length(args.frames):<6} {i:<10} {m:<6} "
-                      f"{100 * truth[m]:>+9.2f} {100 * hits[b, i, m] / args.reps:>8.1f}% "
-                      f"{100 * np.mean(widths[b, i, m]):>10.2f} {400 * spread[m]:>14.2f}")
+          f"{'mean width':>11} {'4 x SD of A-B':>14} {'SE / SD':>8}")
+    for b, i, m in hits:
+        ell = b or block_length(args.frames)
+        k = args.sequences * math.ceil(args.frames / ell)
+        q = float(STUDENT.ppf(0.975, k - 1)) if i == "jackknife" else 1.96
+        width = float(np.mean(widths[b, i, m]))
+        print(f"{ell:<6} {i:<10} {m:<6} "
+              f"{100 * truth[m]:>+9.2f} {100 * hits[b, i, m] / args.reps:>8.1f}% "
+              f"{100 * width:>10.2f} {400 * spread[m]:>14.2f} {width / 2 / q / spread[m]:>8.2f}")
     print(f"(a coverage within ±{100 * 1.96 * np.sqrt(0.95 * 0.05 / args.reps):.1f} points "
           f"of 95% is consistent with 95% at {args.reps} data sets)")
 
