@@ -158,7 +158,7 @@ def adapter_for(task: str, capacities: Mapping[str, int] | None = None) -> Obser
 
 
 def default_max_tracks(task: str) -> int:
-    """The environments' default ``max_tracks`` of ``task``, read from them so agents keep no copy."""
+    """The environments' default ``max_tracks`` of ``task``, read from the env modules."""
     if task == "posetrack":
         from unitrack_env.envs.posetrack import DEFAULT_MAX_TRACKS as POSE_TRACKS
 

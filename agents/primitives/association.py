@@ -43,7 +43,7 @@ HEIGHT_VELOCITY_INDEX = 7
 
 @dataclass
 class _Frame(Generic[P]):
-    """One frame's detections while :meth:`Associator.step` runs (``matched``: detection -> track)."""
+    """One frame's detections while :meth:`Associator.step` runs."""
 
     boxes: np.ndarray
     measurements: np.ndarray
@@ -123,7 +123,7 @@ class Associator(Generic[P]):
     def step(
         self, boxes: np.ndarray, scores: np.ndarray, payloads: Sequence[P]
     ) -> list[TrackOutput]:
-        """Associate one frame's ``(x, y, w, h)`` boxes; return the confirmed tracks matched, by id."""
+        """Associate one frame's ``(x, y, w, h)`` boxes; return the matched confirmed tracks."""
         boxes, scores = self._check_inputs(boxes, scores, payloads)
         self._frame += 1
         self.last_step = StepRecord()

@@ -143,7 +143,7 @@ class KalmanFilter:
         return mean, _batched_diag(std**2)
 
     def predict(self, mean: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Advance states by one step: ``x = F x``, ``P = F P F^T + Q`` (Q from the prior height)."""
+        """Advance states by one step: ``x = F x``, ``P = F P F^T + Q``."""
         mean, covariance = _as_state(mean, covariance)
         q = self._process_covariance(mean[:, 3])
         new_mean = mean @ self._motion.T
@@ -160,7 +160,7 @@ class KalmanFilter:
     def update(
         self, mean: np.ndarray, covariance: np.ndarray, measurements: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Correct states with one ``(u, v, a, h)`` measurement per track (Kalman gain via a solve)."""
+        """Correct states with one ``(u, v, a, h)`` measurement per track."""
         mean, covariance = _as_state(mean, covariance)
         z = _as_measurements(measurements, "measurements")
         if len(z) != len(mean):

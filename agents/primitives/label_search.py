@@ -36,7 +36,7 @@ def grid_positions(h: int, w: int, device: torch.device) -> torch.Tensor:
 
 
 class Workspace:
-    """Scratch tensors reused from step to step (a fresh tens-of-MiB tensor page-faults each step)."""
+    """Scratch tensors reused from step to step (fresh large tensors page-fault each step)."""
 
     def __init__(self) -> None:
         self._tensors: dict[str, torch.Tensor] = {}
@@ -59,7 +59,7 @@ class Workspace:
 def merge_topk(
     values: list[torch.Tensor], labels: list[torch.Tensor], topk: int, temperature: float
 ) -> torch.Tensor:
-    """Top-k over candidate groups (``-inf`` = none), softmax over the kept ones, weighted labels."""
+    """Top-k over candidate groups (``-inf`` = none), softmax over the kept, weighted labels."""
     with stage("top-k"):
         value = torch.cat(values, dim=1).float()
         label = torch.cat(labels, dim=1)
@@ -96,7 +96,7 @@ def search_dense(
     q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int, w: int,
     radius: float | None, topk: int, max_elements: int,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k ``(Q, k)`` affinities and ``(Q, k, K)`` labels over one memory frame, by query blocks."""
+    """Top-k ``(Q, k)`` affinities and ``(Q, k, K)`` labels over one memory frame."""
     size = h * w
     keys = feats.reshape(feats.shape[0], -1)  # (C, S)
     k = min(topk, size)

@@ -69,7 +69,7 @@ SUBPIXEL_BITS: int = 4
 
 @dataclass(frozen=True)
 class LocalMask:
-    """A binary mask stored as its ``(h, w)`` bool crop and the crop's top-left pixel ``(x0, y0)``."""
+    """A binary mask stored as its bool crop and the crop's top-left pixel ``(x0, y0)``."""
 
     mask: np.ndarray
     x0: int = 0

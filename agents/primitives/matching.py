@@ -28,7 +28,7 @@ APPEARANCE_WEIGHT_CODE = 0.98
 
 @dataclass(frozen=True)
 class Assignment:
-    """Thresholded assignment: ``(k, 2)`` ``(row, column)`` matches and the unmatched rows/columns."""
+    """Thresholded assignment: ``(k, 2)`` ``(row, column)`` matches, unmatched rows/columns."""
 
     matches: np.ndarray
     unmatched_rows: np.ndarray
@@ -80,7 +80,7 @@ def iou_cost(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
 def gate(
     cost: np.ndarray, motion_distance: np.ndarray, threshold: float = CHI2_95_4DOF
 ) -> np.ndarray:
-    """Return a copy of ``cost`` with ``inf`` where ``motion_distance > threshold`` (paper eq. gate)."""
+    """Return a copy of ``cost`` with ``inf`` where ``motion_distance > threshold`` (eq. gate)."""
     c = np.array(cost, dtype=np.float64)
     c[np.asarray(motion_distance) > threshold] = np.inf
     return c

@@ -86,7 +86,7 @@ class OverlapMeasure(abc.ABC, Generic[S]):
 
 
 class BoxOverlap(OverlapMeasure[np.ndarray]):
-    """Box IoU with a constant-velocity guess (``velocity_smoothing``: newest displacement's weight)."""
+    """Box IoU with a constant-velocity guess (``velocity_smoothing``: newest step weight)."""
 
     def __init__(self, velocity_smoothing: float = 0.5) -> None:
         self.velocity_smoothing = velocity_smoothing

@@ -39,7 +39,7 @@ DEFAULT_GRID_SHAPE: tuple[int, int] = (10, 4)
 
 @dataclass(frozen=True)
 class ObjectFeatures:
-    """The ``(s, C)`` location features of one observation and optional ``(s, 2)`` grid positions."""
+    """The ``(s, C)`` location features of one observation, optionally ``(s, 2)`` grid positions."""
 
     features: torch.Tensor
     positions: torch.Tensor | None = None
