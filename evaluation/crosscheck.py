@@ -2,6 +2,7 @@
 
 py-motmetrics (MIT licence) independently implements CLEAR MOT and the ID measures; it is
 fed exactly the frames TrackEval scores, with distances ``1 - IoU`` (NaN below 0.5).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -38,10 +38,3 @@ def xywh_to_xyxy(boxes: np.ndarray) -> np.ndarray:
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4).copy()
     b[:, 2:] += b[:, :2]
     return b
-
-
-def xyxy_to_xywh(boxes: np.ndarray) -> np.ndarray:
-    """Convert ``(x1, y1, x2, y2)`` boxes to ``(x, y, w, h)``."""
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4).copy()
-    b[:, 2:] -= b[:, :2]
-    return b

@@ -1,7 +1,7 @@
 """EfficientNet-Lite0, written from the architecture's published definition.
 
 EfficientNet-B0 (Tan & Le, ICML 2019) without squeeze-and-excitation, with ReLU6, and with
-a fixed 32-channel stem and 1280-channel head.
+a fixed 32-channel stem and 1280-channel head. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 :class:`AppearanceModel` wraps one network with what the heads need: input normalisation,
 batched inference, thread and device settings, the JDE letterbox for MOT, and a
-:class:`ModelIdentity` that keys on-disk feature caches.
+:class:`ModelIdentity` that keys on-disk feature caches. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

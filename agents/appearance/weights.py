@@ -2,7 +2,7 @@
 
 The table of named weights, reading a checkpoint, choosing its key remapping, inferring the
 architecture, building and loading: :func:`load_weights` does all of it;
-:func:`resolve_weights` stops before anything is built.
+:func:`resolve_weights` stops before anything is built. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """The UniTrack pose-propagation head (``unitrack-pose``): belief maps propagated like masks.
 
 UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

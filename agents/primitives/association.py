@@ -3,7 +3,7 @@
 :class:`Associator` implements Algorithm 1 of the UniTrack paper (appendix C.1, JDE's
 association). Per detection it gets a box (Kalman filter, IoU stages) and an opaque
 *payload* compared by an injected ``similarity(tracks, detections) -> (n, m)``; the
-appearance cost is ``1 - similarity``.
+appearance cost is ``1 - similarity``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 DeepSORT's filter, as in JDE and UniTrack (appendix C.1): state
 ``(u, v, a, h, du, dv, da, dh)`` (centre, aspect ``w / h``, height and their per-frame
-velocities); measurements ``(u, v, a, h)``.
+velocities); measurements ``(u, v, a, h)``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

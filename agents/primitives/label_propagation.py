@@ -1,4 +1,7 @@
-"""Label propagation with a memory bank (UniTrack level 2: mask and pose propagation)."""
+"""Label propagation with a memory bank (UniTrack level 2: mask and pose propagation).
+
+More in docs/module-notes.md.
+"""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 The query grid is cut into ``t x t`` tiles; a tile's keys are the locations within the
 radius of any of its queries. When a frame enters the memory, every tile's keys are copied
 out once (im2col) into the ring ``(T, R, slots, g, C)``, so a tile's keys in all recent
-frames form one contiguous matrix: no gather at search time.
+frames form one contiguous matrix: no gather at search time. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,4 +1,7 @@
-"""Object features and Kalman boxes of mask and pose observations (UniTrack appendix C)."""
+"""Object features and Kalman boxes of mask and pose observations (UniTrack appendix C).
+
+More in docs/module-notes.md.
+"""
 
 from __future__ import annotations
 

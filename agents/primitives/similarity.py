@@ -3,6 +3,7 @@
 Every object is a *set* of ``(s_i, C)`` location features (40 for a box pooled to 10 x 4,
 the covered cells for a mask). Metrics return an ``(N, M)`` float64 similarity (higher =
 more alike); features are L2-normalised first by default, as UniTrack does.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Reader and result writer for DAVIS-2017 semi-supervised video object segmentation.
 
 Reads ``JPEGImages/480p/<seq>/*.jpg``, ``Annotations/480p/<seq>/*.png`` (palette PNGs;
-test-dev: first frame only) and ``ImageSets/2017/<split>.txt``.
+test-dev: first frame only) and ``ImageSets/2017/<split>.txt``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

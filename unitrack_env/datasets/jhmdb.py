@@ -3,6 +3,7 @@
 Reads ``Rename_Images/<action>/<video>/*.png``,
 ``joint_positions/<action>/<video>/joint_positions.mat`` and optional
 ``splits/<action>_test_split<k>.txt`` (HMDB51 format: 1 = train, 2 = test).
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

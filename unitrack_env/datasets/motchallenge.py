@@ -1,7 +1,7 @@
 """Reader for the MOTChallenge layout (MOT15, MOT16, MOT17, MOT20 and custom data).
 
 Reads ``<root>/<split>/<sequence>/`` with ``seqinfo.ini``, ``img1/``, ``det/det.txt`` and
-``gt/gt.txt`` (train splits).
+``gt/gt.txt`` (train splits). More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Reader and writer of PoseTrack 2018 JSON (ground truth, results and pose detections).
 
 Reads the release layout: ``posetrack_data/annotations/{train,val}/<sequence>.json`` and
-``posetrack_data/images/{train,val,test}/<sequence>/*.jpg``.
+``posetrack_data/images/{train,val,test}/<sequence>/*.jpg``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -106,10 +106,3 @@ class PoseTrackVideo:
     categories: list[dict[str, Any]] = field(default_factory=lambda: [dict(PERSON_CATEGORY)])
     extra: dict[str, Any] = field(default_factory=dict)
 
-    def index_of(self, image_id: int) -> int:
-        """Return the position of image ``image_id`` in :attr:`images`."""
-        for k, image in enumerate(self.images):
-            if image.id == image_id:
-                return k
-        raise KeyError(image_id)
-

@@ -2,6 +2,7 @@
 
 :func:`write_davis` writes the DAVIS-2017 semi-supervised layout: ``JPEGImages/480p``,
 ``Annotations/480p`` (palette PNGs) and ``ImageSets/2017/{train,val,test-dev}.txt``.
+More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 :func:`write_jhmdb` writes ``Rename_Images/<action>/<video>/*.png`` frames,
 ``joint_positions/<action>/<video>/joint_positions.mat`` (``pos_img`` ``(2, 15, T)``,
-1-based) and ``splits/<action>_test_split1.txt``.
+1-based) and ``splits/<action>_test_split1.txt``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -1,4 +1,7 @@
-"""Synthetic MOTS data sets in the MOTS20 and KITTI MOTS layouts (:func:`write_mots`)."""
+"""Synthetic MOTS data sets in the MOTS20 and KITTI MOTS layouts (:func:`write_mots`).
+
+More in docs/module-notes.md.
+"""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 :func:`write_posetrack` writes ``posetrack_data/annotations/{train,val}/<seq>.json``,
 ``posetrack_data/images/{train,val,test}/<seq>/*.jpg`` and simulated pose detections in
-``detections/{train,val,test}/<seq>.json``.
+``detections/{train,val,test}/<seq>.json``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 :func:`write_youtube_vis` writes ``train.json``/``valid.json``, frames under
 ``{train,valid}/JPEGImages/<video>/`` (every-5th numbering, as the 2019 release) and noisy
-detections in ``detections/{train,valid}.json``.
+detections in ``detections/{train,valid}.json``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
