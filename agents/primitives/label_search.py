@@ -226,3 +226,19 @@ class MemorySearch(ABC):
                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
                   slots: Sequence[int]) -> torch.Tensor:
         """``(h * w, K)`` labels of the prepared ``query`` ``(C, h, w)`` from the whole memory."""
+
+    def recent_candidates(self, query: torch.Tensor,
+                          recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                          slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Top-k groups of the recent frames: dense per frame without a radius, else windows."""
+        cfg = self.config
+        c, h, w = query.shape
+        if recent and cfg.radius is None:
+            q = query.reshape(c, -1).t().contiguous()
+            found = [search_dense(q, feats, lbl, h, w, None, cfg.topk, cfg.max_affinity_elements)
+                     for feats, lbl in recent]
+            return [v for v, _ in found], [lab for _, lab in found]
+        if recent:
+            v, lab = self.search_recent(query, slots)
+            return [v], [lab]
+        return [], []

@@ -186,19 +186,7 @@ class TiledSearch(MemorySearch):
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
-        values, labels = [], []
         v, lab = search_dense(q, *first, h, w, cfg.first_frame_radius, cfg.topk,
                               cfg.max_affinity_elements)
-        values.append(v)
-        labels.append(lab)
-        if recent and cfg.radius is None:
-            for feats, lbl in recent:
-                v, lab = search_dense(q, feats, lbl, h, w, None, cfg.topk,
-                                      cfg.max_affinity_elements)
-                values.append(v)
-                labels.append(lab)
-        elif recent:
-            v, lab = self.search_recent(query, slots)
-            values.append(v)
-            labels.append(lab)
-        return merge_topk(values, labels, cfg.topk, cfg.temperature)
+        values, labels = self.recent_candidates(query, recent, slots)
+        return merge_topk([v, *values], [lab, *labels], cfg.topk, cfg.temperature)

@@ -232,17 +232,7 @@ class WindowSearch(MemorySearch):
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
-        values, labels = [], []
-        if recent and cfg.radius is None:
-            for feats, lbl in recent:
-                v, lab = search_dense(q, feats, lbl, h, w, None, cfg.topk,
-                                      cfg.max_affinity_elements)
-                values.append(v)
-                labels.append(lab)
-        elif recent:
-            v, lab = self.search_recent(query, slots)
-            values.append(v)
-            labels.append(lab)
+        values, labels = self.recent_candidates(query, recent, slots)
         if values:
             with stage("top-k"):
                 floor = kth_best(values, cfg.topk)
