@@ -27,7 +27,13 @@ from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, rende
 COUNTS = {"IDSW", "CLR_FP", "CLR_FN", "MT", "ML", "Frag", "IDs", "CLR_TP"}
 
 #: Per-frame value shown on the timeline of a non-MOT task.
-VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1")}
+VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1"),
+                 "vis": ("iou", "IoU of tp tracks")}
+
+#: Event lanes of the timeline of tasks with counted events, and what a count is; their
+#: thumbnails are not drawn yet (masks, poses), only box MOT's.
+LANES = {"mots": (None, "masks"), "posetrack": (("fn", "fp", "idsw"), "joints"),
+         "vis": (("fn", "fp"), "track-frames")}
 
 
 def _slug(text: str) -> str:
@@ -139,9 +145,16 @@ def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
         return (f'<section class="sequence" data-sequence="{esc(seq)}">{head}'
                 + mot_timeline(events, frames) + shown
                 + '<div class="thumbs">' + "".join(figures) + "</div></section>")
+    body = ""
+    if bench.task in LANES:
+        kinds, unit = LANES[bench.task]
+        body = (mot_timeline(events, frames, kinds=kinds) + f"<p>Counts are {unit}; no "
+                "thumbnails for this task yet (only box MOT's are drawn).</p>")
     column, name = VALUE_COLUMNS.get(bench.task, (None, None))
-    body = (value_timeline(events[column], events["frame"], name, frames)
-            if column is not None and column in events else "<p>No per-frame events.</p>")
+    if column is not None and column in events:
+        rows = events[events["type"] == "tp"] if bench.task == "vis" else events
+        body += value_timeline(rows[column], rows["frame"], name, frames)
+    body = body or "<p>No per-frame events.</p>"
     return f'<section class="sequence" data-sequence="{esc(seq)}">{head}{body}</section>'
 
 

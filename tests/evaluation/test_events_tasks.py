@@ -153,3 +153,14 @@ def test_events_command_accepts_the_new_tasks(runs: dict[str, Path], capsys) -> 
         assert main(["events", str(runs[name]), "--type", kind, "--format", "csv"]) == 0
         lines = capsys.readouterr().out.strip().splitlines()
         assert len(lines) > 1 and all(f",{kind}," in line for line in lines[1:]), name
+
+
+def test_report_shows_timelines_of_the_new_tasks(runs: dict[str, Path], tmp_path: Path) -> None:
+    from unitrack_env.evaluation.report.build import build_report
+
+    page = build_report([runs["MOTS"], runs["PoseTrack"], runs["VIS"]], tmp_path).read_text()
+    for name in ("MOTS", "PoseTrack", "VIS"):
+        for seq in per_sequence(runs[name]):
+            section = page.split(f'data-sequence="{seq}">', 2)[-1].split("</section>")[0]
+            assert '<svg class="timeline"' in section and "no thumbnails" in section, seq
+    assert 'class="ev-idsw"' in page and "IoU of tp tracks" in page
