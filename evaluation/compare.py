@@ -264,15 +264,31 @@ def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStat
 def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
                  seed: int = 0, level: str = "frames", block: int | None = None,
                  method: str = "jackknife") -> Comparison:
-    """Compare two MOT run folders on the sequences both scored (see the module docstring)."""
+    """Compare two run folders on the sequences both scored (see the module docstring).
+
+    Box MOT recomputes its metrics from per-frame statistics; SOT, VOS and JHMDB runs compare
+    their per-frame metrics (:func:`~.intervals.compare_frames`, jackknife only).
+    """
+    task = _common_task(run_a, run_b)
     seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
     common = [s for s in seq_a if s in seq_b]
     if not common:
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
-    stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
-    rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed, level=level,
-                                 block=block, method=method)
-    frames = {s: stats_a[s].num_frames for s in common}
+    if task == "mot":
+        stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
+        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
+                                     level=level, block=block, method=method)
+        frames = {s: stats_a[s].num_frames for s in common}
+    else:
+        from .intervals import compare_frames
+
+        if level not in ("frames", "sequences"):
+            raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
+        if method != "jackknife":
+            raise ValueError(f"--interval {method} is for box MOT runs; {task} runs are "
+                             "compared with the block jackknife")
+        rows, frames, blocks = compare_frames(run_a, run_b, task, common, level=level,
+                                              block=block)
     notes = few_data_notes(frames, blocks, level)
     for name in unreliable_rows(frames, blocks):
         for d in rows[name].values():
@@ -282,6 +298,21 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
         notes.append(f"not in both runs, left out: {', '.join(skipped)}")
     return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes,
                       method)
+
+
+#: Tasks ``compare`` supports: box MOT and the tasks whose metrics are means over frames.
+COMPARE_TASKS: tuple[str, ...] = ("mot", "sot", "vos", "pose-prop")
+
+
+def _common_task(run_a: str | os.PathLike, run_b: str | os.PathLike) -> str:
+    tasks = [run_benchmark(r).task for r in (run_a, run_b)]
+    if tasks[0] != tasks[1]:
+        raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
+                         "compare two runs of the same task")
+    if tasks[0] not in COMPARE_TASKS:
+        raise ValueError(f"{run_a}: `compare` supports {', '.join(COMPARE_TASKS)} runs; this "
+                         f"run's task is '{tasks[0]}'")
+    return tasks[0]
 
 
 def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:

@@ -131,7 +131,7 @@ def _pose_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventR
 
     pred, gt = bench.read(folder, sequence), bench.ground_truth(sequence)
     rows = EventRows(sequence)
-    for t in range(min(len(pred), len(gt))):
+    for t in range(1, min(len(pred), len(gt))):  # frame 1 is given, and not scored
         rows.add(t + 1, "frame", pck=frame_pck(pred[t], gt[t], method=bench.normaliser))
     return rows
 
