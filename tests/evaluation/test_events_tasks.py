@@ -45,21 +45,26 @@ def per_sequence(run_dir: Path) -> dict:
 
 
 # ---------------------------------------------------------------------------- MOTS
-def test_mots_events_of_a_hand_made_episode_sum_to_trackeval() -> None:
+@pytest.mark.parametrize(("benchmark", "first"), [("MOTS20", 1), ("KITTI-MOTS", 0)])
+def test_mots_events_of_a_hand_made_episode_sum_to_trackeval(benchmark: str, first: int) -> None:
     """A switch, a fragmentation, a miss and a false positive inside an ignore region."""
     a, b, c = box_mask(0, 0, 3, 4), box_mask(4, 0, 8, 4), box_mask(0, 5, 8, 6)
-    gt = records([(t, 2001, 2, a) for t in range(1, 6)] + [(t, 2002, 2, b) for t in (1, 2, 4, 5)]
-                 + [(t, 10000, 10, c) for t in range(1, 6)])
-    res = records([(1, 5, 2, a), (2, 5, 2, a), (3, 6, 2, a), (5, 6, 2, a), (1, 7, 2, b),
-                   (4, 7, 2, b), (5, 7, 2, b), (2, 8, 2, c), (3, 9, 2, box_mask(4, 4, 8, 5))])
-    rows = mots_sequence_events("S", gt, res, first_frame=1, num_frames=5, class_id=2)
-    official = score_sequence(gt, res, seq_length=5).summary
+    f = first - 1  # frame t of the story is file frame t + f
+    gt = records([(t + f, 2001, 2, a) for t in range(1, 6)]
+                 + [(t + f, 2002, 2, b) for t in (1, 2, 4, 5)]
+                 + [(t + f, 10000, 10, c) for t in range(1, 6)])
+    res = records([(t + f, i, 2, m) for t, i, m in [
+        (1, 5, a), (2, 5, a), (3, 6, a), (5, 6, a), (1, 7, b), (4, 7, b), (5, 7, b), (2, 8, c),
+        (3, 9, box_mask(4, 4, 8, 5))]])
+    rows = mots_sequence_events("S", gt, res, first_frame=first, num_frames=5, class_id=2)
+    official = score_sequence(gt, res, seq_length=5, benchmark=benchmark).summary
     assert counts(rows) == {k: int(official[f]) for k, f in MOT_FIELDS.items()
                             if official[f]} | {"tp": int(official["CLR_TP"])}
     assert counts(rows)["idsw"] == 1 and counts(rows)["frag"] >= 1 and counts(rows)["fp"] == 1
     switch = rows.columns["type"].index("idsw")
     assert (rows.columns["prev_track_id"][switch], rows.columns["track_id"][switch]) == (5, 6)
     assert rows.columns["x"][switch] == 0 and rows.columns["w"][switch] == 3  # the mask's box
+    assert rows.columns["frame"][switch] == 3  # 1-based position, whatever the file numbering
 
 
 def test_mots_run_events_sum_to_trackeval(runs: dict[str, Path]) -> None:
