@@ -4,6 +4,8 @@ The default interval is a paired delete-a-block jackknife: each sequence is cut 
 :data:`BLOCKS` blocks of consecutive frames, the metrics are recomputed with one block left
 out (the same block for both runs), and the difference gets a t interval from the jackknife
 standard error. A block bootstrap is kept for comparison; docs/report.md has the coverage.
+Box MOT recomputes its metrics from per-frame statistics of the official matching; SOT, VOS
+and JHMDB runs compare means of per-frame values (:func:`.intervals.compare_frames`).
 
 More in docs/module-notes.md.
 """

@@ -144,6 +144,10 @@ def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, task: str
     score combines sequences (:func:`combine_weights`).
     """
     va, vb = frame_values(run_a, task, sequences), frame_values(run_b, task, sequences)
+    for run, values in ((run_a, va), (run_b, vb)):
+        missing = [name for name in sequences if name not in values]
+        if missing:
+            raise ValueError(f"{run}: no per-frame events for {', '.join(missing)}")
     weights = combine_weights(run_a, task, sequences)
     frames, blocks, rows = {}, {}, {}
     pairs = {}
