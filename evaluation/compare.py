@@ -52,6 +52,22 @@ def block_length(num_frames: int) -> int:
     return max(1, math.ceil(int(num_frames) / BLOCKS))
 
 
+#: Shortest block of a frame-scored task's jackknife, in frames: a tracker that loses its
+#: target stays lost for tens of frames, and shorter blocks understate the variance
+#: (coverage 81-90% with blocks of a fifth of 100-200 frames, 93-97% with at least 50:
+#: benchmarks/compare_coverage_frames.py, docs/report.md).
+MIN_FRAME_BLOCK: int = 50
+
+
+def frame_block_length(num_frames: int) -> int:
+    """Block length of a frame-scored sequence: a fifth of it, but at least 50 frames.
+
+    Never more than half the sequence (two blocks), so a short sequence keeps a spread.
+    """
+    n = int(num_frames)
+    return max(block_length(n), min(MIN_FRAME_BLOCK, math.ceil(n / 2)))
+
+
 def jackknife_weights(num_frames: int, length: int) -> np.ndarray:
     """``(k, num_frames)`` frame weights: row ``j`` leaves out the ``j``-th block of ``length``."""
     n, ell = int(num_frames), max(1, int(length))
@@ -291,8 +307,8 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
                              "compared with the block jackknife")
         rows, frames, blocks = compare_frames(run_a, run_b, task, common, level=level,
                                               block=block)
-    notes = few_data_notes(frames, blocks, level)
-    for name in unreliable_rows(frames, blocks):
+    notes = few_data_notes(frames, blocks, level, pooled=task != "mot")
+    for name in unreliable_rows(frames, blocks, pooled=task != "mot"):
         for d in rows[name].values():
             d.reliable = False
     skipped = sorted(set(seq_a) ^ set(seq_b))
@@ -321,27 +337,38 @@ def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, in
     return {name: math.ceil(n / blocks[name]) for name, n in frames.items()}
 
 
-def unreliable_rows(frames: dict[str, int], blocks: dict[str, int]) -> list[str]:
+def unreliable_rows(frames: dict[str, int], blocks: dict[str, int], *,
+                    pooled: bool = False) -> list[str]:
     """Rows whose interval rests on too little data.
 
-    A sequence needs :data:`MIN_FRAMES` frames in at least :data:`BLOCKS` blocks; the
-    combined row needs one such sequence.
+    A sequence needs :data:`MIN_FRAMES` frames in at least :data:`BLOCKS` blocks. The
+    combined row needs one such sequence, or with ``pooled`` (frame-scored tasks, whose
+    combined replicates pool the blocks of all sequences) :data:`BLOCKS` blocks of at least
+    :data:`MIN_FRAME_BLOCK` frames in all.
     """
     counts = _block_count(frames, blocks)
     out = [name for name, count in counts.items()
            if count < BLOCKS or frames[name] < MIN_FRAMES]
-    return out + ([COMBINED] if len(out) == len(counts) else [])
+    if pooled:  # enough blocks long enough (MIN_FRAME_BLOCK) in all
+        long = sum(c for name, c in counts.items() if blocks[name] >= MIN_FRAME_BLOCK)
+        enough = long >= BLOCKS and sum(frames.values()) >= MIN_FRAMES
+    else:
+        enough = len(out) < len(counts)
+    return out + ([] if enough else [COMBINED])
 
 
-def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str) -> list[str]:
+def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str, *,
+                   pooled: bool = False) -> list[str]:
     """Plain warnings where too little data makes the intervals wide or unreliable."""
     notes = []
     counts = _block_count(frames, blocks)
-    for name in unreliable_rows(frames, blocks):
+    for name in unreliable_rows(frames, blocks, pooled=pooled):
         if name == COMBINED:
-            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all, no sequence with "
-                         f"{MIN_FRAMES} frames in {BLOCKS} blocks: too little data for a "
-                         "trustworthy interval; do not read a difference into it")
+            rule = (f"fewer than {BLOCKS} blocks of {MIN_FRAME_BLOCK} frames" if pooled else
+                    f"no sequence with {MIN_FRAMES} frames in {BLOCKS} blocks")
+            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all, {rule}: too "
+                         "little data for a trustworthy interval; do not read a difference "
+                         "into it")
         else:
             notes.append(f"{name}: only {frames[name]} frames ({counts[name]} blocks of "
                          f"{blocks[name]}): too little data, its interval is not trustworthy "

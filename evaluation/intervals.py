@@ -28,6 +28,7 @@ from .compare import (
     COMBINED,
     MetricDiff,
     block_length,
+    frame_block_length,
     jackknife_interval,
     jackknife_weights,
     run_stats,
@@ -128,7 +129,7 @@ def _frame_intervals(run: Path, task: str) -> dict[str, tuple[float, float]]:
         values = {name: v[metric].to_numpy() for name, v in by_seq.items()}
         if any(np.isfinite(v).any() for v in values.values()):
             point, reps = frame_replicates(
-                values, {name: block_length(len(v)) for name, v in values.items()},
+                values, {name: frame_block_length(len(v)) for name, v in values.items()},
                 weights=weights)[COMBINED]
             out[metric] = jackknife_interval(point, reps)
     return out
@@ -155,7 +156,7 @@ def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, task: str
         index = va[name][next(iter(FRAME_METRICS[task]))].index.intersection(
             vb[name][next(iter(FRAME_METRICS[task]))].index)
         frames[name] = len(index)
-        blocks[name] = block_length(len(index)) if block is None else max(
+        blocks[name] = frame_block_length(len(index)) if block is None else max(
             1, min(int(block), len(index)))
         pairs[name] = index
     for metric in FRAME_METRICS[task]:

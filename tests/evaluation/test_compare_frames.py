@@ -102,3 +102,15 @@ def test_report_compares_two_sot_runs(sot_runs, tmp_path) -> None:
     page = build_report(list(sot_runs), tmp_path).read_text()
     section = page.split('<h2 id="compare">', 1)[1].split("<h2", 1)[0]
     assert "jackknife" in section and "AUC" in section and "Precision@20px" in section
+
+
+def test_frame_blocks_are_long_and_the_combined_row_needs_five_of_them() -> None:
+    from unitrack_env.evaluation.compare import frame_block_length, unreliable_rows
+
+    assert [frame_block_length(n) for n in (30, 100, 120, 199, 400)] == [15, 50, 50, 50, 80]
+    otb = {"Crossing": 120, "Human3": 199}
+    blocks = {n: frame_block_length(f) for n, f in otb.items()}
+    assert unreliable_rows(otb, blocks, pooled=True) == ["Crossing", "Human3"]
+    short = {"a": 40, "b": 40, "c": 40}  # six blocks, but of 20 frames
+    assert COMBINED in unreliable_rows(short, {n: frame_block_length(40) for n in short},
+                                       pooled=True)
