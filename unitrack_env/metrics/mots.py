@@ -1,14 +1,8 @@
 """Official MOTS scores through TrackEval 1.3.0, and per-frame mask CLEAR counts.
 
-TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
-licence) scores MOTS Challenge with its ``MOTSChallenge`` data set class and KITTI MOTS with
-``KittiMOTS``; the metrics are HOTA, CLEAR (whose ``MOTA``/``MOTP``/``sMOTA`` on masks are
-MOTSA, MOTSP and sMOTSA, Voigtlaender et al. CVPR 2019), Identity and Count. As the
-MOTChallenge adapter (:mod:`unitrack_env.metrics.motchallenge`) does, this one uses the data
-set class's loading and preprocessing and each metric's ``eval_sequence`` /
-``combine_sequences``, never the ``Evaluator``, so nothing is printed, plotted or written.
-
-More in docs/module-notes.md.
+TrackEval's ``MOTSChallenge`` / ``KittiMOTS`` data set classes with HOTA, CLEAR (on masks
+``MOTA``/``MOTP``/``sMOTA`` are MOTSA, MOTSP, sMOTSA), Identity and Count, never its
+``Evaluator``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -175,9 +169,7 @@ def score_folder(
 ) -> ScoreReport:
     """Score ``<results_dir>/<seq>.txt`` (MOTS txt) against a :class:`MOTSDataset`'s gt.
 
-    Raises:
-        DataFormatError: a missing result file, a sequence without ground truth, or a
-            malformed result line (file, line and field).
+    A missing file or a malformed line raises DataFormatError naming file, line and field.
     """
     results_dir = Path(results_dir)
     scores: dict[str, SequenceScore] = {}
