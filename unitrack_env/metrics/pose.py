@@ -19,8 +19,6 @@ import numpy as np
 PAPER_PCK_THRESHOLDS: tuple[float, ...] = (0.1, 0.2)
 """The ``alpha`` values of the paper's JHMDB table (PCK@0.1 and PCK@0.2)."""
 
-SCRIPT_PCK_THRESHOLDS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
-"""The ``alpha`` values the authors' evaluation script prints."""
 
 BOX_DIAGONAL_FACTOR: float = 0.6
 """Factor on the GT joint-box diagonal in the default normaliser (UniTrack/CRW script)."""
