@@ -84,18 +84,9 @@ def score_sequence(
 ) -> SequenceScore:
     """Score one sequence's results with TrackEval (HOTA, CLEAR, Identity, Count).
 
-    Args:
-        ground_truth: the sequence's ground truth (records or a MOTS txt file).
-        results: tracker output (records or a MOTS txt result file); every row is taken as
-            ``object_class``.
-        seq_length: number of frames.
-        benchmark: ``"MOTS20"`` (1-based frames) or ``"KITTI-MOTS"`` (0-based frames).
-        object_class: ``"pedestrian"`` (MOTS20's only class) or ``"car"`` (KITTI MOTS).
-        sequence: name used in messages.
-
-    Raises:
-        DataFormatError: TrackEval rejected the data (frames outside the sequence,
-            overlapping masks, duplicate ids in a frame), naming the result file.
+    Both sides are records or MOTS txt files; every result row is taken as ``object_class``
+    (``"car"`` only on KITTI-MOTS, whose frames are 0-based). Data TrackEval rejects raises
+    DataFormatError naming the result file.
     """
     if benchmark not in TRACKEVAL_DATASETS:
         raise ValueError(f"unknown MOTS benchmark {benchmark!r}; valid: {list(TRACKEVAL_DATASETS)}")

@@ -70,11 +70,7 @@ DEFAULT_SPEC = OTBSpec(sequences=(
 
 
 def choose_target(video: SyntheticVideo) -> int:
-    """Return the id of the target: the fully visible-in-frame walker most occluded at some point.
-
-    Raises:
-        ValueError: no walking person stays inside the image in every frame.
-    """
+    """Return the id of the walker that stays in frame and is most occluded at some point."""
     width, height = video.width, video.height
     inside: dict[int, bool] = {o.id: True for o in video.objects
                                if o.role is ObjectRole.PEDESTRIAN}
