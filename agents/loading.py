@@ -1,7 +1,5 @@
 """Agents by reference: ``module:Class``, ``path/to/file.py:Class`` and installed plug-ins.
 
-An agent spec is one of
-
 More in docs/module-notes.md.
 """
 
@@ -76,11 +74,8 @@ def _execute(name: str, spec: importlib.machinery.ModuleSpec) -> Any:
 def _import_module(name: str) -> Any:
     """Import ``name`` as ``python -m`` would: the current folder first, then ``sys.path``.
 
-    ``python -m`` puts the current folder first on ``sys.path``, an installed console script
-    does not: a module found there puts it first (so that it imports the files beside it),
-    and looking there first makes ``unitrack evaluate --agent agents.mine:MyTracker``
-    import the user's own ``agents/`` even where an installed distribution also provides a
-    top-level ``agents`` (openai-agents does).
+    So ``--agent agents.mine:MyTracker`` imports the user's own ``agents/`` even where an
+    installed distribution provides a top-level ``agents`` (openai-agents does).
     """
     top = name.partition(".")[0]
     local = (importlib.machinery.PathFinder.find_spec(top, [str(Path.cwd())])
@@ -111,9 +106,7 @@ def _is_file(target: str) -> bool:
 def load_reference(spec: str) -> type:
     """Import the class named by ``module:Class`` or ``path/to/file.py:Class``.
 
-    Raises:
-        ImportError: the module or file cannot be imported, or has no such attribute; the
-            message says which and how the reference is written.
+    An ImportError says what could not be imported and how a reference is written.
     """
     target, _, attribute = spec.rpartition(":")
     if _is_file(target):

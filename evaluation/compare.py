@@ -1,12 +1,8 @@
 """Paired comparison of two runs with confidence intervals.
 
-The default interval is a paired delete-a-block jackknife: each sequence is cut into
-:data:`BLOCKS` blocks of consecutive frames, the metrics are recomputed with one block left
-out (the same block for both runs), and the difference gets a t interval from the jackknife
-standard error. A block bootstrap is kept for comparison; docs/report.md has the coverage.
-Box MOT recomputes its metrics from per-frame statistics of the official matching; SOT, VOS
-and JHMDB runs compare means of per-frame values (:func:`.intervals.compare_frames`).
-
+The default is a paired delete-a-block jackknife (the same block of consecutive frames left
+out of both runs) with a t interval; a block bootstrap is kept for comparison (coverage in
+docs/report.md). Frame-scored tasks go through :func:`.intervals.compare_frames`.
 More in docs/module-notes.md.
 """
 

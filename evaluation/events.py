@@ -172,15 +172,10 @@ def write_run_events(out: str | os.PathLike, bench: Benchmark, sequences: list[s
 
 def load_events(run: str | os.PathLike, sequence: str | None = None,
                 type: str | None = None) -> pd.DataFrame:  # noqa: A002 - the CLI's name
-    """The error events of a run folder as a DataFrame (one row per event).
+    """The error events of a run folder as a DataFrame, optionally one sequence or ``type``.
 
-    Args:
-        run: a run folder of ``unitrack evaluate``.
-        sequence: only this sequence (default: every scored sequence).
-        type: only this event type (``tp``, ``fp``, ``fn``, ``idsw``, ``frag``, ``frame``).
-
-    Events missing from the folder (a run made before events existed) are computed from the
-    result files and the ground truth, and written for next time.
+    Events missing from the folder (an older run) are computed from the result files and the
+    ground truth, and written for next time.
     """
     names = run_sequences(run)
     if sequence is not None:

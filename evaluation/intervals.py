@@ -1,16 +1,10 @@
 """95% intervals of one run's combined metrics, and of every scorecard cell (``--ci``).
 
-The method is :mod:`~unitrack_env.evaluation.compare`'s: a delete-a-block jackknife over
-blocks of frames (a fifth of each sequence; at least 50 frames for the frame-scored tasks,
-:func:`~unitrack_env.evaluation.compare.frame_block_length`), with a t interval. Box MOT
-recomputes HOTA, DetA, AssA, IDF1 and MOTA from the per-frame statistics
-(:mod:`unitrack_env.metrics.mot_stats`). Tasks scored per frame use their events: SOT's AUC
-(each frame's share of the success curve) and Precision@20px, VOS's J-Mean, F-Mean and
-J&F-Mean (means over frames and objects), pose propagation's PCK@0.1 (the mean of per-frame
-PCK over the scored frames, the official pooled PCK when every joint is scored). Sequences
-combine as the official scores combine them (:func:`combine_weights`). Other tasks (MOTS,
-PoseTrack, VIS) get no interval. :func:`compare_frames` gives ``unitrack compare`` the same
-jackknife for two runs of a frame-scored task.
+:mod:`~unitrack_env.evaluation.compare`'s delete-a-block jackknife with a t interval. Box MOT
+recomputes its metrics from :mod:`unitrack_env.metrics.mot_stats`; SOT, VOS and JHMDB use
+their per-frame events (means over frames), sequences combined as the official scores combine
+them (:func:`combine_weights`). MOTS, PoseTrack and VIS get no interval.
+:func:`compare_frames` serves ``unitrack compare`` for frame-scored tasks.
 """
 
 from __future__ import annotations

@@ -285,22 +285,11 @@ def run(
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
-    Args:
-        env_id: a registered id, e.g. ``"UniTrack/MOT17-v0"``.
-        agent: a registered name (``"iou"``), a reference (``"my_module:MyTracker"``,
-            ``"path/to/file.py:MyTracker"``), or the agent class itself.
-        out: output folder (see the module docstring); reused to resume.
-        env_kwargs: keyword arguments of ``gym.make`` (``root``, ``split``, ...).
-        agent_kwargs: keyword arguments of the agent (checked against its options).
-        sequences: only these sequences (default: all of the split).
-        workers: parallel worker processes across sequences (1 = in this process).
-        overwrite: discard an existing run in ``out`` instead of resuming it (only files
-            that runs of ours wrote, per ``out/manifest.json``, are deleted).
-        progress: show a progress bar with FPS and ETA.
-        step_timeout: seconds a step may take before its sequence fails (None, 0: no limit).
-
-    Returns:
-        A :class:`RunReport` (``metrics.json`` in ``out`` holds the same metrics).
+    ``agent`` is a registered name (``"iou"``), a reference (``"my_module:MyTracker"``,
+    ``"path/to/file.py:MyTracker"``) or the class; ``env_kwargs`` go to ``gym.make``;
+    ``out`` is reused to resume unless ``overwrite`` (which deletes only files of our runs,
+    per ``out/manifest.json``); ``step_timeout`` None or 0 means no limit. Returns a
+    :class:`RunReport`, the metrics also in ``out/metrics.json``.
 
     Raises:
         RunFailed: some sequences failed (the others are kept; rerun to resume).

@@ -1,10 +1,8 @@
 """Runtime dependencies that pip cannot install for us, checked before any frame is played.
 
-TrackEval (the official MOT/MOTS/VIS scorer) cannot be a declared requirement: every
-release's metadata asks for ``opencv-python`` (the GUI build, needs libGL), which would
-overwrite ``opencv-python-headless``'s ``cv2``. So it is installed with ``--no-deps`` (its
-real needs are unitrack-env's own requirements), and an environment that scores with it
-checks for it when it is made, not at the last step of an episode.
+TrackEval cannot be a declared requirement (its metadata asks for the GUI ``opencv-python``,
+which would overwrite the headless ``cv2``), so it is installed with ``--no-deps`` and an
+environment that scores with it checks for it when made, not at an episode's last step.
 """
 
 from __future__ import annotations

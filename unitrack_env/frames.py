@@ -102,11 +102,7 @@ class FramePrefetcher:
         return image
 
     def check(self, indices: Iterable[int]) -> None:
-        """Refuse a missing or truncated frame among ``indices`` before any is decoded.
-
-        Raises:
-            DataFormatError: naming the first bad file (see :func:`check_complete`).
-        """
+        """Refuse (DataFormatError) a missing or truncated frame before any is decoded."""
         for index in indices:
             check_complete(self._path_of(index))
 

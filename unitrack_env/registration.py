@@ -1,10 +1,8 @@
 """The table of registered environments.
 
-``import unitrack_env`` registers these ids (Gymnasium 1.x has no plugin discovery; or use
-``gym.make("unitrack_env:UniTrack/MOT16-v0")``). Each row is one id: name, entry point,
-default arguments, data folder and ``scoring``, the ``module:Class`` of its
-:class:`~unitrack_env.benchmarks.base.Benchmark`. A project outside this package adds its
-task with :func:`register_variant`.
+``import unitrack_env`` registers these ids (Gymnasium 1.x has no plugin discovery). Each row:
+name, entry point, default arguments, data folder and ``scoring`` (the ``module:Class`` of its
+:class:`~unitrack_env.benchmarks.base.Benchmark`). Other projects use :func:`register_variant`.
 """
 
 from __future__ import annotations

@@ -47,15 +47,10 @@ MAX_KEYS_IN_MESSAGE: int = 8
 class KeyRemap:
     """How one checkpoint family stores a torchvision-layout backbone.
 
-    Attributes:
-        name: Name of the family (the key in a remap table).
-        containers: Keys that may wrap the state dict, tried in order (else the top level).
-        strip_prefixes: Prefixes removed from key names (the first that matches wins).
-        squeeze_5d: Turn ``(out, in, 1, k, k)`` kernels into 2-D ones (TimeCycle).
-        drop_prefixes: Keys (after stripping) that are not the backbone (DINO ``head.``).
-        rename_prefixes: ``(old, new)`` prefixes renamed when no key starts with ``new``.
-        mean, std: RGB normalisation the weights were trained with (None: ImageNet's).
-        description: Where the rule comes from.
+    ``containers`` may wrap the state dict (tried in order); the first matching
+    ``strip_prefixes`` is removed; ``drop_prefixes`` are not the backbone (DINO ``head.``);
+    ``rename_prefixes`` apply when no key starts with the new prefix; ``squeeze_5d`` flattens
+    TimeCycle's ``(out, in, 1, k, k)`` kernels; ``mean``/``std`` None: ImageNet's.
     """
 
     name: str

@@ -82,12 +82,9 @@ class AppearanceModel:
         stride: ViT only: ``8`` / ``"8-overlap"`` or ``"8-upsample"`` (see :mod:`.vit`).
             None: the patch size.
 
-    Attributes:
-        module, identity, load_report: The eval-mode ``nn.Module``, its
-            :class:`ModelIdentity` and :class:`LoadReport` (None for random init).
-        layers, channels: The output layers and their summed channels.
-        stride: Pixels per feature cell (8 for the CNNs); heads read it from here.
-        runtime: The concrete runtime.
+    ``module`` is the eval-mode network, ``identity`` keys feature caches, ``load_report`` is
+    None for random init, ``channels`` sums the output ``layers``' channels, ``stride`` is the
+    pixels per feature cell (heads read it here), ``runtime`` the concrete runtime.
 
     Example:
         >>> model = AppearanceModel()            # EfficientNet-Lite0, ImageNet, offline

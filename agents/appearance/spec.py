@@ -19,17 +19,8 @@ SpecT = TypeVar("SpecT", bound="AppearanceSpec")
 class AppearanceSpec:
     """The appearance model of a head.
 
-    Attributes:
-        weights: ``"imagenet-lite0"`` (default, offline), ``"random"``, a named weights
-            source, or a checkpoint path.
-        arch: Backbone architecture (None: the weights' own).
-        layer: Output layer(s) (None: the architecture's default stride-8 layer).
-        remap: Checkpoint key remapping (``"auto"``: detect the layout).
-        device: Torch device.
-        num_threads: Torch threads while the agent acts (None: torch's setting).
-        runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` or None
-            (``$UNITRACK_RUNTIME``, default auto).
-        stride: ViT only: ``8``, ``"8-overlap"``, ``"8-upsample"``; None: the patch size.
+    Fields are :class:`~unitrack_env.agents.appearance.model.AppearanceModel`'s arguments of
+    the same names (``num_threads`` applies while the agent acts).
     """
 
     weights: str = "imagenet-lite0"

@@ -67,17 +67,9 @@ class _Parsed:
 class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
     """UniTrack's association head for boxes, masks and poses (MOT, MOTS, VIS, PoseTrack).
 
-    Args:
-        max_tracks: Action capacity of box and pose tasks (the environment's ``max_tracks``).
-            None: the reset info's ``capacities``, else the environments' defaults.
-        appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel`
-            to share between agents (then the appearance options are ignored).
-        **options: Fields of :class:`UniTrackConfig`.
-
-    Attributes:
-        settings: The current task's :class:`TaskSettings`.
-        adapter, model: The task's observation adapter and the (cached) appearance model.
-        associator: The task's association engine (its state is the episode state).
+    ``options`` are :class:`UniTrackConfig` fields; ``max_tracks`` (None: the reset info's
+    ``capacities``) sizes box and pose actions; a shared ``appearance_model`` overrides the
+    appearance options. The episode state lives in ``associator``.
     """
 
     config_class = UniTrackConfig

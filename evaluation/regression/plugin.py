@@ -23,12 +23,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 class EpisodeRegression:
-    """What the ``episode_regression`` fixture hands to a test.
-
-    Args:
-        update: re-record instead of comparing (``--update-goldens``).
-        base: folder that relative golden paths are resolved against (the test file's).
-    """
+    """What the ``episode_regression`` fixture hands to a test (``update``: re-record)."""
 
     def __init__(self, update: bool, base: Path) -> None:
         self.update = update

@@ -1,12 +1,9 @@
 """Build the static HTML report of run folders (``unitrack report``), without replaying agents.
 
-``index.html`` holds the metrics table (one row per run and sequence, sortable), the paired
-comparison of the first two runs with 95% intervals (box MOT), and per run and sequence a
-timeline of the error events and thumbnails of ID switches and bursts of misses (sampled
-evenly, at most ``thumbnails`` of each, lazy-loaded); each thumbnail links to its full frame
-and, where ``unitrack render`` left an H.264 clip (``*.mp4`` named after the sequence) in the
-run folder, to that clip at the event's time. A scorecard folder gives its table and radar
-chart. Images are JPEG files in sub-folders beside ``index.html``.
+``index.html`` holds the sortable metrics table, the paired comparison of the first two runs,
+and per run and sequence an event timeline with thumbnails of ID switches and bursts of
+misses (linked to the frame and to a ``unitrack render`` clip when one is in the run folder).
+A scorecard folder gives its table and radar chart.
 """
 
 from __future__ import annotations

@@ -72,12 +72,7 @@ class DAVISBenchmark(Benchmark):
 
     @staticmethod
     def read_frame(folder: str | os.PathLike, sequence: VOSSequence, t: int) -> np.ndarray:
-        """Read and check frame ``t``'s result PNG of ``sequence``.
-
-        Raises:
-            DataFormatError: the PNG is missing, of another size, or holds a label that is
-                not an object of the sequence.
-        """
+        """Read frame ``t``'s result PNG; DataFormatError if missing, misfit or mislabelled."""
         path = Path(folder) / sequence.name / f"{sequence.frame_names[t]}.png"
         if not path.is_file():
             raise DataFormatError(path, f"result of sequence '{sequence.name}' frame "

@@ -88,11 +88,7 @@ class JHMDBBenchmark(Benchmark):
         return pck_counts(predictions, ground_truth, self.thresholds, method=self.normaliser)
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<name>/joint_positions.mat`` files.
-
-        Raises:
-            DataFormatError: a result file is missing or does not cover its video's frames.
-        """
+        """Score ``<folder>/<name>/joint_positions.mat`` files (each covering its video)."""
         per_sequence: dict[str, dict[str, float]] = {}
         pooled: PCKCounts | None = None
         for name in sequences:

@@ -76,12 +76,7 @@ class OTBBenchmark(Benchmark):
         atomic_write_text(Path(folder) / f"{sequence}.txt", format_otb_results(results))
 
     def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
-        """Read ``<folder>/<sequence>.txt`` and check it has one box per frame.
-
-        Raises:
-            DataFormatError: the file is missing, malformed, or has a different number of
-                rows than the sequence has frames.
-        """
+        """Read ``<folder>/<sequence>.txt``; DataFormatError unless it has one box per frame."""
         loaded = self.load(self.dataset.resolve(sequence))
         path = Path(folder) / f"{loaded.name}.txt"
         if not path.is_file():

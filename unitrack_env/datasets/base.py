@@ -15,11 +15,7 @@ SequenceT = TypeVar("SequenceT")
 
 
 class SequenceDataset(ABC, Generic[SequenceT]):
-    """A data set of named sequences (template: subclasses set names and implement load).
-
-    Attributes:
-        sequence_names: the sequences, in the order iteration yields them.
-    """
+    """A data set of named sequences: subclasses set ``sequence_names`` and implement load."""
 
     sequence_names: list[str]
 

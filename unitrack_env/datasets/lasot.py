@@ -21,12 +21,8 @@ class LaSOTDataset:
 
     ``absent`` = ``full_occlusion.txt`` OR ``out_of_view.txt`` (pytracking's
     ``target_visible`` is its negation). Frames are the sorted ``img/`` images, which must
-    number exactly as many as the ground-truth rows.
-
-    Args:
-        root: the LaSOT folder holding the class folders.
-        split_file: optional text file listing sequence names one per line (e.g. the
-            official ``testing_set.txt``); without it every sequence found is listed.
+    number exactly as many as the ground-truth rows. ``split_file`` (e.g. the official
+    ``testing_set.txt``) lists the sequences to read, one per line.
     """
 
     def __init__(self, root: str | Path, split_file: str | Path | None = None) -> None:
@@ -80,10 +76,6 @@ class GOT10kDataset:
 
     On the test split ``groundtruth.txt`` holds only the first frame's box; the other rows
     are NaN and :attr:`SOTSequence.has_ground_truth` is False.
-
-    Args:
-        root: the GOT-10k folder holding ``train/``, ``val/``, ``test/``.
-        split: sub-folder to read.
     """
 
     def __init__(self, root: str | Path, split: str = "val") -> None:

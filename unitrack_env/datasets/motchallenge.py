@@ -127,12 +127,7 @@ def _read_ini(path: Path) -> configparser.ConfigParser:
 
 
 def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
-    """Read ``<seq_dir>/seqinfo.ini``.
-
-    Raises:
-        DataFormatError: the file is missing, has no ``[Sequence]`` section, or a field is
-            missing or not a number where one is needed.
-    """
+    """Read ``<seq_dir>/seqinfo.ini``; DataFormatError names a missing file, section or field."""
     seq_dir = Path(seq_dir)
     path = seq_dir / "seqinfo.ini"
     if not path.is_file():
@@ -196,12 +191,7 @@ def _annotations(table: np.ndarray, ids: np.ndarray, scores: np.ndarray,
 
 
 def read_detections(path: str | Path, length: int | None = None) -> Annotations:
-    """Read a detection file (``det.txt`` or a user file in the same format).
-
-    Args:
-        path: the file.
-        length: the sequence length; rows past it are reported as errors.
-    """
+    """Read a ``det.txt``-format file; rows past ``length`` frames are errors."""
     path = Path(path)
     table, lines = parse_table(path, 7, DET_FIELDS)
     check_rows(path, table, lines, length, "det")

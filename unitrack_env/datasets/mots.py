@@ -136,11 +136,7 @@ class MOTSDataset:
         return gt
 
     def load_detections(self, name: str, class_id: int) -> MaskAnnotations:
-        """The sequence's detections of class ``class_id``.
-
-        Raises:
-            DataFormatError: the detection file is missing (naming where it was expected).
-        """
+        """The sequence's detections of class ``class_id`` (DataFormatError if missing)."""
         if str(self.detections) == "gt":
             gt = self.ground_truth(name)
             if gt is None:

@@ -92,11 +92,9 @@ class MaskAnnotations:
                 for i in np.asarray(idx, dtype=np.int64)]
 
     def decode(self, idx: Sequence[int] | np.ndarray, height: int, width: int) -> np.ndarray:
-        """Decode rows ``idx`` (masks of a ``height x width`` frame) to ``(k, H, W)`` bool.
+        """Decode rows ``idx`` of a ``height x width`` frame to ``(k, H, W)`` bool.
 
-        Raises:
-            DataFormatError: a row's size differs from the frame's, or its RLE is corrupt
-                (naming the file and line).
+        A row of another size or a corrupt RLE raises DataFormatError naming file and line.
         """
         idx = np.asarray(idx, dtype=np.int64)
         for i in idx:

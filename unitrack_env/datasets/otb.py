@@ -33,13 +33,8 @@ OTB_GT_PATTERN = re.compile(r"^groundtruth_rect(?:\.(\d+))?\.txt$")
 class OTBSequenceSpec:
     """One OTB-2015 sequence as the toolkit configures it.
 
-    Attributes:
-        name: the toolkit's sequence name (``Jogging.1``).
-        folder: the folder holding ``img/`` and the ground truth.
-        gt_file: ground-truth file name inside ``folder``.
-        start_frame: number of the first annotated frame (first row of ``gt_file``).
-        end_frame: number of the last annotated frame.
-        init_omit: leading annotated frames skipped before tracking starts.
+    ``start_frame``..``end_frame`` are the annotated frames (the rows of ``gt_file``);
+    ``init_omit`` leading frames are skipped before tracking starts.
     """
 
     name: str
@@ -103,10 +98,8 @@ def canonical_otb_name(name: str) -> str:
 def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
     """Refuse ground truth the episode cannot start from or score (rows from ``first`` on).
 
-    The first row is the target the tracker is given: it must be finite with a positive
-    size; every value must fit the observation bounds. Later rows may be NaN or have a
-    non-positive size: the OTB toolkit leaves such frames out of the evaluation.
-    (Rows are file lines here: :func:`read_box_file` refuses blank lines inside the list.)
+    The first row must be finite with a positive size, every value within the observation
+    bounds; later rows may be NaN or empty (the toolkit leaves those frames out).
     """
     from unitrack_env.spaces.limits import COORD_MAX
 
@@ -131,9 +124,6 @@ class OTBDataset(SequenceDataset[SOTSequence]):
     :data:`OTB100_SEQUENCES` yield the targets the toolkit defines for them; any other folder
     yields one sequence per non-empty ``groundtruth_rect[.k].txt`` whose frames start at the
     first numbered image.
-
-    Args:
-        root: the folder holding the sequence folders.
     """
 
     def __init__(self, root: str | Path) -> None:

@@ -125,11 +125,7 @@ class PoseTrackDataset:
         return files
 
     def load(self, name: str) -> PoseTrackSequence:
-        """Read one sequence: its frame entries, frame files and ground truth (if any).
-
-        Raises:
-            DataFormatError: a frame listed in the annotation file has no image file.
-        """
+        """Read one sequence: its frame entries, frame files (each must exist) and ground truth."""
         self._check(name)
         annotation = self.annotation_dir / f"{name}.json"
         if annotation.is_file():

@@ -188,9 +188,8 @@ def _parse_person(path: Path, k: int, entry: Any) -> PoseTrackPerson:
 def parse_posetrack(data: Any, path: str | os.PathLike = "<json>") -> PoseTrackVideo:
     """Parse the JSON object of one PoseTrack 2018 sequence file.
 
-    Raises:
-        DataFormatError: a missing or malformed field (the message names it), an annotation
-            of an unknown image, or keypoints in another order than PoseTrack 2018's.
+    DataFormatError names a missing or malformed field, an annotation of an unknown image, or
+    keypoints in another order than PoseTrack 2018's.
     """
     path = Path(path)
     _require(path, isinstance(data, dict), "top level must be a JSON object", "<root>")
@@ -219,12 +218,7 @@ def parse_posetrack(data: Any, path: str | os.PathLike = "<json>") -> PoseTrackV
 
 
 def read_posetrack_json(path: str | os.PathLike) -> PoseTrackVideo:
-    """Read one PoseTrack 2018 sequence file (ground truth, results or detections).
-
-    Raises:
-        DataFormatError: unreadable or invalid JSON, or a schema error (see
-            :func:`parse_posetrack`).
-    """
+    """Read one PoseTrack 2018 sequence file (ground truth, results or detections)."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))

@@ -82,10 +82,7 @@ def rle_runs(counts: bytes) -> np.ndarray:
 
     The string holds one number per run, 5 bits per character (offset 48, bit 5 = "more
     characters follow", bit 4 of the last character = sign); from the fourth run on, each
-    number is the difference to the run two places before.
-
-    Raises:
-        ValueError: a character outside the alphabet, or a number cut short.
+    number is the difference to the run two places before. Bad text raises ValueError.
     """
     codes = np.frombuffer(counts, dtype=np.uint8).astype(np.int64) - 48
     if not len(codes):

@@ -1,8 +1,6 @@
 """Single object tracking files shared by the OTB, LaSOT and GOT-10k readers.
 
-A :class:`SOTSequence` is what every SOT reader returns. Box files hold ``x,y,w,h`` rows
-with comma, tab or space separators (any mix), read by :func:`read_box_file`; boxes stay as
-written (1-based pixel origin), so that results written back round-trip to the official
+Boxes stay as written (1-based pixels) so results written back round-trip to the official
 files. Frames are images with numeric stems (``0001.jpg``, ``00000001.jpg``).
 """
 
@@ -31,17 +29,9 @@ BOX_FIELDS = ("x", "y", "w", "h")
 class SOTSequence:
     """One single-object sequence: frames and the target's boxes.
 
-    Attributes:
-        name: sequence name (OTB: ``Jogging.1``; LaSOT: ``airplane-1``).
-        frame_paths: image file of every frame, in order.
-        frame_numbers: the benchmark's own number of every frame (from the file names).
-        boxes: ``(num_frames, 4)`` float64 ``(x, y, w, h)`` as written in the file (1-based
-            pixels). Rows with NaN have no annotation (GOT-10k test frames after the first,
-            LaSOT/UAV "NaN" rows); OTB marks an absent target with a non-positive box.
-        image_size: ``(width, height)`` of the first frame.
-        absent: ``(num_frames,)`` bool where the benchmark flags the target as not visible
-            (LaSOT full occlusion or out of view, GOT-10k ``absence.label``); all False for OTB.
-        benchmark: ``"OTB"``, ``"LaSOT"`` or ``"GOT-10k"``.
+    ``boxes`` are ``(x, y, w, h)`` as written (1-based); NaN rows have no annotation and OTB
+    marks an absent target with a non-positive box. ``absent`` holds the benchmark's
+    not-visible flags (all False for OTB); ``image_size`` is the first frame's ``(w, h)``.
     """
 
     name: str
@@ -79,11 +69,8 @@ class SOTSequence:
 def read_image_size(path: str | Path) -> tuple[int, int]:
     """Return ``(width, height)`` of an image file.
 
-    A PNG or JPEG is measured from its header (no decoding; a decompression bomb is
-    refused, see :mod:`unitrack_env.datasets.limits`); other formats are decoded.
-
-    Raises:
-        DataFormatError: the file is missing, too large, or not a decodable image.
+    PNG and JPEG are measured from the header (a decompression bomb is refused); other
+    formats are decoded. A missing, too large or undecodable file raises DataFormatError.
     """
     _, size = image_size(path)
     if size is not None and min(size) > 0:
@@ -98,16 +85,8 @@ def read_image_size(path: str | Path) -> tuple[int, int]:
 def read_box_file(path: str | Path, *, allow_nan: bool = True) -> np.ndarray:
     """Read an ``x,y,w,h`` box file with comma, tab or space separators (any mix).
 
-    Args:
-        path: the ground-truth file.
-        allow_nan: accept ``NaN`` entries (LaSOT/UAV write them for unannotated frames).
-
-    Returns:
-        ``(n, 4)`` float64, one row per non-empty line.
-
-    Raises:
-        DataFormatError: a line does not hold exactly four numbers, or a blank line is
-            followed by more data (it would shift every later frame).
+    ``allow_nan`` accepts LaSOT/UAV's NaN rows. A line without exactly four numbers, or a
+    blank line followed by more data (it would shift later frames), raises DataFormatError.
     """
     path = Path(path)
     try:

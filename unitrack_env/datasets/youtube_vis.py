@@ -175,8 +175,7 @@ def _segmentations(entry: dict, video: VisVideo, path: Path, where: str) -> tupl
 def parse_vis_json(path: str | os.PathLike, *, text: str | None = None) -> VisData:
     """Read a YouTube-VIS 2019 annotation file (``annotations`` may be absent or null).
 
-    Raises:
-        DataFormatError: naming the file and the JSON path of the first problem.
+    DataFormatError names the file and the JSON path of the first problem.
     """
     path = Path(path)
     data = _load_json(path, text)

@@ -26,15 +26,7 @@ CONTINUITY_BONUS: float = 1000.0
 
 @dataclass(frozen=True)
 class FrameClear:
-    """CLEAR counts of one frame.
-
-    Attributes:
-        tp: matched ground-truth boxes.
-        fp: tracker boxes without a match.
-        fn: ground-truth boxes without a match.
-        idsw: matches whose tracker id differs from the one last matched to that gt id.
-        iou_sum: summed IoU of the matches (numerator of MOTP).
-    """
+    """CLEAR counts of one frame; ``iou_sum`` is the matches' summed IoU (MOTP's numerator)."""
 
     tp: int
     fp: int
@@ -88,11 +80,8 @@ class ClearTotals:
 class StreamingClear:
     """TrackEval CLEAR matching applied one frame at a time.
 
-    All state lives on the instance; :meth:`reset` starts a new sequence.  Feed frames that
-    are already preprocessed (see :func:`unitrack_env.metrics.mot_preprocess.preprocess_frame`).
-
-    Args:
-        threshold: minimum IoU of a match (TrackEval's ``THRESHOLD``, default 0.5).
+    :meth:`reset` starts a new sequence; frames must already be preprocessed
+    (:func:`~unitrack_env.metrics.mot_preprocess.preprocess_frame`).
 
     >>> clear = StreamingClear()
     >>> box = np.array([[0.0, 0.0, 10.0, 10.0]])
@@ -130,17 +119,9 @@ class StreamingClear:
         *,
         iou: np.ndarray | None = None,
     ) -> FrameClear:
-        """Score one preprocessed frame and advance the state.
+        """Score one preprocessed frame, add its counts to ``totals`` and return them.
 
-        Args:
-            gt_ids: ``(n,)`` ids of the evaluated ground truth.
-            gt_boxes: ``(n, 4)`` their ``(x, y, w, h)`` boxes.
-            tracker_ids: ``(k,)`` tracker ids (unique).
-            tracker_boxes: ``(k, 4)`` tracker boxes.
-            iou: optional precomputed ``(n, k)`` IoU matrix (e.g. from preprocessing).
-
-        Returns:
-            This frame's counts (also added to :attr:`totals`).
+        ``iou`` is an optional precomputed ``(n, k)`` IoU matrix (e.g. from preprocessing).
         """
         g_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
         t_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
@@ -185,13 +166,7 @@ def clear_from_frames(
     *,
     benchmark: str,
 ) -> ClearTotals:
-    """Preprocess and score a whole sequence frame by frame.
-
-    Args:
-        gt_frames: per-frame ground truth (frame ``t`` at index ``t - 1``).
-        tracker_frames: per-frame tracker output, same length.
-        benchmark: TrackEval benchmark name (``"MOT15"``, ``"MOT16"``, ``"MOT17"``, ``"MOT20"``).
-    """
+    """Preprocess and score a whole sequence frame by frame (frame ``t`` at index ``t - 1``)."""
     if len(gt_frames) != len(tracker_frames):
         raise ValueError(
             f"{len(gt_frames)} ground-truth frames but {len(tracker_frames)} tracker frames"

@@ -30,8 +30,6 @@ EVENT_COLUMNS: tuple[str, ...] = (
 #: Integer columns (nullable: NaN where a task leaves them empty).
 ID_COLUMNS: tuple[str, ...] = ("object", "gt_id", "track_id", "prev_track_id", "joint")
 
-#: Box MOT event types.
-MOT_EVENT_TYPES: tuple[str, ...] = ("tp", "fp", "fn", "idsw", "frag")
 
 
 @dataclass

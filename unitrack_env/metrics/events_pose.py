@@ -1,12 +1,8 @@
 """Per-frame error events of PoseTrack, from poseval's per-joint CLEAR matching.
 
-poseval scores every joint separately (a CLEAR MOT accumulator per joint), so the events are
-per joint and person: ``tp`` (a matched joint, with its head-normalised ``distance``),
-``idsw`` (a match to another track than that ground truth's last one; its ``tp`` row is listed
-as well), ``fn`` and ``fp``. Summed over a sequence they give poseval's counts exactly:
-``tp`` = matches + switches, ``idsw`` = switches, ``fn`` = misses, ``fp`` = false positives.
-In a frame with no person on one side (after ignore regions) poseval counts one miss and one
-false positive per joint against dummies; those rows have no ids.
+Events are per joint and person: ``tp`` (with the head-normalised ``distance``), ``idsw``
+(also listed as ``tp``), ``fn`` and ``fp``; summed they give poseval's counts exactly. A frame
+with nobody on one side gives one id-less miss and false positive per joint (poseval's dummies).
 """
 
 from __future__ import annotations

@@ -1,13 +1,9 @@
 """Per-frame error events of YouTube-VIS: what each track contributes to AP at IoU 0.50.
 
-Track mAP matches whole tracks (spatio-temporal mask IoU), so the events are per track and
-frame. TrackEval's matching at IoU 0.50 (:func:`~unitrack_env.metrics.vis.track_matches`)
-decides each result track's type: ``tp`` (matched), ``fp`` (unmatched; compared with the
-ground-truth track of its class it overlaps most, if any) or ``ignored`` (matched to a crowd
-track); an unmatched ground-truth track gives ``fn`` rows. Rows cover the frames where either
-track of the pair has a mask, with the frame's mask ``iou`` (0 where one side has none), the
-result's ``score`` and the pair's video-level ``track_iou``. AP50 follows from the ``tp`` and
-``fp`` tracks ranked by score against the ``tp`` + ``fn`` ground truth.
+TrackEval's matching at IoU 0.50 types each result track ``tp``, ``fp`` (paired with the
+ground truth it overlaps most) or ``ignored`` (a crowd match); unmatched ground truth gives
+``fn``. Rows cover the frames where either side has a mask, with the frame's ``iou``, the
+``score`` and the video-level ``track_iou``; AP50 follows from them.
 """
 
 from __future__ import annotations

@@ -30,29 +30,17 @@ MOT_CLASS_IDS: dict[str, int] = {
     "crowd": 13,
 }
 
-#: The only class that is evaluated.
-PEDESTRIAN_CLASS: int = MOT_CLASS_IDS["pedestrian"]
-
-#: Classes whose matched tracker boxes are removed (MOT16, MOT17).
+PEDESTRIAN_CLASS: int = MOT_CLASS_IDS["pedestrian"]  # the only class that is evaluated
+#: Classes whose matched tracker boxes are removed (MOT16, MOT17; MOT20 adds non-MOT vehicles).
 DISTRACTOR_CLASSES: tuple[int, ...] = tuple(
     MOT_CLASS_IDS[name]
     for name in ("person_on_vehicle", "static_person", "distractor", "reflection")
 )
-
-#: MOT20 also treats non-MOT vehicles as distractors.
 MOT20_DISTRACTOR_CLASSES: tuple[int, ...] = (*DISTRACTOR_CLASSES, MOT_CLASS_IDS["non_mot_vehicle"])
-
-#: Benchmarks understood by the preprocessing (TrackEval's ``BENCHMARK`` values).
-BENCHMARKS: tuple[str, ...] = ("MOT15", "MOT16", "MOT17", "MOT20")
-
-#: Benchmark without a class column and without distractor removal.
-CLASSLESS_BENCHMARK: str = "MOT15"
-
-#: IoU a tracker box needs with a ground-truth box to be matched (preprocessing and CLEAR).
-MATCH_IOU_THRESHOLD: float = 0.5
-
-#: Float tolerance TrackEval applies to every threshold comparison (``np.finfo(float).eps``).
-EPS: float = float(np.finfo(float).eps)
+BENCHMARKS: tuple[str, ...] = ("MOT15", "MOT16", "MOT17", "MOT20")  # TrackEval's BENCHMARK
+CLASSLESS_BENCHMARK: str = "MOT15"  # no class column, no distractor removal
+MATCH_IOU_THRESHOLD: float = 0.5  # to match a tracker box (preprocessing and CLEAR)
+EPS: float = float(np.finfo(float).eps)  # TrackEval's tolerance on every threshold
 
 
 def normalize_benchmark(benchmark: str) -> str:
@@ -83,11 +71,7 @@ def distractor_classes(benchmark: str) -> tuple[int, ...]:
 class GtFrame:
     """All ground-truth rows of one frame, before preprocessing.
 
-    Attributes:
-        ids: ``(n,)`` int64 object ids.
-        boxes: ``(n, 4)`` float64 ``(x, y, w, h)``.
-        classes: ``(n,)`` int64 class ids (column 8; unused for MOT15).
-        zero_marked: ``(n,)`` int64 "consider" flags (column 7); 0 means ignore.
+    ``classes`` is column 8 (unused for MOT15); ``zero_marked`` is column 7 (0 = ignore).
     """
 
     ids: np.ndarray
@@ -98,12 +82,7 @@ class GtFrame:
 
 @dataclass(frozen=True)
 class TrackerFrame:
-    """A tracker's boxes in one frame.
-
-    Attributes:
-        ids: ``(k,)`` int64 track ids.
-        boxes: ``(k, 4)`` float64 ``(x, y, w, h)``.
-    """
+    """A tracker's ids and ``(x, y, w, h)`` boxes in one frame."""
 
     ids: np.ndarray
     boxes: np.ndarray
@@ -113,15 +92,8 @@ class TrackerFrame:
 class PreprocessedFrame:
     """One frame after MOTChallenge preprocessing.
 
-    Attributes:
-        gt_ids: ``(n',)`` ids of the evaluated ground truth.
-        gt_boxes: ``(n', 4)`` their boxes.
-        tracker_ids: ``(k',)`` ids of the tracker boxes that count.
-        tracker_boxes: ``(k', 4)`` their boxes.
-        iou: ``(n', k')`` IoU between the kept boxes (computed once, as TrackEval does).
-        gt_kept: ``(n,)`` bool mask over the input ground-truth rows.
-        tracker_kept: ``(k,)`` bool mask over the input tracker rows (False = removed because
-            it matched a distractor).
+    Holds the kept boxes, their ``(n', k')`` IoU (computed once, as TrackEval does) and
+    ``gt_kept``/``tracker_kept`` masks over the input rows (False = removed).
     """
 
     gt_ids: np.ndarray
@@ -174,23 +146,9 @@ def preprocess_frame(
 ) -> PreprocessedFrame:
     """Apply MOTChallenge preprocessing to one frame (TrackEval 1.3.0 semantics).
 
-    Args:
-        gt_ids: ``(n,)`` ground-truth ids of every row of the frame (all classes).
-        gt_boxes: ``(n, 4)`` ground-truth boxes ``(x, y, w, h)``.
-        gt_classes: ``(n,)`` class ids (``gt.txt`` column 8); ignored for MOT15.
-        gt_zero_marked: ``(n,)`` "consider" flags (``gt.txt`` column 7).
-        trk_ids: ``(k,)`` tracker ids.
-        trk_boxes: ``(k, 4)`` tracker boxes.
-        benchmark: ``"MOT15"``, ``"MOT16"``, ``"MOT17"`` or ``"MOT20"``.
-
-    Returns:
-        The kept ground truth and tracker boxes (input order preserved) and their IoU matrix.
-
-    Raises:
-        ValueError: for shape mismatches, duplicate ids within the frame, or (not MOT15)
-            ground-truth class ids outside MOTChallenge's 1..13.  TrackEval checks the classes
-            only in frames where both sides have boxes; we check every frame with ground truth
-            so that an invalid file fails the same way whatever the tracker does.
+    Input order is preserved. Raises ValueError on shape mismatches, duplicate ids, or (not
+    MOT15) class ids outside 1..13 -- in every frame with ground truth, unlike TrackEval,
+    so an invalid file fails whatever the tracker does.
     """
     name = normalize_benchmark(benchmark)
     g_ids = _as_ids(gt_ids, "gt_ids")
@@ -274,13 +232,8 @@ def _split_by_frame(rows: np.ndarray, num_frames: int, what: str) -> list[np.nda
 def gt_frames_from_rows(rows: np.ndarray, num_frames: int, *, benchmark: str) -> list[GtFrame]:
     """Split ``gt.txt`` rows into per-frame records (index ``t - 1`` holds frame ``t``).
 
-    Columns are read by position as TrackEval reads them: frame, id, x, y, w, h, flag, class.
-    Row order within a frame is kept.
-
-    Args:
-        rows: ``(n, >=7)`` array (``>= 8`` columns unless ``benchmark`` is MOT15).
-        num_frames: the sequence length.
-        benchmark: TrackEval benchmark name.
+    Columns by position as TrackEval reads them: frame, id, x, y, w, h, flag, class (not
+    MOT15). Row order within a frame is kept.
     """
     name = normalize_benchmark(benchmark)
     arr = np.asarray(rows, dtype=np.float64)

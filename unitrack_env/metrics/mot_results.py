@@ -113,10 +113,7 @@ def parse_result_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def read_result_file(path: str | Path) -> np.ndarray:
     """Read a MOTChallenge result file into a ``(k, c)`` float64 array (``c >= 6``).
 
-    Raises:
-        DataFormatError: naming the file, the 1-based line and the field of the first
-            malformed value (too few fields, a ragged line, a non-number, a non-integer or
-            non-positive frame, a non-integer id).
+    DataFormatError names the file, line and field of the first malformed value.
     """
     return parse_result_file(Path(path))[0]
 

@@ -1,11 +1,8 @@
 """Per-frame sufficient statistics of MOTA, IDF1 and HOTA, and the metrics on reweighted frames.
 
-A paired bootstrap (:mod:`unitrack_env.evaluation.compare`) recomputes the metrics on many
-resamples of a sequence's frames. A resample is a vector of frame weights (how many times each
-frame was drawn); this module turns preprocessed frames into per-frame tables once and then
-evaluates the metrics for a whole ``(B, frames)`` weight matrix with a few matrix products.
-
-More in docs/module-notes.md.
+:mod:`unitrack_env.evaluation.compare` recomputes the metrics on many resamples (frame
+weights); the tables are built once and a ``(B, frames)`` weight matrix is evaluated with a
+few matrix products. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -31,15 +28,9 @@ MOT_STAT_METRICS: tuple[str, ...] = ("HOTA", "DetA", "AssA", "IDF1", "MOTA")
 class MotStats:
     """Per-frame tables of one sequence (``F`` frames).
 
-    Attributes:
-        clear: ``(F, 4)`` CLEAR ``tp, fp, fn, idsw`` per frame.
-        gt_det: ``(F, G)`` 1 where gt id ``g`` is present in the frame.
-        trk_det: ``(F, K)`` 1 where track id ``k`` is present.
-        id_pairs: ``(P, 2)`` (gt index, track index) of pairs with IoU >= 0.5 somewhere.
-        id_match: sparse ``(F, P)``, 1 where the pair has IoU >= 0.5 in the frame.
-        hota_pairs: ``(Q, 2)`` (gt index, track index) of pairs HOTA matched somewhere.
-        hota_match: ``A`` sparse ``(F, Q)``, 1 where the pair is matched at that alpha.
-        hota_tp: ``(F, A)`` HOTA true positives per frame and alpha.
+    ``clear`` is ``(F, 4)`` tp, fp, fn, idsw; ``gt_det``/``trk_det`` mark present ids;
+    ``id_match`` (sparse ``(F, P)``) marks IoU >= 0.5 of the ``id_pairs``; ``hota_match`` (one
+    per alpha) marks HOTA matches of the ``hota_pairs``; ``hota_tp`` is ``(F, A)``.
     """
 
     clear: np.ndarray

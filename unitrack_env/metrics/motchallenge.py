@@ -1,13 +1,7 @@
 """Official MOTChallenge scores through TrackEval 1.3.0 (HOTA, CLEAR, Identity, Count).
 
-TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
-licence) is the scorer behind the MOTChallenge leaderboards.  This adapter uses TrackEval's own
-``MotChallenge2DBox`` loading and preprocessing and its metric classes, but not its
-``Evaluator``: it calls ``get_raw_seq_data`` / ``get_preprocessed_seq_data`` and each metric's
-``eval_sequence`` / ``combine_sequences`` directly, so that nothing is printed, plotted or
-written (TrackEval's defaults would write into its own ``site-packages`` folder).
-
-More in docs/module-notes.md.
+Uses TrackEval's ``MotChallenge2DBox`` loading and preprocessing and its metric classes, not its
+``Evaluator``, so nothing is printed, plotted or written. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -47,14 +41,9 @@ __all__ = [
     "trackeval_sequence_data",
 ]
 
-#: Name of the tracker folder inside the temporary TrackEval layout.
-_TRACKER_NAME: str = "tracker"
-
-#: Sub-folder TrackEval expects under the tracker folder.
+_TRACKER_NAME: str = "tracker"  # folders of the temporary TrackEval layout
 _TRACKER_SUB_FOLDER: str = "data"
-
-#: The only MOTChallenge class that is evaluated.
-_CLASS: str = "pedestrian"
+_CLASS: str = "pedestrian"  # the only MOTChallenge class that is evaluated
 
 #: Order in which metrics appear in summaries (TrackEval class names).
 METRIC_NAMES: tuple[str, ...] = ("HOTA", "CLEAR", "Identity", "Count")
@@ -64,16 +53,8 @@ METRIC_NAMES: tuple[str, ...] = ("HOTA", "CLEAR", "Identity", "Count")
 class SequenceScore(Mapping[str, float]):
     """TrackEval's results for one sequence (or a combination of sequences).
 
-    Behaves as a read-only mapping over :attr:`summary`, so ``score["MOTA"]`` works and
-    ``dict(score)`` is the flat summary; equality compares summaries.
-
-    Attributes:
-        sequence: sequence name (folder name) or ``"COMBINED"``.
-        benchmark: TrackEval benchmark used.
-        summary: flat ``{field: float}`` of every scalar TrackEval field; HOTA-family array
-            fields are averaged over the alpha thresholds.
-        raw: ``{metric class name: TrackEval result dict}`` exactly as ``eval_sequence`` (or
-            ``combine_sequences``) returned it, arrays included.
+    A read-only mapping over ``summary`` (every scalar TrackEval field, HOTA arrays averaged
+    over alpha); ``raw`` holds TrackEval's result dicts per metric class as returned.
     """
 
     sequence: str
@@ -129,10 +110,7 @@ def _memory_bytes() -> int | None:
 def check_matrix_memory(data: dict[str, Any], source: Path, seq: str) -> None:
     """Refuse to score when TrackEval's HOTA matrices could not fit this machine's memory.
 
-    HOTA allocates about :data:`_HOTA_MATRICES` matrices of ``gt ids x tracker ids`` doubles
-    per sequence; the ground-truth id count is bounded at reset
-    (:data:`~unitrack_env.datasets.limits.MAX_TRACKS`), the tracker's only here. Refusing
-    names the culprit instead of a ``MemoryError: Unable to allocate 728. TiB``.
+    Names the culprit instead of a ``MemoryError: Unable to allocate 728. TiB``.
     """
     gt_ids, tracker_ids = int(data["num_gt_ids"]), int(data["num_tracker_ids"])
     need = _HOTA_MATRICES * 8 * gt_ids * tracker_ids
@@ -191,24 +169,8 @@ def score_sequence(
 ) -> SequenceScore:
     """Score one sequence with TrackEval's HOTA, CLEAR, Identity and Count metrics.
 
-    Args:
-        gt_seq_dir: MOTChallenge sequence folder with ``gt/gt.txt`` (its folder name is the
-            sequence name).
-        tracker_rows: ``(k, >=6)`` result rows, or the path of a result file.
-        benchmark: ``"MOT15"``, ``"MOT16"``, ``"MOT17"`` or ``"MOT20"`` (TrackEval's
-            ``BENCHMARK``; MOT15 means no class column and no distractor removal).
-        seq_length: number of frames; read from ``seqinfo.ini`` when omitted.
-
-    Returns:
-        A :class:`SequenceScore` (a mapping of TrackEval field names to floats).
-
-    Raises:
-        DataFormatError: missing or malformed ground truth / seqinfo / result file.
-        ValueError: malformed ``tracker_rows`` array, unknown benchmark.
-
-    Example:
-        >>> score = score_sequence(seq_dir, rows, benchmark="MOT17")  # doctest: +SKIP
-        >>> score["MOTA"], score["IDF1"], score["HOTA"]  # doctest: +SKIP
+    ``gt_seq_dir`` holds ``gt/gt.txt``; ``tracker_rows`` are ``(k, >=6)`` rows or a result
+    file; ``seq_length`` defaults to ``seqinfo.ini``'s. Bad files raise DataFormatError.
     """
     name = normalize_benchmark(benchmark)
     seq_dir = Path(gt_seq_dir).resolve()
@@ -267,9 +229,7 @@ def _run_trackeval(
         }
         captured = io.StringIO()
         try:
-            # TrackEval prints (and dumps tracebacks) on bad input; keep that out of the
-            # caller's streams and put it in our error instead.  The redirection is
-            # process-wide while it lasts: score in worker processes, not threads.
+            # TrackEval prints tracebacks on bad input; they go into our error instead.
             data = trackeval_sequence_data(MotChallenge2DBox, config, _TRACKER_NAME, seq, _CLASS,
                                            captured)
         except TrackEvalException as exc:
@@ -281,11 +241,7 @@ def _run_trackeval(
 
 
 def combine_sequence_scores(scores: Mapping[str, SequenceScore]) -> SequenceScore:
-    """Combine per-sequence results as TrackEval's ``combine_sequences`` of each metric does.
-
-    Returns:
-        A :class:`SequenceScore` named ``"COMBINED"`` with summary and raw results.
-    """
+    """Combine per-sequence results as each TrackEval metric's ``combine_sequences`` does."""
     if not scores:
         raise ValueError("no sequence scores to combine")
     benchmarks = {s.benchmark for s in scores.values()}
@@ -326,20 +282,8 @@ def score_folder(
 ) -> ScoreReport:
     """Score ``results_dir/<seq>.txt`` against ``gt_root/<seq>/gt/gt.txt`` for each sequence.
 
-    Args:
-        gt_root: folder holding one MOTChallenge sequence folder per sequence.
-        results_dir: folder of result files named ``<seq>.txt``.
-        benchmark: ``"MOT15"``, ``"MOT16"``, ``"MOT17"`` or ``"MOT20"``.
-        sequences: the sequences to score; each must have a result file.  By default every
-            ``*.txt`` file in ``results_dir`` is scored (and each must have ground truth).
-
-    Returns:
-        A :class:`ScoreReport`.
-
-    Raises:
-        DataFormatError: a missing folder, a result file whose sequence has no ground truth, a
-            missing result file for a listed sequence, or a malformed line (naming the file,
-            line and field).
+    ``sequences`` defaults to every result file. A missing file or folder, or a malformed
+    line, raises DataFormatError naming it.
     """
     name = normalize_benchmark(benchmark)
     gt_root = Path(gt_root)

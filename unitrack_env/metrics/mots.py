@@ -1,14 +1,8 @@
 """Official MOTS scores through TrackEval 1.3.0, and per-frame mask CLEAR counts.
 
-TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
-licence) scores MOTS Challenge with its ``MOTSChallenge`` data set class and KITTI MOTS with
-``KittiMOTS``; the metrics are HOTA, CLEAR (whose ``MOTA``/``MOTP``/``sMOTA`` on masks are
-MOTSA, MOTSP and sMOTSA, Voigtlaender et al. CVPR 2019), Identity and Count. As the
-MOTChallenge adapter (:mod:`unitrack_env.metrics.motchallenge`) does, this one uses the data
-set class's loading and preprocessing and each metric's ``eval_sequence`` /
-``combine_sequences``, never the ``Evaluator``, so nothing is printed, plotted or written.
-
-More in docs/module-notes.md.
+TrackEval's ``MOTSChallenge`` / ``KittiMOTS`` data set classes with HOTA, CLEAR (on masks
+``MOTA``/``MOTP``/``sMOTA`` are MOTSA, MOTSP, sMOTSA), Identity and Count, never its
+``Evaluator``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -90,18 +84,9 @@ def score_sequence(
 ) -> SequenceScore:
     """Score one sequence's results with TrackEval (HOTA, CLEAR, Identity, Count).
 
-    Args:
-        ground_truth: the sequence's ground truth (records or a MOTS txt file).
-        results: tracker output (records or a MOTS txt result file); every row is taken as
-            ``object_class``.
-        seq_length: number of frames.
-        benchmark: ``"MOTS20"`` (1-based frames) or ``"KITTI-MOTS"`` (0-based frames).
-        object_class: ``"pedestrian"`` (MOTS20's only class) or ``"car"`` (KITTI MOTS).
-        sequence: name used in messages.
-
-    Raises:
-        DataFormatError: TrackEval rejected the data (frames outside the sequence,
-            overlapping masks, duplicate ids in a frame), naming the result file.
+    Both sides are records or MOTS txt files; every result row is taken as ``object_class``
+    (``"car"`` only on KITTI-MOTS, whose frames are 0-based). Data TrackEval rejects raises
+    DataFormatError naming the result file.
     """
     if benchmark not in TRACKEVAL_DATASETS:
         raise ValueError(f"unknown MOTS benchmark {benchmark!r}; valid: {list(TRACKEVAL_DATASETS)}")
@@ -175,9 +160,7 @@ def score_folder(
 ) -> ScoreReport:
     """Score ``<results_dir>/<seq>.txt`` (MOTS txt) against a :class:`MOTSDataset`'s gt.
 
-    Raises:
-        DataFormatError: a missing result file, a sequence without ground truth, or a
-            malformed result line (file, line and field).
+    A missing file or a malformed line raises DataFormatError naming file, line and field.
     """
     results_dir = Path(results_dir)
     scores: dict[str, SequenceScore] = {}

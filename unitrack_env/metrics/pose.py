@@ -1,9 +1,7 @@
 """PCK (percentage of correct keypoints) for pose propagation on JHMDB.
 
-Data contract: keypoints are ``(..., J, 2)`` arrays of ``(x, y)`` pixel coordinates; the
-prediction and the ground truth must use the same origin (the JHMDB reader returns 0-based
-coordinates). A joint is correct when ``||pred - gt|| <= alpha * s`` where ``s`` is the
-frame's normaliser. Scores are fractions in ``[0, 1]`` (papers print percentages).
+Keypoints are ``(..., J, 2)`` ``(x, y)`` pixels, prediction and ground truth in the same frame.
+A joint is correct when ``||pred - gt|| <= alpha * s``, ``s`` the frame's normaliser.
 
 More in docs/module-notes.md.
 """
@@ -21,8 +19,6 @@ import numpy as np
 PAPER_PCK_THRESHOLDS: tuple[float, ...] = (0.1, 0.2)
 """The ``alpha`` values of the paper's JHMDB table (PCK@0.1 and PCK@0.2)."""
 
-SCRIPT_PCK_THRESHOLDS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
-"""The ``alpha`` values the authors' evaluation script prints."""
 
 BOX_DIAGONAL_FACTOR: float = 0.6
 """Factor on the GT joint-box diagonal in the default normaliser (UniTrack/CRW script)."""
@@ -51,15 +47,10 @@ def pck_normaliser(
     method: Normaliser = "box_diagonal",
     visible: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Return the PCK normaliser of each frame from its ground-truth joints.
+    """Return each frame's PCK normaliser in pixels (NaN without visible joints).
 
-    Args:
-        gt: ``(..., J, 2)`` ground-truth keypoints.
-        method: ``"box_diagonal"`` (0.6 x joint-box diagonal, default) or ``"box_max_side"``.
-        visible: optional ``(..., J)`` bool; only visible joints span the box.
-
-    Returns:
-        ``(...)`` normalisers in pixels (NaN for a frame without visible joints).
+    ``"box_diagonal"`` is 0.6 x the visible joints' box diagonal; ``"box_max_side"`` its
+    longer side.
 
     >>> float(pck_normaliser(np.array([[0.0, 0.0], [30.0, 40.0]])))
     30.0
@@ -81,15 +72,7 @@ def pck_normaliser(
 
 
 def keypoint_distances(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """Return the Euclidean distance of every predicted joint to its ground truth.
-
-    Args:
-        pred: ``(..., J, 2)`` predicted keypoints.
-        gt: ground truth of the same shape.
-
-    Returns:
-        ``(..., J)`` distances in pixels.
-    """
+    """Return the ``(..., J)`` pixel distance of every predicted joint to its ground truth."""
     p = _as_keypoints(pred, "pred")
     g = _as_keypoints(gt, "gt")
     if p.shape != g.shape:
@@ -107,17 +90,7 @@ def frame_pck(
 ) -> float:
     """Return the fraction of a frame's (visible) joints within ``alpha x normaliser``.
 
-    This is the pose-propagation per-step reward (PCK@0.1 of the frame by default).
-
-    Args:
-        pred: ``(J, 2)`` predicted keypoints.
-        gt: ``(J, 2)`` ground-truth keypoints.
-        alpha: PCK threshold as a fraction of the normaliser.
-        method: normaliser, see :func:`pck_normaliser`.
-        visible: optional ``(J,)`` bool; invisible joints are not scored.
-
-    Returns:
-        PCK in ``[0, 1]``; 0.0 when no joint is visible.
+    The pose-propagation per-step reward; 0.0 when no joint is visible.
 
     >>> gt = np.array([[0.0, 0.0], [30.0, 40.0]])  # normaliser 0.6 * 50 = 30 px
     >>> frame_pck(gt + [[2.0, 0.0], [4.0, 0.0]], gt, alpha=0.1)  # 2 <= 3 < 4
@@ -137,13 +110,7 @@ def frame_pck(
 
 @dataclass(frozen=True)
 class PCKCounts:
-    """Correct-joint counts per threshold and joint, mergeable across videos.
-
-    Attributes:
-        thresholds: the ``alpha`` values.
-        correct: ``(len(thresholds), J)`` number of correct joint instances.
-        total: ``(J,)`` number of scored joint instances.
-    """
+    """Correct-joint counts ``(thresholds, J)`` and scored counts ``(J,)``, mergeable."""
 
     thresholds: tuple[float, ...]
     correct: np.ndarray
@@ -181,18 +148,9 @@ def pck_counts(
     skip_first_frame: bool = True,
     visible: np.ndarray | None = None,
 ) -> PCKCounts:
-    """Count correct joints of one video at several thresholds.
+    """Count correct joints of one ``(T, J, 2)`` video at several thresholds.
 
-    Args:
-        pred: ``(T, J, 2)`` predicted keypoints, frame 0 included.
-        gt: ``(T, J, 2)`` ground truth.
-        thresholds: ``alpha`` values.
-        method: normaliser, see :func:`pck_normaliser`.
-        skip_first_frame: do not score frame 0 (it is given), as the authors' script does.
-        visible: optional ``(T, J)`` bool of scored joints.
-
-    Returns:
-        :class:`PCKCounts`; merge across videos with :meth:`PCKCounts.merge`.
+    ``skip_first_frame`` leaves out frame 0 (it is given), as the authors' script does.
     """
     p = _as_keypoints(pred, "pred")
     g = _as_keypoints(gt, "gt")

@@ -1,12 +1,8 @@
 """PoseTrack multi-person pose tracking metrics: poseval's per-keypoint CLEAR MOT (our code).
 
-Definitions restated from poseval (leonid-pishchulin/poseval, ``py/eval_helpers.py``
-``assignGTmulti`` and ``py/evaluateTracking.py`` ``computeMetrics``; the copy UniTrack ships in
-``eval/poseval`` (Zhongdao/UniTrack @ 5efab37) adds IDF1 and the ID-switch sum) and from
-py-motmetrics' ``MOTAccumulator.update`` (the library poseval calls). Nothing is imported from
-them; ``tests/unitrack_env/test_posetrack.py`` cross-checks the counts with motmetrics 1.4.0.
-
-More in docs/module-notes.md.
+Definitions restated from poseval (``assignGTmulti``, ``computeMetrics``; UniTrack's copy adds
+IDF1 and the ID-switch sum) and py-motmetrics; nothing is imported from them. More in
+docs/module-notes.md.
 """
 from __future__ import annotations
 
@@ -87,13 +83,7 @@ class PosevalSequence:
         pred: PoseFrame,
         ignore_regions: Sequence[np.ndarray] = (),
     ) -> FrameCounts:
-        """Evaluate one frame (only frames poseval evaluates, see :func:`evaluated_frames`).
-
-        Args:
-            gt: ground-truth persons (with head sizes).
-            pred: predicted persons.
-            ignore_regions: the frame's ignore polygons.
-        """
+        """Evaluate one frame (only frames poseval evaluates, see :func:`evaluated_frames`)."""
         if ignore_regions:
             gt = remove_ignored(gt, ignore_regions)
             pred = remove_ignored(pred, ignore_regions)
@@ -174,12 +164,9 @@ def _mean_defined(values: np.ndarray) -> float:
 def summarise(sequences: Iterable[SequenceCounts]) -> dict[str, float]:
     """Combine sequences into poseval's metrics (fractions; see the module docstring).
 
-    Returns:
-        Flat dict: ``MOTA``, ``IDF1``, ``IDSW`` (sum over joints), ``MOTP``, ``Precision``,
-        ``Recall`` (means over joints), ``MOTA/<part>`` for poseval's body-part columns,
-        ``<metric>/<joint>`` for every joint, and the pooled counts ``num_objects``,
-        ``num_misses``, ``num_false_positives``, ``num_frames``, ``num_sequences``.
-        Metrics of a set without evaluated frames are NaN.
+    A flat dict: ``MOTA``, ``IDF1``, ``IDSW`` (summed), ``MOTP``, ``Precision``, ``Recall``
+    (means over joints), ``MOTA/<part>``, ``<metric>/<joint>`` and pooled ``num_*`` counts;
+    NaN without evaluated frames.
     """
     seqs = list(sequences)
     zero = np.zeros(NUM_JOINTS)
@@ -237,9 +224,8 @@ def evaluate_video(
 ) -> SequenceCounts:
     """Evaluate one sequence's result file against its ground-truth file.
 
-    Raises:
-        ValueError: the result lists other images than the ground truth (poseval pairs
-            frames by position, so both must list the same images in the same order).
+    Raises ValueError when the result lists other images than the ground truth (poseval
+    pairs frames by position).
     """
     if [im.id for im in pred.images] != [im.id for im in gt.images]:
         raise ValueError(

@@ -53,14 +53,7 @@ DUMMY_PRED_ID: int = -(2**62)
 # --------------------------------------------------------------------------- frames
 @dataclass(frozen=True)
 class PoseFrame:
-    """The persons of one frame, reduced to poseval's 15 joints.
-
-    Attributes:
-        ids: ``(n,)`` int64 track ids.
-        xy: ``(n, 15, 2)`` float64 joint coordinates.
-        present: ``(n, 15)`` bool, joints that exist.
-        head_size: ``(n,)`` float64 PCKh reference (ground truth only; NaN if unknown).
-    """
+    """The persons of one frame, reduced to poseval's 15 joints (``head_size``: NaN if unknown)."""
 
     ids: np.ndarray
     xy: np.ndarray
@@ -83,13 +76,7 @@ class PoseFrame:
         keypoints: np.ndarray,
         bbox_head: np.ndarray | None = None,
     ) -> PoseFrame:
-        """Build a frame from ``(n, 17, 3)`` PoseTrack keypoints.
-
-        Args:
-            ids: track id of each person.
-            keypoints: ``(n, 17, 3)`` ``(x, y, v)``; ``(0, 0, 0)`` is an absent keypoint.
-            bbox_head: optional ``(n, 4)`` head boxes ``(x, y, w, h)`` (ground truth).
-        """
+        """Build a frame from ``(n, 17, 3)`` ``(x, y, v)`` keypoints (``(0, 0, 0)``: absent)."""
         kp = np.asarray(keypoints, dtype=np.float64).reshape(-1, len(POSETRACK_KEYPOINTS), 3)
         ids_arr = np.asarray(ids, dtype=np.int64).reshape(-1)
         if len(ids_arr) != len(kp):
@@ -110,9 +97,6 @@ class PoseFrame:
                           for p in people], dtype=np.float64)
         return cls.from_keypoints(ids, keypoints, heads)
 
-    def subset(self, keep: np.ndarray) -> PoseFrame:
-        """The persons selected by a boolean or index array."""
-        return PoseFrame(self.ids[keep], self.xy[keep], self.present[keep], self.head_size[keep])
 
 
 def head_sizes(bbox_head: np.ndarray | None, count: int) -> np.ndarray:

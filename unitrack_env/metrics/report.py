@@ -13,15 +13,9 @@ COMBINED: str = "COMBINED"
 class ScoreReport:
     """Per-sequence and combined TrackEval metrics of one results folder.
 
-    Attributes:
-        benchmark: the benchmark (rule set) scored.
-        per_sequence: ``{sequence: {field: value}}`` (fractions, not percent).
-        combined: metrics over all sequences (TrackEval's ``COMBINED_SEQ``).
-        scores: task-specific full results per sequence (for MOT, TrackEval's
-            :class:`~unitrack_env.metrics.motchallenge.SequenceScore`), including
-            ``COMBINED``; not serialised by :meth:`to_json`.
-        sequences_of: how many sequences the split has to score (0: not known).
-        missing: sequences asked for that had no result file (``allow_missing=True``).
+    Metrics are fractions. ``scores`` holds the task's full results (not serialised);
+    ``sequences_of`` is the split's sequence count (0: not known); ``missing`` lists
+    sequences without a result file (``allow_missing=True``).
     """
 
     benchmark: str

@@ -1,11 +1,7 @@
 """Single object tracking (SOT) metrics in the OTB toolkit's way: success AUC and precision.
 
-Data contract: every function takes the whole sequence, ``pred`` and ``gt`` as ``(n, 4)``
-arrays of ``(x, y, w, h)`` boxes in the benchmark file's own pixel frame (OTB is 1-based;
-both arrays must use the same origin, which then cancels out), row ``i`` = frame ``i`` of
-the sequence, row 0 = the initialisation frame.
-
-More in docs/module-notes.md.
+``pred`` and ``gt`` are ``(n, 4)`` ``(x, y, w, h)`` boxes in the same pixel frame, row ``i``
+= frame ``i``, row 0 = the initialisation frame. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -61,13 +57,6 @@ def overlap_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
     Rows where either box is non-finite or has no area get 0.
 
-    Args:
-        pred: ``(n, 4)`` predicted boxes ``(x, y, w, h)``.
-        gt: ``(n, 4)`` ground-truth boxes in the same pixel frame.
-
-    Returns:
-        ``(n,)`` float64 overlaps in ``[0, 1]``.
-
     >>> overlap_per_frame(np.array([[0, 0, 10, 10]]), np.array([[5, 0, 10, 10]]))
     array([0.33333333])
     """
@@ -102,16 +91,10 @@ def center_error_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 
 def valid_ground_truth(gt: np.ndarray, rule: InvalidGTRule = INVALID_GT_TOOLKIT) -> np.ndarray:
-    """Return which ground-truth rows count as annotated.
+    """Return which ground-truth rows count as annotated, as ``(n,)`` bool.
 
-    Args:
-        gt: ``(n, 4)`` ground-truth boxes.
-        rule: ``"toolkit"``: all four numbers ``> 0`` (OTB MATLAB toolkit, so a box touching
-            or crossing the left/top border at ``x <= 0`` counts as invalid there too);
-            ``"exclude"``: finite with ``w > 0`` and ``h > 0`` (pytracking).
-
-    Returns:
-        ``(n,)`` bool.
+    ``"toolkit"``: all four numbers ``> 0`` (OTB MATLAB toolkit, so a box at ``x <= 0`` is
+    invalid too); ``"exclude"``: finite with ``w > 0`` and ``h > 0`` (pytracking).
     """
     g = _as_boxes(gt, "gt")
     with np.errstate(invalid="ignore"):
@@ -125,8 +108,7 @@ def valid_ground_truth(gt: np.ndarray, rule: InvalidGTRule = INVALID_GT_TOOLKIT)
 def frame_iou(pred_box: np.ndarray, gt_box: np.ndarray) -> float:
     """Return the IoU of one predicted box with one ground-truth box (a per-step reward).
 
-    Returns 0.0 when the ground truth is missing or empty (NaN, ``w <= 0`` or ``h <= 0``),
-    so that the value is always a finite float.
+    0.0 when the ground truth is missing or empty, so the value is always finite.
     """
     g = _as_boxes(gt_box, "gt_box")
     if not valid_ground_truth(g, INVALID_GT_EXCLUDE)[0]:
@@ -141,10 +123,7 @@ def repair_predictions(
 
     Frame 0 becomes the ground truth when ``init_from_gt``; afterwards a row that is
     non-finite or has ``w <= 0`` or ``h <= 0`` is replaced by the previous (repaired) row,
-    unless that frame's ground truth contains NaN.
-
-    Returns:
-        A new ``(n, 4)`` float64 array.
+    unless that frame's ground truth contains NaN. Returns a new array.
     """
     p, g = _check_pair(pred, gt)
     p = p.copy()
@@ -163,15 +142,9 @@ def repair_predictions(
 def success_curve(
     overlaps: np.ndarray, thresholds: np.ndarray = OTB_OVERLAP_THRESHOLDS
 ) -> np.ndarray:
-    """Return the fraction of frames whose overlap is strictly greater than each threshold.
+    """Return the fraction of frames whose overlap is strictly above each threshold.
 
-    Args:
-        overlaps: ``(n,)`` per-frame overlaps; the toolkit's ``-1`` marks invalid frames,
-            which then fail every threshold.
-        thresholds: IoU thresholds.
-
-    Returns:
-        ``(len(thresholds),)`` rates; NaN when ``n == 0``.
+    The toolkit's ``-1`` for invalid frames fails every threshold; NaN when there are no frames.
     """
     o = np.asarray(overlaps, dtype=np.float64).reshape(-1)
     if len(o) == 0:
@@ -196,14 +169,8 @@ def precision_curve(
 class SOTScores:
     """Success and precision of one sequence (or the average over sequences).
 
-    Attributes:
-        success_curve: success rate at each of :data:`OTB_OVERLAP_THRESHOLDS`.
-        precision_curve: precision at each of :data:`OTB_CENTER_THRESHOLDS`.
-        auc: mean of ``success_curve`` (the OTB "AUC"/success score), in ``[0, 1]``.
-        precision_20px: ``precision_curve`` at 20 px.
-        average_overlap: mean IoU over the frames with valid ground truth.
-        num_frames: frames in the denominator (all frames, or valid ones under "exclude").
-        num_sequences: 1 for a sequence; the count for an aggregate.
+    ``auc`` is the mean of ``success_curve`` (OTB's success score); ``average_overlap`` is
+    over frames with valid ground truth; ``num_frames`` is the denominator.
     """
 
     success_curve: np.ndarray
@@ -239,17 +206,8 @@ def evaluate_sot_sequence(
 ) -> SOTScores:
     """Score one sequence the way the OTB toolkit does (one-pass evaluation, OPE).
 
-    Args:
-        pred: ``(n, 4)`` predicted boxes, one per frame including the first.
-        gt: ``(n, 4)`` ground-truth boxes.
-        init_from_gt: replace frame 0's prediction by the ground truth (toolkit default).
-        invalid_gt: ``"toolkit"`` or ``"exclude"`` (see :func:`valid_ground_truth`).
-
-    Returns:
-        :class:`SOTScores` for the sequence.
-
-    Raises:
-        ValueError: shapes differ, the sequence is empty, or the rule is unknown.
+    ``init_from_gt`` replaces frame 0's prediction by the ground truth (toolkit default);
+    ``invalid_gt`` is a :func:`valid_ground_truth` rule.
     """
     p, g = _check_pair(pred, gt)
     if len(p) == 0:

@@ -1,14 +1,8 @@
 """Official YouTube-VIS track mAP through TrackEval 1.3.0 (``YouTubeVIS`` + ``TrackMAP``).
 
-TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
-licence) restates the YouTube-VIS evaluation (Yang et al., ICCV 2019): a predicted track
-matches a ground-truth track by spatio-temporal mask IoU (intersections and unions summed
-over the video's frames); AP is averaged over IoU thresholds 0.50:0.05:0.95 and 101 recall
-points, per category, then over categories. As the MOTChallenge adapter does, this one uses
-TrackEval's data set class and metric directly (no ``Evaluator``: nothing is printed,
-plotted or written), in a private temporary folder.
-
-More in docs/module-notes.md.
+Tracks match by spatio-temporal mask IoU; AP is averaged over IoU 0.50:0.05:0.95 and 101
+recall points per category, then over categories. TrackEval's classes are called directly
+(no ``Evaluator``, nothing written). More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -115,9 +109,7 @@ def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[Vi
                  source: Path | None = None) -> ScoreReport:
     """Track mAP of ``results`` on ``videos`` of ``ground_truth``, per video and combined.
 
-    Raises:
-        ValueError: ``ground_truth`` has no annotations or ``videos`` is empty.
-        DataFormatError: TrackEval rejected the data (naming ``source``).
+    Raises ValueError on empty input, DataFormatError (naming ``source``) on rejected data.
     """
     metric = _metric()
     per_class = _per_class(ground_truth, results, videos, source, metric)
@@ -136,15 +128,8 @@ def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[Vi
 class TrackMatch:
     """TrackEval's matching of one video's tracks of one class at one IoU threshold.
 
-    Attributes:
-        category_id: the class.
-        dt_index: result tracks in TrackEval's order (by score, descending), as indices
-            into the video's results.
-        dt_gt: annotation id each one is matched to, -1 if none.
-        dt_ignored: whether it is ignored (matched to a crowd or out-of-range track).
-        gt_ids: the class's ground-truth annotation ids.
-        gt_matched: whether each one is matched.
-        gt_ignored: whether each one is ignored.
+    ``dt_index`` orders the result tracks as TrackEval does (score descending); ``dt_gt`` is
+    the annotation each matches (-1 if none); ``*_ignored`` marks crowd/out-of-range tracks.
     """
 
     category_id: int

@@ -1,11 +1,8 @@
-"""Video object segmentation (VOS) metrics as defined by DAVIS: J, F and J&F.
+"""DAVIS video object segmentation metrics: J, F and J&F.
 
-Data contract: label maps are ``(H, W)`` integer arrays (one per frame) as stored in DAVIS
-palette PNGs: 0 = background, ``k`` = object ``k``, 255 = void. Ground truth and prediction
-of a frame have the same shape. Object ``k`` of the prediction is compared with object ``k``
-of the ground truth (semi-supervised: the ids are given in the first frame, no matching).
-
-More in docs/module-notes.md.
+Label maps are ``(H, W)`` integer arrays: 0 = background, ``k`` = object ``k``, 255 = void.
+Object ``k`` of the prediction is scored against object ``k`` of the ground truth (no
+matching). More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -42,15 +39,7 @@ def _as_mask(mask: np.ndarray, name: str) -> np.ndarray:
 def region_similarity(
     gt_mask: np.ndarray, pred_mask: np.ndarray, void_mask: np.ndarray | None = None
 ) -> float:
-    """Return J, the intersection over union of two binary masks outside void pixels.
-
-    Args:
-        gt_mask: ``(H, W)`` ground-truth mask of one object.
-        pred_mask: ``(H, W)`` predicted mask of the same object.
-        void_mask: optional ``(H, W)`` pixels to ignore.
-
-    Returns:
-        J in ``[0, 1]``; 1.0 when both masks are empty (outside void).
+    """Return J, the IoU of two ``(H, W)`` masks outside void pixels; 1.0 when both are empty.
 
     >>> region_similarity(np.eye(2, dtype=bool), np.ones((2, 2), dtype=bool))
     0.5
@@ -72,10 +61,8 @@ def region_similarity(
 def boundary_map(mask: np.ndarray) -> np.ndarray:
     """Return the one-pixel-wide boundary of a binary mask (DAVIS ``seg2bmap``, same size).
 
-    A pixel is a boundary pixel when it differs from its right, lower or lower-right
-    neighbour; pixels beyond the right and bottom edges repeat the edge pixel, so the image
-    border itself is not a boundary. The boundary sits half a pixel towards the origin from
-    the true contour (D. Martin, 2003).
+    A pixel is on the boundary when it differs from its right, lower or lower-right
+    neighbour; the image border itself is not a boundary.
 
     >>> boundary_map(np.array([[0, 0, 0], [0, 1, 0], [0, 0, 0]])).astype(int)
     array([[1, 1, 0],
@@ -91,11 +78,7 @@ def boundary_map(mask: np.ndarray) -> np.ndarray:
 
 
 def disk_footprint(radius: float) -> np.ndarray:
-    """Return the ``uint8`` disk ``x**2 + y**2 <= radius**2`` on a ``(2r+1, 2r+1)`` grid.
-
-    This is the structuring element of ``skimage.morphology.disk(radius)`` used by the
-    DAVIS boundary measure.
-    """
+    """Return the ``uint8`` disk ``x**2 + y**2 <= radius**2`` (``skimage``'s ``disk``)."""
     r = int(radius)
     if r < 0 or r != radius:
         raise ValueError(f"disk radius must be a non-negative whole number; got {radius}")
@@ -116,16 +99,9 @@ def boundary_measure(
     void_mask: np.ndarray | None = None,
     bound_th: float = BOUNDARY_THRESHOLD,
 ) -> float:
-    """Return F, the boundary F-measure of a predicted mask against the ground truth.
+    """Return F, the boundary F-measure in ``[0, 1]``; void pixels are removed first.
 
-    Args:
-        gt_mask: ``(H, W)`` ground-truth mask of one object.
-        pred_mask: ``(H, W)`` predicted mask.
-        void_mask: optional ``(H, W)`` void pixels, removed from both masks first.
-        bound_th: tolerance, a fraction of the image diagonal (< 1) or pixels (>= 1).
-
-    Returns:
-        F in ``[0, 1]``.
+    ``bound_th`` is a fraction of the image diagonal (< 1) or pixels (>= 1).
     """
     g = _as_mask(gt_mask, "gt_mask")
     p = _as_mask(pred_mask, "pred_mask")
@@ -176,21 +152,9 @@ def frame_scores(
     void_label: int = DAVIS_VOID_LABEL,
     bound_th: float = BOUNDARY_THRESHOLD,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return per-object J and F of one frame.
+    """Return per-object ``(j, f)`` of one frame; F is NaN unless ``with_f`` (slower).
 
-    Args:
-        gt_labels: ``(H, W)`` ground-truth label map (may contain ``void_label``).
-        pred_labels: ``(H, W)`` predicted label map (0 or an object id per pixel).
-        object_ids: the sequence's object ids (from its first frame).
-        with_f: also compute F (slower); otherwise F is all NaN.
-        void_label: label of void pixels in the ground truth.
-        bound_th: boundary tolerance for F.
-
-    Returns:
-        ``(j, f)``, each ``(len(object_ids),)`` float64.
-
-    Raises:
-        ValueError: shapes differ or the prediction uses a label that is not an object.
+    Raises ValueError when shapes differ or the prediction uses a label that is not an object.
     """
     gt = np.asarray(gt_labels)
     pred = np.asarray(pred_labels)
@@ -215,9 +179,8 @@ def frame_j(gt_labels: np.ndarray, pred_labels: np.ndarray, object_ids: Sequence
 def davis_statistics(per_frame: np.ndarray) -> tuple[float, float, float]:
     """Return ``(mean, recall, decay)`` of one object's per-frame J or F (DAVIS).
 
-    ``mean`` ignores NaN frames; an empty input gives NaN for all three. The decay bins are
-    ``v[e[i] : e[i+1] + 1]`` with ``e = round(linspace(1, n, 5)) - 1`` (neighbouring bins share
-    their edge frame), decay = mean(first bin) - mean(last bin).
+    ``mean`` ignores NaN frames; decay = mean(first bin) - mean(last bin), bins sharing
+    their edge frame as in the official code.
     """
     v = np.asarray(per_frame, dtype=np.float64).reshape(-1)
     if len(v) == 0:
@@ -238,11 +201,8 @@ def davis_statistics(per_frame: np.ndarray) -> tuple[float, float, float]:
 class VOSScores:
     """DAVIS scores of one sequence, or of several sequences pooled by object.
 
-    Attributes:
-        object_names: ``"<sequence>_<id>"`` for every object, as the DAVIS tables name them.
-        j_per_frame: one ``(frames,)`` array of J per object (evaluated frames only).
-        f_per_frame: same for F.
-        j_mean, j_recall, j_decay, f_mean, f_recall, f_decay: per-object statistics.
+    Objects are named ``"<sequence>_<id>"``; ``j_per_frame``/``f_per_frame`` hold one
+    array per object over the scored frames; the other arrays are per-object statistics.
     """
 
     object_names: tuple[str, ...]
@@ -294,18 +254,7 @@ def evaluate_vos_sequence(
 ) -> VOSScores:
     """Score one sequence with the DAVIS-2017 semi-supervised protocol.
 
-    Args:
-        gt_labels: ``T`` ground-truth label maps ``(H, W)``.
-        pred_labels: ``T`` predicted label maps.
-        object_ids: object ids of the sequence (non-zero, non-void labels of frame 0).
-        sequence_name: used to name objects ``"<sequence>_<id>"``.
-        exclude_first_last: drop frame 0 and frame ``T-1`` as the official script does
-            (a sequence of 2 frames then has no scored frame and its statistics are NaN).
-        void_label: void label in the ground truth.
-        bound_th: boundary tolerance for F.
-
-    Returns:
-        :class:`VOSScores`.
+    ``exclude_first_last`` drops the first and last frame as the official script does.
     """
     if len(gt_labels) != len(pred_labels):
         raise ValueError(
@@ -346,17 +295,7 @@ def aggregate_vos(scores: Sequence[VOSScores]) -> VOSScores:
 def scores_from_frames(
     j: np.ndarray, f: np.ndarray, object_ids: Sequence[int], sequence_name: str
 ) -> VOSScores:
-    """A sequence's DAVIS scores from per-object, per-frame J and F of its scored frames.
-
-    :func:`evaluate_vos_sequence` computes J and F from label maps; an episode computes them
-    frame by frame.
-
-    Args:
-        j: ``(objects, frames)`` J of the scored frames.
-        f: ``(objects, frames)`` F of the scored frames.
-        object_ids: the sequence's object labels.
-        sequence_name: names the objects ``"<sequence>_<id>"``.
-    """
+    """A sequence's DAVIS scores from ``(objects, frames)`` J and F of its scored frames."""
     n = len(object_ids)
     j_stats = np.array([davis_statistics(row) for row in j]).reshape(n, 3)
     f_stats = np.array([davis_statistics(row) for row in f]).reshape(n, 3)

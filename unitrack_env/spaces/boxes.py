@@ -77,11 +77,8 @@ def unpack_tracks(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Validate a track action and return ``(ids (k,) int64, boxes (k, 4) float64)``.
 
-    Accepts the padded form (with ``num_tracks``) or the unpadded ``{"ids", "boxes"}``.
-
-    Raises:
-        InvalidActionError: wrong keys, shapes or dtypes; NaN/inf or negative sizes;
-            ids that are not positive integers or repeat.
+    Accepts the padded form (with ``num_tracks``) or the unpadded ``{"ids", "boxes"}``;
+    InvalidActionError names bad keys, shapes, dtypes, values or ids.
     """
     ids, boxes = track_arrays(action, "boxes", "pack_tracks(ids, boxes, max_tracks)")
     if boxes.ndim != 2 or boxes.shape[1] != 4:

@@ -66,11 +66,8 @@ def unpack_pose_tracks(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Validate a pose-track action and return ``(ids (k,) int64, keypoints (k, K, 3) float64)``.
 
-    Accepts the padded form (with ``num_tracks``) or the unpadded ``{"ids", "keypoints"}``.
-
-    Raises:
-        InvalidActionError: wrong keys, shapes or dtypes; NaN/inf coordinates; scores
-            outside ``[0, 1]``; ids that are not positive integers or repeat.
+    Accepts the padded form (with ``num_tracks``) or the unpadded ``{"ids", "keypoints"}``;
+    InvalidActionError names bad keys, shapes, dtypes, coordinates, scores or ids.
     """
     ids, kp = track_arrays(action, "keypoints", "pack_pose_tracks(ids, keypoints, max_tracks)")
     if kp.ndim != 3 or kp.shape[2] != 3 or (num_keypoints is not None

@@ -1,10 +1,8 @@
 """Embedded synthetic data sets: small, deterministic, in each benchmark's exact layout.
 
-Without ``root=``, an environment calls :func:`ensure_synthetic` (e.g.
-``ensure_synthetic("MOT17")``) and reads the returned folder with the same reader as real
-data. The scene engine (:func:`render_scene`) draws textured people that walk, cross and
-occlude each other in front of a static background; writers put the scenes on disk in a
-benchmark's layout (:func:`write_motchallenge` for MOT15/16/17/20).
+Without ``root=``, an environment reads :func:`ensure_synthetic`'s folder with the same reader
+as real data. :func:`render_scene` draws textured people that walk, cross and occlude each
+other; writers put the scenes on disk in a benchmark's layout.
 """
 
 from unitrack_env.datasets.synthetic.cache import (

@@ -70,11 +70,7 @@ def cache_root() -> Path:
 
 
 def synthetic_path(benchmark: str, kind: str = "motchallenge") -> Path:
-    """Return where the synthetic ``benchmark`` data set of ``kind`` is (or will be) cached.
-
-    Raises:
-        ValueError: unknown ``kind`` or ``benchmark`` (the message lists the valid ones).
-    """
+    """Return where the synthetic ``benchmark`` data set of ``kind`` is (or will be) cached."""
     if kind not in WRITERS:
         raise ValueError(f"unknown synthetic data kind {kind!r}; valid: {', '.join(WRITERS)}")
     if benchmark not in KIND_BENCHMARKS[kind]:

@@ -76,11 +76,7 @@ DEFAULT_SPEC = DAVISSpec(sequences=(
 
 
 def choose_objects(video: SyntheticVideo, count: int) -> tuple[int, ...]:
-    """Return the scene ids of the ``count`` labelled objects (see the module docstring).
-
-    Raises:
-        ValueError: fewer than ``count`` walking people are visible in frame 0.
-    """
+    """Return the scene ids of the ``count`` labelled objects (walkers visible in frame 0)."""
     first = video.frame(0)
     visible = [a.id for a in first.objects
                if a.role is ObjectRole.PEDESTRIAN and a.visible_pixels >= MIN_FIRST_FRAME_PIXELS]

@@ -1,9 +1,7 @@
 """Long, deliberately hard synthetic MOT sequences (30 FPS, 300 frames) for accuracy benchmarks.
 
-They stress what separates an association tracker from an IoU tracker: crossings with
-heavy overlap, long occlusions, look-alikes (shared textures, so appearance can mislead)
-and a panning, shaking camera. Written in the MOTChallenge layout by
-:func:`write_hard_motchallenge`; not part of the embedded default data.
+Crossings with heavy overlap, long occlusions, look-alikes and a panning, shaking camera
+separate an association tracker from an IoU tracker. Written by :func:`write_hard_motchallenge`.
 
 Example:
     >>> from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC

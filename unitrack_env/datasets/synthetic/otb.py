@@ -1,12 +1,7 @@
 """Synthetic OTB-2015 data set: single targets that walk, cross and get occluded.
 
-:func:`write_otb` renders the scenes of an :class:`OTBSpec` and writes them in the exact
-OTB-2015 layout, which :class:`unitrack_env.datasets.otb.OTBDataset` reads::
-
-    <root>/<Seq>/img/0001.jpg ...            JPEG (quality 90); a sequence may start later
-    <root>/<Seq>/groundtruth_rect.txt        x,y,w,h per frame, 1-based integer pixels
-
-More in docs/module-notes.md.
+:func:`write_otb` writes the exact OTB-2015 layout (``<Seq>/img/0001.jpg ...``,
+``<Seq>/groundtruth_rect.txt`` in 1-based pixels). More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -40,15 +35,10 @@ _SCENE = {
 
 @dataclass(frozen=True)
 class SyntheticOTBSequence:
-    """One synthetic OTB sequence.
+    """One synthetic OTB sequence (``name`` must not be an OTB-100 name).
 
-    Attributes:
-        name: folder name (must not be an OTB-100 name, whose frame range is fixed).
-        scene: the scene to render.
-        first_frame: number of the first image file (later than 1 like BlurCar1's 247).
-        separator: separator of the ground-truth columns (a comma, or a tab as in Crossing).
-        grayscale: write single-channel JPEGs (some OTB sequences are grayscale).
-        trailing_newline: end the ground-truth file with a newline.
+    ``first_frame``, ``separator``, ``grayscale`` and ``trailing_newline`` reproduce variants
+    real OTB sequences have (BlurCar1 starts at 247, Crossing uses tabs).
     """
 
     name: str
@@ -80,11 +70,7 @@ DEFAULT_SPEC = OTBSpec(sequences=(
 
 
 def choose_target(video: SyntheticVideo) -> int:
-    """Return the id of the target: the fully visible-in-frame walker most occluded at some point.
-
-    Raises:
-        ValueError: no walking person stays inside the image in every frame.
-    """
+    """Return the id of the walker that stays in frame and is most occluded at some point."""
     width, height = video.width, video.height
     inside: dict[int, bool] = {o.id: True for o in video.objects
                                if o.role is ObjectRole.PEDESTRIAN}
@@ -140,13 +126,7 @@ def write_sequence(root: Path, sequence: SyntheticOTBSequence) -> Path:
 
 
 def write_otb(root: Path, benchmark: str = "OTB", spec: OTBSpec = DEFAULT_SPEC) -> None:
-    """Write the synthetic OTB data set of ``spec`` into ``root`` (the OTB folder).
-
-    Args:
-        root: output folder; sequence folders are created inside it.
-        benchmark: must be ``"OTB"`` (the signature every synthetic writer shares).
-        spec: the sequences to write.
-    """
+    """Write the synthetic OTB data set of ``spec`` into ``root`` (``benchmark`` must be OTB)."""
     if benchmark not in BENCHMARKS:
         raise ValueError(f"write_otb writes {BENCHMARKS}, not {benchmark!r}")
     names = [s.name.lower() for s in spec.sequences]

@@ -131,11 +131,7 @@ def labeled_frames(num_frames: int) -> np.ndarray:
 
 def person_keypoints(video: SyntheticVideo, obj_id: int, t: int,
                      instance_map: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return one person's 17 keypoints and their masks at frame ``t``.
-
-    Returns:
-        ``(xy (17, 2), inside (17,), visible (17,))``; the ear slots are never inside.
-    """
+    """One person's ``(xy (17, 2), inside (17,), visible (17,))`` at ``t`` (ears never inside)."""
     obj = video.object(obj_id)
     xy = select_joints(skeleton_pixels(obj, t), POSETRACK_FROM_SKELETON)
     inside, visible = joint_visibility(xy, instance_map, obj_id)

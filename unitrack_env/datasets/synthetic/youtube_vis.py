@@ -72,12 +72,7 @@ def _polygon(mask: np.ndarray) -> list[list[float]]:
 
 def write_youtube_vis(root: str | Path, benchmark: str = "YouTube-VIS-2019", *,
                       spec: VISSpec = DEFAULT_SPEC) -> None:
-    """Render ``spec`` and write it under ``root`` in the YouTube-VIS 2019 layout.
-
-    Raises:
-        ValueError: unknown ``benchmark``.
-        OSError: a file could not be written.
-    """
+    """Render ``spec`` and write it under ``root`` in the YouTube-VIS 2019 layout."""
     if benchmark not in BENCHMARKS:
         raise ValueError(f"unknown VIS benchmark {benchmark!r}; valid: {', '.join(BENCHMARKS)}")
     root = Path(root)
