@@ -92,6 +92,47 @@ def merge_topk(
         return torch.einsum("qk,qkc->qc", weights, kept)
 
 
+def rescore(q: torch.Tensor, values: list[torch.Tensor], ids: list[torch.Tensor],
+            keys: torch.Tensor, labels: torch.Tensor, width: int, topk: int,
+            temperature: float, max_elements: int) -> torch.Tensor:
+    """The exact float32 top-k of approximate candidates, softmax, weighted labels.
+
+    The ``width`` best candidates by their approximate (bfloat16) affinities are scored
+    again in float32 (``q`` against their ``keys``); the usual top-k and softmax follow. The
+    result is float32's wherever the exact top-k lies among those ``width`` candidates.
+
+    Args:
+        q: ``(Q, C)`` float32 queries.
+        values: Per group ``(Q, k_g)`` approximate affinities (``-inf``: not a candidate).
+        ids: Per group ``(Q, k_g, 1)`` float rows of ``keys`` / ``labels`` of the candidates.
+        keys: ``(N, C)`` float32 memory features, one row per memory location.
+        labels: ``(N, K)`` their labels.
+        width: Candidates scored again per query.
+        topk: Kept affinities per query.
+        temperature: Softmax temperature.
+        max_elements: Most gathered feature values held at once.
+
+    Returns:
+        ``(Q, K)`` propagated labels.
+    """
+    with stage("top-k"):
+        value = torch.cat(values, dim=1).float()
+        best, pick = value.topk(min(width, value.shape[1]), dim=1)
+        index = torch.cat(ids, dim=1)[..., 0].gather(1, pick).long()
+    with stage("rescore"):
+        exact = torch.empty_like(best)
+        chunk = max(1, max_elements // (best.shape[1] * keys.shape[1]))
+        for start in range(0, q.shape[0], chunk):
+            stop = min(q.shape[0], start + chunk)
+            gathered = keys.index_select(0, index[start:stop].reshape(-1)).view(
+                stop - start, best.shape[1], -1)
+            exact[start:stop] = torch.bmm(gathered, q[start:stop].unsqueeze(2)).squeeze(2)
+        exact.masked_fill_(best == float("-inf"), float("-inf"))  # not a candidate
+    with stage("labels"):
+        kept = labels.index_select(0, index.view(-1)).view(*index.shape, labels.shape[1])
+    return merge_topk([exact], [kept], topk, temperature)
+
+
 def kth_best(values: list[torch.Tensor], k: int) -> torch.Tensor:
     """``(Q,)`` the ``k``-th largest of the candidate groups per query (``-inf``: fewer).
 
@@ -286,10 +327,13 @@ class MemorySearch(ABC):
         """``(h * w, k)`` affinities and ``(h * w, k, K)`` labels over the recent windows."""
 
     @abstractmethod
-    def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
-                  recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
-                  slots: Sequence[int]) -> torch.Tensor:
-        """``(h * w, K)`` labels of ``query`` ``(C, h, w)`` from the whole memory.
+    def candidates(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
+                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                   slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Per candidate group, ``(h * w, k_g)`` affinities and ``(h * w, k_g, K)`` labels.
+
+        Their merged top-k (:func:`merge_topk`, ``k = config.topk``) is the top-k of
+        ``query`` ``(C, h, w)`` over the whole memory.
 
         Args:
             query: Prepared (normalised) query features.

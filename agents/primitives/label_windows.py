@@ -25,7 +25,6 @@ from .label_search import (
     MemorySearch,
     Workspace,
     kth_best,
-    merge_topk,
     search_above,
     search_dense,
     stage,
@@ -40,7 +39,7 @@ class WindowLayout:
     """The window ring's layout for one map size (see the module docstring).
 
     Attributes:
-        key: What it was built for ``(h, w, tile, radius, slots, topk, device)``.
+        key: What it was built for ``(h, w, tile, radius, slots, topk, device, dtype)``.
         tile: Tile side ``t``.
         pad: ``floor(radius)``: zero padding of a frame before its windows are cut.
         tiles_y: Tile rows.
@@ -52,8 +51,9 @@ class WindowLayout:
             position (always zero) serves the dummy keys.
         key_position: ``(T, R g)`` long: the keys' flat positions in the ``h x w`` map (0
             for keys off the map and dummy keys, which are never chosen over real ones).
-        bias: ``(T, t^2, R, 1, g)`` float: ``-inf`` for a key beyond the query's radius,
-            off the map or a dummy, else 0 (added to the affinities: one cheap pass).
+        bias: ``(T, t^2, R, 1, g)``, the affinities' dtype: ``-inf`` for a key beyond the
+            query's radius, off the map or a dummy, else 0 (added to the affinities: one
+            cheap pass; a bfloat16 sum with a float32 bias is ~50x slower).
     """
 
     key: tuple[object, ...]
@@ -69,7 +69,8 @@ class WindowLayout:
 
     @classmethod
     def build(cls, h: int, w: int, tile: int, radius: float, slots: int, topk: int,
-              device: torch.device, key: tuple[object, ...]) -> WindowLayout:
+              device: torch.device, dtype: torch.dtype, key: tuple[object, ...]
+              ) -> WindowLayout:
         """Lay out the windows of an ``h x w`` map for ``slots`` recent frames."""
         pad = int(math.floor(radius))
         tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
@@ -102,7 +103,7 @@ class WindowLayout:
             len(on_map), tile * tile, rows, 1, width)
         bias = torch.zeros(excluded.shape).masked_fill_(excluded, float("-inf"))
         return cls(key, tile, pad, tiles_y, tiles_x, rows, width, key_index.to(device),
-                   key_position.to(device), bias.to(device))
+                   key_position.to(device), bias.to(device, dtype))
 
     @property
     def num_tiles(self) -> int:
@@ -231,14 +232,15 @@ class WindowSearch(MemorySearch):
         """Forget the ring (a new video)."""
         self._ring = self._ring_labels = None
 
-    def layout(self, h: int, w: int, device: torch.device) -> WindowLayout:
+    def layout(self, h: int, w: int, device: torch.device, dtype: torch.dtype) -> WindowLayout:
         """The window layout for an ``h x w`` map (cached: one video, one size)."""
         cfg = self.config
         tile = max(1, min(cfg.tile_size, max(h, w)))
         radius, slots = float(cfg.radius or 0.0), cfg.memory_size - 1
-        key = (h, w, tile, radius, slots, cfg.topk, str(device))
+        key = (h, w, tile, radius, slots, cfg.topk, str(device), dtype)
         if self._layout is None or self._layout.key != key:
-            self._layout = WindowLayout.build(h, w, tile, radius, slots, cfg.topk, device, key)
+            self._layout = WindowLayout.build(h, w, tile, radius, slots, cfg.topk, device,
+                                              dtype, key)
         return self._layout
 
     def write(self, slot: int, feats: torch.Tensor, labels: torch.Tensor) -> None:
@@ -248,7 +250,7 @@ class WindowSearch(MemorySearch):
             return
         c, h, w = feats.shape
         with stage("memory"):
-            layout = self.layout(h, w, feats.device)
+            layout = self.layout(h, w, feats.device, feats.dtype)
             if self._ring is None or self._ring_labels is None:
                 slots = cfg.memory_size - 1
                 self._ring = feats.new_zeros(layout.num_tiles, layout.rows, slots,
@@ -265,14 +267,14 @@ class WindowSearch(MemorySearch):
         if self._ring is None or self._ring_labels is None:
             raise RuntimeError("the recent memory has no ring")  # never: write() made it
         cfg = self.config
-        layout = self.layout(query.shape[1], query.shape[2], query.device)
+        layout = self.layout(query.shape[1], query.shape[2], query.device, query.dtype)
         return search_windows(query, layout, self._ring, self._ring_labels, len(slots),
                               cfg.topk, cfg.max_affinity_elements, self.workspace)
 
-    def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
-                  recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
-                  slots: Sequence[int]) -> torch.Tensor:
-        """``(h * w, K)`` labels: recent windows first, then the first frame above a floor."""
+    def candidates(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
+                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                   slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Candidates: recent windows first, then the first frame above their floor."""
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
@@ -295,4 +297,4 @@ class WindowSearch(MemorySearch):
         else:  # the first frame alone: nothing to set a floor
             v, lab = search_dense(q, *first, h, w, cfg.first_frame_radius, cfg.topk,
                                   cfg.max_affinity_elements)
-        return merge_topk([v, *values], [lab, *labels], cfg.topk, cfg.temperature)
+        return [v, *values], [lab, *labels]
