@@ -256,7 +256,7 @@ def stages(cfg: Config) -> None:
 
 
 #: ``precision`` part: bf16 candidates per query, in multiples of ``topk``, measured.
-CANDIDATE_FACTORS = (1, 2, 3, 4)
+CANDIDATE_FACTORS = (1, 2, 3)
 
 
 def precision(cfg: Config) -> None:
