@@ -52,7 +52,7 @@ MAX_AFFINITY_ELEMENTS: int = 1 << 22
 PRECISIONS: tuple[str, ...] = ("float32", "bf16")
 """Allowed ``propagation_precision`` values (docs/design-decisions.md)."""
 
-CANDIDATE_FACTOR: int = 3
+CANDIDATE_FACTOR: int = 2
 """``bf16`` precision: candidates per query scored again in float32, in multiples of
 ``topk`` (docs/design-decisions.md has the measurement that chose it)."""
 
