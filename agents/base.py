@@ -6,12 +6,9 @@ An agent is one class with two methods::
         def reset(self, observation, info): ...
         def act(self, observation): ...   # returns the environment's action
 
-Subclassing registers the class under ``name``; ``make_agent("my-tracker", **kwargs)``
-builds it. Built-in agents are imported lazily on first use so that ``import unitrack_env.agents``
-stays cheap (no torch import for the IoU baseline). Agents that live elsewhere are named by
-reference (``"my_package.tracker:MyTracker"``, ``"path/to/file.py:MyTracker"``) or published
-by an installed distribution in the ``unitrack_env.agents`` entry-point group (see
-:mod:`unitrack_env.agents.loading`).
+Subclassing registers it; ``make_agent("my-tracker", **kwargs)`` builds it. Built-ins are
+imported lazily; others are named ``"module:Class"`` / ``"file.py:Class"`` or published in
+the ``unitrack_env.agents`` entry-point group (:mod:`unitrack_env.agents.loading`).
 """
 
 from __future__ import annotations
@@ -41,12 +38,7 @@ _BUILTIN_MODULES: dict[str, str] = {
 
 
 class Agent(abc.ABC):
-    """A tracker that plays episodes of unitrack environments.
-
-    Class attributes:
-        name: registry name (set by the ``name=`` class keyword).
-        tasks: task families it can play (``"mot"``, ...), see ``unitrack_env.task_of``.
-    """
+    """A tracker that plays episodes; class keywords ``name=`` (registry) and ``tasks=``."""
 
     name: ClassVar[str] = ""
     tasks: ClassVar[tuple[str, ...]] = ()
@@ -95,14 +87,10 @@ def _is_agent_class(cls: type) -> bool:
 
 
 def agent_class(spec: str | type) -> type[Agent]:
-    """Return the agent class named by ``spec``: a name, a reference or the class itself.
+    """Return the agent class named by ``spec``: a name, a ``module:Class`` reference, or a class.
 
-    A reference is ``module:Class`` or ``path/to/file.py:Class``.
-
-    Raises:
-        KeyError: an unknown name (the message lists the known ones).
-        ImportError: a reference that cannot be imported, or a class that is no agent.
-        TypeError: ``spec`` is an agent object or anything else but a name or a class.
+    Unknown names raise KeyError (listing the known), bad references ImportError, other
+    objects TypeError.
     """
     if isinstance(spec, type):
         if not _is_agent_class(spec):

@@ -1,11 +1,8 @@
 """An agent's options, typed: their names and types, checked before anything is played.
 
-An agent's options are the keyword parameters of its ``__init__`` plus, for agents that
-collect ``**options`` into a config dataclass, the fields of the class named by the agent's
-``config_class`` attribute. :func:`check_options` verifies names and types of given values;
-:func:`parse_options` turns command-line ``key=value`` strings into typed values (Python
-literals where the type asks for numbers, tuples or dicts; the text itself where it asks for a
-string or path).
+The options are the keyword parameters of ``__init__`` plus the fields of the agent's
+``config_class``. :func:`check_options` verifies given values; :func:`parse_options` turns
+command-line ``key=value`` strings into typed values.
 """
 
 from __future__ import annotations

@@ -1,17 +1,10 @@
 """Where independent pieces of work run: a local process pool, or a Ray cluster.
 
-A backend is a context manager that yields ``run(fn, items)``: it calls ``fn(item,
-threads)`` for every item somewhere and yields ``(item, result)`` pairs as they finish, a
-result being ``fn``'s return value or the exception it raised (one failure never stops the
-others). Results come back through the backend itself (pipes for the pool, Ray's object
-store for Ray), so workers on other machines need no shared file system.
-
-* ``pool``: ``workers`` spawned processes on this machine, each with ``cpu_count // workers``
-  torch threads; they watch their parent and ignore Ctrl-C, and a worker that dies fails
-  only the item it was running, naming the signal (see :mod:`unitrack_env.evaluation.pool`).
-* ``ray``: one Ray task per item declaring ``num_cpus=1`` (and ``num_gpus``), one torch
-  thread each; ``address=None`` starts a local Ray with ``workers`` CPUs, ``"auto"`` or
-  ``"ray://host:port"`` joins a running cluster. Needs the ``ray`` extra.
+A backend is a context manager yielding ``run(fn, items)``, which calls ``fn(item,
+threads)`` somewhere and yields ``(item, result or exception)`` as they finish; results
+travel through the backend, so remote workers need no shared file system. ``pool``:
+``workers`` spawned local processes (:mod:`unitrack_env.evaluation.pool`); ``ray``: one
+``num_cpus=1`` task per item, on a local Ray or a cluster (``address``; the ``ray`` extra).
 """
 
 from __future__ import annotations

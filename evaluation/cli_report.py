@@ -29,7 +29,8 @@ EXAMPLES = {
 
 #: Columns ``unitrack events`` prints as a table (``--format csv`` prints them all).
 TABLE_COLUMNS = ("sequence", "frame", "type", "object", "gt_id", "track_id", "prev_track_id",
-                 "iou", "center_error", "j", "f", "pck")
+                 "joint", "iou", "center_error", "j", "f", "pck", "distance", "score",
+                 "track_iou")
 
 
 def add_parsers(sub: Any) -> None:
@@ -43,8 +44,9 @@ def add_parsers(sub: Any) -> None:
                  "positives, ...; computed from its result files if the run predates them)")
     ev.add_argument("run", help="a run folder of `unitrack evaluate`")
     ev.add_argument("--sequence", help="only this sequence")
-    ev.add_argument("--type", help="only this event type: tp, fp, fn, idsw, frag (MOT) or "
-                    "frame (SOT, VOS, pose)")
+    ev.add_argument("--type", help="only this event type: tp, fp, fn, idsw, frag (MOT, MOTS; "
+                    "PoseTrack per joint), tp, fp, fn, ignored (VIS, per track and frame) or "
+                    "frame (SOT, VOS, JHMDB)")
     ev.add_argument("--format", choices=("table", "csv", "count"), default="table",
                     help="a table, every column as CSV, or the count per sequence and type")
     ev.set_defaults(func=_cmd_events)

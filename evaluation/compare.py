@@ -4,6 +4,8 @@ The default interval is a paired delete-a-block jackknife: each sequence is cut 
 :data:`BLOCKS` blocks of consecutive frames, the metrics are recomputed with one block left
 out (the same block for both runs), and the difference gets a t interval from the jackknife
 standard error. A block bootstrap is kept for comparison; docs/report.md has the coverage.
+Box MOT recomputes its metrics from per-frame statistics of the official matching; SOT, VOS
+and JHMDB runs compare means of per-frame values (:func:`.intervals.compare_frames`).
 
 More in docs/module-notes.md.
 """
@@ -48,6 +50,22 @@ def block_length(num_frames: int) -> int:
     hundreds of frames; blocks shorter than that understate their variance (docs/report.md).
     """
     return max(1, math.ceil(int(num_frames) / BLOCKS))
+
+
+#: Shortest block of a frame-scored task's jackknife, in frames: a tracker that loses its
+#: target stays lost for tens of frames, and shorter blocks understate the variance
+#: (coverage 81-90% with blocks of a fifth of 100-200 frames, 93-97% with at least 50:
+#: benchmarks/compare_coverage_frames.py, docs/report.md).
+MIN_FRAME_BLOCK: int = 50
+
+
+def frame_block_length(num_frames: int) -> int:
+    """Block length of a frame-scored sequence: a fifth of it, but at least 50 frames.
+
+    Never more than half the sequence (two blocks), so a short sequence keeps a spread.
+    """
+    n = int(num_frames)
+    return max(block_length(n), min(MIN_FRAME_BLOCK, math.ceil(n / 2)))
 
 
 def jackknife_weights(num_frames: int, length: int) -> np.ndarray:
@@ -264,17 +282,33 @@ def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStat
 def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
                  seed: int = 0, level: str = "frames", block: int | None = None,
                  method: str = "jackknife") -> Comparison:
-    """Compare two MOT run folders on the sequences both scored (see the module docstring)."""
+    """Compare two run folders on the sequences both scored (see the module docstring).
+
+    Box MOT recomputes its metrics from per-frame statistics; SOT, VOS and JHMDB runs compare
+    their per-frame metrics (:func:`~.intervals.compare_frames`, jackknife only).
+    """
+    task = _common_task(run_a, run_b)
     seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
     common = [s for s in seq_a if s in seq_b]
     if not common:
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
-    stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
-    rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed, level=level,
-                                 block=block, method=method)
-    frames = {s: stats_a[s].num_frames for s in common}
-    notes = few_data_notes(frames, blocks, level)
-    for name in unreliable_rows(frames, blocks):
+    if task == "mot":
+        stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
+        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
+                                     level=level, block=block, method=method)
+        frames = {s: stats_a[s].num_frames for s in common}
+    else:
+        from .intervals import compare_frames
+
+        if level not in ("frames", "sequences"):
+            raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
+        if method != "jackknife":
+            raise ValueError(f"--interval {method} is for box MOT runs; {task} runs are "
+                             "compared with the block jackknife")
+        rows, frames, blocks = compare_frames(run_a, run_b, task, common, level=level,
+                                              block=block)
+    notes = few_data_notes(frames, blocks, level, pooled=task != "mot")
+    for name in unreliable_rows(frames, blocks, pooled=task != "mot"):
         for d in rows[name].values():
             d.reliable = False
     skipped = sorted(set(seq_a) ^ set(seq_b))
@@ -284,31 +318,57 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
                       method)
 
 
+#: Tasks ``compare`` supports: box MOT and the tasks whose metrics are means over frames.
+COMPARE_TASKS: tuple[str, ...] = ("mot", "sot", "vos", "pose-prop")
+
+
+def _common_task(run_a: str | os.PathLike, run_b: str | os.PathLike) -> str:
+    tasks = [run_benchmark(r).task for r in (run_a, run_b)]
+    if tasks[0] != tasks[1]:
+        raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
+                         "compare two runs of the same task")
+    if tasks[0] not in COMPARE_TASKS:
+        raise ValueError(f"{run_a}: `compare` supports {', '.join(COMPARE_TASKS)} runs; this "
+                         f"run's task is '{tasks[0]}'")
+    return tasks[0]
+
+
 def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:
     return {name: math.ceil(n / blocks[name]) for name, n in frames.items()}
 
 
-def unreliable_rows(frames: dict[str, int], blocks: dict[str, int]) -> list[str]:
+def unreliable_rows(frames: dict[str, int], blocks: dict[str, int], *,
+                    pooled: bool = False) -> list[str]:
     """Rows whose interval rests on too little data.
 
-    A sequence needs :data:`MIN_FRAMES` frames in at least :data:`BLOCKS` blocks; the
-    combined row needs one such sequence.
+    A sequence needs :data:`MIN_FRAMES` frames in at least :data:`BLOCKS` blocks. The
+    combined row needs one such sequence, or with ``pooled`` (frame-scored tasks, whose
+    combined replicates pool the blocks of all sequences) :data:`BLOCKS` blocks of at least
+    :data:`MIN_FRAME_BLOCK` frames in all.
     """
     counts = _block_count(frames, blocks)
     out = [name for name, count in counts.items()
            if count < BLOCKS or frames[name] < MIN_FRAMES]
-    return out + ([COMBINED] if len(out) == len(counts) else [])
+    if pooled:  # enough blocks long enough (MIN_FRAME_BLOCK) in all
+        long = sum(c for name, c in counts.items() if blocks[name] >= MIN_FRAME_BLOCK)
+        enough = long >= BLOCKS and sum(frames.values()) >= MIN_FRAMES
+    else:
+        enough = len(out) < len(counts)
+    return out + ([] if enough else [COMBINED])
 
 
-def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str) -> list[str]:
+def few_data_notes(frames: dict[str, int], blocks: dict[str, int], level: str, *,
+                   pooled: bool = False) -> list[str]:
     """Plain warnings where too little data makes the intervals wide or unreliable."""
     notes = []
     counts = _block_count(frames, blocks)
-    for name in unreliable_rows(frames, blocks):
+    for name in unreliable_rows(frames, blocks, pooled=pooled):
         if name == COMBINED:
-            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all, no sequence with "
-                         f"{MIN_FRAMES} frames in {BLOCKS} blocks: too little data for a "
-                         "trustworthy interval; do not read a difference into it")
+            rule = (f"fewer than {BLOCKS} blocks of {MIN_FRAME_BLOCK} frames" if pooled else
+                    f"no sequence with {MIN_FRAMES} frames in {BLOCKS} blocks")
+            notes.append(f"{COMBINED}: {sum(frames.values())} frames in all, {rule}: too "
+                         "little data for a trustworthy interval; do not read a difference "
+                         "into it")
         else:
             notes.append(f"{name}: only {frames[name]} frames ({counts[name]} blocks of "
                          f"{blocks[name]}): too little data, its interval is not trustworthy "

@@ -1,10 +1,7 @@
 """Cross-check of MOTChallenge scores with py-motmetrics, and where and why the two differ.
 
-py-motmetrics (C. Heindl, J. Valmadre et al., https://github.com/cheind/py-motmetrics, MIT
-licence) is an independent implementation of CLEAR MOT and the ID measures. It is fed exactly
-the frames TrackEval scores (our :func:`~unitrack_env.metrics.mot_preprocess.preprocess_frame`,
-TrackEval's MOTChallenge preprocessing) with distances ``1 - IoU``, NaN below ``0.5 - eps``.
-
+py-motmetrics (MIT licence) independently implements CLEAR MOT and the ID measures; it is
+fed exactly the frames TrackEval scores, with distances ``1 - IoU`` (NaN below 0.5).
 More in docs/module-notes.md.
 """
 
@@ -88,13 +85,9 @@ def iou_distance(iou: np.ndarray, threshold: float = MATCH_IOU_THRESHOLD) -> np.
 class PairDifference:
     """One ground-truth object matched differently by the two libraries in one frame.
 
-    Attributes:
-        frame: 1-based frame.
-        gt_id: The ground-truth id.
-        trackeval: TrackEval's tracker id (None: missed).
-        motmetrics: motmetrics' tracker id (None: missed).
-        rule: :data:`CONTINUATION`, :data:`DISPLACED` or :data:`OTHER`.
-        last_frame: motmetrics' frame of the continued match (continuation only).
+    ``trackeval`` / ``motmetrics``: each library's tracker id (None: missed); ``rule``:
+    :data:`CONTINUATION`, :data:`DISPLACED` or :data:`OTHER`; ``last_frame``: motmetrics'
+    frame of the continued match.
     """
 
     frame: int
@@ -117,13 +110,7 @@ class PairDifference:
 
 @dataclass(frozen=True)
 class Crosscheck:
-    """TrackEval's and motmetrics' metrics of one sequence, and the pairs they match differently.
-
-    Attributes:
-        trackeval: TrackEval's metrics (TrackEval names, fractions).
-        motmetrics: motmetrics' (:func:`motmetrics_summary`).
-        pairs: Every object matched differently, in frame order.
-    """
+    """TrackEval's and motmetrics' metrics of one sequence, and the pairs they match differently."""
 
     trackeval: dict[str, float]
     motmetrics: dict[str, float]
@@ -204,19 +191,10 @@ def motmetrics_summary(
     *,
     benchmark: str,
 ) -> dict[str, float]:
-    """Score a sequence with py-motmetrics after MOTChallenge preprocessing.
+    """Score a sequence with py-motmetrics after ``benchmark``'s MOTChallenge preprocessing.
 
-    Args:
-        gt_frames: per-frame ground truth, frame ``t`` at index ``t - 1`` (see
-            :func:`~unitrack_env.metrics.mot_preprocess.gt_frames_from_rows`).
-        tracker_frames: per-frame tracker output, same length (see
-            :func:`~unitrack_env.metrics.mot_preprocess.tracker_frames_from_rows`).
-        benchmark: TrackEval benchmark name, deciding the preprocessing.
-
-    Returns:
-        ``{"MOTA", "IDF1", "IDP", "IDR", "IDSW", "CLR_TP", "CLR_FP", "CLR_FN", "GT_Dets",
-        "Dets", "IDTP", "IDFP", "IDFN", "MOTP_distance"}`` as floats (fractions, not percent;
-        ``MOTP_distance`` is motmetrics' mean ``1 - IoU``, i.e. ``1 - `` TrackEval's MOTP).
+    Returns TrackEval-named fractions (MOTA, IDF1, IDP, IDR, IDSW, CLR_TP/FP/FN, GT_Dets, Dets,
+    IDTP/FP/FN) and ``MOTP_distance``, motmetrics' mean ``1 - IoU``.
     """
     acc, _ = _accumulate(gt_frames, tracker_frames, benchmark)
     return _summary(acc)

@@ -15,10 +15,13 @@ import pandas as pd
 
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
+from unitrack_env.datasets.mots_format import CLASS_IDS
 from unitrack_env.metrics.events_mot import (
     EVENT_COLUMNS,
+    ID_COLUMNS,
     EventRows,
     mot_sequence_events,
+    mots_sequence_events,
     read_gt_rows,
 )
 
@@ -26,7 +29,7 @@ from unitrack_env.metrics.events_mot import (
 EVENTS_DIR: str = "events"
 
 #: Tasks whose events are computed.
-EVENT_TASKS: tuple[str, ...] = ("mot", "sot", "vos", "pose-prop")
+EVENT_TASKS: tuple[str, ...] = ("mot", "mots", "posetrack", "vis", "sot", "vos", "pose-prop")
 
 
 def events_path(run: str | os.PathLike, sequence: str) -> Path:
@@ -60,6 +63,19 @@ def sequence_events(bench: Benchmark, folder: str | os.PathLike, sequence: str) 
         seq_dir = bench.dataset.split_dir / sequence
         return mot_sequence_events(sequence, read_gt_rows(seq_dir), bench.read(folder, sequence),
                                    bench.sequence_length(sequence), bench.name)
+    if bench.task == "mots":
+        info = bench.dataset.info(sequence)
+        return mots_sequence_events(sequence, bench.dataset.ground_truth(sequence),
+                                    bench.read(folder, sequence), first_frame=info.first_frame,
+                                    num_frames=info.length,
+                                    class_id=CLASS_IDS[bench.object_class])
+    if bench.task == "posetrack":
+        return _posetrack_events(bench, folder, sequence)
+    if bench.task == "vis":
+        from unitrack_env.metrics.events_vis import vis_sequence_events
+
+        return vis_sequence_events(sequence, bench.dataset.data, bench.read(folder, sequence),
+                                   bench.dataset.video(sequence))
     if bench.task == "sot":
         return _sot_events(bench, folder, sequence)
     if bench.task == "vos":
@@ -68,6 +84,15 @@ def sequence_events(bench: Benchmark, folder: str | os.PathLike, sequence: str) 
         return _pose_events(bench, folder, sequence)
     raise ValueError(f"no per-frame events for task '{bench.task}' (events exist for "
                      f"{', '.join(EVENT_TASKS)})")
+
+
+def _posetrack_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
+    from unitrack_env.datasets.posetrack_json import read_posetrack_json
+    from unitrack_env.metrics.events_pose import posetrack_sequence_events
+
+    gt = read_posetrack_json(bench.dataset.annotation_dir / f"{sequence}.json")
+    return posetrack_sequence_events(sequence, gt, bench.read(folder, sequence),
+                                     drop_last_frame=bench.drop_last_frame)
 
 
 def _sot_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
@@ -106,7 +131,7 @@ def _pose_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventR
 
     pred, gt = bench.read(folder, sequence), bench.ground_truth(sequence)
     rows = EventRows(sequence)
-    for t in range(min(len(pred), len(gt))):
+    for t in range(1, min(len(pred), len(gt))):  # frame 1 is given, and not scored
         rows.add(t + 1, "frame", pck=frame_pck(pred[t], gt[t], method=bench.normaliser))
     return rows
 
@@ -114,7 +139,7 @@ def _pose_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventR
 def to_frame(rows: EventRows) -> pd.DataFrame:
     """An event table as a DataFrame with :data:`EVENT_COLUMNS`."""
     df = pd.DataFrame(rows.columns, columns=list(EVENT_COLUMNS))
-    for col in ("gt_id", "track_id", "prev_track_id", "object"):
+    for col in ID_COLUMNS:
         df[col] = df[col].astype("Int64")
     return df
 
@@ -174,7 +199,8 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
                                  keep_default_na=True))
     df = (pd.concat(parts, ignore_index=True) if parts
           else pd.DataFrame(columns=list(EVENT_COLUMNS)))
-    for col in ("gt_id", "track_id", "prev_track_id", "object"):
+    df = df.reindex(columns=list(EVENT_COLUMNS))  # files written before a column existed
+    for col in ID_COLUMNS:
         df[col] = df[col].astype("Int64")
     if type is not None:
         df = df[df["type"] == type].reset_index(drop=True)

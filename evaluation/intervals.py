@@ -1,12 +1,16 @@
 """95% intervals of one run's combined metrics, and of every scorecard cell (``--ci``).
 
 The method is :mod:`~unitrack_env.evaluation.compare`'s: a delete-a-block jackknife over
-blocks of frames (a fifth of each sequence), with a t interval. Box MOT recomputes HOTA, DetA,
-AssA, IDF1 and MOTA from the per-frame statistics (:mod:`unitrack_env.metrics.mot_stats`).
-Tasks scored per frame use their events: SOT's AUC (each frame's share of the success
-curve) and Precision@20px, VOS's J-Mean, F-Mean and J&F-Mean (means over frames and objects),
-pose propagation's PCK@0.1 (the mean of per-frame PCK, which weights frames equally where the
-official score pools joints). Other tasks (MOTS, PoseTrack, VIS) get no interval.
+blocks of frames (a fifth of each sequence; at least 50 frames for the frame-scored tasks,
+:func:`~unitrack_env.evaluation.compare.frame_block_length`), with a t interval. Box MOT
+recomputes HOTA, DetA, AssA, IDF1 and MOTA from the per-frame statistics
+(:mod:`unitrack_env.metrics.mot_stats`). Tasks scored per frame use their events: SOT's AUC
+(each frame's share of the success curve) and Precision@20px, VOS's J-Mean, F-Mean and
+J&F-Mean (means over frames and objects), pose propagation's PCK@0.1 (the mean of per-frame
+PCK over the scored frames, the official pooled PCK when every joint is scored). Sequences
+combine as the official scores combine them (:func:`combine_weights`). Other tasks (MOTS,
+PoseTrack, VIS) get no interval. :func:`compare_frames` gives ``unitrack compare`` the same
+jackknife for two runs of a frame-scored task.
 """
 
 from __future__ import annotations
@@ -21,7 +25,15 @@ import pandas as pd
 
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
-from .compare import block_length, jackknife_interval, jackknife_weights, run_stats
+from .compare import (
+    COMBINED,
+    MetricDiff,
+    block_length,
+    frame_block_length,
+    jackknife_interval,
+    jackknife_weights,
+    run_stats,
+)
 from .events import load_events, run_benchmark, run_sequences
 
 #: Per-frame value of each interval metric of a frame-scored task.
@@ -48,25 +60,116 @@ def _mot_intervals(run: Path) -> dict[str, tuple[float, float]]:
     return {m: jackknife_interval(float(values[m][0]), samples[m]) for m in values}
 
 
-def _frame_intervals(run: Path, task: str) -> dict[str, tuple[float, float]]:
+def frame_values(run: str | os.PathLike, task: str,
+                 sequences: list[str] | None = None) -> dict[str, dict[str, pd.Series]]:
+    """``{sequence: {metric: per-frame values}}`` of a frame-scored run, from its events.
+
+    One value per frame (the mean over a frame's objects), indexed by frame number.
+    """
     events = load_events(run, type="frame")
     out = {}
-    for metric, per_frame in FRAME_METRICS[task].items():
-        parts = []  # (per-block sums, per-block counts) of each sequence
-        for _, seq in events.groupby("sequence"):
-            # one value per frame (the mean over a frame's objects)
-            frame_values = pd.Series(per_frame(seq), index=seq["frame"].to_numpy())
-            values = frame_values.groupby(level=0).mean().to_numpy()
-            keep = jackknife_weights(len(values), block_length(len(values)))
-            ok = np.isfinite(values)
-            parts.append((keep[:, ok] @ values[ok], keep[:, ok].sum(1),
-                          values[ok].sum(), float(ok.sum())))
-        total, n = sum(p[2] for p in parts), sum(p[3] for p in parts)
-        if n:
-            sums = np.concatenate([total - p[2] + p[0] for p in parts])
-            counts = np.concatenate([n - p[3] + p[1] for p in parts])
-            out[metric] = jackknife_interval(total / n, sums / np.maximum(counts, 1))
+    for name, seq in events.groupby("sequence", sort=False):
+        if sequences is None or name in sequences:
+            out[str(name)] = {
+                metric: pd.Series(per_frame(seq), index=seq["frame"].to_numpy())
+                .groupby(level=0).mean() for metric, per_frame in FRAME_METRICS[task].items()}
     return out
+
+
+def frame_replicates(values: dict[str, np.ndarray], blocks: dict[str, int],
+                     level: str = "frames", weights: dict[str, float] | None = None,
+                     ) -> dict[str, tuple[float, np.ndarray]]:
+    """Per sequence and ``COMBINED``: the mean over frames and its jackknife replicates.
+
+    A sequence's replicates leave out one block of its frames each. ``COMBINED`` is the mean
+    of the sequences' means with ``weights`` (the official combination: 1 per sequence for
+    OTB, its objects for DAVIS), or with ``weights=None`` the mean of all frames pooled; its
+    replicates leave out one block of one sequence at a time (``level="frames"``) or one
+    whole sequence (``"sequences"``). NaN frames are skipped.
+    """
+    parts, out = {}, {}
+    for name, v in values.items():
+        keep = jackknife_weights(len(v), blocks[name])
+        ok = np.isfinite(v)
+        parts[name] = (keep[:, ok] @ v[ok], keep[:, ok].sum(1), v[ok].sum(), float(ok.sum()))
+        out[name] = (parts[name][2] / max(parts[name][3], 1.0),
+                     parts[name][0] / np.maximum(parts[name][1], 1))
+    if weights is None:  # sums and counts of the pooled frames
+        sums = {n: (p[2], p[0]) for n, p in parts.items()}
+        counts = {n: (p[3], p[1]) for n, p in parts.items()}
+    else:  # weighted sequence means: "sum" w * mean, "count" w
+        sums = {n: (weights[n] * out[n][0], weights[n] * out[n][1]) for n in parts}
+        counts = {n: (weights[n], np.full(len(out[n][1]), float(weights[n]))) for n in parts}
+    total, n = sum(v[0] for v in sums.values()), sum(v[0] for v in counts.values())
+    if level == "frames":
+        rep_sums = np.concatenate([total - s[0] + s[1] for s in sums.values()])
+        rep_counts = np.concatenate([n - c[0] + c[1] for c in counts.values()])
+    else:
+        rep_sums = np.array([total - s[0] for s in sums.values()])
+        rep_counts = np.array([n - c[0] for c in counts.values()])
+    out[COMBINED] = (total / max(n, 1e-12), rep_sums / np.maximum(rep_counts, 1e-12))
+    return out
+
+
+def combine_weights(run: str | os.PathLike, task: str,
+                    sequences: list[str]) -> dict[str, float] | None:
+    """Each sequence's weight in the official combined score (None: frames pooled)."""
+    if task == "sot":
+        return dict.fromkeys(sequences, 1.0)
+    if task == "vos":
+        objects = load_events(run, type="frame").groupby("sequence")["object"].nunique()
+        return {name: float(objects.get(name, 1)) for name in sequences}
+    return None
+
+
+def _frame_intervals(run: Path, task: str) -> dict[str, tuple[float, float]]:
+    by_seq = frame_values(run, task)
+    weights = combine_weights(run, task, list(by_seq))
+    out = {}
+    for metric in FRAME_METRICS[task]:
+        values = {name: v[metric].to_numpy() for name, v in by_seq.items()}
+        if any(np.isfinite(v).any() for v in values.values()):
+            point, reps = frame_replicates(
+                values, {name: frame_block_length(len(v)) for name, v in values.items()},
+                weights=weights)[COMBINED]
+            out[metric] = jackknife_interval(point, reps)
+    return out
+
+
+def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, task: str,
+                   sequences: list[str], *, level: str = "frames", block: int | None = None
+                   ) -> tuple[dict[str, dict[str, MetricDiff]], dict[str, int], dict[str, int]]:
+    """Paired jackknife rows of two frame-scored runs: ``(rows, frames, block lengths)``.
+
+    Both runs' metrics are the means of the per-frame values of :data:`FRAME_METRICS`
+    (recomputed from the events) over the frames both runs scored, combined as the official
+    score combines sequences (:func:`combine_weights`).
+    """
+    va, vb = frame_values(run_a, task, sequences), frame_values(run_b, task, sequences)
+    for run, values in ((run_a, va), (run_b, vb)):
+        missing = [name for name in sequences if name not in values]
+        if missing:
+            raise ValueError(f"{run}: no per-frame events for {', '.join(missing)}")
+    weights = combine_weights(run_a, task, sequences)
+    frames, blocks, rows = {}, {}, {}
+    pairs = {}
+    for name in sequences:
+        index = va[name][next(iter(FRAME_METRICS[task]))].index.intersection(
+            vb[name][next(iter(FRAME_METRICS[task]))].index)
+        frames[name] = len(index)
+        blocks[name] = frame_block_length(len(index)) if block is None else max(
+            1, min(int(block), len(index)))
+        pairs[name] = index
+    for metric in FRAME_METRICS[task]:
+        ra = frame_replicates({n: va[n][metric].loc[i].to_numpy() for n, i in pairs.items()},
+                              blocks, level, weights)
+        rb = frame_replicates({n: vb[n][metric].loc[i].to_numpy() for n, i in pairs.items()},
+                              blocks, level, weights)
+        for name in [*sequences, COMBINED]:
+            (a, reps_a), (b, reps_b) = ra[name], rb[name]
+            low, high = jackknife_interval(a - b, reps_a - reps_b)
+            rows.setdefault(name, {})[metric] = MetricDiff(a, b, a - b, low, high)
+    return rows, frames, blocks
 
 
 def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,

@@ -226,12 +226,7 @@ class Manifest:
 
     @classmethod
     def load(cls, folder: Path) -> Manifest:
-        """The folder's manifest (empty when there is none).
-
-        Raises:
-            ValueError: ``manifest.json`` is there but not one of ours (another tool's file,
-                or damaged): its list cannot be trusted to say what may be deleted.
-        """
+        """The folder's manifest (empty if none); ValueError if ``manifest.json`` is not ours."""
         path = Path(folder) / MANIFEST
         if not path.exists():
             return cls(Path(folder))
@@ -289,12 +284,7 @@ def owned_files(manifest: Manifest, names: Iterable[str]) -> set[Path]:
 
 
 def adopt(manifest: Manifest, names: Iterable[str], verified: Iterable[str]) -> None:
-    """Record as ours what a run of ours provably wrote without listing it.
-
-    A folder written before manifests existed (or cells a scorecard stored): a ``run.json``
-    of ours, and the sequences in ``verified`` (their record's digest matches the result
-    files, so the record and those files are ours).
-    """
+    """Record as ours what a run of ours provably wrote without listing it (verified records)."""
     out, names = manifest.folder, list(names)
     found = [p for n in verified for p in sequence_outputs(out, n, names)]
     if not manifest.found:
@@ -375,14 +365,8 @@ def results_match(out: Path, names: list[str], name: str) -> bool:
 def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: bool) -> Manifest:
     """The folder's manifest, after ``overwrite`` deleted our files; refuse foreign files.
 
-    ``every`` is the split's sequences, ``names`` those this run plays or keeps. Runs of ours
-    that left no manifest entry (written before manifests, or a scorecard's stored cells)
-    are adopted when their records verify. Files that no run of ours wrote are never deleted
-    (``overwrite`` names them in a warning) nor overwritten (the run is refused).
-
-    Raises:
-        OutputError: a file that is not ours is where this run would write; or ``out``
-            cannot be written.
+    Unlisted runs of ours are adopted when their records verify. Files no run of ours wrote
+    are never deleted (a warning names them) nor overwritten (OutputError).
     """
     from .runner import OutputError
 
@@ -405,10 +389,8 @@ def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: boo
 def outside(paths: list[Path], out: Path) -> list[Path]:
     """``paths`` without those inside ``out``: a run's own files are never its inputs.
 
-    ``--out`` inside ``--root`` is allowed rather than refused (runs kept beside their data
-    are common, and the data readers never read them as sequences); without this filter,
-    every file a run writes there would change the fingerprint of the very sequences it
-    resumes, and each rerun would replay them all.
+    Else every file a run writes inside ``--root`` would change the fingerprints of the
+    sequences it resumes.
     """
     prefixes = tuple({p.rstrip(os.sep) + os.sep
                       for p in (os.path.abspath(out), str(Path(out).resolve()))})

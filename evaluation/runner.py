@@ -39,9 +39,8 @@ from .workers import (
 class RunFailed(RuntimeError):
     """Some sequences failed; the others finished and were kept (``failures`` by name).
 
-    ``errors`` holds the exceptions of the sequences played in this process (``workers=1``),
-    tracebacks included (``pdb.post_mortem(e.errors[name].__traceback__)``); the first is also
-    this error's ``__cause__``. Worker processes send their messages only.
+    ``errors`` holds this process's exceptions with tracebacks (``workers=1``); workers send
+    messages only.
     """
 
     def __init__(self, failures: dict[str, str], out: Path,

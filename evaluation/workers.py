@@ -1,12 +1,7 @@
 """Sequences played in parallel worker processes, robust to failures on either side.
 
-* A sequence that fails in a worker comes back as a one-line message (the worker catches
-  it), so the pool keeps serving the other sequences; a worker that dies (a segfault, the
-  OOM killer) or hangs fails only the sequence it was playing
-  (:mod:`unitrack_env.evaluation.pool`).
-* Workers die with their parent: each one watches its parent process and exits when it is
-  gone (killed, crashed), so no orphan keeps writing into the output folder.
-* Workers share the CPU: each one gets ``cpu_count // workers`` torch threads.
+A failing sequence comes back as a one-line message; a dead or hung worker fails only its
+sequence; workers exit when their parent dies; each gets ``cpu_count // workers`` threads.
 """
 
 from __future__ import annotations
@@ -107,11 +102,8 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str,
 def refuse_unguarded_script() -> None:
     """Refuse to start worker processes from a script's unguarded top level.
 
-    Spawned workers import the script that started them; its top-level code would run again
-    in each (in a worker, Python refuses to start processes, so every sequence failed as "a
-    worker died"; a second ``run(..., overwrite=True)`` could even clear the folder being
-    written). Raised in the parent before anything is written, and in a worker that imports
-    such a script.
+    Spawned workers re-import the script, re-running its top-level code (a second
+    ``run(..., overwrite=True)`` could clear the folder being written).
     """
     message = ("put the code that calls run(..., workers=N) or scorecard(..., workers=N) under "
                "'if __name__ == \"__main__\":' — worker processes import {} and would run it "

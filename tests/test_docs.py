@@ -124,3 +124,14 @@ def test_adding_a_task_quotes_the_mean_error_its_commands_print(tmp_path, monkey
         value = json.loads(capsys.readouterr().out)["per_sequence"][sequence]["MeanError"]
     assert f"{value:.{len(error.split('.')[1])}f}" == error
     assert f"{100 * value:.1f}" == shown  # the table's percent rule
+
+
+def test_architecture_lists_the_public_api():
+    """docs/architecture.md's public API table names exactly each package's ``__all__``."""
+    text = (REPO / "docs" / "architecture.md").read_text()
+    section = text.split("## Public API")[1].split("\n## ")[0]
+    rows = re.findall(r"^\| `([\w.]+)` \| (.*) \|$", section, flags=re.M)
+    assert len(rows) >= 7
+    for package, names in rows:
+        exported = set(importlib.import_module(package).__all__)
+        assert set(re.findall(r"`(\w+)`", names)) == exported, package

@@ -1,12 +1,8 @@
 """Exceptions with messages that say what to fix.
 
-Every error about input data names the file and, where it applies, the 1-based line and
-the field, so that a user never has to decode a traceback from deep inside numpy.
-
-Every exception here survives ``pickle`` with its message and attributes: the runner's
-worker processes send them to the parent, which must report the real error (an exception
-whose ``__init__`` takes other arguments than ``args`` cannot be unpickled there, and
-``concurrent.futures`` then reports a ``BrokenProcessPool`` instead).
+Errors about input data name the file and, where it applies, the 1-based line and field.
+Every exception survives ``pickle`` with its message and attributes, so worker processes
+can send the real error to the parent (not a ``BrokenProcessPool``).
 """
 
 from __future__ import annotations
@@ -18,14 +14,7 @@ from typing import Any
 
 
 class DataFormatError(ValueError):
-    """A data file is missing, unreadable or malformed.
-
-    Attributes:
-        path: the file (or folder) at fault.
-        message: what is wrong and what is allowed (without the location).
-        line: 1-based line, where it applies.
-        field: the field (column, JSON path, INI key), where it applies.
-    """
+    """A data file is missing, unreadable or malformed."""
 
     def __init__(
         self,

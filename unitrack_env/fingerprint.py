@@ -1,10 +1,7 @@
 """Fingerprints of a sequence's input files, so that a resumed run can tell stale results.
 
-Annotation, detection and other text files are hashed by content (they are small and an
-edit to one changes the episode); frames are hashed by name and size only (hashing every
-image would cost more than the check is worth, and an edited frame of the same size is
-rare). The fingerprint also covers which files there are, so an added or removed frame
-changes it.
+Text files are hashed by content; frames by name and size only (hashing every image costs
+more than it is worth); the file list is covered too, so an added or removed frame counts.
 """
 
 from __future__ import annotations
@@ -57,12 +54,9 @@ def sequence_files(root: Path, sequence: str, all_sequences: Iterable[str], *,
                    shared: bool = True) -> list[Path]:
     """The files under ``root`` that belong to ``sequence``, plus shared annotation files.
 
-    A file belongs to a sequence when its path below ``root`` contains the sequence name as
-    folder names (``train/MOT17-02/...``; names with ``/`` such as JHMDB's ``run/clip`` too),
-    or names it without the suffix (``instances_txt/0002.txt``). Files that belong to no
-    sequence and look like annotations (``.json``, ``.txt``, ...) are shared, e.g. a
-    YouTube-VIS JSON or DAVIS's ImageSets, and count for every sequence (unless ``shared``
-    is False).
+    A file belongs when its path names the sequence as folders (``train/MOT17-02/...``) or as
+    a stem (``instances_txt/0002.txt``); annotation-like files of no sequence (a YouTube-VIS
+    JSON, DAVIS's ImageSets) are shared by all, unless ``shared`` is False.
     """
     own = tuple(sequence.split("/"))
     others = [tuple(name.split("/")) for name in set(all_sequences) if name != sequence]

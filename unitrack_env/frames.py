@@ -29,18 +29,10 @@ _TAIL_BYTES = 64
 def check_complete(path: str | Path) -> None:
     """Refuse a JPEG or PNG file that is truncated, not an image, or a decompression bomb.
 
-    libjpeg decodes a truncated JPEG without an error (the missing rows become one flat
-    colour; it only prints "Premature end of JPEG file" on stderr), so the file's tail is
-    checked instead: a JPEG must end with the EOI marker ``FF D9`` (padding after it is
-    allowed), a PNG with its ``IEND`` chunk. The format is taken from the file's first
-    bytes, not its name: a PNG saved as ``.jpg`` is decoded as the PNG it is (OpenCV and the
-    official tools read images by content), and a ``.jpg``/``.png`` that is neither is
-    refused naming what it is. The header's width and height are checked against
-    :data:`~unitrack_env.datasets.limits.MAX_IMAGE_PIXELS` before anything is decoded.
-    Other suffixes are not checked. Cheap: small reads at the file's start and end.
-
-    Raises:
-        DataFormatError: the file is missing, empty, not an image, too large, or truncated.
+    libjpeg decodes a truncated JPEG silently, so the tail is checked (JPEG ``FF D9``, PNG
+    ``IEND``). The format comes from the first bytes, not the name, like OpenCV; the header
+    size is checked against :data:`~unitrack_env.datasets.limits.MAX_IMAGE_PIXELS` before
+    decoding. Other suffixes are not checked. Raises DataFormatError.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -74,12 +66,7 @@ def check_complete(path: str | Path) -> None:
 
 
 def read_rgb(path: str | Path) -> np.ndarray:
-    """Decode an image file to a ``uint8`` RGB array.
-
-    Raises:
-        DataFormatError: the file is missing, truncated (see :func:`check_complete`) or not
-            a decodable image.
-    """
+    """Decode an image file to a ``uint8`` RGB array (DataFormatError if missing or bad)."""
     path = Path(path)
     check_complete(path)
     image = cv2.imread(str(path), _IMREAD_RGB if _IMREAD_RGB is not None else cv2.IMREAD_COLOR)
@@ -92,12 +79,7 @@ def read_rgb(path: str | Path) -> np.ndarray:
 
 
 class FramePrefetcher:
-    """Loads frames by index, decoding the next index in the background.
-
-    Args:
-        path_of: maps a frame index to its image file.
-        prefetch: decode ``index + 1`` on a background thread after each request.
-    """
+    """Loads frames by index (``path_of``); with ``prefetch`` the next decodes in the background."""
 
     def __init__(self, path_of: Callable[[int], Path], *, prefetch: bool = True) -> None:
         self._path_of = path_of

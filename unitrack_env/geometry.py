@@ -10,14 +10,7 @@ import numpy as np
 
 
 def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
-    """Return the ``(len(a), len(b))`` intersection-over-union matrix of two box sets.
-
-    Args:
-        boxes_a: ``(n, 4)`` boxes as ``(x, y, w, h)``.
-        boxes_b: ``(m, 4)`` boxes as ``(x, y, w, h)``.
-
-    Returns:
-        ``float64`` array; pairs whose union is empty get 0.
+    """Return the ``(n, m)`` float64 IoU matrix of two ``(x, y, w, h)`` box sets (empty union: 0).
 
     >>> box_iou(np.array([[0, 0, 2, 2]]), np.array([[1, 0, 2, 2], [5, 5, 1, 1]]))
     array([[0.33333333, 0.        ]])
@@ -44,11 +37,4 @@ def xywh_to_xyxy(boxes: np.ndarray) -> np.ndarray:
     """Convert ``(x, y, w, h)`` boxes to ``(x1, y1, x2, y2)``."""
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4).copy()
     b[:, 2:] += b[:, :2]
-    return b
-
-
-def xyxy_to_xywh(boxes: np.ndarray) -> np.ndarray:
-    """Convert ``(x1, y1, x2, y2)`` boxes to ``(x, y, w, h)``."""
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4).copy()
-    b[:, 2:] -= b[:, :2]
     return b

@@ -1,13 +1,10 @@
 """The table of registered environments.
 
-Gymnasium 1.x has no plugin auto-discovery, so ``import unitrack_env`` registers these ids
-(or use ``gym.make("unitrack_env:UniTrack/MOT16-v0")``, which imports the package first).
-Each row is one id: ``(name, entry point, default keyword arguments)``, the data folder and
-its benchmark (``scoring``: the ``module:Class`` of its
-:class:`~unitrack_env.benchmarks.base.Benchmark`, which writes, reads and scores results and
-states the task).
-Adding a task is one env module, one benchmark module and one row; a project outside this
-package adds its row with :func:`register_variant`.
+``import unitrack_env`` registers these ids (Gymnasium 1.x has no plugin discovery; or use
+``gym.make("unitrack_env:UniTrack/MOT16-v0")``). Each row is one id: name, entry point,
+default arguments, data folder and ``scoring``, the ``module:Class`` of its
+:class:`~unitrack_env.benchmarks.base.Benchmark`. A project outside this package adds its
+task with :func:`register_variant`.
 """
 
 from __future__ import annotations
@@ -98,11 +95,8 @@ def variants() -> tuple[Variant, ...]:
 def register_variant(row: Variant) -> None:
     """Add a row to the table and register its id with Gymnasium (idempotent per id).
 
-    This is how a project adds its own task without editing this package: one env class,
-    one benchmark class (``scoring``) and this call.
-
-    Raises:
-        ValueError: another row already has this id.
+    How a project adds its own task without editing this package; a clashing id raises
+    ValueError.
     """
     for known in variants():
         if known.env_id == row.env_id:

@@ -35,13 +35,8 @@ def draw_boxes(
 ) -> np.ndarray:
     """Draw ``(x, y, w, h)`` boxes on a copy of ``frame``; with ``ids``, id-coloured and labelled.
 
-    Args:
-        frame: ``uint8`` RGB image.
-        boxes: ``(n, 4)`` boxes.
-        ids: optional ``(n,)`` ids (colour + label).
-        thickness: line width; default scales with the image size.
-        colour: fixed colour when ``ids`` is None.
-        one_based: boxes use MOTChallenge's 1-based pixel coordinates.
+    ``thickness`` defaults to a size-scaled width; ``one_based`` reads MOTChallenge's 1-based
+    pixel coordinates.
     """
     canvas = np.ascontiguousarray(frame).copy()
     if thickness is None:
@@ -93,10 +88,8 @@ def overlay_labels(frame: np.ndarray, labels: np.ndarray, alpha: float = OVERLAY
                    ) -> np.ndarray:
     """Draw every object of ``labels`` on ``frame``: a translucent fill and an outline.
 
-    Object ``k`` gets the id colour :func:`id_colour` ``(k)`` (bright and well spread, like
-    the tracks of the association environments); void pixels (:data:`VOID_LABEL`) are
-    skipped. When ``frame`` does not match the labels' size (e.g. ``decode_frames=False``),
-    the objects are drawn on a black canvas.
+    Object ``k`` gets :func:`id_colour` ``(k)``; void pixels are skipped; a frame of another
+    size (``decode_frames=False``) is replaced by a black canvas.
     """
     if frame.shape[:2] != labels.shape:
         frame = np.zeros((*labels.shape, 3), dtype=np.uint8)
@@ -133,15 +126,9 @@ def draw_skeleton(
     colour: tuple[int, int, int] | None = None,
     joint_colours_: list[tuple[int, int, int]] | None = None,
 ) -> None:
-    """Draw one skeleton in place: limbs (0-based joint pairs) and joint dots.
+    """Draw one skeleton in place: limbs (0-based joint pairs) and the ``present`` joints' dots.
 
-    Args:
-        canvas: ``uint8`` RGB image, modified in place.
-        points: ``(J, 2)`` 0-based ``(x, y)``.
-        limbs: joint index pairs to connect.
-        present: ``(J,)`` bool of joints to draw (default: all finite).
-        colour: one colour for the whole skeleton (e.g. its track id's).
-        joint_colours_: a colour per joint (used when ``colour`` is None).
+    ``colour`` colours the whole skeleton, else ``joint_colours_`` each joint.
     """
     pts = np.asarray(points, dtype=np.float64)
     ok = np.all(np.isfinite(pts), axis=1) & np.all(np.abs(pts) < 1e5, axis=1)

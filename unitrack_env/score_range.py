@@ -1,12 +1,9 @@
 """Detection score scales as data: the range each benchmark's detection scores are on.
 
-Public detections come with scores on the detector's own scale: MOTChallenge's FRCNN and
-SDP files give a confidence in 0..1, MOT15's ACF detector an unbounded score (PETS09-S2L1's
-``det.txt`` runs from -0.48 to 138.92). A threshold such as "start a track at 0.5" means
-nothing without the scale, so each benchmark declares its :class:`ScoreRange` here; the
-environments report it as ``info["detection_scores"]`` at reset and can hand scores out on
-0..1 instead (``detection_scores="unit"``). Agents state their thresholds on 0..1 and map
-them with :meth:`ScoreRange.from_unit`.
+FRCNN and SDP confidences are in 0..1; MOT15's ACF scores are unbounded (PETS09-S2L1:
+-0.48 to 138.92). A threshold means nothing without the scale, so each benchmark declares
+a :class:`ScoreRange`, reported as ``info["detection_scores"]``; agents state thresholds on
+0..1 and map them with :meth:`ScoreRange.from_unit`.
 """
 
 from __future__ import annotations
@@ -24,14 +21,10 @@ SCORE_MODES: tuple[str, ...] = ("raw", "unit")
 
 @dataclass(frozen=True)
 class ScoreRange:
-    """The scale of a benchmark's detection scores.
+    """The scale of a benchmark's detection scores: ``low`` maps to 0, ``high`` to 1.
 
-    Attributes:
-        low: Score of no confidence (maps to 0 on the unit scale).
-        high: Score of full confidence (maps to 1).
-        bounded: Whether every score lies in ``[low, high]`` (False: the detector's scores
-            can fall outside; the unit scale clips them).
-        source: Where the range comes from (the files it was measured on, or the format).
+    ``bounded`` False means scores can fall outside (the unit scale clips them); ``source``
+    says where the range comes from.
     """
 
     low: float

@@ -1,10 +1,5 @@
 """Gymnasium wrappers for concerns that cut across the environments.
 
-:class:`FrameSkip` lets the agent answer every ``k``-th frame only; the environment still
-plays and scores every frame, so the final ``info["metrics"]`` are the official metrics of
-the whole sequence. (Which detections an agent sees is the association environments'
-``min_score=`` argument, the one place that filters them.)
-
 >>> import gymnasium as gym
 >>> import unitrack_env
 >>> from unitrack_env.wrappers import FrameSkip
@@ -27,21 +22,11 @@ def _indexes_detections(action_space: gym.Space) -> bool:
 class FrameSkip(gym.Wrapper):
     """The agent answers every ``skip``-th frame; the frames between are answered for it.
 
-    Each ``step`` plays ``skip`` frames of the environment: the agent's answer for the
-    current frame, then a filler answer for each of the next ``skip - 1`` frames, and
-    returns the observation of the frame after them, the sum of the rewards and the last
-    info (with ``info["frames_played"]``). The environment records and scores every frame,
-    so ``write_episode`` and the final ``info["metrics"]`` cover the whole sequence with the
-    official metrics: a frame-skipping tracker is scored exactly like any other.
-
-    The filler holds the agent's last answer (the same tracks, box, label map or joints)
-    where an answer does not depend on the frame, and reports nothing where it names the
-    frame's detections by position (MOTS and VIS ``{"ids": ...}``: ids of one frame's
-    detections mean nothing on another frame).
-
-    Args:
-        env: any unitrack environment.
-        skip: frames per agent step (1: no skipping).
+    Each ``step`` plays ``skip`` frames and returns the last observation, the summed reward and
+    the last info (``info["frames_played"]``). Every frame is recorded and scored, so a
+    frame-skipping tracker gets the official metrics of the whole sequence. The filler repeats
+    the agent's last answer, except where an answer names detections by position (MOTS and VIS
+    ids), where it reports nothing.
     """
 
     def __init__(self, env: gym.Env, skip: int) -> None:

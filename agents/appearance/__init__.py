@@ -1,21 +1,9 @@
 """Level 1 of UniTrack: the shared appearance model producing stride-8 feature maps.
 
-Public API:
-
-* :class:`AppearanceModel` -- images in, ``(B, C, ceil(H/8), ceil(W/8))`` features out;
-  default weights ``"imagenet-lite0"`` (EfficientNet-Lite0, ImageNet, offline; stage5 run
-  at stride 8, 112 channels).
-* :func:`letterbox` / :class:`Letterbox` -- JDE-style 1088 x 608 letterbox with box mapping.
-* :class:`ModelIdentity` -- (architecture, layer, weights digest, normalisation) for cache keys.
-* Checkpoints: :class:`LoadReport`, :class:`KeyRemap`, :data:`DEFAULT_REMAPS`,
-  :class:`CheckpointError`, :func:`load_checkpoint`.
-* Weights (:mod:`~unitrack_env.agents.appearance.weights`): :data:`DEFAULT_WEIGHT_LOADERS`,
-  :class:`WeightsSource`, :func:`load_weights`, :func:`resolve_weights`,
-  :class:`LoadedWeights`; :class:`AppearanceSpec`, the appearance fields of every head's
-  config.
-* Cache (content-addressed, bounded, on by default): :class:`FeatureCache`, :class:`CacheKey`,
-  :class:`CachedAppearanceModel`, :func:`content_key`, :func:`track_cache_run`.
-* Architectures: :class:`ResNet`, :class:`EfficientNetLite0`.
+:class:`AppearanceModel` takes images and returns ``(B, C, ceil(H/8), ceil(W/8))`` features;
+the default weights ``"imagenet-lite0"`` (EfficientNet-Lite0, ImageNet, offline) give 112
+channels. The package also exports the letterbox, the model identity, weights and checkpoint
+loading, and the content-addressed feature cache (list: docs/architecture.md).
 """
 
 from unitrack_env.errors import CheckpointError

@@ -1,11 +1,4 @@
-"""The backbones an appearance model can build, their output layers and hypercolumns.
-
-:func:`build_network` makes the ``nn.Module`` of an architecture (:data:`ARCHITECTURES`) run
-at stride 8 up to its output layer(s) (a ViT at its patch size, or its ``stride`` option);
-:func:`split_layers` reads a ``layer`` option (one
-layer, or a hypercolumn such as ``"stage3+stage5"``) and :func:`combine_layers` joins the
-per-layer maps of a hypercolumn.
-"""
+"""The backbones an appearance model can build, their output layers and hypercolumns."""
 
 from __future__ import annotations
 
@@ -60,10 +53,8 @@ NORM_EPS: float = 1e-12
 def split_layers(layer: str) -> tuple[str, ...]:
     """The layers of a ``layer`` option: ``"stage5"`` -> one, ``"stage3+stage5"`` -> two.
 
-    Several layers make a *hypercolumn* (Hariharan et al., CVPR 2015): every stride-8 map is
-    L2-normalised along channels, scaled by ``1/sqrt(n)`` and the maps are concatenated, so
-    each location's vector has unit norm and the dot product of two such vectors is the mean
-    of the per-layer cosine similarities. The network runs once, to the deepest layer.
+    Several make a *hypercolumn* (Hariharan et al., CVPR 2015): each map L2-normalised, scaled
+    by ``1/sqrt(n)`` and concatenated, so a dot product is the mean per-layer cosine.
     """
     parts = tuple(part.strip() for part in str(layer).split(LAYER_SEPARATOR))
     if not all(parts) or len(set(parts)) != len(parts):
@@ -84,15 +75,8 @@ def build_network(arch: str, layers: tuple[str, ...], seed: int,
                   stride: int | str | StrideOption | None = None) -> nn.Module:
     """The randomly initialised network of ``arch`` whose ``layers`` all have stride 8.
 
-    Args:
-        arch: One of :data:`ARCHITECTURES`.
-        layers: The output layers (see :func:`split_layers`).
-        seed: Seed of the initialisation (the global torch RNG is left untouched).
-        stride: ViT only: the :class:`~.vit.StrideOption` (None: the patch size).
-
-    Raises:
-        ValueError: An unknown layer, a CNN layer whose stride is not
-            :data:`FEATURE_STRIDE`, or a ``stride`` for a CNN.
+    ``stride`` is for ViTs only; an unknown layer or a CNN layer of another stride raises
+    ValueError.
     """
     if arch in VIT_SPECS:
         with torch.random.fork_rng(devices=[]):

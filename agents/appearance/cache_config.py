@@ -1,10 +1,7 @@
 """Settings of the feature cache: where it lives, how large it may grow, and size texts.
 
-The folder (:func:`default_cache_dir`: ``$UNITRACK_FEATURE_CACHE``, ``$UNITRACK_CACHE`` or
-the platform's user cache folder), the cap (:func:`default_max_size`:
-``$UNITRACK_FEATURE_CACHE_MAX`` or :data:`DEFAULT_MAX_SIZE`), the on-disk dtype, and the
-parsing and printing of sizes such as ``"10GiB"``. Part of the feature cache
-(:mod:`~unitrack_env.agents.appearance.feature_cache`).
+Folder: ``$UNITRACK_FEATURE_CACHE``, ``$UNITRACK_CACHE`` or the user cache folder; cap:
+``$UNITRACK_FEATURE_CACHE_MAX`` or :data:`DEFAULT_MAX_SIZE`.
 """
 
 from __future__ import annotations
@@ -51,11 +48,7 @@ _SIZE = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*([a-zA-Z]*)\s*$")
 def parse_size(text: str | int | float) -> int:
     """Bytes of a size such as ``"10GiB"``, ``"500MB"``, ``"1.5G"`` or ``1048576``.
 
-    ``KiB/MiB/GiB/TiB`` and the bare ``K/M/G/T`` are powers of 1024; ``kB/MB/GB/TB`` powers
-    of 1000.
-
-    Raises:
-        ValueError: not a size, or negative.
+    ``KiB``.. and bare ``K``.. are powers of 1024, ``kB``.. powers of 1000; ValueError otherwise.
     """
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         value = float(text)

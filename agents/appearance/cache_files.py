@@ -1,11 +1,8 @@
 """Files of the feature cache: the entry format, atomic writes, the lock, corrupt entries.
 
-An entry is one ``.npy`` file in the on-disk dtype, written to a temporary sibling and
-renamed into place (:func:`_atomic_write`), so a reader sees a complete file or none;
-:func:`_load_entry` reads one back and names what is wrong with a corrupt one (truncated,
-bad header, wrong dtype or shape). :func:`_file_lock` is the inter-process lock
-(``fcntl.flock`` on POSIX, ``msvcrt.locking`` on Windows). Part of the feature cache
-(:mod:`~unitrack_env.agents.appearance.feature_cache`).
+An entry is one ``.npy`` file written to a temporary sibling and renamed into place, so
+readers see a complete file or none; :func:`_load_entry` names what is wrong with a corrupt
+one; :func:`_file_lock` is the inter-process lock (``flock`` / ``msvcrt.locking``).
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
 """The feature-cache folder: where entries live, the size accounting and LRU eviction.
 
-:class:`CacheFolder` (the base of :class:`~.feature_cache.FeatureCache`) lays entries out
-under ``<root>/v2/<model key>-<H>x<W>-<dtype>/<ab>/``, stores them atomically under the
-inter-process lock while keeping ``<root>/usage.json`` exact, evicts the least recently used
-entries when the total exceeds the cap, and scans, prunes and clears the folder
-(:class:`CacheUsage`). Part of the feature cache.
+Entries live under ``<root>/v2/<model key>-<H>x<W>-<dtype>/<ab>/``, are stored atomically
+under the inter-process lock with ``usage.json`` kept exact, and the least recently used
+go when the total exceeds the cap.
 """
 
 from __future__ import annotations
@@ -56,15 +54,7 @@ _CACHEDIR_TAG = (
 
 @dataclass
 class NamespaceUsage:
-    """Disk use of one entry folder (one model identity, input size and dtype).
-
-    Attributes:
-        name: Folder name ``<model key>-<H>x<W>-<dtype>``.
-        entries: Number of entries.
-        bytes: Their total size.
-        last_used: Most recent use of any entry (UNIX time; 0 without entries).
-        model: The model description saved with the folder (``model.json``), or empty.
-    """
+    """Disk use of one entry folder ``<model key>-<H>x<W>-<dtype>`` (``last_used``: UNIX time)."""
 
     name: str
     entries: int = 0
@@ -75,15 +65,7 @@ class NamespaceUsage:
 
 @dataclass
 class CacheUsage:
-    """What a cache folder holds (from a scan).
-
-    Attributes:
-        root: The folder.
-        entries: Number of entries.
-        bytes: Their total size.
-        namespaces: Per entry folder, largest first.
-        temp_files: Temporary files of writers in progress (or killed).
-    """
+    """What a cache folder holds (from a scan): entries, bytes, per-folder use, temp files."""
 
     root: Path
     entries: int
@@ -93,17 +75,7 @@ class CacheUsage:
 
 
 class CacheFolder:
-    """Entries of one cache folder on disk, within a cap (the storage of a feature cache).
-
-    Args:
-        root: Cache folder (created on first write).
-        max_size: Cap in bytes or as text (``"10GiB"``); None: :func:`default_max_size`.
-        dtype: On-disk dtype (default float16; float32 stores the features exactly).
-
-    Attributes:
-        stats: :class:`CacheStats` of this instance (this process): writes and evictions
-            here, lookups in :class:`~.feature_cache.FeatureCache`.
-    """
+    """Entries of one cache folder on disk, within a cap (the storage of a feature cache)."""
 
     def __init__(
         self,
@@ -282,11 +254,7 @@ class CacheFolder:
         return sum(e.size for e in entries), len(entries)
 
     def prune(self, max_size: int | str | None = None) -> tuple[int, int]:
-        """Evict least recently used entries down to ``max_size`` (default: the cap).
-
-        Also removes temporary files left by killed writers. Returns (entries, bytes)
-        removed.
-        """
+        """Evict LRU entries and stale temp files down to ``max_size``; return (entries, bytes)."""
         limit = self.max_size if max_size is None else parse_size(max_size)
         if not self.root.is_dir():
             return 0, 0

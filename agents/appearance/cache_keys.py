@@ -1,10 +1,4 @@
-"""Addresses of feature-cache entries: what determines a frame's features, as a key.
-
-:func:`content_key` hashes every byte of a decoded frame (with its shape, dtype and the
-transform that turns it into the network input); :class:`CacheKey` joins it with the model
-identity and the network input size. Part of the feature cache
-(:mod:`~unitrack_env.agents.appearance.feature_cache`).
-"""
+"""Addresses of feature-cache entries: what determines a frame's features, as a key."""
 
 from __future__ import annotations
 
@@ -26,11 +20,8 @@ CONTENT_DIGEST_BYTES: int = 16
 def content_key(image: np.ndarray, transform: str = "") -> str:
     """Hex digest (128 bits) of every byte of ``image``, its shape and dtype, and ``transform``.
 
-    Args:
-        image: The array to address (e.g. the decoded frame).
-        transform: Names what turns ``image`` into the network input (e.g.
-            ``"letterbox 1088x608 pad 128"``); empty when ``image`` is the network input. Two
-            preprocessings of the same frame never share an entry.
+    ``transform`` names what turns ``image`` into the network input (e.g. ``"letterbox
+    1088x608 pad 128"``), so two preprocessings of one frame never share an entry.
     """
     array = np.ascontiguousarray(image)
     digest = hashlib.new(CONTENT_HASH)
@@ -41,13 +32,7 @@ def content_key(image: np.ndarray, transform: str = "") -> str:
 
 @dataclass(frozen=True)
 class CacheKey:
-    """Identity of one cached feature map.
-
-    Attributes:
-        model: :meth:`ModelIdentity.key` of the appearance model.
-        input_size: ``(height, width)`` of the network input.
-        content: :func:`content_key` of the frame (hex).
-    """
+    """Identity of one cached feature map: model key, input size, content key."""
 
     model: str
     input_size: tuple[int, int]

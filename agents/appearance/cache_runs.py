@@ -1,10 +1,8 @@
 """Hit statistics of the feature cache: counters, and the runs that recorded them on disk.
 
-:class:`CacheStats` counts one cache's hits, misses, corrupt entries, writes and evictions.
-Each process records its counters in ``<root>/runs`` (:meth:`FeatureCache.flush_stats`);
-:func:`read_runs` sums them per run (:class:`RunRecord`), and :func:`track_cache_run` gives
-the caches of a block, worker processes included, one run id (:class:`CacheRun`). Part of
-the feature cache (:mod:`~unitrack_env.agents.appearance.feature_cache`).
+Each process records its :class:`CacheStats` in ``<root>/runs``; :func:`read_runs` sums
+them per run, and :func:`track_cache_run` gives the caches of a block (worker processes
+included) one run id.
 """
 
 from __future__ import annotations
@@ -30,14 +28,8 @@ RUN_ENV: str = "UNITRACK_FEATURE_CACHE_RUN"
 class CacheStats:
     """Counters of one cache (in one process), or summed over processes.
 
-    Attributes:
-        hits: Entries read from disk.
-        misses: Entries computed because they were absent.
-        corrupt: Entries recomputed because the stored file was unreadable.
-        stored: Entries this process added (a concurrent writer may have added one first).
-        stored_bytes: Bytes of those entries.
-        evicted: Entries this process removed to keep the cap.
-        evicted_bytes: Bytes of those entries.
+    ``corrupt``: entries recomputed because unreadable; ``stored``/``evicted`` (and bytes):
+    entries this process added or removed.
     """
 
     hits: int = 0
@@ -84,16 +76,7 @@ class CacheStats:
 
 @dataclass(frozen=True)
 class RunRecord:
-    """Statistics of one run (the processes that shared a run id), from ``<root>/runs``.
-
-    Attributes:
-        run: The run id (None: a process outside :func:`track_cache_run`).
-        started: Earliest process start (UNIX time).
-        updated: Latest statistics update (UNIX time).
-        processes: Number of processes (caches) that reported.
-        stats: Summed counters.
-        namespaces: Entry folders used (``<model key>-<H>x<W>-<dtype>``).
-    """
+    """Statistics of one run (the processes that shared a run id), from ``<root>/runs``."""
 
     run: str | None
     started: float
@@ -138,22 +121,13 @@ def read_runs(
 
 @dataclass
 class CacheRun:
-    """A run's handle from :func:`track_cache_run`.
-
-    Attributes:
-        run: The run id every feature cache of this run (and its worker processes) records.
-        root: The cache folder to read statistics from (None: :func:`default_cache_dir`).
-    """
+    """A run's handle from :func:`track_cache_run`: its id and the cache folder (None: default)."""
 
     run: str
     root: Path | None = None
 
     def stats(self, root: str | os.PathLike[str] | None = None) -> CacheStats | None:
-        """Counters summed over the processes of this run; None when no cache reported.
-
-        Args:
-            root: Another cache folder (when the agents were given ``feature_cache=<dir>``).
-        """
+        """Counters summed over this run's processes (in ``root``); None if none reported."""
         folder = Path(root) if root is not None else (self.root or default_cache_dir())
         if folder is None:
             return None
@@ -172,9 +146,7 @@ class CacheRun:
 def track_cache_run(root: str | os.PathLike[str] | None = None) -> Iterator[CacheRun]:
     """Give the feature caches used inside the block a run id (``$UNITRACK_FEATURE_CACHE_RUN``).
 
-    Worker processes started inside inherit it. Caches record their counters when their agent
-    resets or closes; read the sum afterwards with :meth:`CacheRun.stats` or
-    :meth:`CacheRun.summary`.
+    Worker processes inherit it; read the sum afterwards with :meth:`CacheRun.summary`.
 
     Example:
         >>> with track_cache_run() as cache_run:                  # doctest: +SKIP

@@ -1,9 +1,4 @@
-"""The appearance model whose per-frame features are served through the feature cache.
-
-:class:`CachedAppearanceModel` (what the heads build) wraps an :class:`AppearanceModel`: it
-looks every frame up by its content key and runs the backbone once, batched, on the frames not
-in the cache (built by :func:`~unitrack_env.agents.appearance.feature_cache.resolve_cache`).
-"""
+"""The appearance model whose per-frame features are served through the feature cache."""
 
 from __future__ import annotations
 
@@ -25,14 +20,8 @@ from .model import AppearanceModel
 class CachedAppearanceModel:
     """An :class:`AppearanceModel` whose per-frame features go through a :class:`FeatureCache`.
 
-    Args:
-        model: The appearance model.
-        cache: A cache, a folder, or True for the default cache.
-        max_size: Cap of a cache built here (None: :func:`default_max_size`).
-
-    Raises:
-        ValueError: ``cache`` resolves to no cache (False, or True while
-            ``$UNITRACK_FEATURE_CACHE=off``): use the model itself.
+    Frames are looked up by content; the backbone runs once, batched, on the misses.
+    ``cache`` resolving to no cache raises ValueError (use the model itself).
 
     Example:
         >>> cached = CachedAppearanceModel(AppearanceModel(), "/tmp/feats")  # doctest: +SKIP
@@ -72,15 +61,7 @@ class CachedAppearanceModel:
         return CacheKey(self._model_key, (int(input_size[0]), int(input_size[1])), content)
 
     def lookup(self, input_size: tuple[int, int], content: str) -> torch.Tensor | None:
-        """The cached ``(1, C, h, w)`` map of one frame, or None (nothing computed).
-
-        Args:
-            input_size: ``(height, width)`` of the network input.
-            content: :func:`content_key` the entry is stored under.
-
-        A hit counts in the statistics; a miss does not (the caller computes with
-        :meth:`features` ``(..., keys=[content])``, which counts it).
-        """
+        """The cached ``(1, C, h, w)`` map of one frame, or None (a hit counts; a miss does not)."""
         array, _ = self.cache._read(self.key(input_size, content),
                                     self.model.feature_shape(*input_size))
         if array is None:
@@ -94,18 +75,10 @@ class CachedAppearanceModel:
         *,
         keys: Sequence[str] | None = None,
     ) -> torch.Tensor:
-        """Feature maps ``(B, C, h, w)`` of network inputs, from the cache when possible.
+        """Feature maps ``(B, C, h, w)`` of same-size uint8 inputs, from the cache if possible.
 
-        Args:
-            images: uint8 RGB network inputs ``(H, W, 3)`` (one, a ``(B, H, W, 3)`` array, or
-                a list), all of the same size (letterbox first).
-            keys: :func:`content_key` of each frame to store the entries under (default: of
-                ``images`` themselves). A caller that looks entries up before preparing its
-                input (by the original frame, to skip the letterbox on a hit) passes its own.
-
-        Returns:
-            float32 CPU tensor of the stored (e.g. float16-rounded) features; the backbone
-            runs once, batched, on the frames not in the cache.
+        ``keys`` are the entries' :func:`content_key` (default: of ``images``), so a caller can
+        key by the original frame and skip the letterbox on a hit. Returns float32 CPU features.
         """
         batch = np.asarray(images) if not isinstance(images, np.ndarray) else images
         if batch.ndim == 3:
@@ -148,10 +121,7 @@ def with_cache(model: AppearanceModel, option: FeatureCache | str | os.PathLike[
                max_size: int | str | None = None) -> AppearanceModel | CachedAppearanceModel:
     """``model`` served through the cache ``option`` names, or ``model`` itself.
 
-    The propagation heads' use: float32 entries by default, so their features (and results)
-    are exactly the uncached ones, while a frame a head has seen before (a rerun, another head
-    at the same input size) is read instead of computed. No cache (False, None, or
-    ``$UNITRACK_FEATURE_CACHE=off``), or an injected model without an identity: ``model``.
+    The propagation heads' use: float32 entries by default, so results equal the uncached ones.
     """
     if not hasattr(model, "identity"):
         return model

@@ -49,17 +49,12 @@ class KeyRemap:
 
     Attributes:
         name: Name of the family (the key in a remap table).
-        containers: Keys that may wrap the state dict, tried in order (e.g. ``("model",)``
-            for CRW's ``ckpt['model']``). When none is present the top level is used.
+        containers: Keys that may wrap the state dict, tried in order (else the top level).
         strip_prefixes: Prefixes removed from key names (the first that matches wins).
-            Keys that match none are kept unchanged (and usually end up "unexpected").
-        squeeze_5d: Turn 5-D kernels ``(out, in, 1, k, k)`` into 2-D ones (TimeCycle's
-            3-D convolutions with temporal size 1).
-        drop_prefixes: Keys (after stripping) that are not the backbone, dropped (e.g. a
-            DINO projection ``head.``, MAE's ``decoder_``).
+        squeeze_5d: Turn ``(out, in, 1, k, k)`` kernels into 2-D ones (TimeCycle).
+        drop_prefixes: Keys (after stripping) that are not the backbone (DINO ``head.``).
         rename_prefixes: ``(old, new)`` prefixes renamed when no key starts with ``new``.
-        mean: RGB mean the weights were trained with (None: ImageNet's).
-        std: RGB standard deviation the weights were trained with (None: ImageNet's).
+        mean, std: RGB normalisation the weights were trained with (None: ImageNet's).
         description: Where the rule comes from.
     """
 
@@ -120,14 +115,9 @@ UniTrack code facts; the plain-R50 families share one rule and are listed for di
 class LoadReport:
     """What happened when a state dict was loaded into a module.
 
-    Attributes:
-        source: File the weights came from (or a description such as ``"random"``).
-        remap: Name of the :class:`KeyRemap` used (None when none applied).
-        matched: Keys loaded (present in both, same shape).
-        missing: Model keys absent from the checkpoint.
-        unexpected: Checkpoint keys the model does not have.
-        mismatched: ``(key, checkpoint_shape, model_shape)`` for same-name, different-shape keys.
-        required_prefixes: Module prefixes the chosen output layer depends on.
+    ``matched``, ``missing`` (model keys absent), ``unexpected`` (checkpoint keys the model
+    lacks) and ``mismatched`` ``(key, checkpoint_shape, model_shape)`` keys;
+    ``required_prefixes`` are the module prefixes the output layer depends on.
     """
 
     source: str
@@ -184,13 +174,7 @@ def _abbrev(items: list[Any]) -> str:
 
 
 def read_checkpoint(path: str | os.PathLike[str]) -> Any:
-    """Read a checkpoint file with ``weights_only=True`` on the CPU.
-
-    Raises:
-        CheckpointError: The file is missing, or is not a readable PyTorch checkpoint
-            (corrupt, truncated, not a checkpoint, or holding pickled objects that the
-            safe loader refuses).
-    """
+    """Read a checkpoint file with ``weights_only=True`` on the CPU; CheckpointError if not."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(path, "checkpoint file not found")
@@ -208,22 +192,10 @@ def read_checkpoint(path: str | os.PathLike[str]) -> Any:
         ) from exc
 
 
-def _is_state_dict(obj: Any) -> bool:
-    return isinstance(obj, Mapping) and bool(obj) and all(
-        isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in obj.items()
-    )
-
-
 def extract_state_dict(
     obj: Any, remap: KeyRemap, *, path: str | os.PathLike[str] | None = None
 ) -> dict[str, torch.Tensor]:
-    """Unwrap a loaded checkpoint and rename its keys according to ``remap``.
-
-    Non-tensor entries (e.g. an optimizer's step counter at top level) are dropped.
-
-    Raises:
-        CheckpointError: No tensor state dict could be found.
-    """
+    """Unwrap a loaded checkpoint, rename its keys by ``remap``, drop non-tensor entries."""
     if not isinstance(obj, Mapping):
         raise CheckpointError(path, f"expected a dict-like checkpoint, got {type(obj).__name__}")
     state: Any = obj
@@ -330,19 +302,9 @@ def load_state_into(
 ) -> LoadReport:
     """Copy the matching tensors of ``state`` into ``module`` and report what happened.
 
-    Args:
-        module: Target module (its other parameters keep their current values).
-        state: Renamed checkpoint state dict.
-        required_prefixes: Module prefixes the output layer depends on; a missing,
-            shape-mismatched or unexpected key under one of them makes the load incomplete.
-        source: Description of the weights for the report.
-        remap: Name of the remap used, for the report.
-        allow_partial: Load what matches even when the backbone is incomplete.
-        path: File name for error messages.
-
-    Raises:
-        CheckpointError: The load is incomplete and ``allow_partial`` is False. The message
-            names the file and the first offending keys. Nothing is modified in that case.
+    A missing, mismatched or unexpected key under ``required_prefixes`` makes the load
+    incomplete: CheckpointError naming the file and keys, nothing modified, unless
+    ``allow_partial``.
     """
     model_state = module.state_dict()
     report = compare_state_dicts(
@@ -386,25 +348,10 @@ def load_checkpoint(
     allow_partial: bool = False,
     checkpoint: Any = None,
 ) -> tuple[LoadReport, KeyRemap]:
-    """Read a checkpoint file and load it into ``module``.
+    """Read a checkpoint file and load it into ``module``; return the report and the remap used.
 
-    Args:
-        module: Target module with torchvision-layout (or matching) parameter names.
-        path: Checkpoint file.
-        required_prefixes: See :func:`load_state_into`.
-        remap: A name in ``remaps``, a :class:`KeyRemap`, or ``"auto"`` to pick the remap
-            that matches the most keys.
-        remaps: Remap table to search (default :data:`DEFAULT_REMAPS`).
-        allow_partial: See :func:`load_state_into`.
-        checkpoint: The file's content when the caller has already read it with
-            :func:`read_checkpoint` (avoids a second read of a large file).
-
-    Returns:
-        The load report and the remap used (whose ``mean``/``std`` tell the input
-        normalisation the weights expect, when it is not ImageNet's).
-
-    Raises:
-        CheckpointError: Unreadable file, unknown remap name, or incomplete load.
+    ``remap`` is a name in ``remaps``, a :class:`KeyRemap`, or ``"auto"`` (the one matching the
+    most keys); ``checkpoint`` is the file's content when already read. Raises CheckpointError.
     """
     obj = read_checkpoint(path) if checkpoint is None else checkpoint
     if isinstance(remap, KeyRemap):

@@ -1,11 +1,7 @@
 """EfficientNet-Lite0, written from the architecture's published definition.
 
-EfficientNet-Lite (Tan & Le, "EfficientNet: Rethinking Model Scaling for CNNs", ICML 2019;
-Lite variants from the TensorFlow TPU repository, models/official/efficientnet/lite) is
-EfficientNet-B0 with three changes for edge devices: no squeeze-and-excitation, ReLU6
-instead of swish, and a stem (32 channels) and head (1280 channels) that do not scale.
-
-More in docs/module-notes.md.
+EfficientNet-B0 (Tan & Le, ICML 2019) without squeeze-and-excitation, with ReLU6, and with
+a fixed 32-channel stem and 1280-channel head. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -44,15 +40,7 @@ NUM_CLASSES: int = 1000
 
 @dataclass(frozen=True)
 class StageSpec:
-    """One stage of MBConv blocks.
-
-    Attributes:
-        repeats: Number of blocks.
-        kernel: Depthwise kernel size.
-        stride: Stride of the first block (later blocks have stride 1).
-        expand: Expansion ratio of the inverted bottleneck.
-        out_channels: Output channels of every block of the stage.
-    """
+    """One stage of MBConv blocks (``stride`` of the first block; ``expand`` ratio)."""
 
     repeats: int
     kernel: int
@@ -138,10 +126,7 @@ class MBConvBlock(nn.Module):
 class EfficientNetLite0(nn.Module):
     """EfficientNet-Lite0 classifier with named intermediate feature outputs.
 
-    Args:
-        stride8: Set the stride of stage4 and stage6 to 1 so that every output after stage3
-            keeps stride 8 (no dilation). The classifier still runs, on a larger map.
-        num_classes: Classifier outputs.
+    ``stride8`` sets stage4 and stage6 to stride 1, so every output after stage3 has stride 8.
 
     Example:
         >>> net = EfficientNetLite0().eval()

@@ -47,14 +47,9 @@ def resolve_cache(
     max_size: int | str | None = None,
     dtype: type[np.floating] = DEFAULT_CACHE_DTYPE,
 ) -> FeatureCache | None:
-    """The cache an agent option asks for.
+    """The cache an agent option asks for: True the default (if on), False/None none, a folder.
 
-    Args:
-        spec: True: the default cache (:func:`default_cache_dir`; None when the environment
-            turns it off); False or None: no cache; a folder; or a :class:`FeatureCache`.
-        max_size: Cap for a cache built here (None: :func:`default_max_size`).
-        dtype: On-disk dtype of a cache built here (float32: exact features, as the
-            propagation heads use; entries of each dtype live apart).
+    A cache built here gets ``max_size`` and on-disk ``dtype`` (entries of each dtype live apart).
     """
     if isinstance(spec, FeatureCache):
         return spec
@@ -72,17 +67,9 @@ def resolve_cache(
 class FeatureCache(CacheFolder):
     """Feature maps on disk, content-addressed and bounded (see the module docstring).
 
-    Lookups and writes (a failure is warned about once), and this process's statistics; the
-    folder itself (paths, accounting, eviction, :meth:`~CacheFolder.usage`,
-    :meth:`~CacheFolder.prune`, :meth:`~CacheFolder.clear`) is the base :class:`CacheFolder`.
-
-    Args:
-        root: Cache folder (created on first write).
-        max_size: Cap in bytes or as text (``"10GiB"``); None: :func:`default_max_size`.
-        dtype: On-disk dtype (default float16; float32 stores the features exactly).
-
-    Attributes:
-        stats: :class:`CacheStats` of this instance (this process).
+    Lookups, writes (a failure is warned about once) and this process's ``stats``; the folder
+    itself (accounting, eviction, usage, prune, clear) is the base :class:`CacheFolder`.
+    ``max_size`` is bytes or text (``"10GiB"``); ``dtype`` float16 by default.
     """
 
     def __init__(
@@ -142,15 +129,8 @@ class FeatureCache(CacheFolder):
     ) -> np.ndarray:
         """Store ``array`` (atomically, within the cap); return the stored-dtype values.
 
-        Args:
-            key: Entry identity.
-            array: The features.
-            replace: Overwrite an existing entry (repairing a corrupt one). Otherwise an entry
-                that a concurrent writer stored first is kept (the content is the same).
-            model_info: Readable description saved once per entry folder (``model.json``).
-
-        A failed write (disk full, read-only folder) is reported once and the values are
-        returned uncached.
+        Without ``replace`` an entry a concurrent writer stored first is kept. A failed write is
+        reported once and the values are returned uncached.
         """
         stored = _to_stored(array, self.dtype)
         try:
@@ -172,15 +152,9 @@ class FeatureCache(CacheFolder):
         *,
         expected_shape: tuple[int, ...] | None = None,
     ) -> torch.Tensor:
-        """Return the cached features for ``key``, computing and storing them if needed.
+        """The cached float32 features for ``key``, computed by ``compute()`` and stored on a miss.
 
-        Args:
-            key: Entry identity.
-            compute: Zero-argument function producing the array (called on a miss only).
-            expected_shape: When given, a stored entry of another shape counts as corrupt.
-
-        Returns:
-            A float32 CPU tensor holding the stored values.
+        A stored entry of another shape than ``expected_shape`` counts as corrupt.
         """
         array, corrupt = self._read(key, expected_shape)
         if array is not None:
@@ -195,11 +169,7 @@ class FeatureCache(CacheFolder):
 
     # -- statistics on disk
     def flush_stats(self) -> None:
-        """Write this process's counters to ``<root>/runs``.
-
-        Read by ``unitrack cache info`` and :func:`track_cache_run`; cheap, and a no-op when
-        nothing changed.
-        """
+        """Write this process's counters to ``<root>/runs`` (no-op when nothing changed)."""
         run = os.environ.get(RUN_ENV) or None
         if self._session_file is not None and run != self._session_run:
             self._session_file = None  # a new run: a new record, counted from here
@@ -235,10 +205,5 @@ class FeatureCache(CacheFolder):
         self._flushed = self.stats.copy()
 
     def runs(self, limit: int | None = None, *, run: str | None = None) -> list[RunRecord]:
-        """Statistics of the most recent runs (newest last), from ``<root>/runs``.
-
-        Args:
-            limit: At most this many (the most recent).
-            run: Only this run id.
-        """
+        """Statistics of the most recent ``limit`` runs (or of ``run``), newest last."""
         return read_runs(self.root, limit=limit, run=run)

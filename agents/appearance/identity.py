@@ -1,10 +1,4 @@
-"""What determines a feature map: the model identity that keys feature caches.
-
-:class:`ModelIdentity` names the architecture, layer, weights digest, normalisation and
-runtime of an appearance model; :meth:`ModelIdentity.key` is the short string that on-disk
-feature caches and exported runtime graphs are keyed by, and :func:`weights_digest` hashes
-the weights that compute the output layer.
-"""
+"""What determines a feature map: the model identity that keys feature caches."""
 
 from __future__ import annotations
 
@@ -25,18 +19,8 @@ DIGEST_LENGTH: int = 16
 class ModelIdentity:
     """Everything that determines a feature map, for cache keys and reports.
 
-    Attributes:
-        arch: Architecture name.
-        layer: Output layer.
-        weights: Weights name or file.
-        digest: First :data:`DIGEST_LENGTH` hex digits of the SHA-256 of the weights of every
-            module that computes the output layer (names, dtypes, shapes and values).
-        mean: Input normalisation mean.
-        std: Input normalisation standard deviation.
-        runtime: Engine that computes the features (``"torch"``, ``"openvino"``,
-            ``"onnxruntime"``; see :mod:`~unitrack_env.agents.appearance.runtime`). Engines
-            agree to float rounding (cosine >= 0.9999), not bit for bit, so caches keep them
-            apart.
+    ``digest`` hashes the weights of every module that computes the output layer. Runtimes
+    agree to float rounding, not bit for bit, so caches keep them apart.
     """
 
     arch: str
@@ -50,8 +34,7 @@ class ModelIdentity:
     def key(self) -> str:
         """A short stable string that changes whenever the features could change.
 
-        The torch runtime keeps the key it had before runtimes existed (old caches stay
-        valid); every other runtime adds its name.
+        The torch runtime keeps its historic key (old caches stay valid); others add their name.
         """
         text = f"{self.arch}|{self.layer}|{self.digest}|{self.mean}|{self.std}"
         if self.runtime != TORCH:
@@ -60,12 +43,7 @@ class ModelIdentity:
 
 
 def weights_digest(module: nn.Module, prefixes: Sequence[str] | None = None) -> str:
-    """SHA-256 (first :data:`DIGEST_LENGTH` hex digits) of a module's state dict.
-
-    Args:
-        module: The network.
-        prefixes: Only hash keys starting with one of these (None: all keys).
-    """
+    """SHA-256 prefix (:data:`DIGEST_LENGTH` hex digits) of a state dict's ``prefixes`` keys."""
     sha = hashlib.sha256()
     for key, value in sorted(module.state_dict().items()):
         if prefixes is not None and not any(key.startswith(p) for p in prefixes):

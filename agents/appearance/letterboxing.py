@@ -25,12 +25,8 @@ LETTERBOX_PAD_VALUE: int = 128
 class Letterbox:
     """A frame resized with its aspect ratio kept and padded to a fixed input size.
 
-    Attributes:
-        image: The letterboxed uint8 RGB image ``(H, W, 3)`` (None for a geometry-only
-            letterbox from :func:`letterbox_layout`).
-        scale: ``(sx, sy)`` resize factors (content pixels / original pixels).
-        offset: ``(dx, dy)`` padding added left and top, in input pixels.
-        original_size: ``(width, height)`` of the original frame.
+    ``scale`` ``(sx, sy)`` and ``offset`` ``(dx, dy)`` map frame pixels to input pixels;
+    ``image`` is None for a geometry-only letterbox (:func:`letterbox_layout`).
     """
 
     image: np.ndarray | None
@@ -63,18 +59,9 @@ def letterbox(
     *,
     pad_value: int = LETTERBOX_PAD_VALUE,
 ) -> Letterbox:
-    """Resize ``image`` to fit ``size`` = (width, height) keeping its aspect ratio; pad the rest.
+    """Resize ``image`` to fit ``size`` (width, height) keeping its aspect; pad the rest.
 
-    The content is centred (as in JDE, which UniTrack's MOT head follows); area
-    interpolation when shrinking, bilinear when enlarging.
-
-    Args:
-        image: uint8 RGB ``(H, W, 3)``.
-        size: Target (width, height); default 1088 x 608.
-        pad_value: Grey level of the padding.
-
-    Returns:
-        The letterboxed image with the scale and offset that map frame boxes onto it.
+    The content is centred, as in JDE; area interpolation when shrinking, bilinear enlarging.
     """
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise ValueError(

@@ -1,13 +1,8 @@
 """The shared appearance model (UniTrack level 1): images in, stride-8 feature maps out.
 
-UniTrack (paper, section "Base appearance model") uses one appearance model for every task:
-a network phi mapping an image to a feature map of stride r = 8. :class:`AppearanceModel`
-wraps such a network with everything the heads need: input conversion and normalisation,
-batched inference under ``torch.inference_mode()``, a thread and device setting, the
-JDE-style letterbox used for MOT (whole frame to 1088 x 608), and an :class:`ModelIdentity`
-(architecture, layer, weights digest, runtime) that keys on-disk feature caches.
-
-More in docs/module-notes.md.
+:class:`AppearanceModel` wraps one network with what the heads need: input normalisation,
+batched inference, thread and device settings, the JDE letterbox for MOT, and a
+:class:`ModelIdentity` that keys on-disk feature caches. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -45,11 +40,7 @@ __all__ = ["AppearanceModel", "torch_threads"]
 
 @contextlib.contextmanager
 def torch_threads(num_threads: int | None) -> Iterator[None]:
-    """Run the body with ``torch.set_num_threads(num_threads)`` (None: leave it alone).
-
-    The previous setting is restored afterwards, so agents sharing a process do not leak
-    their thread counts into each other.
-    """
+    """Run the body with ``torch.set_num_threads(num_threads)`` (None: leave it), then restore."""
     if num_threads is None:
         yield
         return
@@ -69,50 +60,34 @@ class AppearanceModel:
     Args:
         weights: Named weights (``"imagenet-lite0"`` default, ``"random"``), a
             ``"torchvision:<Enum>.<MEMBER>"`` string, or a checkpoint file path.
-        arch: ``"efficientnet-lite0"``, ``"resnet18"``, ``"resnet34"``, ``"resnet50"``,
-            ``"resnet101"`` or a ViT (``"vit_small_patch14"``, ``"vit_base_patch8"``, ...,
-            ``_reg4`` with registers; :data:`~.vit.VIT_SPECS`). None: the weights' own
-            architecture (inferred from the keys for a file; ResNet-18 for random init).
+        arch: ``"efficientnet-lite0"``, ``"resnet18"`` .. ``"resnet101"`` or a ViT
+            (:data:`~.vit.VIT_SPECS`). None: the weights' own architecture.
         layer: Output layer (ResNet ``"layer2"``..``"layer4"``; EfficientNet ``"stage3"``..
-            ``"head"``; ViT ``"block1"``..``"block12"``), or several joined by ``"+"`` for a
-            hypercolumn (see :func:`split_layers`). None: :data:`DEFAULT_LAYERS`. Each CNN
-            layer must have stride 8.
+            ``"head"``; ViT ``"block1"``..``"block12"``), or several joined by ``"+"`` (a
+            hypercolumn). None: :data:`DEFAULT_LAYERS`. CNN layers must have stride 8.
         device: Torch device for the network and the returned features.
-        num_threads: When given, ``torch.set_num_threads(num_threads)`` for the duration of
-            each forward pass (the previous setting is restored afterwards).
-        mean: RGB normalisation mean (of RGB / 255). None: what the weights expect.
-        std: RGB normalisation standard deviation. None: what the weights expect.
+        num_threads: ``torch.set_num_threads`` during each forward pass.
+        mean, std: RGB normalisation (of RGB / 255). None: what the weights expect.
         remap: For checkpoint files: a remap name, a :class:`KeyRemap` or ``"auto"``.
-        remaps: Remap table (default :data:`DEFAULT_REMAPS`).
-        loaders: Named-weights table (default :data:`DEFAULT_WEIGHT_LOADERS`).
+        remaps, loaders: Remap and named-weights tables (defaults :data:`DEFAULT_REMAPS`,
+            :data:`DEFAULT_WEIGHT_LOADERS`).
         allow_partial: Accept a checkpoint that does not cover the whole backbone.
         seed: Seed of the random initialisation (the global torch RNG is left untouched).
-        channels_last: Run the network in channels-last memory format (the same numbers up
-            to float rounding; on the project's 2-core CPU no faster, within noise, for
-            EfficientNet-Lite0 or ResNet-18, but it can help on other hardware). The returned
-            features are ordinary contiguous tensors either way.
-        runtime: Engine that runs the network: ``"torch"`` (eager, the reference; the only
-            one for CUDA), ``"openvino"`` or ``"onnxruntime"`` (the network exported to ONNX
-            once per input size, float32; optional extras ``unitrack-env[openvino]`` /
-            ``[onnxruntime]``), ``"auto"`` (the fastest installed, checked against torch per
-            input size) or None (the environment variable ``UNITRACK_RUNTIME``, default
-            ``"auto"``). See
-            :mod:`~unitrack_env.agents.appearance.runtime`.
-        runtime_cache: Directory of the exported graphs (None: ``$UNITRACK_RUNTIME_CACHE`` or
+        channels_last: Run the network channels-last (same numbers up to rounding).
+        runtime: ``"torch"`` (the reference; the only one for CUDA), ``"openvino"``,
+            ``"onnxruntime"`` (optional extras), ``"auto"`` (the fastest installed, checked
+            against torch) or None (``$UNITRACK_RUNTIME``, default ``"auto"``).
+        runtime_cache: Directory of exported graphs (None: ``$UNITRACK_RUNTIME_CACHE`` or
             ``~/.cache/unitrack_env/runtime``).
-        stride: ViT only: feature stride below the patch size, ``8`` / ``"8-overlap"``
-            (overlapping patch embedding) or ``"8-upsample"`` (see :mod:`.vit`). None: the
-            patch size.
+        stride: ViT only: ``8`` / ``"8-overlap"`` or ``"8-upsample"`` (see :mod:`.vit`).
+            None: the patch size.
 
     Attributes:
-        module: The ``nn.Module`` (in eval mode, on ``device``).
-        identity: :class:`ModelIdentity` of this configuration.
-        load_report: :class:`LoadReport` of the weights (None for random init).
-        layers: The output layers (one, or the parts of a hypercolumn).
-        channels: Channels of the feature map (summed over hypercolumn parts).
-        stride: Pixels per feature cell: :data:`FEATURE_STRIDE` (8) for the CNNs, the patch
-            size (or the ``stride`` option) for a ViT. Heads read it from here.
-        runtime: The concrete runtime (``"auto"`` and None resolved).
+        module, identity, load_report: The eval-mode ``nn.Module``, its
+            :class:`ModelIdentity` and :class:`LoadReport` (None for random init).
+        layers, channels: The output layers and their summed channels.
+        stride: Pixels per feature cell (8 for the CNNs); heads read it from here.
+        runtime: The concrete runtime.
 
     Example:
         >>> model = AppearanceModel()            # EfficientNet-Lite0, ImageNet, offline
@@ -194,11 +169,9 @@ class AppearanceModel:
             yield
 
     def preprocess(self, images: np.ndarray | Sequence[np.ndarray] | torch.Tensor) -> torch.Tensor:
-        """Turn uint8 RGB images into a normalised float batch ``(B, 3, H, W)`` on the device.
+        """Turn uint8 RGB images (one, a batch or a list) into a normalised ``(B, 3, H, W)`` batch.
 
-        Accepts one ``(H, W, 3)`` uint8 array, a ``(B, H, W, 3)`` uint8 array or tensor, or a
-        sequence of same-size ``(H, W, 3)`` uint8 arrays. A float tensor ``(B, 3, H, W)`` or
-        ``(3, H, W)`` is taken as already normalised and only moved to the device.
+        A float ``(B, 3, H, W)`` or ``(3, H, W)`` tensor is taken as normalised and only moved.
         """
         if isinstance(images, torch.Tensor) and images.is_floating_point():
             x = images if images.ndim == 4 else images.unsqueeze(0)
@@ -232,11 +205,7 @@ class AppearanceModel:
         return (x - self._mean_t) / self._std_t
 
     def features(self, images: np.ndarray | Sequence[np.ndarray] | torch.Tensor) -> torch.Tensor:
-        """Feature maps ``(B, C, ceil(H / s), ceil(W / s))``, ``s`` = :attr:`stride` (float32).
-
-        Args:
-            images: See :meth:`preprocess`.
-        """
+        """Feature maps ``(B, C, ceil(H / s), ceil(W / s))``, ``s`` = :attr:`stride` (float32)."""
         with self._threads(), torch.inference_mode():
             x = self.preprocess(images)
             if self._compiled is not None:

@@ -1,15 +1,8 @@
 """ResNet backbones in the torchvision state-dict layout, with the UniTrack stride-8 option.
 
-The architecture is He et al., "Deep Residual Learning for Image Recognition" (CVPR 2016),
-with the "v1.5" bottleneck (stride on the 3x3 convolution) that torchvision's checkpoints
-use. Parameter names follow torchvision's layout (``conv1``, ``bn1``, ``layer1`` ...
-``layer4`` made of blocks with ``conv1``/``bn1``/``conv2``/``bn2``[/``conv3``/``bn3``] and an
-optional ``downsample.0`` (1x1 conv) / ``downsample.1`` (batch norm), ``fc``), so that
-torchvision and most self-supervised ResNet checkpoints load by key.
-
-UniTrack (paper, "Implementation details") obtains a stride-8 feature map by setting the
-spatial stride of every convolution in ``layer3`` and ``layer4``, including the downsample
-shortcut, to 1, without dilation. ``stride8=True`` (the default here) does exactly that.
+He et al. (CVPR 2016) with the "v1.5" bottleneck; parameter names follow torchvision so its
+and most self-supervised checkpoints load by key. ``stride8=True`` (UniTrack) sets every
+stride in ``layer3`` and ``layer4`` to 1, without dilation.
 """
 
 from __future__ import annotations
@@ -33,13 +26,7 @@ NUM_CLASSES: int = 1000
 
 @dataclass(frozen=True)
 class ResNetSpec:
-    """Depth configuration of one ResNet variant.
-
-    Attributes:
-        name: Architecture name, e.g. ``"resnet18"``.
-        bottleneck: True for the 3-convolution bottleneck block (ResNet-50 and deeper).
-        blocks: Number of blocks in ``layer1`` .. ``layer4``.
-    """
+    """Depth configuration of one ResNet variant (``blocks`` in ``layer1`` .. ``layer4``)."""
 
     name: str
     bottleneck: bool
@@ -130,12 +117,7 @@ class Bottleneck(nn.Module):
 class ResNet(nn.Module):
     """A ResNet with torchvision parameter names and named feature outputs.
 
-    Args:
-        arch: One of :data:`RESNET_SPECS` (``resnet18``, ``resnet34``, ``resnet50``,
-            ``resnet101``).
-        stride8: Use stride 1 in every convolution of layer3 and layer4 (UniTrack), giving
-            a stride-8 map at layer3 and layer4. With False, the standard strides 16 / 32.
-        num_classes: Outputs of ``fc``.
+    ``stride8`` gives stride-8 maps at layer3 and layer4 (else 16 / 32).
 
     Example:
         >>> net = ResNet("resnet18").eval()
@@ -217,13 +199,7 @@ class ResNet(nn.Module):
 
 
 def infer_resnet_arch(keys: set[str] | list[str]) -> str | None:
-    """Guess the ResNet depth from torchvision-layout state-dict keys.
-
-    Counts the blocks of each layer and whether blocks have a ``conv3`` (bottleneck).
-
-    Returns:
-        The matching name in :data:`RESNET_SPECS`, or None when no ResNet matches.
-    """
+    """The :data:`RESNET_SPECS` name matching torchvision-layout keys' block counts, or None."""
     keys = set(keys)
     bottleneck = any(k.startswith("layer1.0.conv3.") for k in keys)
     counts = []

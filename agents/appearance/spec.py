@@ -1,9 +1,6 @@
 """What names an appearance model: one dataclass that every head's config extends.
 
-Four heads used to repeat ``weights/arch/layer/device/num_threads/runtime``; they now inherit
-these fields from :class:`AppearanceSpec`, so the options a user passes
-(``--agent-arg weights=...``) stay flat while the model is built in one place
-(:meth:`AppearanceSpec.build`).
+The options stay flat (``--agent-arg weights=...``) while the model is built in one place.
 """
 
 from __future__ import annotations
@@ -30,10 +27,9 @@ class AppearanceSpec:
         remap: Checkpoint key remapping (``"auto"``: detect the layout).
         device: Torch device.
         num_threads: Torch threads while the agent acts (None: torch's setting).
-        runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` (fastest
-            installed) or None (``$UNITRACK_RUNTIME``, default auto).
-        stride: ViT only: feature stride below the patch size (``8``, ``"8-overlap"``,
-            ``"8-upsample"``); None: the patch size.
+        runtime: ``"torch"``, ``"openvino"``, ``"onnxruntime"``, ``"auto"`` or None
+            (``$UNITRACK_RUNTIME``, default auto).
+        stride: ViT only: ``8``, ``"8-overlap"``, ``"8-upsample"``; None: the patch size.
     """
 
     weights: str = "imagenet-lite0"
@@ -47,11 +43,7 @@ class AppearanceSpec:
 
     @classmethod
     def from_options(cls: type[SpecT], agent: str, options: Mapping[str, Any]) -> SpecT:
-        """The config ``cls(**options)`` of the agent named ``agent``.
-
-        Raises:
-            TypeError: An unknown option; the message names the agent and the valid options.
-        """
+        """The config ``cls(**options)`` of ``agent``; TypeError lists the valid options."""
         try:
             return cls(**options)
         except TypeError as exc:
@@ -63,11 +55,7 @@ class AppearanceSpec:
         cls: type[SpecT], agent: str, options: Mapping[str, Any],
         model: AppearanceModel | None = None,
     ) -> tuple[SpecT, AppearanceModel]:
-        """A head's config (:meth:`from_options`) and its model: ``model`` when shared, else built.
-
-        Raises:
-            TypeError: An unknown option (see :meth:`from_options`).
-        """
+        """A head's config and its model: ``model`` when shared, else built."""
         config = cls.from_options(agent, options)
         return config, model if model is not None else config.build()
 

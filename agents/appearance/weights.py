@@ -1,13 +1,8 @@
 """Appearance weights in one place: a weights name or file -> a network with its weights loaded.
 
-Every step from the ``weights=`` / ``arch=`` / ``remap=`` options of an appearance model to a
-loaded network lives here: the table of named weights, reading a checkpoint file, choosing
-its key remapping, inferring the architecture, building the network and loading it.
-:func:`load_weights` does all of it and returns a :class:`LoadedWeights` (the network, its
-architecture and layers, the load report, the normalisation the weights expect and what the
-weights digest covers); :func:`resolve_weights` stops before anything is built.
-
-More in docs/module-notes.md.
+The table of named weights, reading a checkpoint, choosing its key remapping, inferring the
+architecture, building and loading: :func:`load_weights` does all of it;
+:func:`resolve_weights` stops before anything is built. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -59,14 +54,9 @@ TORCHVISION_PREFIX: str = "torchvision:"
 class WeightsSource:
     """Weights produced by a loader in the weights table.
 
-    Attributes:
-        name: Name recorded in the identity (e.g. ``"imagenet-lite0"``).
-        arch: Architecture the weights belong to (None: any; the model's default).
-        path: Checkpoint file to load (None with ``state_dict`` or for random init).
-        state_dict: In-memory state dict (already in the target layout).
-        remap: Remap name or ``"auto"`` for a file.
-        mean: RGB mean the weights expect (None: ImageNet's or the remap's).
-        std: RGB standard deviation the weights expect.
+    ``name`` is recorded in the identity; ``arch`` None fits any; ``path`` or ``state_dict``
+    (None for random init); ``remap`` for a file; ``mean``/``std`` None: ImageNet's or the
+    remap's.
     """
 
     name: str
@@ -119,13 +109,7 @@ def check_arch(arch: str | None) -> None:
 
 @dataclass(frozen=True)
 class ResolvedWeights:
-    """Where a model's weights come from and the architecture they belong to (none loaded).
-
-    Attributes:
-        arch: Architecture to build.
-        source: The weights.
-        checkpoint: The file's content when it was already read (to infer the architecture).
-    """
+    """Where a model's weights come from and the architecture they belong to (none loaded)."""
 
     arch: str
     source: WeightsSource
@@ -134,19 +118,11 @@ class ResolvedWeights:
 
 @dataclass(frozen=True)
 class LoadedWeights:
-    """A network with its weights loaded: what :func:`load_weights` returns.
+    """A network (on the CPU) with its weights loaded: what :func:`load_weights` returns.
 
-    Attributes:
-        module: The network (on the CPU, as built).
-        arch: Its architecture.
-        layer: The output layer option (the architecture's default filled in).
-        layers: The output layers (one, or the parts of a hypercolumn).
-        name: Weights name recorded in the model identity.
-        required: Module prefixes that compute the output layers: what the load had to
-            cover and what the weights digest hashes.
-        report: The :class:`LoadReport` (None for random initialisation).
-        mean: RGB mean the weights expect (None: not stated, ImageNet's).
-        std: RGB standard deviation the weights expect (None: not stated, ImageNet's).
+    ``required`` are the module prefixes that compute the output layers: what the load had to
+    cover and what the weights digest hashes. ``report`` is None for random initialisation;
+    ``mean``/``std`` None means ImageNet's.
     """
 
     module: nn.Module
@@ -162,11 +138,7 @@ class LoadedWeights:
     def normalisation(
         self, mean: Sequence[float] | None = None, std: Sequence[float] | None = None
     ) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        """The input ``(mean, std)``: the caller's, else the weights', else ImageNet's.
-
-        Raises:
-            ValueError: Not three numbers each, or a standard deviation <= 0.
-        """
+        """The input ``(mean, std)``: the caller's, else the weights', else ImageNet's."""
         mean_out = tuple(float(v) for v in (mean or self.mean or IMAGENET_MEAN))
         std_out = tuple(float(v) for v in (std or self.std or IMAGENET_STD))
         if len(mean_out) != 3 or len(std_out) != 3 or min(std_out) <= 0:
@@ -186,13 +158,9 @@ def load_weights(
     seed: int = 0,
     stride: int | str | None = None,
 ) -> LoadedWeights:
-    """Resolve ``weights``, build the network they belong to and load them into it.
+    """Resolve ``weights``, build their network and load them (arguments as ``AppearanceModel``'s).
 
-    Args: as :class:`~unitrack_env.agents.appearance.model.AppearanceModel`'s.
-
-    Raises:
-        ValueError: Unknown weights name, architecture or layer.
-        CheckpointError: An unreadable checkpoint, or one that does not fit the network.
+    Raises ValueError (unknown name, architecture or layer) or CheckpointError.
     """
     resolved = resolve_weights(weights, arch=arch, remap=remap, loaders=loaders)
     layer = layer if layer is not None else DEFAULT_LAYERS[resolved.arch]
@@ -227,13 +195,7 @@ def _load_source(
 
 
 def file_remap(source_remap: str, remap: str | KeyRemap) -> str | KeyRemap:
-    """The remap a checkpoint file is read with.
-
-    Args:
-        source_remap: The source's: ``"identity"`` (a named loader that knows the file
-            holds the network's own keys), ``"auto"`` (the caller decides) or a remap name.
-        remap: The caller's ``remap=`` option (a name, a :class:`KeyRemap` or ``"auto"``).
-    """
+    """The remap a checkpoint file is read with: the source's, or if ``"auto"`` the caller's."""
     if source_remap == "identity":
         return IDENTITY_REMAP
     if source_remap == "auto":
@@ -281,11 +243,7 @@ def resolve_weights(
 
 
 def infer_file_arch(path: Path, obj: Any, remap: str | KeyRemap) -> str:
-    """Architecture of a checkpoint (content ``obj`` of ``path``), from its keys.
-
-    A ResNet's depth from its blocks, EfficientNet-Lite0 from its ``_conv_stem``, or a ViT
-    from its ``patch_embed.proj.weight`` (width, patch), blocks (depth) and registers.
-    """
+    """Architecture of a checkpoint (content ``obj`` of ``path``), from its keys."""
     if isinstance(remap, KeyRemap):
         candidates = [remap]
     elif remap == "auto":
@@ -342,8 +300,7 @@ def _vit_arch(obj: Any, remaps: Sequence[KeyRemap], path: Path) -> str | None:
 def _torchvision_weights(spec: str) -> WeightsSource:
     """Weights from torchvision's weight API, e.g. ``"ResNet18_Weights.IMAGENET1K_V1"``.
 
-    torchvision is not a dependency of this project; this path exists for users who have it
-    (and are online or have the file in torch's hub cache). Not tested here.
+    torchvision is not a dependency; this path serves users who have it. Not tested here.
     """
     try:
         import torchvision.models as tvm

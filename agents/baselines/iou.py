@@ -1,11 +1,8 @@
 """The IoU baseline: overlap + Hungarian matching with a track life cycle, no appearance.
 
-The agent is an observation adapter (:mod:`~unitrack_env.agents.primitives.adapters`) around
-an :class:`~unitrack_env.agents.primitives.overlap_tracker.OverlapTracker` whose overlap
-measure fits the task: box IoU with a constant-velocity guess (MOT), mask IoU with the track's
-last mask via ``pycocotools`` (MOTS, VIS), and the object keypoint similarity (OKS) with the
-track's last pose (PoseTrack). The task comes from the reset info (``info["task"]``), else
-from the observation's keys.
+An observation adapter around an
+:class:`~unitrack_env.agents.primitives.overlap_tracker.OverlapTracker` whose measure fits
+the task: box IoU with a constant-velocity guess (MOT), mask IoU (MOTS, VIS), OKS (PoseTrack).
 """
 
 from __future__ import annotations
@@ -37,22 +34,16 @@ class IoUConfig:
     """Parameters of the IoU baseline.
 
     Attributes:
-        iou_threshold: least IoU between a track's predicted box and a detection to match.
-        min_hits: a track is reported once it has been matched this many times (during the
-            first ``min_hits`` frames of an episode every matched track is reported, so the
-            opening frames are not lost).
-        max_lost_seconds: a track that found no detection is kept this long (converted to
-            frames with the sequence's frame rate) before it is dropped.
-        velocity_smoothing: weight of the newest displacement in the exponentially smoothed
-            velocity that predicts where a track is in the next frame (0 = no motion model).
-        duplicate_iou: an unmatched detection that overlaps a matched one by at least this
-            IoU is treated as a duplicate detection and starts no track (1 = off).
-        oks_threshold: poses: least OKS between a track's last pose and a detection to match
-            (:func:`object_keypoint_similarity`; used instead of ``iou_threshold``). Low,
-            since fast motion lowers a person's OKS with itself one frame later (the
-            sweep: docs/design-decisions.md).
-        duplicate_oks: poses: an unmatched pose with at least this OKS to a matched one is a
-            duplicate and starts no track (1 = off).
+        iou_threshold: Least IoU between a track's predicted box and a detection to match.
+        min_hits: Matches before a track is reported (all are during the first ``min_hits``
+            frames).
+        max_lost_seconds: How long a track that found no detection is kept.
+        velocity_smoothing: Weight of the newest displacement in the smoothed velocity (0: none).
+        duplicate_iou: An unmatched detection overlapping a matched one this much starts no
+            track (1 = off).
+        oks_threshold: Poses: least OKS to match (low: fast motion lowers a person's OKS with
+            itself; the sweep is in docs/design-decisions.md).
+        duplicate_oks: Poses: the duplicate OKS (1 = off).
     """
 
     iou_threshold: float = 0.3
@@ -67,23 +58,10 @@ class IoUConfig:
 class IoUAgent(Agent, name="iou", tasks=("mot", "mots", "vis", "posetrack")):
     """Associates detections to tracks by overlap, without appearance.
 
-    Per frame: predict each track (boxes: last box + smoothed velocity, times the frames it
-    has been lost), match the tracks to the detections with the Hungarian algorithm on the
-    overlap, start a track for every unmatched detection that is no duplicate, and drop
-    tracks lost longer than ``max_lost_seconds``. Only tracks matched in this frame are
-    reported (see :class:`~unitrack_env.agents.primitives.overlap_tracker.OverlapTracker`).
-
-    On mask observations the overlap is mask IoU between each track's last mask and the
-    detections (no motion model; masks of one step apart overlap), and the action gives each
-    detection its track id (0 = not reported). On pose observations it is the OKS between
-    each track's last pose and the detections, thresholded at ``oks_threshold``; the action
-    echoes the matched poses with their ids.
-
-    Args:
-        max_tracks: action capacity of box and pose tracks (must match the environment's
-            ``max_tracks``); None: the reset info's capacities, else the environments'
-            defaults.
-        **config: fields of :class:`IoUConfig`.
+    Per frame: predict each track, Hungarian-match on the overlap, start a track for each
+    unmatched non-duplicate detection, drop tracks lost over ``max_lost_seconds``; only tracks
+    matched in this frame are reported. ``max_tracks``: the action capacity of box and pose
+    tasks (None: the reset info's); ``**config``: :class:`IoUConfig` fields.
     """
 
     config_class = IoUConfig

@@ -14,14 +14,8 @@ from ..base import Agent
 class FreshIdsAgent(Agent, name="fresh-ids", tasks=("mot",)):
     """Reports every detection as a new track with a never-seen id.
 
-    Detection quality is kept (so MOTA's FP/FN terms are the detector's), but nothing is
-    associated across frames, so every continuing object is an identity switch: the floor
-    for IDF1, AssA and HOTA.
-
-    Which detections it sees is the environment's ``min_score``.
-
-    Args:
-        max_tracks: action capacity (must match the environment's ``max_tracks``).
+    Nothing is associated, so every continuing object is an identity switch: the floor for
+    IDF1, AssA and HOTA. ``max_tracks`` must match the environment's.
     """
 
     def __init__(self, max_tracks: int = 512) -> None:

@@ -1,39 +1,14 @@
 """The UniTrack association head (agent ``unitrack``): boxes, masks and poses with one agent.
 
-One agent plays every association environment -- MOT (boxes), MOTS (masks), VIS (masks
-with classes) and PoseTrack (poses). At reset it reads the task from the environment's
-info (``info["task"]``; without it, from the observation's keys, or the ``task`` option)
-and picks the task's observation adapter (:mod:`~unitrack_env.agents.primitives.adapters`,
-sized by ``info["capacities"]``) and settings (:data:`TASK_DEFAULTS` and the association
-preset, resolved once by :meth:`UniTrackConfig.settings`, with the score thresholds on the
-environment's declared score range ``info["detection_scores"]``). Per frame (UniTrack
-paper, section 2.4 and appendix C; facts about the authors' code in
-``OFFICIAL-CODE-FACTS.md``, "Association"):
-
-1. Read the frame's observations and drop unusable ones (non-finite scores, empty boxes
-   or masks, poses without a visible keypoint).
-2. Turn every observation into a box for the Kalman filter and the IoU stages and a region
-   for appearance: a box is itself; a mask gives the paper's mean / mean-absolute-deviation
-   box (appendix C.1, :func:`~unitrack_env.agents.primitives.mask_features.mask_to_box`); a
-   pose is first drawn as a mask (appendix C.2,
-   :func:`~unitrack_env.agents.primitives.mask_features.pose_to_mask`).
-3. Letterbox the frame to ``input_size`` (default 1088 x 608) and run the appearance model
-   once: a stride-8 feature map (frames without observations skip it).
-4. Object features: a box is RoIAlign-pooled into a tall 10 x 4 grid (40 locations); a mask
-   (or drawn pose) gives its in-mask feature cells, a variable-size set capped at
-   ``max_mask_area`` locations by rescaling (authors: 200 MOTS, 1000 VIS); every location
-   is L2-normalised.
-5. Associate with :class:`~unitrack_env.agents.primitives.association.Associator`
-   (appearance similarity, RSM by default, fused with Kalman motion; then IoU; track life
-   cycle). On VIS each class has its own engine
-   (:class:`~unitrack_env.agents.primitives.category_gating.CategoryGatedAssociator`):
-   a track only matches detections of its class.
-6. Act in the environment's format: MOT boxes of the confirmed tracks matched in the frame;
-   MOTS/VIS one id per detection (0 = not reported); PoseTrack the ids with the matched
-   poses echoed.
-
-The options are :class:`~unitrack_env.agents.heads.unitrack_config.UniTrackConfig`; why
-each default: ``docs/design-decisions.md``.
+One agent plays MOT (boxes), MOTS (masks), VIS (masks with classes) and PoseTrack (poses):
+at reset it reads the task, capacities and declared score range from the info and picks
+the task's observation adapter and settings. Per frame (paper section 2.4, appendix C):
+drop unusable observations; give each a Kalman box (a mask's mean/MAD box, a pose drawn
+as a mask first); run the appearance model once on the letterboxed frame; pool object
+features (a 10 x 4 RoIAlign grid per box, capped in-mask cells per mask); associate with
+:class:`~unitrack_env.agents.primitives.association.Associator` (per class on VIS); act in
+the environment's format. Options: :class:`UniTrackConfig`; why each default:
+``docs/design-decisions.md``.
 
 Example:
     >>> import gymnasium as gym, unitrack_env                    # doctest: +SKIP
@@ -80,15 +55,7 @@ __all__ = ["UniTrackAgent"]
 
 @dataclass(frozen=True)
 class _Parsed:
-    """One frame's usable observations, ready for association.
-
-    Attributes:
-        index: Position of each kept observation in the frame's observation.
-        boxes: ``(m, 4)`` Kalman boxes ``(x, y, w, h)``.
-        scores: ``(m,)`` scores.
-        masks: The kept masks (masks and poses) or None (boxes).
-        categories: ``(m,)`` classes when gating by class, else None.
-    """
+    """One frame's usable observations: their indices, Kalman boxes, scores, masks, classes."""
 
     index: np.ndarray
     boxes: np.ndarray
@@ -101,22 +68,16 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
     """UniTrack's association head for boxes, masks and poses (MOT, MOTS, VIS, PoseTrack).
 
     Args:
-        max_tracks: Action capacity of box and pose tasks; must equal the environment's
-            ``max_tracks``. None: the reset info's ``capacities``, else the environments'
-            defaults. Mask tasks answer one id per detection instead.
+        max_tracks: Action capacity of box and pose tasks (the environment's ``max_tracks``).
+            None: the reset info's ``capacities``, else the environments' defaults.
         appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel`
             to share between agents (then the appearance options are ignored).
         **options: Fields of :class:`UniTrackConfig`.
 
     Attributes:
-        config: The options.
-        settings: The current task's :class:`TaskSettings` (``settings.task``: the task,
-            from ``config.task``, else the reset info, else the observation; ``"mot"``
-            until one of them says otherwise).
-        adapter: The current task's observation adapter.
-        model: The appearance model (possibly wrapped by the feature cache).
-        associator: The association engine of the task (its state is the agent's episode
-            state); a :class:`CategoryGatedAssociator` when tracks are gated by class.
+        settings: The current task's :class:`TaskSettings`.
+        adapter, model: The task's observation adapter and the (cached) appearance model.
+        associator: The task's association engine (its state is the episode state).
     """
 
     config_class = UniTrackConfig
@@ -179,12 +140,7 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
 
     # ------------------------------------------------------------------ episode
     def reset(self, observation: Any, info: dict[str, Any]) -> None:
-        """Forget all tracks and ids; read the task, capacities and ``frame_rate`` from info.
-
-        Without ``info["task"]`` (and the ``task`` option) the observation (may be None)
-        tells the task. ``info["detection_scores"]`` is the range the score thresholds are
-        stated on (without it they apply as given).
-        """
+        """Forget all tracks and ids; read the task, capacities, ``frame_rate`` and score range."""
         task = self.config.task or reset_task(observation, info, self.task)
         self.score_range = ScoreRange.from_info(info.get("detection_scores"))
         self._task_from_info = bool(info.get("task"))

@@ -1,7 +1,6 @@
 """The UniTrack pose-propagation head (``unitrack-pose``): belief maps propagated like masks.
 
 UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E.
-
 More in docs/module-notes.md.
 """
 
@@ -40,10 +39,7 @@ MIN_PEAK: float = 1e-3
 
 @dataclass(frozen=True)
 class UniTrackPoseConfig(AppearanceSpec):
-    """Options of the ``unitrack-pose`` agent.
-
-    The appearance model's fields (``weights``, ``arch``, ``layer``, ``remap``, ``device``,
-    ``num_threads``, ``runtime``) come from :class:`AppearanceSpec`.
+    """Options of the ``unitrack-pose`` agent (appearance fields from :class:`AppearanceSpec`).
 
     Attributes:
         input_size: ``(width, height)`` the frames are resized to (None: native size).
@@ -51,7 +47,7 @@ class UniTrackPoseConfig(AppearanceSpec):
         min_sigma: Least sigma (feature pixels).
         refine_radius: Soft-argmax neighbourhood half-side (0: plain argmax).
         min_peak: Peak below which a joint keeps its previous position.
-        propagation: Fields of :class:`LabelPropagationConfig` to override.
+        propagation: :class:`LabelPropagationConfig` fields to override.
         feature_cache: The on-disk feature cache, float32 (as ``unitrack-vos``'s).
     """
 
@@ -82,11 +78,7 @@ def body_size(points: np.ndarray) -> float:
 
 def decode_maps(maps: torch.Tensor, refine_radius: int = REFINE_RADIUS) -> tuple[np.ndarray,
                                                                                  np.ndarray]:
-    """Peak positions of ``(J, h, w)`` maps: argmax + local soft-argmax.
-
-    Returns:
-        ``(J, 2)`` (x, y) in grid cells and ``(J,)`` peak values.
-    """
+    """Peak ``(J, 2)`` (x, y) in grid cells and ``(J,)`` values of ``(J, h, w)`` maps."""
     maps = maps.double()
     j, h, w = maps.shape
     flat = maps.reshape(j, -1)
@@ -110,15 +102,8 @@ def decode_maps(maps: torch.Tensor, refine_radius: int = REFINE_RADIUS) -> tuple
 class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
     """UniTrack's pose-propagation head (JHMDB): joints as Gaussian belief maps, propagated.
 
-    Args:
-        appearance_model: An :class:`~unitrack_env.agents.appearance.AppearanceModel` shared
-            with other heads; its own weights options win over this head's.
-        **options: Fields of :class:`UniTrackPoseConfig`.
-
-    Attributes:
-        sigma: Gaussian sigma (feature pixels) of the current video's belief maps.
-        propagator: The current video's label propagation (its memory of belief maps).
-        config, model: The options and the appearance model.
+    ``appearance_model``: a model shared with other heads; ``**options``:
+    :class:`UniTrackPoseConfig` fields.
     """
 
     config_class = UniTrackPoseConfig

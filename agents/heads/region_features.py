@@ -1,13 +1,7 @@
 """Object features of one frame for the ``unitrack`` association agent.
 
-The frame is letterboxed to the network input and run through the appearance model once
-(a stride-8 feature map, served by the feature cache when one is on); then
-
-* a box is RoIAlign-pooled into a tall ``roi_size`` grid (default 10 x 4, 40 locations);
-* a mask (or a pose drawn as a mask) gives its in-mask feature cells, a variable-size set
-  capped at ``max_area`` locations by rescaling
-  (:func:`~unitrack_env.agents.primitives.mask_features.mask_location_features`).
-
+One appearance-model pass on the letterboxed frame; a box is RoIAlign-pooled into a
+``roi_size`` grid, a mask (or drawn pose) gives its in-mask cells capped at ``max_area``.
 Every location feature is L2-normalised.
 """
 
@@ -36,16 +30,7 @@ from ..primitives.similarity import ObjectFeatures
 
 
 class RegionFeatures:
-    """Box and mask features of a frame from one appearance model.
-
-    Args:
-        model: The appearance model, possibly wrapped by the feature cache.
-        stride: The model's feature stride.
-        input_size: ``(width, height)`` of the letterboxed network input.
-        roi_size: ``(rows, columns)`` of the RoIAlign grid of a box.
-        sampling_ratio: Bilinear samples per RoIAlign bin and axis (boxes and masks).
-        pixel_origin: Coordinate of the first pixel in box observations (MOTChallenge: 1).
-    """
+    """Box and mask features of a frame from one (possibly cached) appearance model."""
 
     def __init__(self, model: AppearanceModel | CachedAppearanceModel, stride: int, *,
                  input_size: tuple[int, int], roi_size: tuple[int, int], sampling_ratio: int,
@@ -58,10 +43,9 @@ class RegionFeatures:
         self.pixel_origin = pixel_origin
 
     def feature_map(self, frame: np.ndarray) -> tuple[torch.Tensor, Letterbox]:
-        """Letterbox ``frame`` and return its ``(1, C, h, w)`` feature map and the letterbox.
+        """Letterbox ``frame``; return its ``(1, C, h, w)`` feature map and the letterbox.
 
-        With the feature cache, entries are keyed by a hash of the original frame (and the
-        letterbox), so a hit needs only the letterbox geometry (no resize).
+        Cache entries are keyed by the original frame, so a hit skips the resize.
         """
         size = self.input_size
         if not isinstance(self.model, CachedAppearanceModel):
@@ -75,12 +59,7 @@ class RegionFeatures:
         return self.model.features(boxed.image, keys=[key]), boxed
 
     def boxes(self, frame: np.ndarray, boxes_xywh: np.ndarray) -> list[torch.Tensor]:
-        """L2-normalised location features ``(rows * cols, C)`` of each box of one frame.
-
-        Args:
-            frame: uint8 RGB ``(H, W, 3)`` frame.
-            boxes_xywh: ``(n, 4)`` boxes in the observation's coordinates.
-        """
+        """L2-normalised ``(rows * cols, C)`` location features of each ``(n, 4)`` box."""
         fmap, boxed = self.feature_map(frame)
         xyxy = xywh_to_xyxy(boxes_xywh) - self.pixel_origin
         rois = torch.as_tensor(boxed.boxes_to_features(xyxy, self.stride), dtype=fmap.dtype)
@@ -93,17 +72,7 @@ class RegionFeatures:
 
     def masks(self, frame: np.ndarray, masks: Sequence[LocalMask],
               max_area: int | None) -> list[ObjectFeatures]:
-        """In-mask location features of each (non-empty) mask of one frame.
-
-        Args:
-            frame: uint8 RGB ``(H, W, 3)`` frame.
-            masks: Masks in the frame's pixels (drawn poses included).
-            max_area: Most location features per mask (None: no cap).
-
-        Returns:
-            One ``ObjectFeatures`` per mask: ``(s_i, C)`` L2-normalised features, at most
-            ``max_area`` of them, with their feature-cell positions.
-        """
+        """In-mask ``ObjectFeatures`` of each non-empty mask (at most ``max_area`` cells)."""
         fmap, boxed = self.feature_map(frame)
         stride = self.stride
         return mask_location_features(

@@ -1,11 +1,8 @@
 """Options of the ``unitrack`` association agent and what they resolve to per task.
 
-:class:`UniTrackConfig` holds the user's options (the appearance model's fields come from
-:class:`~unitrack_env.agents.appearance.spec.AppearanceSpec`); :data:`TASK_DEFAULTS` holds
-each task's observation kind, mask cap and class gating; the association engine's values
-are the presets of :class:`AssociationConfig` (``preset="default"`` or ``"paper"``).
-:meth:`UniTrackConfig.settings` resolves all of it into one :class:`TaskSettings` per task.
-Why each default: ``docs/design-decisions.md``.
+:meth:`UniTrackConfig.settings` resolves the options, :data:`TASK_DEFAULTS` and the
+:class:`AssociationConfig` preset into one :class:`TaskSettings` per task. Why each
+default: ``docs/design-decisions.md``.
 """
 
 from __future__ import annotations
@@ -47,13 +44,7 @@ AGENT_LEVEL_FIELDS = ("use_motion", "new_track_score", "output_min_area", "outpu
 
 @dataclass(frozen=True)
 class TaskDefaults:
-    """What a task is to the ``unitrack`` agent (its association values are presets).
-
-    Attributes:
-        observation: ``"boxes"``, ``"masks"`` or ``"poses"``.
-        max_mask_area: Most location features per mask or pose (None for boxes).
-        category_gating: A track only matches detections of its class (VIS).
-    """
+    """What a task is to the ``unitrack`` agent: observation kind, mask cap, class gating."""
 
     observation: str
     max_mask_area: int | None = None
@@ -143,12 +134,7 @@ class UniTrackConfig(AppearanceSpec):
                              "option (use_motion, new_track_score, output_filter)")
 
     def settings(self, task: str, scores: ScoreRange | None = None) -> TaskSettings:
-        """The settings of ``task``, with score thresholds on ``scores`` (None: as given).
-
-        Raises:
-            ValueError: An unknown task.
-            TypeError: An unknown ``association`` field (the message lists the valid ones).
-        """
+        """The settings of ``task``, thresholds on ``scores`` (None: as given); bad names raise."""
         try:
             defaults = TASK_DEFAULTS[task]
         except KeyError:
@@ -177,22 +163,10 @@ class UniTrackConfig(AppearanceSpec):
         """The :class:`AssociationConfig` these options describe on ``task``."""
         return self.settings(task, scores).association
 
-    def max_mask_area_for(self, task: str) -> int | None:
-        """The mask-area cap on ``task`` (``settings(task).max_mask_area``)."""
-        return self.settings(task).max_mask_area
-
 
 @dataclass(frozen=True)
 class TaskSettings:
-    """The ``unitrack`` agent's settings on one task (resolved by :meth:`UniTrackConfig.settings`).
-
-    Attributes:
-        task: The task.
-        observation: ``"boxes"``, ``"masks"`` or ``"poses"``.
-        association: The association engine's parameters.
-        max_mask_area: Most location features per mask or pose (None: no cap).
-        category_gating: A track only matches detections of its class.
-    """
+    """The ``unitrack`` agent's settings on one task (from :meth:`UniTrackConfig.settings`)."""
 
     task: str
     observation: str

@@ -25,20 +25,13 @@ VOID_LABEL: int = 255
 
 @dataclass(frozen=True)
 class UniTrackVOSConfig(AppearanceSpec):
-    """Options of the ``unitrack-vos`` agent.
-
-    The appearance model's fields (``weights``, ``arch``, ``layer``, ``remap``, ``device``,
-    ``num_threads``, ``runtime``) come from :class:`AppearanceSpec`
-    (``weights="random"`` is the paper's random-init baseline).
+    """Options of the ``unitrack-vos`` agent (appearance fields from :class:`AppearanceSpec`).
 
     Attributes:
-        propagation: Fields of :class:`LabelPropagationConfig` to override (memory_size,
-            radius, topk, temperature, ...).
-        antialias: Antialias the bilinear downsampling of the first frame's labels to the
-            feature grid (averages each cell's pixels instead of sampling 2 x 2 of them).
-        feature_cache: The on-disk feature cache (True: the default folder; a folder; False:
-            none), float32 entries: the same features, read instead of computed when a frame
-            was seen before (:func:`~unitrack_env.agents.appearance.cached_model.with_cache`).
+        propagation: :class:`LabelPropagationConfig` fields to override.
+        antialias: Antialias the downsampling of the first frame's labels to the feature grid.
+        feature_cache: The on-disk feature cache (True: the default folder; a folder; False),
+            float32 entries: the same features, read instead of computed.
     """
 
     propagation: dict[str, Any] | None = None
@@ -52,11 +45,7 @@ class UniTrackVOSConfig(AppearanceSpec):
 
 def make_propagation_config(options: dict[str, Any] | None,
                             stride: int | None = None) -> LabelPropagationConfig:
-    """A :class:`LabelPropagationConfig` from a dict of overrides, with a clear error.
-
-    ``stride``: the model's feature stride; the radii are rescaled to it
-    (:meth:`LabelPropagationConfig.for_stride`). None: as given.
-    """
+    """A :class:`LabelPropagationConfig` from overrides, radii rescaled to ``stride`` if given."""
     try:
         config = LabelPropagationConfig(**(options or {}))
         return config if stride is None else config.for_stride(stride)
@@ -84,17 +73,9 @@ def labels_to_onehot(labels: np.ndarray, object_ids: tuple[int, ...]) -> torch.T
 class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
     """UniTrack's mask-propagation head for semi-supervised VOS (DAVIS).
 
-    Args:
-        appearance_model: A ready :class:`~unitrack_env.agents.appearance.AppearanceModel` to share
-            (then ``weights``/``arch``/``layer``/``device`` are ignored).
-        **options: Fields of :class:`UniTrackVOSConfig`.
-
-    Attributes:
-        config: The options.
-        model: The appearance model.
-        propagator: The label-propagation state of the current video.
-        object_ids: Labels of the current video's objects (channel ``i + 1`` is object
-            ``object_ids[i]``).
+    ``appearance_model``: a ready model to share (the appearance options are then ignored);
+    ``**options``: :class:`UniTrackVOSConfig` fields. Channel ``i + 1`` of the propagated labels
+    is object ``object_ids[i]``.
     """
 
     config_class = UniTrackVOSConfig

@@ -1,29 +1,15 @@
 """Observation adapters: the association environments' observations in, their actions out.
 
-An association agent (``unitrack``, ``iou``) has one core -- read the frame's detections,
-associate them with tracks, report the tracks -- and three observation formats around it.
-An adapter owns one format:
-
-* :class:`BoxAdapter` (MOT): padded ``boxes``/``scores`` + ``num_detections`` in; the
-  reported tracks' ids and boxes out (:func:`~unitrack_env.spaces.pack_tracks`).
-* :class:`MaskAdapter` (MOTS, VIS): ``masks`` (and ``classes`` on VIS) in; one track id per
-  detection out, 0 = not reported (:func:`~unitrack_env.spaces.pack_mask_ids`).
-* :class:`PoseAdapter` (PoseTrack): ``keypoints``/``scores`` + ``num_people`` in; the
-  reported ids with the matched poses echoed out (:func:`~unitrack_env.spaces.pack_pose_tracks`).
-
-Adapters are sized by the environment's capacities, which the reset info carries
-(``info["capacities"]``, e.g. ``{"max_detections": 512, "max_tracks": 512}``); the task comes
-from ``info["task"]`` (:func:`reset_task`). Users who call ``reset`` without an environment
-get the task sniffed from the observation's keys (:func:`detect_task`) and the environments'
-default capacities.
+An association agent (``unitrack``, ``iou``) has one core and three observation formats:
+:class:`BoxAdapter` (MOT), :class:`MaskAdapter` (MOTS, VIS; one id per detection, 0 = not
+reported) and :class:`PoseAdapter` (PoseTrack). Adapters are sized by the reset info's
+``capacities`` and pick the task from ``info["task"]``, else from the observation's keys.
 
 Example:
     >>> import numpy as np
     >>> adapter = adapter_for("mot", {"max_tracks": 3})
     >>> obs = {"boxes": np.ones((4, 4), np.float32), "scores": np.ones(4, np.float32),
     ...        "num_detections": 2}
-    >>> len(adapter.detections(obs).scores)
-    2
     >>> adapter.action(adapter.detections(obs), [7], [1], np.ones((1, 4)))["ids"].tolist()
     [7, 0, 0]
 """
@@ -47,16 +33,9 @@ from unitrack_env.spaces.poses import pack_pose_tracks, unpack_poses
 class Detections:
     """One frame's detections as the observation gives them (its dtypes, no filtering).
 
-    Row ``i`` is the observation's detection ``i``; agents filter rows themselves and answer
-    with observation rows.
-
-    Attributes:
-        boxes: ``(n, 4)`` ``(x, y, w, h)`` (box and mask tasks; empty for poses).
-        scores: ``(n,)`` detection scores.
-        masks: ``(n, H, W)`` bool masks (mask tasks), else None.
-        keypoints: ``(n, K, 3)`` ``(x, y, score)`` poses (pose tasks), else None.
-        classes: ``(n,)`` class ids (VIS), else None.
-        capacity: Padded length of the observation's arrays.
+    Row ``i`` is the observation's detection ``i``. ``boxes`` ``(n, 4)`` (empty for poses),
+    ``scores``; ``masks``, ``keypoints``, ``classes`` are None unless the task has them;
+    ``capacity`` is the padded length.
     """
 
     boxes: np.ndarray
@@ -73,13 +52,8 @@ class Detections:
 class ObservationAdapter(abc.ABC):
     """Reads one association format's observations and writes its actions.
 
-    Args:
-        task: The task played (``"mot"``, ``"mots"``, ``"vis"``, ``"posetrack"``).
-        capacities: The environment's capacities (``info["capacities"]``); missing entries
-            take the environments' defaults.
-
-    Attributes:
-        kind: ``"boxes"``, ``"masks"`` or ``"poses"``.
+    ``capacities`` are the environment's (``info["capacities"]``); missing entries take the
+    environments' defaults. ``kind`` is ``"boxes"``, ``"masks"`` or ``"poses"``.
     """
 
     kind: ClassVar[str] = ""
@@ -100,17 +74,11 @@ class ObservationAdapter(abc.ABC):
     @abc.abstractmethod
     def action(self, detections: Detections, ids: Sequence[int], rows: Sequence[int],
                boxes: np.ndarray | None = None) -> dict[str, Any]:
-        """The action reporting track ``ids[k]`` on detection ``rows[k]`` (its box ``boxes[k]``).
-
-        Tracks are reported in the order given.
-        """
+        """The action reporting track ``ids[k]`` on detection ``rows[k]`` (its box ``boxes[k]``)."""
 
 
 class BoxAdapter(ObservationAdapter):
-    """MOT boxes: ``boxes``/``scores``/``num_detections`` in; ``ids``/``boxes`` out.
-
-    The action is padded to :attr:`max_tracks`.
-    """
+    """MOT boxes: ``boxes``/``scores``/``num_detections`` in; ``ids``/``boxes`` out."""
 
     kind = "boxes"
 
@@ -128,11 +96,7 @@ class BoxAdapter(ObservationAdapter):
 
 
 class MaskAdapter(ObservationAdapter):
-    """MOTS / VIS masks: ``masks``/``scores`` (``classes``) in; one id per detection out.
-
-    The action is padded to ``capacities["max_detections"]`` (else the observation's
-    padded length).
-    """
+    """MOTS / VIS masks: ``masks``/``scores`` (``classes``) in; one id per detection out."""
 
     kind = "masks"
 
@@ -157,10 +121,7 @@ class MaskAdapter(ObservationAdapter):
 
 
 class PoseAdapter(ObservationAdapter):
-    """PoseTrack poses: ``keypoints``/``scores``/``num_people`` in; ids and poses out.
-
-    The reported poses are the matched observed poses, padded to :attr:`max_tracks`.
-    """
+    """PoseTrack poses: ``keypoints``/``scores``/``num_people`` in; ids and matched poses out."""
 
     kind = "poses"
 
@@ -188,11 +149,7 @@ ADAPTERS: Mapping[str, type[ObservationAdapter]] = MappingProxyType({
 
 
 def adapter_for(task: str, capacities: Mapping[str, int] | None = None) -> ObservationAdapter:
-    """The adapter of ``task`` sized by ``capacities``.
-
-    Raises:
-        ValueError: ``task`` is no association task (the message lists them).
-    """
+    """The adapter of ``task`` sized by ``capacities``; ValueError lists the valid tasks."""
     try:
         return ADAPTERS[task](task, capacities)
     except KeyError:
@@ -201,10 +158,7 @@ def adapter_for(task: str, capacities: Mapping[str, int] | None = None) -> Obser
 
 
 def default_max_tracks(task: str) -> int:
-    """The environments' default action capacity of ``task`` (their ``max_tracks``).
-
-    Read from the environment modules (imported on first use), so that agents keep no copy.
-    """
+    """The environments' default ``max_tracks`` of ``task``, read from the env modules."""
     if task == "posetrack":
         from unitrack_env.envs.posetrack import DEFAULT_MAX_TRACKS as POSE_TRACKS
 
@@ -215,14 +169,7 @@ def default_max_tracks(task: str) -> int:
 
 
 def detect_task(observation: Mapping[str, Any]) -> str:
-    """The association task an observation belongs to, from its keys.
-
-    ``keypoints`` -> ``"posetrack"``; ``masks`` with ``classes`` -> ``"vis"``; ``masks`` ->
-    ``"mots"``; ``boxes`` -> ``"mot"``. The fallback for users who reset an agent without
-    an environment's info (environments name their task in ``info["task"]``).
-
-    Raises:
-        ValueError: None of these keys.
+    """The association task of an observation from its keys (when no ``info["task"]`` is given).
 
     >>> detect_task({"frame": None, "masks": None, "classes": None})
     'vis'
@@ -256,11 +203,8 @@ def episode_adapter(observation: Any, info: Mapping[str, Any], current: str,
                     max_tracks: int | None = None) -> ObservationAdapter:
     """The adapter of a new episode: its task (:func:`reset_task`) sized by the reset info.
 
-    Args:
-        observation: The episode's first observation (may be None).
-        info: The reset info (``task``, ``capacities``; both optional).
-        current: The task to keep when neither the info nor the observation tells one.
-        max_tracks: An agent's explicit action capacity; overrides ``info["capacities"]``.
+    ``current`` is kept when neither info nor observation tells the task; ``max_tracks``
+    overrides ``info["capacities"]``.
     """
     capacities = dict(info.get("capacities") or {})
     if max_tracks is not None:

@@ -14,21 +14,13 @@ import torch.nn.functional as F
 def remember(memory: Any, observation: Any, momentum: float) -> Any:
     """The payload a track keeps after matching ``observation``.
 
-    Args:
-        memory: The track's payload so far.
-        observation: The matched observation's payload.
-        momentum: Weight of the memory; 0 keeps the observation (paper and code).
-
-    Returns:
-        ``observation`` when ``momentum`` is 0 or the payloads are not two tensors of one
-        shape; else ``normalize(momentum * normalize(memory) + (1 - momentum) *
-        normalize(observation))`` per location (last dimension), in the observation's dtype.
+    ``momentum`` 0 (paper), or payloads that are not two tensors of one shape, keep the
+    observation; else ``normalize(m * normalize(memory) + (1 - m) * normalize(observation))``
+    per location.
 
     Example:
         >>> import torch
         >>> old, new = torch.tensor([[1.0, 0.0]]), torch.tensor([[0.0, 1.0]])
-        >>> remember(old, new, 0.0).tolist()
-        [[0.0, 1.0]]
         >>> [round(v, 3) for v in remember(old, new, 0.75)[0].tolist()]
         [0.949, 0.316]
     """

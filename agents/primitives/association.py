@@ -1,14 +1,9 @@
 """Track life cycle and the paper's two-stage association, as a task-agnostic engine.
 
-:class:`Associator` implements Algorithm 1 of the UniTrack paper (appendix C.1, the JDE
-association algorithm) plus the track life cycle around it. It does not know what an
-object looks like: per detection it receives a box (for the Kalman filter and the IoU
-stages) and an opaque *payload* (e.g. the L2-normalised location features of the box, or
-later of a mask or a pose), and it compares payloads with an injected similarity function
-``similarity(track_payloads, detection_payloads) -> (n, m) similarity``; the appearance
-cost is ``1 - similarity`` (for RSM this is the paper's ``1 - (cos_fwd + cos_bwd) / 2``).
-
-More in docs/module-notes.md.
+:class:`Associator` implements Algorithm 1 of the UniTrack paper (appendix C.1, JDE's
+association). Per detection it gets a box (Kalman filter, IoU stages) and an opaque
+*payload* compared by an injected ``similarity(tracks, detections) -> (n, m)``; the
+appearance cost is ``1 - similarity``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -48,17 +43,7 @@ HEIGHT_VELOCITY_INDEX = 7
 
 @dataclass
 class _Frame(Generic[P]):
-    """One frame's detections while :meth:`Associator.step` runs.
-
-    Attributes:
-        boxes: ``(m, 4)`` ``(x, y, w, h)``.
-        measurements: ``(m, 4)`` the boxes as Kalman measurements ``(u, v, a, h)``.
-        scores: ``(m,)`` scores.
-        payloads: ``m`` payloads.
-        frame: Episode frame counter.
-        was_lost: Keys of the tracks that were lost before this frame.
-        matched: Detection index -> the track it matched or started (filled by the stages).
-    """
+    """One frame's detections while :meth:`Associator.step` runs."""
 
     boxes: np.ndarray
     measurements: np.ndarray
@@ -70,17 +55,10 @@ class _Frame(Generic[P]):
 
 
 class Associator(Generic[P]):
-    """Two-stage association with the track life cycle (paper Algorithm 1 + appendix C.1).
+    """Two-stage association with the track life cycle; :meth:`reset` clears all state.
 
-    All state lives on the instance; :meth:`reset` clears it, including the id counter.
-
-    Args:
-        similarity: ``similarity(track_payloads, detection_payloads) -> (n, m)``; higher is
-            more similar, the appearance cost is ``1 - similarity``. ``None`` skips the
-            appearance stage and offers confirmed and lost tracks to the IoU stage (an
-            IoU/SORT-style tracker, useful as a control).
-        config: Parameters; paper defaults.
-        frame_rate: Frames per second of the sequence (sets the lost-track age).
+    ``similarity=None`` skips the appearance stage and offers confirmed and lost tracks to the
+    IoU stage (an IoU/SORT-style control).
 
     Example:
         >>> import numpy as np
@@ -110,11 +88,7 @@ class Associator(Generic[P]):
 
     # ------------------------------------------------------------------ state
     def reset(self, frame_rate: float | None = None) -> None:
-        """Forget every track and restart ids at 1 (call at the start of each sequence).
-
-        Args:
-            frame_rate: New frame rate; ``None`` keeps the current one.
-        """
+        """Forget every track and restart ids at 1; ``frame_rate=None`` keeps the current one."""
         if frame_rate is not None:
             if not (np.isfinite(frame_rate) and frame_rate > 0):
                 raise ValueError(f"frame_rate must be a positive number, got {frame_rate!r}")
@@ -149,16 +123,7 @@ class Associator(Generic[P]):
     def step(
         self, boxes: np.ndarray, scores: np.ndarray, payloads: Sequence[P]
     ) -> list[TrackOutput]:
-        """Associate one frame's detections with the tracks and update the life cycle.
-
-        Args:
-            boxes: ``(m, 4)`` detection boxes ``(x, y, w, h)`` with ``w, h > 0``.
-            scores: ``(m,)`` detection scores.
-            payloads: ``m`` payloads passed to the similarity function.
-
-        Returns:
-            The confirmed tracks matched in this frame, sorted by id.
-        """
+        """Associate one frame's ``(x, y, w, h)`` boxes; return the matched confirmed tracks."""
         boxes, scores = self._check_inputs(boxes, scores, payloads)
         self._frame += 1
         self.last_step = StepRecord()
@@ -386,12 +351,7 @@ class Associator(Generic[P]):
 
 def _unambiguous(cost: np.ndarray, matches: np.ndarray, threshold: float,
                  margin: float) -> np.ndarray:
-    """Keep the matches that beat every other acceptable pair of their row and column.
-
-    A pair is kept when each other pair of its track or its detection with a cost below
-    ``threshold`` costs at least ``margin`` more (a ratio-test style check); ambiguous
-    pairs are left to the IoU stage.
-    """
+    """Keep the matches whose rival pairs (same row or column) all cost at least ``margin`` more."""
     keep = []
     for row, col in matches:
         alternatives = np.concatenate([np.delete(cost[row], col), np.delete(cost[:, col], row)])

@@ -1,9 +1,7 @@
 """Parameters of the association engine (:class:`AssociationConfig`) and its presets.
 
-:meth:`AssociationConfig.paper` is the UniTrack paper's setting of a task (the authors' code
-where the paper is silent); :meth:`AssociationConfig.mot` is the ``unitrack`` agent's MOT
-default: the paper's with five measured departures. Why each departure, with the tables and
-commands that chose it: ``docs/design-decisions.md``, "Association defaults (MOT)".
+``paper()`` is the paper's setting of a task, ``mot()`` the ``unitrack`` agent's MOT default;
+why each departure: ``docs/design-decisions.md``, "Association defaults (MOT)".
 """
 
 from __future__ import annotations
@@ -44,61 +42,33 @@ class AssociationConfig:
 
     Attributes:
         use_motion: Fuse the Kalman Mahalanobis distance into the stage-1 cost and gate with
-            it. ``False`` is the paper's "w/o motion" setting (appearance cost alone in stage
-            1); the Kalman filter still runs for the IoU stages, as in the authors' code.
-        appearance_weight: ``lambda`` in ``lambda * C_a + (1 - lambda) * C_m``. Paper 0.99;
-            the authors' MOT config uses 0.98.
-        gate_threshold: Squared-Mahalanobis gate of stage 1 (chi-square 0.95, 4 dof =
-            9.4877); ``None`` fuses without gating (the authors' MOTS/pose configs).
-        appearance_threshold: A stage-1 match is accepted when its fused cost is below this
-            value. Authors' code: 0.7 (the paper gives no number).
-        iou_threshold: A stage-2 match is accepted when ``IoU > iou_threshold`` between the
-            Kalman-predicted track box and the detection. Authors' code: 0.5.
-        confirm_iou_threshold: A tentative track is confirmed by a detection with
-            ``IoU > confirm_iou_threshold`` to its box. Paper (appendix C.1): the IoU between
-            the consecutive boxes must be at least 0.8 (the default). The authors' code passes
-            0.7 as an IoU *distance* limit, i.e. accepts ``IoU > 0.3``; reading that 0.7 as
-            an IoU gives 0.7.
-        new_track_score: A detection left unmatched starts a track when its score is at
-            least this value, on the detections' own scale. Authors' code: 0.5 (their
-            detector's confidence); the ``unitrack`` agent states it on 0..1 of the
-            environment's declared score range.
-        confirm_on_first_frame: Tracks born on the first frame of an episode are confirmed
-            at once (authors' code; the paper is silent). Without it every object would be
-            missed on frame 1.
-        lost_seconds: A lost track is kept for ``round(lost_seconds * frame_rate)`` frames
-            after its last match (paper: 1 second; code: ``frame_rate / 30 * 30`` frames).
-        duplicate_iou: An active and a lost track with ``IoU > duplicate_iou`` are treated
-            as duplicates and the younger is removed. The authors' code passes 0.15 as an
-            IoU *distance* limit, i.e. ``IoU > 0.85``; that is the default (read as an IoU,
-            0.15 would merge neighbours in a crowd).
-        freeze_lost_height_velocity: Set the height velocity of lost tracks to 0 before
-            predicting (authors' code, from JDE), so that unobserved boxes do not grow or
-            shrink without bound.
-        iou_stage_includes_lost: Also offer lost tracks to the IoU stage. The paper's
-            Algorithm 1 does not distinguish lost tracks; the authors' code offers only
-            confirmed, currently tracked ones (default ``False``), since a lost track's
-            predicted box drifts.
-        report_filtered_box: Report the Kalman-filtered box of a matched track (authors'
-            code). ``False`` reports the matched detection's box unchanged.
-        reid_threshold: When set, a *lost* track is re-found in stage 1 only when its fused
-            cost is below this (stricter than ``appearance_threshold``): re-identifying a
-            person after a gap needs more evidence than following them from the previous
-            frame. ``None`` (paper and code): lost tracks use ``appearance_threshold``.
-        ambiguity_margin: A stage-1 match is kept only when every other acceptable pair of
-            its track and of its detection costs at least this much more (a ratio test);
-            ambiguous pairs fall to the IoU stage, where overlap with the predicted box
-            decides. ``0`` (paper and code): no check.
-        appearance_momentum: What a track remembers of its appearance after a match:
-            ``0`` (paper; authors' code ``curr_feat``) the matched observation's payload;
-            ``m > 0`` the location-wise moving average ``m * memory + (1 - m) * observation``
-            (JDE's embedding smoothing, momentum 0.9; see
-            :mod:`~unitrack_env.agents.primitives.appearance_memory`). Payloads of different
-            shapes (masks of different sizes) keep the newest.
-        output_min_area: When set, only report boxes with ``w * h > output_min_area``
-            (authors' MOT evaluation: 200).
-        output_max_aspect: When set, only report boxes with ``w / h <= output_max_aspect``
-            (authors' MOT evaluation: 1.6, i.e. no wide boxes for pedestrians).
+            it; ``False`` is the paper's "w/o motion" (the filter still runs for the IoU stages).
+        appearance_weight: ``lambda`` in ``lambda * C_a + (1 - lambda) * C_m``. Paper 0.99.
+        gate_threshold: Squared-Mahalanobis gate of stage 1 (chi-square 0.95, 4 dof = 9.4877);
+            ``None`` fuses without gating (the authors' MOTS/pose configs).
+        appearance_threshold: Stage-1 matches need a fused cost below this. Code: 0.7.
+        iou_threshold: Stage-2 matches need ``IoU > iou_threshold`` to the predicted box. 0.5.
+        confirm_iou_threshold: A tentative track is confirmed by a detection with IoU above
+            this. Paper (appendix C.1): 0.8.
+        new_track_score: An unmatched detection starts a track when its score is at least
+            this, on the detections' own scale. Code: 0.5.
+        confirm_on_first_frame: Confirm tracks born on an episode's first frame at once (code).
+        lost_seconds: Keep a lost track ``round(lost_seconds * frame_rate)`` frames. Paper: 1.
+        duplicate_iou: An active and a lost track with IoU above this are duplicates; the
+            younger is removed. Code: 0.15 as an IoU distance, i.e. 0.85.
+        freeze_lost_height_velocity: Zero the height velocity of lost tracks before predicting
+            (code, from JDE), so unobserved boxes do not grow without bound.
+        iou_stage_includes_lost: Also offer lost tracks to the IoU stage (code: ``False``).
+        report_filtered_box: Report the Kalman-filtered box of a matched track (code), not the
+            detection's box.
+        reid_threshold: Stricter stage-1 cost limit for re-finding *lost* tracks; ``None``
+            (paper): ``appearance_threshold``.
+        ambiguity_margin: Keep a stage-1 match only when every rival pair costs at least this
+            much more (a ratio test); ambiguous pairs fall to the IoU stage. Paper: 0.
+        appearance_momentum: ``0`` (paper) a track remembers its last observation; ``m > 0``
+            the moving average ``m * memory + (1 - m) * observation`` (JDE: 0.9).
+        output_min_area: When set, report only boxes with ``w * h`` above it (code MOT: 200).
+        output_max_aspect: When set, report only boxes with ``w / h`` at most it (code: 1.6).
         kalman: Noise parameters of the Kalman filter.
     """
 
@@ -159,11 +129,7 @@ class AssociationConfig:
     def mot(cls) -> AssociationConfig:
         """The ``unitrack`` agent's MOT default: the paper's with five measured departures.
 
-        The detection's box is reported, tracks remember a moving average of their
-        appearance (momentum 0.95), an appearance match must win by a margin of 0.05, a
-        tentative track is confirmed at IoU > 0.5 (paper 0.8) and lost tracks take part in
-        the IoU stage: chosen on PETS09-S2L1, the MOT17 clips and the synthetic scenes
-        together (``docs/design-decisions.md``).
+        Why each: ``docs/design-decisions.md``, "Association defaults (MOT)".
         """
         return replace(cls.paper("mot"), report_filtered_box=False, ambiguity_margin=0.05,
                        appearance_momentum=0.95, confirm_iou_threshold=0.5,

@@ -1,11 +1,8 @@
 """Category gating for association: a track only ever matches detections of its class.
 
-Video instance segmentation (YouTube-VIS, 40 classes) tracks objects of many classes in one
-video. :class:`CategoryGatedAssociator` runs one
-:class:`~unitrack_env.agents.primitives.association.Associator`
-per class, so every stage (appearance, IoU, confirmation, duplicate removal) only pairs a
-track with detections of the class it was born with, and numbers the tracks of all classes
-with one id sequence (ids are given in the order tracks are first confirmed).
+:class:`CategoryGatedAssociator` runs one
+:class:`~unitrack_env.agents.primitives.association.Associator` per class (YouTube-VIS has
+40) and numbers all tracks with one id sequence, in the order they are confirmed.
 """
 
 from __future__ import annotations
@@ -22,11 +19,6 @@ from .tracks import P, TrackOutput
 
 class CategoryGatedAssociator(Generic[P]):
     """One :class:`Associator` per category, with ids shared across categories.
-
-    Args:
-        similarity: The appearance similarity, as for :class:`Associator`.
-        config: Association parameters (the same for every category).
-        frame_rate: Frames per second of the sequence.
 
     Example:
         >>> same = lambda a, b: np.ones((len(a), len(b)))
@@ -98,17 +90,9 @@ class CategoryGatedAssociator(Generic[P]):
         payloads: Sequence[P],
         categories: Any,
     ) -> list[TrackOutput]:
-        """Associate one frame's detections, each only with tracks of its own category.
+        """Associate one frame's detections, each only with tracks of its integer ``categories``.
 
-        Args:
-            boxes: ``(m, 4)`` detection boxes ``(x, y, w, h)``.
-            scores: ``(m,)`` detection scores.
-            payloads: ``m`` payloads for the similarity function.
-            categories: ``(m,)`` integer category of each detection.
-
-        Returns:
-            The confirmed tracks matched in this frame, with ids unique across categories
-            and ``detection_index`` into this frame's input, sorted by id.
+        Returns the confirmed tracks matched in this frame, ids unique across categories, by id.
         """
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         scores = np.asarray(scores, dtype=np.float64).reshape(-1)

@@ -1,14 +1,8 @@
 """Constant-velocity Kalman filter for box tracks (the motion cue of association).
 
-The filter follows the form used by DeepSORT (Wojke et al., ICIP 2017) and adopted by JDE
-and UniTrack (paper, appendix C.1): the state is the eight-dimensional vector
-
-    ``(u, v, a, h, du, dv, da, dh)``
-
-where ``(u, v)`` is the box centre, ``a = w / h`` the aspect ratio, ``h`` the height, and the
-last four entries their velocities (per frame). Measurements are ``(u, v, a, h)``.
-
-More in docs/module-notes.md.
+DeepSORT's filter, as in JDE and UniTrack (appendix C.1): state
+``(u, v, a, h, du, dv, da, dh)`` (centre, aspect ``w / h``, height and their per-frame
+velocities); measurements ``(u, v, a, h)``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -24,36 +18,18 @@ MEASUREMENT_DIM = 4
 """Dimension of a measurement ``(u, v, a, h)``."""
 
 CHI2_95_4DOF = 9.4877
-"""0.95 quantile of the chi-square distribution with 4 degrees of freedom.
-
-Squared Mahalanobis distances of 4-d measurements above this value fall outside the 95%
-confidence region of the predicted measurement; the paper (eq. gate, appendix C.1) and
-DeepSORT gate matches with it (``scipy.stats.chi2.ppf(0.95, 4) = 9.48773``).
-"""
+"""0.95 quantile of chi-square with 4 dof: the paper's and DeepSORT's Mahalanobis gate."""
 
 
 @dataclass(frozen=True)
 class KalmanConfig:
     """Noise parameters of the constant-velocity box filter (DeepSORT values).
 
-    Attributes:
-        std_weight_position: Standard deviation of position-like quantities (u, v, h) as a
-            fraction of the box height, used for the process noise and the measurement
-            noise. DeepSORT: ``1/20``.
-        std_weight_velocity: Standard deviation of velocities (du, dv, dh) per frame as a
-            fraction of the box height, used for the process noise. DeepSORT: ``1/160``.
-        initial_position_factor: At track start the position standard deviations are
-            ``initial_position_factor * std_weight_position * h``. DeepSORT: ``2``.
-        initial_velocity_factor: At track start the velocity standard deviations are
-            ``initial_velocity_factor * std_weight_velocity * h`` (the velocity is unknown,
-            so it starts very uncertain). DeepSORT: ``10``.
-        aspect_std: Standard deviation of the aspect ratio in the initial covariance and in
-            the process noise (absolute, unit-less). DeepSORT: ``1e-2``.
-        aspect_velocity_std: Standard deviation of the aspect-ratio velocity in the initial
-            covariance and the process noise. DeepSORT: ``1e-5``.
-        aspect_measurement_std: Standard deviation of the measured aspect ratio.
-            DeepSORT: ``1e-1``.
-        time_step: Time between two consecutive predictions, in frames. ``1``.
+    Position-like stds (u, v, h) are ``std_weight_position * h`` (1/20), velocity stds
+    ``std_weight_velocity * h`` (1/160); at track start they are multiplied by
+    ``initial_position_factor`` (2) and ``initial_velocity_factor`` (10). The aspect ratio has
+    absolute stds ``aspect_std`` (1e-2), ``aspect_velocity_std`` (1e-5) and
+    ``aspect_measurement_std`` (1e-1); ``time_step`` is in frames.
     """
 
     std_weight_position: float = 1.0 / 20.0
@@ -66,29 +42,13 @@ class KalmanConfig:
     time_step: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in (
-            "std_weight_position",
-            "std_weight_velocity",
-            "initial_position_factor",
-            "initial_velocity_factor",
-            "aspect_std",
-            "aspect_velocity_std",
-            "aspect_measurement_std",
-            "time_step",
-        ):
-            value = getattr(self, name)
+        for name, value in vars(self).items():
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"KalmanConfig.{name} must be a positive number, got {value!r}")
 
 
 def xywh_to_xyah(boxes: np.ndarray) -> np.ndarray:
-    """Convert ``(x, y, w, h)`` boxes to Kalman measurements ``(u, v, a, h)``.
-
-    Args:
-        boxes: ``(n, 4)`` boxes (top-left corner, width, height).
-
-    Returns:
-        ``(n, 4)`` ``float64`` array of centre, aspect ratio ``w / h`` and height.
+    """Convert ``(n, 4)`` ``(x, y, w, h)`` boxes to ``float64`` measurements ``(u, v, a, h)``.
 
     >>> xywh_to_xyah(np.array([[10.0, 20.0, 4.0, 8.0]]))
     array([[12. , 24. ,  0.5,  8. ]])
@@ -104,13 +64,7 @@ def xywh_to_xyah(boxes: np.ndarray) -> np.ndarray:
 
 
 def xyah_to_xywh(states: np.ndarray) -> np.ndarray:
-    """Convert ``(u, v, a, h, ...)`` states or measurements to ``(x, y, w, h)`` boxes.
-
-    Args:
-        states: ``(n, k)`` array with ``k >= 4``; only the first four columns are read.
-
-    Returns:
-        ``(n, 4)`` ``float64`` boxes.
+    """Convert ``(u, v, a, h, ...)`` rows (first four columns read) to ``(x, y, w, h)`` boxes.
 
     >>> xyah_to_xywh(np.array([[12.0, 24.0, 0.5, 8.0]]))
     array([[10., 20.,  4.,  8.]])
@@ -124,11 +78,8 @@ def xyah_to_xywh(states: np.ndarray) -> np.ndarray:
 class KalmanFilter:
     """Batched constant-velocity Kalman filter on ``(u, v, a, h)`` and their velocities.
 
-    The filter holds no track state: callers keep ``mean``/``covariance`` per track and pass
-    stacked arrays, so one instance can serve any number of tracks.
-
-    Args:
-        config: Noise parameters; DeepSORT's values by default.
+    Holds no track state: callers keep ``mean``/``covariance`` per track and pass stacked
+    arrays, so one instance serves any number of tracks.
 
     Example:
         >>> kf = KalmanFilter()
@@ -144,11 +95,6 @@ class KalmanFilter:
         motion = np.eye(STATE_DIM)
         motion[:MEASUREMENT_DIM, MEASUREMENT_DIM:] = dt * np.eye(MEASUREMENT_DIM)
         self._motion = motion  # F: x_{t+1} = F x_t
-
-    @property
-    def motion_matrix(self) -> np.ndarray:
-        """The ``(8, 8)`` state transition matrix ``F`` (a copy)."""
-        return self._motion.copy()
 
     # ------------------------------------------------------------------ noise models
     def _position_like_std(self, height: np.ndarray, weight: float, aspect: float) -> np.ndarray:
@@ -178,19 +124,7 @@ class KalmanFilter:
 
     # ------------------------------------------------------------------ filter steps
     def initiate(self, measurements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Create track states from first measurements.
-
-        The velocity starts at 0; the covariance is diagonal with standard deviations
-        ``initial_position_factor * std_weight_position * h`` for ``u, v, h``,
-        ``aspect_std`` for ``a``, ``initial_velocity_factor * std_weight_velocity * h``
-        for ``du, dv, dh`` and ``aspect_velocity_std`` for ``da``.
-
-        Args:
-            measurements: ``(n, 4)`` measurements ``(u, v, a, h)``.
-
-        Returns:
-            ``(mean (n, 8), covariance (n, 8, 8))``.
-        """
+        """Create ``(n, 8)`` states and diagonal covariances from first ``(n, 4)`` measurements."""
         z = _as_measurements(measurements, "measurements")
         c = self.config
         mean = np.concatenate([z, np.zeros_like(z)], axis=1)
@@ -209,17 +143,7 @@ class KalmanFilter:
         return mean, _batched_diag(std**2)
 
     def predict(self, mean: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Advance states by one time step: ``x = F x``, ``P = F P F^T + Q``.
-
-        The process noise ``Q`` uses the height of the state before the prediction.
-
-        Args:
-            mean: ``(n, 8)`` state means.
-            covariance: ``(n, 8, 8)`` state covariances.
-
-        Returns:
-            Predicted ``(mean, covariance)``, new arrays of the same shapes.
-        """
+        """Advance states by one step: ``x = F x``, ``P = F P F^T + Q``."""
         mean, covariance = _as_state(mean, covariance)
         q = self._process_covariance(mean[:, 3])
         new_mean = mean @ self._motion.T
@@ -227,15 +151,7 @@ class KalmanFilter:
         return new_mean, new_cov
 
     def project(self, mean: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Project states into measurement space: ``(H x, H P H^T + R)``.
-
-        Args:
-            mean: ``(n, 8)`` state means.
-            covariance: ``(n, 8, 8)`` state covariances.
-
-        Returns:
-            ``(mean (n, 4), covariance (n, 4, 4))`` of the predicted measurement.
-        """
+        """Project ``(n, 8)`` states into measurement space: ``(H x, H P H^T + R)``."""
         mean, covariance = _as_state(mean, covariance)
         r = self._measurement_covariance(mean[:, 3])
         d = MEASUREMENT_DIM
@@ -244,19 +160,7 @@ class KalmanFilter:
     def update(
         self, mean: np.ndarray, covariance: np.ndarray, measurements: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Correct states with measurements (one measurement per track).
-
-        ``K = P H^T S^-1``, ``x = x + K (z - H x)``, ``P = P - K S K^T`` with
-        ``S = H P H^T + R``.
-
-        Args:
-            mean: ``(n, 8)`` predicted state means.
-            covariance: ``(n, 8, 8)`` predicted state covariances.
-            measurements: ``(n, 4)`` measurements ``(u, v, a, h)``.
-
-        Returns:
-            Corrected ``(mean, covariance)``.
-        """
+        """Correct states with one ``(u, v, a, h)`` measurement per track."""
         mean, covariance = _as_state(mean, covariance)
         z = _as_measurements(measurements, "measurements")
         if len(z) != len(mean):
@@ -278,18 +182,9 @@ class KalmanFilter:
     def gating_distance(
         self, mean: np.ndarray, covariance: np.ndarray, measurements: np.ndarray
     ) -> np.ndarray:
-        """Squared Mahalanobis distances between predicted tracks and measurements.
+        """``(n, m)`` squared Mahalanobis distances of measurements to predicted tracks (eq. cm).
 
-        ``d[i, j] = (z_j - H x_i)^T S_i^-1 (z_j - H x_i)`` on the full 4-d measurement
-        (paper eq. cm). Compare with :data:`CHI2_95_4DOF` to gate.
-
-        Args:
-            mean: ``(n, 8)`` state means (typically after :meth:`predict`).
-            covariance: ``(n, 8, 8)`` state covariances.
-            measurements: ``(m, 4)`` measurements ``(u, v, a, h)``.
-
-        Returns:
-            ``(n, m)`` ``float64`` array.
+        Compare with :data:`CHI2_95_4DOF` to gate.
         """
         mean, covariance = _as_state(mean, covariance)
         z = _as_measurements(measurements, "measurements")

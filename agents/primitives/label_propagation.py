@@ -69,28 +69,20 @@ class LabelPropagationConfig:
 
     Attributes:
         memory_size: ``M``, the first frame plus ``M - 1`` latest frames (>= 1).
-        radius: Local attention radius (feature pixels at ``radius_stride``, Euclidean) for
-            the recent frames; None: no limit (dense affinity over every recent frame, slow).
+        radius: Local attention radius of the recent frames (feature pixels at
+            ``radius_stride``); None: dense, slow.
         first_frame_radius: Radius for the first frame; None (default): no limit.
-        radius_stride: The feature stride the radii are given for (8: UniTrack's); a model
-            of another stride gets them through :meth:`for_stride`, the same reach in image
-            pixels (12 cells at stride 8 = 96 pixels = 6.9 cells at stride 14). None: the
-            radii are in the model's own feature pixels.
+        radius_stride: The stride the radii are given for (8); other strides get the same reach
+            in pixels through :meth:`for_stride`. None: the model's own feature pixels.
         topk: Memory locations kept per query.
         temperature: Softmax temperature over the kept affinities.
         normalize: L2-normalise every location's feature (cosine affinities).
-        tile_size: Query tile side of the local search (speed and memory only; results do
-            not depend on it beyond float rounding). The window ring holds every recent
-            frame about ``(t + 2 r)^2 / t^2`` times (t = 8, r = 12: 13 times, 211 MB for
-            five 112-channel 60 x 107 maps).
-        max_affinity_elements: Memory bound: most affinity values held at once (per block
-            of queries or tiles; fewer, larger blocks mean fewer parallel regions).
-        propagation_precision: ``"float32"`` (default: the paper's exact formulation) or
-            ``"bf16"``: bfloat16 affinities pick :data:`CANDIDATE_FACTOR` ``* topk``
-            candidates per query, whose affinities are then computed again in float32 for
-            the usual top-k and softmax: float32's result unless the exact top-k falls
-            outside those candidates. Only on CPUs with native bfloat16
-            (:data:`NATIVE_BF16_FLAGS`; checked by :class:`LabelPropagator`).
+        tile_size: Query tile side of the local search (speed and memory only).
+        max_affinity_elements: Most affinity values held at once.
+        propagation_precision: ``"float32"`` (default, the paper's exact formulation) or
+            ``"bf16"``: bfloat16 affinities pick ``CANDIDATE_FACTOR * topk`` candidates per
+            query, rescored in float32 (float32's result unless its top-k falls outside
+            them); CPUs with native bfloat16 only (docs/design-decisions.md).
     """
 
     memory_size: int = MEMORY_SIZE
@@ -105,11 +97,7 @@ class LabelPropagationConfig:
     propagation_precision: str = "float32"
 
     def for_stride(self, stride: int) -> LabelPropagationConfig:
-        """These options for a model whose feature cell is ``stride`` pixels.
-
-        The radii are rescaled from ``radius_stride`` (unchanged when equal, or when
-        ``radius_stride`` is None).
-        """
+        """These options for a model whose feature cell is ``stride`` pixels (radii rescaled)."""
         if self.radius_stride is None or stride == self.radius_stride:
             return self
         scale = self.radius_stride / stride
@@ -195,22 +183,10 @@ def propagate_dense(
     topk: int = TOP_K,
     temperature: float = TEMPERATURE,
 ) -> torch.Tensor:
-    """Reference definition: dense affinity to every memory location, masked by radius.
+    """Reference definition: dense affinity to every memory location, masked by ``radii``.
 
-    Features are used as given (normalise them first for cosine affinities). Slow and
-    ``O((h w)^2 M)`` in memory: for tests and small maps.
-
-    Args:
-        query: ``(C, h, w)`` features of the current frame.
-        memory_features: ``M`` maps ``(C, h, w)``.
-        memory_labels: ``M`` label maps ``(K, h, w)``.
-        radii: Per memory frame, the Euclidean radius of the locations a query may attend
-            to (None: all).
-        topk: Kept affinities per query.
-        temperature: Softmax temperature.
-
-    Returns:
-        ``(K, h, w)`` propagated labels.
+    ``O((h w)^2 M)`` memory, for tests and small maps; features are used as given.
+    Returns ``(K, h, w)`` propagated labels.
     """
     c, h, w = query.shape
     q = query.reshape(c, -1).t()
@@ -231,31 +207,13 @@ def propagate_dense(
 class LabelPropagator:
     """Stateful label propagation over a memory bank (first frame + latest predictions).
 
-    Usage per video::
-
-        prop = LabelPropagator()
-        prop.reset(features_0, labels_0)        # (C, h, w), (K, h, w) of the first frame
-        for features_t in later_frames:
-            labels_t = prop.step(features_t)    # propagate, then remember (recurrent)
-
-    With ``propagation_precision="bf16"`` the search sees bfloat16 features, ``topk *
-    CANDIDATE_FACTOR`` and, for labels, each location's row in the float32 memory bank,
-    from which :func:`~unitrack_env.agents.primitives.label_search.rescore` scores the
-    candidates again: the same searches serve both precisions.
-
-    Args:
-        config: Hyper-parameters (default: the paper's).
-        reference: Search the memory with the formulation this one replaced (keys gathered
-            at every step, plain top-k;
-            :mod:`unitrack_env.agents.primitives.label_search_tiled`): the same results,
-            slower; for benchmarks and tests.
-
-    Raises:
-        ValueError: ``"bf16"`` precision on a CPU without native bfloat16.
-
-    Attributes:
-        config: The hyper-parameters.
-        search: How the memory is laid out and searched.
+    ``reset(features_0, labels_0)`` then ``labels_t = step(features_t)`` per frame.
+    ``reference=True`` searches with the formulation the default replaced
+    (:mod:`~unitrack_env.agents.primitives.label_search_tiled`): same results, slower.
+    ``"bf16"`` precision: the same searches see bfloat16 features, ``CANDIDATE_FACTOR *
+    topk`` and, as labels, each location's row in a float32 memory bank, from which
+    :func:`~unitrack_env.agents.primitives.label_search.rescore` scores the candidates
+    again; refused (ValueError) on a CPU without native bfloat16.
     """
 
     def __init__(self, config: LabelPropagationConfig | None = None, *,

@@ -1,13 +1,7 @@
 """The k-NN searches of label propagation: over a whole frame, and above a floor.
 
-Each search returns, per query location, its best affinities and the labels of those memory
-locations; :func:`merge_topk` merges the candidate groups exactly (the top-k of a union is
-the top-k of the union of each group's top-k) and weighs the kept labels. How a
-:class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator` lays out and
-searches its memory is a :class:`MemorySearch`: the default
-:class:`~unitrack_env.agents.primitives.label_windows.WindowSearch` or the reference
-:class:`~unitrack_env.agents.primitives.label_search_tiled.TiledSearch`. Stages are marked
-with :func:`stage` for ``torch.profiler`` (``benchmarks/propagation.py`` reports them).
+:func:`merge_topk` merges candidate groups exactly (the top-k of a union is the top-k of
+each group's top-k). A :class:`MemorySearch` lays out and searches a propagator's memory.
 """
 
 from __future__ import annotations
@@ -42,11 +36,7 @@ def grid_positions(h: int, w: int, device: torch.device) -> torch.Tensor:
 
 
 class Workspace:
-    """Scratch tensors reused from step to step.
-
-    A fresh tensor of tens of MiB costs page faults on every step
-    (docs/design-decisions.md).
-    """
+    """Scratch tensors reused from step to step (fresh large tensors page-fault each step)."""
 
     def __init__(self) -> None:
         self._tensors: dict[str, torch.Tensor] = {}
@@ -69,17 +59,7 @@ class Workspace:
 def merge_topk(
     values: list[torch.Tensor], labels: list[torch.Tensor], topk: int, temperature: float
 ) -> torch.Tensor:
-    """Top-k over candidate groups, softmax over the kept ones, weighted labels.
-
-    Args:
-        values: Per group ``(Q, k_g)`` affinities (``-inf`` = not a candidate).
-        labels: Per group ``(Q, k_g, K)`` labels of those candidates.
-        topk: Candidates kept over all groups.
-        temperature: Softmax temperature.
-
-    Returns:
-        ``(Q, K)`` propagated labels.
-    """
+    """Top-k over candidate groups (``-inf`` = none), softmax over the kept, weighted labels."""
     with stage("top-k"):
         value = torch.cat(values, dim=1).float()
         label = torch.cat(labels, dim=1)
@@ -95,25 +75,12 @@ def merge_topk(
 def rescore(q: torch.Tensor, values: list[torch.Tensor], ids: list[torch.Tensor],
             keys: torch.Tensor, labels: torch.Tensor, width: int, topk: int,
             temperature: float, max_elements: int) -> torch.Tensor:
-    """The exact float32 top-k of approximate candidates, softmax, weighted labels.
+    """``(Q, K)`` labels from the exact float32 top-k of approximate candidates.
 
-    The ``width`` best candidates by their approximate (bfloat16) affinities are scored
-    again in float32 (``q`` against their ``keys``); the usual top-k and softmax follow. The
-    result is float32's wherever the exact top-k lies among those ``width`` candidates.
-
-    Args:
-        q: ``(Q, C)`` float32 queries.
-        values: Per group ``(Q, k_g)`` approximate affinities (``-inf``: not a candidate).
-        ids: Per group ``(Q, k_g, 1)`` float rows of ``keys`` / ``labels`` of the candidates.
-        keys: ``(N, C)`` float32 memory features, one row per memory location.
-        labels: ``(N, K)`` their labels.
-        width: Candidates scored again per query.
-        topk: Kept affinities per query.
-        temperature: Softmax temperature.
-        max_elements: Most gathered feature values held at once.
-
-    Returns:
-        ``(Q, K)`` propagated labels.
+    The ``width`` best candidates by their approximate (bfloat16) affinities ``values``,
+    whose rows of ``keys`` ``(N, C)`` / ``labels`` ``(N, K)`` are ``ids`` (per group ``(Q,
+    k_g, 1)``, float), are scored again against ``q`` ``(Q, C)`` in float32; the usual top-k
+    and softmax follow: float32's result wherever its top-k lies among those candidates.
     """
     with stage("top-k"):
         value = torch.cat(values, dim=1).float()
@@ -134,10 +101,7 @@ def rescore(q: torch.Tensor, values: list[torch.Tensor], ids: list[torch.Tensor]
 
 
 def kth_best(values: list[torch.Tensor], k: int) -> torch.Tensor:
-    """``(Q,)`` the ``k``-th largest of the candidate groups per query (``-inf``: fewer).
-
-    Each group is sorted, largest first (as ``torch.topk`` returns it).
-    """
+    """``(Q,)`` the ``k``-th largest of the sorted candidate groups per query (``-inf``: fewer)."""
     if len(values) == 1 and values[0].shape[1] == k:  # one group, sorted by its top-k
         return values[0][:, k - 1].float()
     value = torch.cat(values, dim=1)
@@ -160,21 +124,7 @@ def search_dense(
     q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int, w: int,
     radius: float | None, topk: int, max_elements: int,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k of every query over one whole memory frame, by blocks of queries.
-
-    Args:
-        q: ``(Q, C)`` query features.
-        feats: ``(C, h, w)`` memory features.
-        lbl: ``(K, h, w)`` memory labels.
-        h: Map rows.
-        w: Map columns.
-        radius: Euclidean radius a query may attend to (None: all).
-        topk: Kept affinities per query.
-        max_elements: Most affinities held at once.
-
-    Returns:
-        ``(Q, k)`` affinities and ``(Q, k, K)`` labels.
-    """
+    """Top-k ``(Q, k)`` affinities and ``(Q, k, K)`` labels over one memory frame."""
     size = h * w
     keys = feats.reshape(feats.shape[0], -1)  # (C, S)
     k = min(topk, size)
@@ -214,30 +164,11 @@ def search_above(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Every key of one memory frame at or above each query's ``floor`` (or its top-k).
 
-    Exact for the merged top-k (:func:`merge_topk`) when ``floor`` is, per query, the
-    ``topk``-th best affinity of other candidates: nothing below it can enter the merged
-    top-k, so only the keys at or above the floor need to be found, in any order. The ``S``
-    keys form ``ceil(S / 20)`` strided groups of 20 (key ``j`` in group ``j mod ceil(S /
-    20)``); one strided max per block of queries gives every group's best affinity; only the
-    (typically one or two) groups whose best reaches the floor are read again, and their
-    members at or above the floor are kept, up to :data:`ABOVE_WIDTH` of them. A query with
-    more (a low floor), or with an infinite floor, gets a plain top-k of its row.
-
-    Args:
-        q: ``(Q, C)`` query features.
-        feats: ``(C, h, w)`` memory features.
-        lbl: ``(K, h, w)`` memory labels.
-        h: Map rows.
-        w: Map columns.
-        radius: Euclidean radius a query may attend to (None: all).
-        floor: ``(Q,)`` float32: least affinity worth finding per query (``-inf``: all).
-        topk: Kept affinities per query.
-        max_elements: Most affinities held at once.
-        workspace: Where to keep the affinity buffer between calls (None: a new one).
-
-    Returns:
-        ``(Q, W)`` affinities (``W = max(topk, ABOVE_WIDTH)``, unsorted; ``-inf``: empty
-        slot) and ``(Q, W, K)`` labels.
+    Exact for the merged top-k when ``floor`` is each query's ``topk``-th best other
+    candidate. Keys form strided groups of 20; one strided max finds the groups whose best
+    reaches the floor, and only those are re-read (up to :data:`ABOVE_WIDTH` keys kept; more,
+    or an infinite floor, falls back to a plain top-k). Returns unsorted ``(Q, W)`` affinities
+    (``-inf``: empty) and ``(Q, W, K)`` labels.
     """
     size = h * w
     keys = feats.reshape(feats.shape[0], -1)
@@ -265,11 +196,7 @@ def search_above(
 
 def _select_above(block: torch.Tensor, lanes: int, floor: torch.Tensor, k: int,
                   out_v: torch.Tensor, out_i: torch.Tensor) -> None:
-    """Fill ``out_v``/``out_i`` ``(n, W)``: each row's keys at or above its floor, or its top-k.
-
-    A row keeps its keys at or above the floor (unsorted) when it has at most ``W`` of them,
-    else its plain top-k; empty slots get ``-inf`` and column 0.
-    """
+    """Fill ``out_v``/``out_i`` ``(n, W)``: each row's keys at or above its floor, or its top-k."""
     n, width = out_v.shape
     grid = block.view(n, GROUP_SIZE, lanes)
     hit = grid.amax(1) >= floor.unsqueeze(1)  # (n, lanes): groups whose best reaches it
@@ -302,12 +229,8 @@ def _select_above(block: torch.Tensor, lanes: int, floor: torch.Tensor, k: int,
 class MemorySearch(ABC):
     """How a label propagator lays out its recent memory and finds each query's top-k.
 
-    The propagator keeps the bookkeeping (the first frame, the recent frames and their
-    ring slots); a search keeps its own copy of the recent frames in the layout it
-    searches, written once per frame by :meth:`write`.
-
-    Args:
-        config: The propagator's hyper-parameters.
+    The propagator keeps the bookkeeping; a search keeps its own copy of the recent frames in
+    the layout it searches, written once per frame by :meth:`write`.
     """
 
     def __init__(self, config: LabelPropagationConfig) -> None:
@@ -330,14 +253,24 @@ class MemorySearch(ABC):
     def candidates(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
                    recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
                    slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
-        """Per candidate group, ``(h * w, k_g)`` affinities and ``(h * w, k_g, K)`` labels.
+        """Candidate groups (affinities, labels) of the prepared ``query`` ``(C, h, w)``.
 
-        Their merged top-k (:func:`merge_topk`, ``k = config.topk``) is the top-k of
-        ``query`` ``(C, h, w)`` over the whole memory.
-
-        Args:
-            query: Prepared (normalised) query features.
-            first: The first frame's features and labels.
-            recent: The recent frames' features and labels, oldest first.
-            slots: Their ring slots, oldest first.
+        Their merged top-k (:func:`merge_topk`, ``k = config.topk``) is the query's top-k
+        over the whole memory.
         """
+
+    def recent_candidates(self, query: torch.Tensor,
+                          recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                          slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Top-k groups of the recent frames: dense per frame without a radius, else windows."""
+        cfg = self.config
+        c, h, w = query.shape
+        if recent and cfg.radius is None:
+            q = query.reshape(c, -1).t().contiguous()
+            found = [search_dense(q, feats, lbl, h, w, None, cfg.topk, cfg.max_affinity_elements)
+                     for feats, lbl in recent]
+            return [v for v, _ in found], [lab for _, lab in found]
+        if recent:
+            v, lab = self.search_recent(query, slots)
+            return [v], [lab]
+        return [], []

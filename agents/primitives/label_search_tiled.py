@@ -1,16 +1,9 @@
-"""The reference formulation of the label-propagation search: keys gathered at every step.
+"""The reference label-propagation search: keys gathered at every step.
 
-This is the formulation :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`
-used before its window ring (:mod:`unitrack_env.agents.primitives.label_search`); it is kept,
-selected by ``LabelPropagator(reference=True)``, as the baseline of
-``benchmarks/propagation.py`` and of the equality tests:
-
-* first frame: dense affinity by blocks of queries, one ``torch.topk`` over every key;
-* recent frames: the query grid is cut into ``tile_size`` x ``tile_size`` tiles; each tile's
-  keys (its square grown by the radius, ``t^2 + 4 t r + pi r^2`` locations) are gathered from
-  a zero-padded channels-last ring, for a block of tiles and every recent frame, with one
-  ``index_select`` *at every step*; one batched matmul, one masking pass and one
-  ``torch.topk`` over all the candidates of a query then serve the block.
+The formulation the window ring (:mod:`~unitrack_env.agents.primitives.label_windows`)
+replaced, kept as ``LabelPropagator(reference=True)`` for ``benchmarks/propagation.py`` and
+the equality tests: a dense top-k over the first frame; for the recent frames, each tile's
+radius keys gathered from a zero-padded ring with one ``index_select`` per step.
 """
 
 from __future__ import annotations
@@ -35,19 +28,10 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class LocalGeometry:
-    """Layout of the tiled local search for one map size.
+    """Layout of the tiled local search for one map size (``key``: what it was built for).
 
-    Attributes:
-        key: What it was built for ``(h, w, tile, radius, device)``.
-        tile: Tile side.
-        pad: Zero padding of the ring's maps (``floor(radius)``) on every side.
-        tiles_y: Tile rows.
-        tiles_x: Tile columns.
-        padded_h: Rows of a padded ring map (``tiles_y * tile + 2 pad``).
-        padded_w: Columns of a padded ring map.
-        key_index: ``(T, L)`` long: per tile, the flat positions (in a padded map) of the keys
-            within the radius of at least one of its queries.
-        excluded: ``(T, t^2, L)`` bool: key out of the query's radius or off the map.
+    ``key_index`` ``(T, L)``: per tile, the flat positions in a padded map of the keys within
+    the radius of any of its queries; ``excluded`` ``(T, t^2, L)``: out of radius or off map.
     """
 
     key: tuple[object, ...]
@@ -103,20 +87,7 @@ def search_local(
     query: torch.Tensor, geo: LocalGeometry, ring_keys: torch.Tensor,
     ring_labels: torch.Tensor, slots: Sequence[int], topk: int, max_elements: int,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k of every query over the radius windows of all recent frames (gathered keys).
-
-    Args:
-        query: ``(C, h, w)`` query features.
-        geo: The local search's layout for this map size.
-        ring_keys: ``(slots, Hp * Wp, C)`` zero-padded memory features.
-        ring_labels: ``(slots, Hp * Wp, K)`` zero-padded memory labels.
-        slots: Ring slots in use, oldest first.
-        topk: Kept affinities per query.
-        max_elements: Most affinities held at once.
-
-    Returns:
-        ``(h * w, k)`` affinities and ``(h * w, k, K)`` labels.
-    """
+    """Top-k ``(h * w, k)`` affinities and labels of every query over all recent frames' windows."""
     c, h, w = query.shape
     tile, t2 = geo.tile, geo.tile * geo.tile
     num_tiles, window = geo.key_index.shape
@@ -158,11 +129,7 @@ def search_local(
 
 
 class TiledSearch(MemorySearch):
-    """The reference search: plain top-k over the first frame, gathered tiles for the rest.
-
-    Args:
-        config: The propagator's hyper-parameters.
-    """
+    """The reference search: plain top-k over the first frame, gathered tiles for the rest."""
 
     def __init__(self, config: LabelPropagationConfig) -> None:
         super().__init__(config)
@@ -218,19 +185,7 @@ class TiledSearch(MemorySearch):
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
-        values, labels = [], []
         v, lab = search_dense(q, *first, h, w, cfg.first_frame_radius, cfg.topk,
                               cfg.max_affinity_elements)
-        values.append(v)
-        labels.append(lab)
-        if recent and cfg.radius is None:
-            for feats, lbl in recent:
-                v, lab = search_dense(q, feats, lbl, h, w, None, cfg.topk,
-                                      cfg.max_affinity_elements)
-                values.append(v)
-                labels.append(lab)
-        elif recent:
-            v, lab = self.search_recent(query, slots)
-            values.append(v)
-            labels.append(lab)
-        return values, labels
+        values, labels = self.recent_candidates(query, recent, slots)
+        return [v, *values], [lab, *labels]

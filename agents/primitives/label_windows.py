@@ -1,14 +1,9 @@
 """The default label-propagation search: a ring of im2col windows, grouped top-k, a floor.
 
-Layout (written once per memory frame, not at every step). The query grid is cut into
-``t x t`` tiles. A tile's keys are the locations within the radius of at least one of its
-queries: the tile square grown by the radius (``L ~ t^2 + 4 t r + pi r^2`` locations). When a
-frame enters the recent memory, every tile's ``L`` keys are copied out of it once
-(im2col) into the tile's row of the ring ``(T, R, slots, g, C)``; the ``L`` keys of a tile
-are laid out as ``R`` rows of ``g`` (padded with dummy keys). A tile's keys in *all* recent
-frames are then one contiguous ``(R slots g, C)`` matrix: no gather at search time.
-
-More in docs/module-notes.md.
+The query grid is cut into ``t x t`` tiles; a tile's keys are the locations within the
+radius of any of its queries. When a frame enters the memory, every tile's keys are copied
+out once (im2col) into the ring ``(T, R, slots, g, C)``, so a tile's keys in all recent
+frames form one contiguous matrix: no gather at search time. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -36,24 +31,13 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class WindowLayout:
-    """The window ring's layout for one map size (see the module docstring).
+    """The window ring's layout for one map size (``key``: what it was built for).
 
-    Attributes:
-        key: What it was built for ``(h, w, tile, radius, slots, topk, device, dtype)``.
-        tile: Tile side ``t``.
-        pad: ``floor(radius)``: zero padding of a frame before its windows are cut.
-        tiles_y: Tile rows.
-        tiles_x: Tile columns.
-        rows: ``R``, rows of a tile's key layout.
-        width: ``g``, keys per row of a tile's key layout.
-        key_index: ``(T, R g)`` long: per tile, flat positions of its keys in the
-            zero-padded frame ``((tiles_y t + 2 pad) (tiles_x t + 2 pad) + 1)``; the last
-            position (always zero) serves the dummy keys.
-        key_position: ``(T, R g)`` long: the keys' flat positions in the ``h x w`` map (0
-            for keys off the map and dummy keys, which are never chosen over real ones).
-        bias: ``(T, t^2, R, 1, g)``, the affinities' dtype: ``-inf`` for a key beyond the
-            query's radius, off the map or a dummy, else 0 (added to the affinities: one
-            cheap pass; a bfloat16 sum with a float32 bias is ~50x slower).
+    ``R`` rows of ``g`` keys per tile (padded with dummy keys); ``key_index`` gives their flat
+    positions in the zero-padded frame (the last, always zero, serves dummies),
+    ``key_position`` in the ``h x w`` map; ``bias`` (the affinities' dtype: a bfloat16 sum
+    with a float32 bias is ~50x slower) is ``-inf`` for keys beyond a query's radius, off the
+    map or dummy, else 0.
     """
 
     key: tuple[object, ...]
@@ -111,12 +95,7 @@ class WindowLayout:
         return self.tiles_y * self.tiles_x
 
     def windows(self, feats: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
-        """im2col: ``(C, h, w)`` -> ``(T, R, g, C)``, every tile's keys (a view of ``out``).
-
-        Args:
-            feats: One frame's features.
-            out: ``(T R g, C)`` buffer the keys are written into.
-        """
+        """im2col: one frame's ``(C, h, w)`` -> ``(T, R, g, C)`` tile keys (a view of ``out``)."""
         c, h, w = feats.shape
         t, pad = self.tile, self.pad
         padded = feats.new_zeros((self.tiles_y * t + 2 * pad) * (self.tiles_x * t + 2 * pad)
@@ -144,13 +123,8 @@ class WindowLayout:
 def grouped_topk(aff: torch.Tensor, rows: int, k: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Exact top-k of each row of ``aff`` ``(N, R * G)`` seen as ``G`` strided groups of ``R``.
 
-    Group ``j`` holds the columns ``j, j + G, ..., j + (R - 1) G``. The top-k of a row lies
-    in its ``k`` groups of largest maximum: a key of any other group is beaten by those
-    ``k`` maxima.
-
-    Returns:
-        ``(N, k')`` values (sorted, largest first) and their columns in ``aff``;
-        ``k' = min(k, R G)``.
+    The top-k lies in the ``k`` groups of largest maximum. Returns the sorted values and their
+    columns in ``aff``.
     """
     n, groups = aff.shape[0], aff.shape[1] // rows
     grid = aff.view(n, rows, groups)
@@ -164,21 +138,7 @@ def grouped_topk(aff: torch.Tensor, rows: int, k: int) -> tuple[torch.Tensor, to
 def search_windows(query: torch.Tensor, layout: WindowLayout, ring: torch.Tensor,
                    ring_labels: torch.Tensor, used: int, topk: int, max_elements: int,
                    workspace: Workspace | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-k of every query over the radius windows of the recent frames in the ring.
-
-    Args:
-        query: ``(C, h, w)`` query features.
-        layout: The window layout for this map size.
-        ring: ``(T, R, slots, g, C)`` the recent frames' windows.
-        ring_labels: ``(slots, h * w, K)`` the recent frames' labels.
-        used: Ring slots holding frames (``0 .. used - 1``; the others are ignored).
-        topk: Kept affinities per query.
-        max_elements: Most affinities held at once.
-        workspace: Where to keep the affinity buffer between calls (None: a new one).
-
-    Returns:
-        ``(h * w, k)`` affinities and ``(h * w, k, K)`` labels.
-    """
+    """Top-k ``(h * w, k)`` affinities and labels of every query over the ring's ``used`` slots."""
     c, h, w = query.shape
     workspace = workspace if workspace is not None else Workspace()
     num_tiles, rows, slots, width = ring.shape[:4]
@@ -215,11 +175,7 @@ def search_windows(query: torch.Tensor, layout: WindowLayout, ring: torch.Tensor
 
 
 class WindowSearch(MemorySearch):
-    """The default search: im2col window ring, grouped top-k, first frame above a floor.
-
-    Args:
-        config: The propagator's hyper-parameters.
-    """
+    """The default search: im2col window ring, grouped top-k, first frame above a floor."""
 
     def __init__(self, config: LabelPropagationConfig) -> None:
         super().__init__(config)
@@ -278,17 +234,7 @@ class WindowSearch(MemorySearch):
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
-        values, labels = [], []
-        if recent and cfg.radius is None:
-            for feats, lbl in recent:
-                v, lab = search_dense(q, feats, lbl, h, w, None, cfg.topk,
-                                      cfg.max_affinity_elements)
-                values.append(v)
-                labels.append(lab)
-        elif recent:
-            v, lab = self.search_recent(query, slots)
-            values.append(v)
-            labels.append(lab)
+        values, labels = self.recent_candidates(query, recent, slots)
         if values:
             with stage("top-k"):
                 floor = kth_best(values, cfg.topk)

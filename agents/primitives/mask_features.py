@@ -72,13 +72,7 @@ SUBPIXEL_BITS: int = 4
 
 @dataclass(frozen=True)
 class LocalMask:
-    """A binary mask stored as its crop and the crop's top-left pixel in the frame.
-
-    Attributes:
-        mask: ``(h, w)`` bool crop (may be all False only for an empty mask, ``area == 0``).
-        x0: Frame column of the crop's first column.
-        y0: Frame row of the crop's first row.
-    """
+    """A binary mask stored as its bool crop and the crop's top-left pixel ``(x0, y0)``."""
 
     mask: np.ndarray
     x0: int = 0
@@ -121,13 +115,8 @@ class LocalMask:
 def mask_to_box(mask: LocalMask) -> np.ndarray:
     """The paper's box of a mask for the Kalman filter (appendix C.1), ``(x, y, w, h)``.
 
-    With in-mask pixel centres ``(x_j, y_j)``: the centre is their mean ``(u, v)``; the half
-    width is ``2 * mean |x_j - u|`` and the half height ``2 * mean |y_j - v|`` (exact for a
-    filled rectangle, and robust to thin protrusions, unlike the tight box). Extents are
-    floored at :data:`MIN_BOX_EXTENT`.
-
-    Raises:
-        ValueError: The mask is empty.
+    Centre: the mean in-mask pixel; half extents: twice the mean absolute deviation (exact for
+    a filled rectangle, robust to thin protrusions), floored at :data:`MIN_BOX_EXTENT`.
 
     >>> m = np.zeros((6, 8), bool); m[1:5, 2:8] = True   # a 6 x 4 rectangle at (2, 1)
     >>> mask_to_box(LocalMask.from_full(m)).tolist()
@@ -145,12 +134,7 @@ def mask_to_box(mask: LocalMask) -> np.ndarray:
 
 
 def body_size(keypoints: np.ndarray, min_score: float = 0.0) -> float:
-    """Body size of a pose: ``max(x range, y range)`` of its visible keypoints (paper eq. sbody).
-
-    Args:
-        keypoints: ``(K, 3)`` ``(x, y, score)``.
-        min_score: A keypoint is visible when its score is above this.
-    """
+    """Body size of a pose: ``max(x range, y range)`` of keypoints scored above ``min_score``."""
     kp = np.asarray(keypoints, dtype=np.float64)
     visible = kp[kp[:, 2] > min_score, :2]
     if not len(visible):
@@ -170,23 +154,9 @@ def pose_to_mask(
 ) -> LocalMask | None:
     """Draw a pose as a binary mask (the paper's pose -> mask conversion, appendix C.2).
 
-    Every limb whose two keypoints are visible is drawn as a segment of width
-    ``max(width_ratio * body_size, min_width)`` pixels (round caps), every polygon with at
-    least three visible corners is filled, and every visible keypoint gets a disc of that
-    width (so a pose with isolated joints still has pixels there).
-
-    Args:
-        keypoints: ``(K, 3)`` ``(x, y, score)`` in frame pixels.
-        min_score: A keypoint is visible when its score is above this (0 marks a keypoint
-            the detector did not find).
-        limbs: Segments as keypoint index pairs.
-        polygons: Closed polygons to fill, as keypoint index tuples.
-        width_ratio: Limb width per unit of :func:`body_size` (paper 0.05).
-        min_width: Least limb width in pixels (authors' code 8).
-
-    Returns:
-        The mask in frame coordinates (possibly reaching outside the frame), or None when
-        no keypoint is visible.
+    Limbs with both keypoints visible (score above ``min_score``) become round-capped segments
+    of width ``max(width_ratio * body_size, min_width)`` (paper 0.05, code 8 px), polygons with
+    three visible corners are filled, visible keypoints get discs. None when none is visible.
 
     >>> kp = np.zeros((17, 3)); kp[5] = (50, 40, 1); kp[11] = (50, 90, 1)
     >>> m = pose_to_mask(kp)
@@ -248,14 +218,9 @@ def mask_grid(
 ) -> np.ndarray:
     """The mask's cells on a grid over its box in feature-map units, capped at ``max_area``.
 
-    The mask's crop spans ``box_features`` (x1, y1, x2, y2 in feature cells). The grid has
-    about one cell per feature cell (``round`` of the box size, at least 1); a grid cell is
-    in the mask when its covered fraction is at least ``coverage_threshold``. When more
-    than ``max_area`` cells are in, the grid is shrunk by ``sqrt(max_area / count)`` per
-    axis (repeatedly if rounding leaves it above) -- the authors' "rescaling" cap.
-
-    Returns:
-        ``(rows, cols)`` bool grid with at least one True cell.
+    About one grid cell per feature cell; a cell is in when its covered fraction reaches
+    ``coverage_threshold``. Over ``max_area`` cells, the grid shrinks by
+    ``sqrt(max_area / count)`` per axis (the authors' "rescaling" cap). At least one cell is in.
     """
     if max_area is not None and max_area < 1:
         raise ValueError(f"max_area must be >= 1 or None, got {max_area}")
@@ -288,24 +253,9 @@ def mask_location_features(
 ) -> list[ObjectFeatures]:
     """In-mask location features of each mask: a variable-size set per object.
 
-    For every mask, the crop's box is mapped to feature coordinates, RoIAlign pools the
-    feature map on the :func:`mask_grid` of that box, and the cells inside the mask are
-    kept (at most ``max_area``), each L2-normalised, with their grid positions (for CF).
-
-    Args:
-        feature_map: ``(1, C, h, w)`` or ``(C, h, w)`` stride-8 map of the frame.
-        masks: Non-empty masks in frame pixels.
-        to_features: Maps ``(n, 4)`` frame-pixel x1y1x2y2 boxes to feature coordinates
-            (e.g. ``lambda b: letterbox.boxes_to_features(b, stride)``).
-        max_area: Cap on the number of locations per mask (None: no cap).
-        sampling_ratio: Bilinear samples per RoIAlign bin and axis.
-        coverage_threshold: See :func:`mask_grid`.
-        normalize: L2-normalise every location feature.
-
-    Returns:
-        One :class:`~unitrack_env.agents.primitives.similarity.ObjectFeatures` per mask: ``(s_i,
-        C)`` features (row-major over the grid) and ``(s_i, 2)`` (row, column) positions in
-        feature cells.
+    RoIAlign pools ``feature_map`` on each mask's :func:`mask_grid`; the cells inside the mask
+    are kept, L2-normalised, with their grid positions (for CF). ``to_features`` maps frame
+    x1y1x2y2 boxes to feature coordinates.
     """
     fmap = feature_map.unsqueeze(0) if feature_map.ndim == 3 else feature_map
     if not masks:

@@ -28,13 +28,7 @@ APPEARANCE_WEIGHT_CODE = 0.98
 
 @dataclass(frozen=True)
 class Assignment:
-    """Result of a thresholded assignment between rows (tracks) and columns (detections).
-
-    Attributes:
-        matches: ``(k, 2)`` ``int64`` array of ``(row, column)`` pairs, sorted by row.
-        unmatched_rows: ``int64`` indices of rows left unmatched, ascending.
-        unmatched_cols: ``int64`` indices of columns left unmatched, ascending.
-    """
+    """Thresholded assignment: ``(k, 2)`` ``(row, column)`` matches, unmatched rows/columns."""
 
     matches: np.ndarray
     unmatched_rows: np.ndarray
@@ -44,22 +38,9 @@ class Assignment:
 def linear_assignment(cost: np.ndarray, threshold: float) -> Assignment:
     """Optimal one-to-one assignment that only accepts pairs with ``cost < threshold``.
 
-    Solves ``max sum over matched pairs of (threshold - cost)``: a pair is worth matching
-    only when its cost is below the threshold, and the matching (not necessarily of maximum
-    size) is optimal under that criterion. This is the same optimum as the JDE/UniTrack
-    ``lap.lapjv(cost, extend_cost=True, cost_limit=threshold)`` call, where leaving a row or
-    a column unmatched costs ``threshold / 2``; here it is solved with
-    :func:`scipy.optimize.linear_sum_assignment` (Hungarian / Jonker-Volgenant).
-
-    Args:
-        cost: ``(n, m)`` cost matrix; ``inf`` entries are never matched.
-        threshold: Pairs are accepted only when their cost is strictly below it.
-
-    Returns:
-        The :class:`Assignment`.
-
-    Raises:
-        ValueError: If ``cost`` is not 2-d or contains NaN.
+    Maximises the sum of ``threshold - cost`` over matched pairs: the optimum of JDE/UniTrack's
+    ``lap.lapjv(cost, extend_cost=True, cost_limit=threshold)``, solved with scipy's
+    ``linear_sum_assignment``. ``inf`` entries are never matched; NaN raises ValueError.
 
     >>> a = linear_assignment(np.array([[0.1, 0.9], [0.2, 0.8]]), 0.5)
     >>> a.matches.tolist(), a.unmatched_rows.tolist(), a.unmatched_cols.tolist()
@@ -90,9 +71,6 @@ def linear_assignment(cost: np.ndarray, threshold: float) -> Assignment:
 def iou_cost(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
     """Return the IoU distance ``1 - IoU`` between two sets of ``(x, y, w, h)`` boxes.
 
-    Uses :func:`unitrack_env.geometry.box_iou` (TrackEval convention). Matching with
-    ``linear_assignment(iou_cost(a, b), 1 - t)`` accepts pairs with ``IoU > t``.
-
     >>> iou_cost(np.array([[0, 0, 2, 2]]), np.array([[0, 0, 2, 2], [4, 4, 1, 1]]))
     array([[0., 1.]])
     """
@@ -102,13 +80,7 @@ def iou_cost(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
 def gate(
     cost: np.ndarray, motion_distance: np.ndarray, threshold: float = CHI2_95_4DOF
 ) -> np.ndarray:
-    """Return a copy of ``cost`` with ``inf`` where ``motion_distance > threshold``.
-
-    Args:
-        cost: ``(n, m)`` cost matrix.
-        motion_distance: ``(n, m)`` squared Mahalanobis distances.
-        threshold: Gate; the chi-square 0.95 quantile for 4 dof by default (paper eq. gate).
-    """
+    """Return a copy of ``cost`` with ``inf`` where ``motion_distance > threshold`` (eq. gate)."""
     c = np.array(cost, dtype=np.float64)
     c[np.asarray(motion_distance) > threshold] = np.inf
     return c
@@ -120,21 +92,10 @@ def fuse_motion(
     appearance_weight: float = APPEARANCE_WEIGHT_PAPER,
     gate_threshold: float | None = CHI2_95_4DOF,
 ) -> np.ndarray:
-    """Fuse appearance and motion costs (paper, Algorithm 1) and optionally gate.
+    """Fuse appearance and motion costs (paper, Algorithm 1): ``lambda C_a + (1 - lambda) C_m``.
 
-    ``C = lambda * C_a + (1 - lambda) * C_m``, where ``C_m`` is the squared Mahalanobis
-    distance. Gated pairs (``C_m > gate_threshold``) get ``inf`` *before* the assignment,
-    as the authors' code does; the paper's Algorithm 1 instead filters gated pairs after
-    the Hungarian step, which can let an impossible pair block a valid one.
-
-    Args:
-        appearance_cost: ``(n, m)`` appearance costs (e.g. ``1 - RSM``).
-        motion_distance: ``(n, m)`` squared Mahalanobis distances.
-        appearance_weight: ``lambda`` in ``[0, 1]``; paper 0.99, authors' code 0.98.
-        gate_threshold: Gate on ``motion_distance``; ``None`` disables gating.
-
-    Returns:
-        ``(n, m)`` fused cost.
+    Gated pairs (``C_m > gate_threshold``; ``None``: no gate) get ``inf`` *before* the
+    assignment, as the authors' code does, so an impossible pair cannot block a valid one.
     """
     if not 0.0 <= appearance_weight <= 1.0:
         raise ValueError(f"appearance_weight must be in [0, 1], got {appearance_weight}")

@@ -1,16 +1,9 @@
 """Overlap measures for appearance-free tracking: box IoU, mask IoU and pose OKS.
 
 A measure tells an :class:`~unitrack_env.agents.primitives.overlap_tracker.OverlapTracker`
-what a detection's state is (a box, a mask's run-length encoding, a pose), how similar two
-sets of states are, and how a track's state follows its matches:
-
-* :class:`BoxOverlap`: box IoU, with a constant-velocity guess of where a track is now
-  (its last box plus an exponentially smoothed velocity, times the frames since its last
-  match).
-* :class:`MaskOverlap`: mask IoU between a track's last mask and the detections
-  (``pycocotools`` RLE; no motion model: masks of one step apart overlap).
-* :class:`PoseOverlap`: the object keypoint similarity (:func:`object_keypoint_similarity`)
-  between a track's last pose and the detections.
+a detection's state, how similar two sets of states are, and how a track follows its
+matches: :class:`BoxOverlap` (IoU with a constant-velocity guess), :class:`MaskOverlap`
+(RLE mask IoU, no motion) and :class:`PoseOverlap` (OKS).
 """
 
 from __future__ import annotations
@@ -41,20 +34,10 @@ sit where COCO has the eyes and take their 0.025."""
 def object_keypoint_similarity(
     poses_a: np.ndarray, poses_b: np.ndarray, sigmas: np.ndarray = OKS_SIGMAS
 ) -> np.ndarray:
-    """OKS between every pose of ``poses_a`` and every pose of ``poses_b``.
+    """OKS ``(n, m)`` between every pose of ``poses_a`` and every pose of ``poses_b``.
 
-    ``OKS(a, b) = mean over keypoints visible in both of exp(-d^2 / (2 s^2 (2 sigma)^2))``,
-    the COCO keypoint similarity with ``s^2`` the area of ``a``'s visible-keypoint box (COCO
-    uses the annotated segment's area, which poses do not have) and ``d`` the keypoint
-    distance. Pairs with no keypoint visible in both have OKS 0.
-
-    Args:
-        poses_a: ``(n, K, 3)`` ``(x, y, score)``; a keypoint is visible when its score is > 0.
-        poses_b: ``(m, K, 3)``.
-        sigmas: ``(K,)`` per-keypoint falloff.
-
-    Returns:
-        ``(n, m)`` similarities in ``[0, 1]``.
+    COCO's keypoint similarity over keypoints visible (score > 0) in both, with ``s^2`` the
+    area of ``a``'s visible-keypoint box (poses have no segment area); 0 when none is shared.
 
     >>> a = np.zeros((1, 17, 3)); a[0, :, 2] = 1; a[0, :, 0] = np.arange(17) * 10
     >>> a[0, :, 1] = np.arange(17) * 20
@@ -103,12 +86,7 @@ class OverlapMeasure(abc.ABC, Generic[S]):
 
 
 class BoxOverlap(OverlapMeasure[np.ndarray]):
-    """Box IoU with a constant-velocity guess.
-
-    Args:
-        velocity_smoothing: Weight of the newest displacement in the exponentially smoothed
-            velocity (0 = no motion model); a track's first match sets the velocity outright.
-    """
+    """Box IoU with a constant-velocity guess (``velocity_smoothing``: newest step weight)."""
 
     def __init__(self, velocity_smoothing: float = 0.5) -> None:
         self.velocity_smoothing = velocity_smoothing
@@ -159,11 +137,7 @@ class MaskOverlap(OverlapMeasure[dict]):
 
 
 class PoseOverlap(OverlapMeasure[np.ndarray]):
-    """Object keypoint similarity (:func:`object_keypoint_similarity`; no motion).
-
-    Args:
-        sigmas: ``(K,)`` per-keypoint falloff.
-    """
+    """Object keypoint similarity (:func:`object_keypoint_similarity`; no motion)."""
 
     def __init__(self, sigmas: np.ndarray = OKS_SIGMAS) -> None:
         self.sigmas = sigmas

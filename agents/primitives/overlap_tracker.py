@@ -19,12 +19,8 @@ from .overlap import OverlapMeasure, S
 class OverlapTrack(Generic[S]):
     """One track of an :class:`OverlapTracker` (a record; the engine mutates it).
 
-    Attributes:
-        track_id: Public id (>= 1).
-        state: State of the last matched detection (a box, a mask RLE, a pose).
-        hits: Number of matched frames (birth included).
-        lost: Frames since the last match.
-        velocity: Motion state of measures with a motion model (box velocity), else None.
+    ``state`` is the last matched detection's (a box, a mask RLE, a pose); ``hits`` counts
+    matched frames, ``lost`` frames since the last match; ``velocity`` is the box motion state.
     """
 
     track_id: int
@@ -36,13 +32,7 @@ class OverlapTrack(Generic[S]):
 
 @dataclass(frozen=True)
 class OverlapReport(Generic[S]):
-    """A reported track of one frame.
-
-    Attributes:
-        track_id: Public id.
-        detection_index: Index of its detection in this frame's states.
-        state: Its state (the detection's).
-    """
+    """A reported track of one frame: its id, its detection's index and state."""
 
     track_id: int
     detection_index: int
@@ -50,18 +40,11 @@ class OverlapReport(Generic[S]):
 
 
 class OverlapTracker(Generic[S]):
-    """Overlap matching with a hit-count / lost-age life cycle (see the module docstring).
+    """Overlap matching with a hit-count / lost-age life cycle; :meth:`reset` clears all state.
 
-    All state lives on the instance; :meth:`reset` clears it, including the id counter.
-
-    Args:
-        measure: The overlap measure.
-        threshold: Least overlap of a match.
-        duplicate_threshold: Least overlap of an unmatched detection with a matched one that
-            makes it a duplicate (1 = off).
-        min_hits: Matches before a track is reported (after the first ``min_hits`` frames).
-        max_lost_seconds: How long an unmatched track is kept.
-        frame_rate: Frames per second (sets the lost-track age).
+    A match needs overlap ``threshold``; an unmatched detection overlapping a matched one by
+    ``duplicate_threshold`` is a duplicate (1 = off); tracks are reported after ``min_hits``
+    matches and kept ``max_lost_seconds`` unmatched.
 
     Example:
         >>> from unitrack_env.agents.primitives.overlap import BoxOverlap

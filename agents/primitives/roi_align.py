@@ -57,27 +57,12 @@ def roi_align(
     aligned: bool = True,
     batch_index: torch.Tensor | Sequence[int] | None = None,
 ) -> torch.Tensor:
-    """Pool a fixed-size feature grid from each box.
+    """Pool a fixed ``output_size`` feature grid from each box: ``(n, C, oh, ow)``.
 
-    Args:
-        feature_map: ``(C, H, W)`` or ``(B, C, H, W)``.
-        boxes: ``(n, 4)`` as x1, y1, x2, y2 in the coordinates that ``spatial_scale`` maps to
-            feature-map pixels (``spatial_scale=1``: feature coordinates; ``1/8``: input
-            pixels of a stride-8 map). ``(n, 5)`` rows ``(batch_index, x1, y1, x2, y2)`` as in
-            torchvision are accepted too.
-        output_size: ``(height, width)`` of the pooled grid.
-        spatial_scale: Factor from box coordinates to feature-map pixels.
-        sampling_ratio: Samples per bin along each axis; ``<= 0`` picks
-            ``ceil(box_size / output_size)`` per box.
-        aligned: Shift boxes by -0.5 pixel (the correct, "aligned" RoIAlign).
-        batch_index: Image of each box when ``feature_map`` is batched with ``B > 1``.
-
-    Returns:
-        ``(n, C, output_size[0], output_size[1])`` with the feature map's dtype; ``n = 0``
-        gives an empty tensor of that shape.
-
-    Raises:
-        ValueError: Bad shapes, or a batched map with ``B > 1`` and no batch index.
+    ``boxes`` are ``(n, 4)`` x1y1x2y2 (or torchvision's ``(n, 5)`` with a batch index) that
+    ``spatial_scale`` maps to feature pixels. ``sampling_ratio <= 0`` picks
+    ``ceil(box_size / output_size)`` per box; ``aligned`` shifts boxes by -0.5 pixel. A batched
+    map with ``B > 1`` needs ``batch_index``; bad shapes raise ValueError.
     """
     fmap = feature_map.unsqueeze(0) if feature_map.ndim == 3 else feature_map
     if fmap.ndim != 4:
@@ -125,11 +110,7 @@ def _sampling_grid(
     rois: torch.Tensor, pooled: tuple[int, int], spatial_scale: float, sampling_ratio: int,
     aligned: bool,
 ) -> tuple[torch.Tensor, ...]:
-    """Box origins and sizes in feature pixels, and the samples per bin of each box.
-
-    Returns:
-        ``(x1, y1, roi_w, roi_h, grid_h, grid_w)``, each ``(n,)``.
-    """
+    """``(x1, y1, roi_w, roi_h, grid_h, grid_w)`` per box: origins, sizes, samples per bin."""
     offset = 0.5 if aligned else 0.0
     x1 = rois[:, 0] * spatial_scale - offset
     y1 = rois[:, 1] * spatial_scale - offset

@@ -1,13 +1,8 @@
 """Appearance similarity between tracks and detections: RSM and the paper's baselines.
 
-Every object (a track's last observation, or a detection) is a *set* of location features
-``(s_i, C)``: a box pooled by RoIAlign into a 10 x 4 grid gives 40 locations; a mask gives
-the (variable) number of feature-map cells it covers. All metrics return an ``(N, M)``
-similarity matrix (float64 numpy, higher = more alike; the association cost is
-``1 - similarity``), accept objects of different sizes where the metric allows it, and
-return ``(N, 0)`` / ``(0, M)`` arrays for empty inputs. By default every location feature is
-L2-normalised first (``normalize=True``), as UniTrack does before computing RSM.
-
+Every object is a *set* of ``(s_i, C)`` location features (40 for a box pooled to 10 x 4,
+the covered cells for a mask). Metrics return an ``(N, M)`` float64 similarity (higher =
+more alike); features are L2-normalised first by default, as UniTrack does.
 More in docs/module-notes.md.
 """
 
@@ -45,13 +40,7 @@ DEFAULT_GRID_SHAPE: tuple[int, int] = (10, 4)
 
 @dataclass(frozen=True)
 class ObjectFeatures:
-    """The location features of one observation, optionally with their positions.
-
-    Attributes:
-        features: ``(s, C)`` location features.
-        positions: ``(s, 2)`` (row, column) of each location on the feature grid; only
-            :func:`center_feature_similarity` uses them. None for a row-major box grid.
-    """
+    """The ``(s, C)`` location features of one observation, optionally ``(s, 2)`` grid positions."""
 
     features: torch.Tensor
     positions: torch.Tensor | None = None
@@ -179,21 +168,9 @@ def _reconstruction_cosine(
 ) -> torch.Tensor:
     """cos(q_i, R_{i<-j} k_j) for all pairs, with R the (i, j) block of ``attention``.
 
-    Args:
-        queries: N sets ``(s_i, C)`` (the objects being reconstructed).
-        keys: M sets ``(s_j, C)`` (the objects they are reconstructed from).
-        affinity: ``(sum s_i, sum s_j)`` inner products of all query and key locations.
-        attention: Same shape; softmax of the affinity over ALL key locations (each row sums
-            to one over every key object, not per block: no renormalisation).
-
-    Returns:
-        ``(N, M)`` cosines of the flattened original and reconstruction.
-
-    The inner product <q_i, R k_j> is the block sum of ``attention * affinity``. The squared
-    norm of the reconstruction is ``sum_r || sum_c a_rc k_c ||^2`` over rows r of block i and
-    columns c of block j, computed on key sets padded to ``s_max`` locations either directly
-    (cost ~ rows * M * s_max * C) or through the key Gram matrices (~ rows * M * s_max^2),
-    whichever is cheaper.
+    ``attention`` is the softmax of ``affinity`` over ALL key locations (no per-block
+    renormalisation). The reconstruction norm is computed directly or through the key Gram
+    matrices, whichever is cheaper.
     """
     n, m = len(queries), len(keys)
     q_owner, k_owner = _owners(queries), _owners(keys)
@@ -227,27 +204,10 @@ def rsm(
 ) -> np.ndarray:
     """Reconstruction Similarity Metric (UniTrack, section 2.4, eq. "rsm").
 
-    ``RSM(i, j) = (cos(t_i, t_hat_{i<-j}) + cos(d_j, d_hat_{j<-i})) / 2``, where all track
-    locations ``T`` and all detection locations ``D`` are stacked, ``A = T D^T`` is the
-    affinity between every track location and every detection location,
-    ``t_hat_{i<-j} = R_{i<-j} d_j`` with ``R_{i<-j}`` the (i, j) sub-block of
-    ``softmax(A / temperature)`` taken over ALL detection locations (forward), and
-    ``d_hat_{j<-i}`` likewise from ``softmax(A / temperature)`` over ALL track locations
-    (backward). Sub-blocks are not renormalised, so a detection that another detection
-    explains better reconstructs a track poorly (its attention weights, hence its
-    reconstruction, approach zero). Cosines are of the flattened ``(s, C)`` matrices, with
-    each norm floored at :data:`COSINE_EPS` so that a vanishing reconstruction scores ~0.
-
-    The metric is symmetric: swapping tracks and detections transposes the result.
-
-    Args:
-        tracks: N objects (see :data:`ObjectSet`); sizes may differ.
-        detections: M objects.
-        temperature: Softmax temperature (default :data:`RSM_TEMPERATURE`, as in the code).
-        normalize: L2-normalise every location feature first (the paper does).
-
-    Returns:
-        ``(N, M)`` float64 similarities in ``[-1, 1]`` (``[0, 1]`` for non-negative features).
+    ``RSM(i, j) = (cos(t_i, t_hat_{i<-j}) + cos(d_j, d_hat_{j<-i})) / 2``, reconstructing each
+    object from the other's locations with ``softmax(T D^T / temperature)`` taken over ALL
+    locations of the other side, so a detection another detection explains better reconstructs
+    a track poorly. Norms are floored at :data:`COSINE_EPS`. Symmetric; returns ``(N, M)``.
     """
     if temperature <= 0:
         raise ValueError(f"temperature must be > 0, got {temperature}")
@@ -297,19 +257,10 @@ def center_feature_similarity(
     normalize: bool = True,
     grid_shape: tuple[int, int] = DEFAULT_GRID_SHAPE,
 ) -> np.ndarray:
-    """Center Feature (CF) baseline (UniTrack, appendix D).
+    """Center Feature (CF) baseline (UniTrack, appendix D): cosine of the centre-of-mass features.
 
-    Each observation is represented by the point feature at its centre of mass: the mean
-    position of its locations, and the feature of the location nearest to it (locations
-    tied for nearest are averaged, which for a box grid with an even side is the bilinear
-    value at the centre). Similarity is the cosine of these vectors. Works for any
-    observation format, but is a local feature.
-
-    Args:
-        tracks: N objects; masks need :class:`ObjectFeatures` with positions.
-        detections: M objects.
-        normalize: L2-normalise every location feature first.
-        grid_shape: Grid assumed for objects given without positions.
+    Locations tied for nearest to the centre are averaged (the bilinear centre of an even grid).
+    Masks need :class:`ObjectFeatures` with positions; ``grid_shape`` is assumed otherwise.
     """
     t_feats, d_feats, t_pos, d_pos = _prepare(tracks, detections, normalize)
     empty = _empty(len(t_feats), len(d_feats))
@@ -327,14 +278,9 @@ def center_feature_similarity(
 def global_feature_similarity(
     tracks: ObjectSet, detections: ObjectSet, *, normalize: bool = True
 ) -> np.ndarray:
-    """Global Feature (GF) baseline (UniTrack, appendix D).
+    """Global Feature (GF) baseline (UniTrack, appendix D): cosine of the concatenated features.
 
-    The ``s`` point features of an observation are concatenated into one ``s * C`` vector
-    and compared by cosine. Only defined when every observation has the same number of
-    locations in the same order (boxes resized to a fixed grid), as the paper notes.
-
-    Raises:
-        ValueError: Observations of different sizes (e.g. masks).
+    Defined only for observations of equal size (boxes on a fixed grid); raises ValueError else.
     """
     t_feats, d_feats, _, _ = _prepare(tracks, detections, normalize)
     empty = _empty(len(t_feats), len(d_feats))
@@ -354,11 +300,7 @@ def global_feature_similarity(
 def global_pooled_feature_similarity(
     tracks: ObjectSet, detections: ObjectSet, *, normalize: bool = True
 ) -> np.ndarray:
-    """Global-Pooled Feature (GPF) baseline (UniTrack, appendix D).
-
-    The point features of an observation are averaged into one ``C`` vector (global average
-    pooling, as in many re-identification models) and compared by cosine. Any sizes.
-    """
+    """Global-Pooled Feature (GPF) baseline (UniTrack, appendix D): cosine of mean features."""
     t_feats, d_feats, _, _ = _prepare(tracks, detections, normalize)
     empty = _empty(len(t_feats), len(d_feats))
     if empty is not None:

@@ -32,21 +32,10 @@ class TrackState(enum.Enum):
 class Track(Generic[P]):
     """One track of an :class:`Associator` (a record; the engine mutates it).
 
-    Attributes:
-        track_id: Public id (>= 1), assigned when the track is confirmed; ``None`` while
-            tentative.
-        state: Life-cycle state.
-        mean: ``(8,)`` Kalman state ``(u, v, a, h, du, dv, da, dh)``.
-        covariance: ``(8, 8)`` Kalman covariance.
-        payload: Payload of the last matched observation (or the moving average of the
-            matched ones, see ``AssociationConfig.appearance_momentum``).
-        score: Score of the last matched detection.
-        detection_box: ``(4,)`` ``(x, y, w, h)`` of the last matched detection.
-        start_frame: Episode frame counter (1-based) at birth.
-        last_frame: Episode frame counter of the last match.
-        hits: Number of matched frames.
-        key: Engine-internal serial number (unique per episode, tentative tracks included);
-            diagnostics use it to follow a track before it has a public id.
+    ``track_id`` is set when the track is confirmed (None while tentative); ``mean`` and
+    ``covariance`` are its Kalman state; ``payload`` is the last matched observation's (or
+    their moving average); frame counters are 1-based; ``key`` is an engine serial number
+    that follows tentative tracks too.
     """
 
     track_id: int | None
@@ -69,14 +58,7 @@ class Track(Generic[P]):
 
 @dataclass(frozen=True)
 class TrackOutput:
-    """A reported track of one frame.
-
-    Attributes:
-        track_id: Public id (>= 1).
-        box: ``(4,)`` ``float64`` ``(x, y, w, h)``.
-        score: Score of the matched detection.
-        detection_index: Index of the matched detection in this frame's input.
-    """
+    """A reported track of one frame: id, ``(x, y, w, h)`` box, score, and its detection's index."""
 
     track_id: int
     box: np.ndarray
@@ -88,13 +70,9 @@ class TrackOutput:
 class StepRecord:
     """What one :meth:`Associator.step` did (for diagnostics; no effect on tracking).
 
-    Attributes:
-        matches: ``(track key, detection index, stage, was_lost)`` per match, where stage is
-            ``"appearance"`` (stage 1), ``"iou"`` (stage 2) or ``"tentative"``
-            (confirmation), and ``was_lost`` says the track was lost before this frame.
-        births: ``(track key, detection index)`` of the tracks started in this frame.
-        similarities: Track key -> ``(m,)`` stage-1 similarity of that track to every
-            detection of the frame (tracks offered to stage 1 only).
+    ``matches``: ``(track key, detection index, stage, was_lost)`` with stage ``"appearance"``,
+    ``"iou"`` or ``"tentative"``; ``births``: ``(track key, detection index)``;
+    ``similarities``: track key -> stage-1 similarity to every detection.
     """
 
     matches: list[tuple[int, int, str, bool]] = field(default_factory=list)

@@ -96,9 +96,8 @@ def record_episode(
 def metric_tolerance(tolerance: float | dict[str, float], name: str) -> float:
     """The absolute tolerance of metric ``name``.
 
-    ``tolerance`` is one number for every metric, or a dict whose keys are metric names or
-    ``fnmatch`` patterns (``"IDF1/*"``): an exact name wins, then the first matching
-    pattern in the dict's order, then ``"*"`` if present, else :data:`DEFAULT_TOLERANCE`.
+    ``tolerance`` is a number, or a dict of names or ``fnmatch`` patterns: an exact name wins,
+    then the first matching pattern, then ``"*"``, else :data:`DEFAULT_TOLERANCE`.
     """
     if not isinstance(tolerance, dict):
         return float(tolerance)
@@ -118,15 +117,9 @@ def compare_records(
     metrics: list[str] | None = None,
     strict_actions: bool = False,
 ) -> list[str]:
-    """Return human-readable differences (empty when the episode still matches).
+    """Human-readable differences of ``actual`` from ``golden`` (empty when it still matches).
 
-    Args:
-        golden: the recorded episode.
-        actual: the replayed episode.
-        tolerance: absolute tolerance, for all metrics or per metric name or pattern
-            (see :func:`metric_tolerance`).
-        metrics: compare only these metrics (default: all in the golden file).
-        strict_actions: also fail when the action digest changed while metrics did not.
+    ``strict_actions`` also fails on a changed action digest with unchanged metrics.
     """
     problems: list[str] = []
     if golden.frames != actual.frames:
@@ -169,9 +162,7 @@ def check_episode(
 ) -> EpisodeRecord:
     """Replay an episode and compare it with its golden file (or re-record with ``update``).
 
-    Raises:
-        GoldenMismatch: the golden file is missing (and ``update`` is False), or the
-            episode moved; the message shows each change.
+    Raises GoldenMismatch when the golden file is missing or the episode moved.
     """
     path = Path(golden)
     actual = record_episode(env_id, agent, sequence, env_kwargs=env_kwargs,

@@ -19,6 +19,7 @@ from typing import Any
 
 import pandas as pd
 
+from ..compare import COMPARE_TASKS
 from ..events import load_events, run_benchmark
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, render_picture, sample
@@ -27,7 +28,13 @@ from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, rende
 COUNTS = {"IDSW", "CLR_FP", "CLR_FN", "MT", "ML", "Frag", "IDs", "CLR_TP"}
 
 #: Per-frame value shown on the timeline of a non-MOT task.
-VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1")}
+VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1"),
+                 "vis": ("iou", "IoU of tp tracks")}
+
+#: Event lanes of the timeline of tasks with counted events, and what a count is; their
+#: thumbnails are not drawn yet (masks, poses), only box MOT's.
+LANES = {"mots": (None, "masks"), "posetrack": (("fn", "fp", "idsw"), "joints"),
+         "vis": (("fn", "fp"), "track-frames")}
 
 
 def _slug(text: str) -> str:
@@ -59,7 +66,7 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
 
 
 def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
-    """The paired comparison of two MOT runs with 95% intervals."""
+    """The paired comparison of two runs (box MOT, SOT, VOS, JHMDB) with 95% intervals."""
     from ..compare import compare_runs
 
     comp = compare_runs(run_a, run_b, resamples=resamples)
@@ -77,8 +84,8 @@ def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
     notes = "".join(f'<p class="note">{esc(n)}</p>' for n in comp.notes)
     metrics = list(comp.rows["COMBINED"])
     return (f'<h2 id="compare">Comparison</h2><p>A = {esc(run_a.name)}, B = {esc(run_b.name)}: '
-            f"paired circular block bootstrap over frames ({comp.resamples} resamples, blocks "
-            f"of {', '.join(f'{b}' for b in comp.blocks.values())} frames); shaded rows: the "
+            f"paired delete-a-block jackknife over frames (blocks of "
+            f"{', '.join(f'{b}' for b in comp.blocks.values())} frames); shaded rows: the "
             "95% interval of A - B excludes 0.</p>" + notes
             + forest(comp.rows["COMBINED"], metrics)
             + table(["sequence", "metric", "A", "B", "A-B", "95% interval"], rows,
@@ -139,9 +146,16 @@ def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
         return (f'<section class="sequence" data-sequence="{esc(seq)}">{head}'
                 + mot_timeline(events, frames) + shown
                 + '<div class="thumbs">' + "".join(figures) + "</div></section>")
+    body = ""
+    if bench.task in LANES:
+        kinds, unit = LANES[bench.task]
+        body = (mot_timeline(events, frames, kinds=kinds) + f"<p>Counts are {unit}; no "
+                "thumbnails for this task yet (only box MOT's are drawn).</p>")
     column, name = VALUE_COLUMNS.get(bench.task, (None, None))
-    body = (value_timeline(events[column], events["frame"], name, frames)
-            if column is not None and column in events else "<p>No per-frame events.</p>")
+    if column is not None and column in events:
+        rows = events[events["type"] == "tp"] if bench.task == "vis" else events
+        body += value_timeline(rows[column], rows["frame"], name, frames)
+    body = body or "<p>No per-frame events.</p>"
     return f'<section class="sequence" data-sequence="{esc(seq)}">{head}{body}</section>'
 
 
@@ -214,7 +228,7 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
             metrics_section(loaded)]
-    if len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task == "mot":
+    if len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task in COMPARE_TASKS:
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
         body.append(compare_section(runs[0], runs[1], resamples) if common else
                     '<h2 id="compare">Comparison</h2><p class="note">The first two runs share '

@@ -83,18 +83,19 @@ MOT_LANES = (("fn", "#e67e22", "misses (FN)"), ("fp", "#8e44ad", "false positive
 
 
 def mot_timeline(events: pd.DataFrame, num_frames: int, width: int = 1000,
-                 max_bars: int = 800) -> str:
-    """An SVG with one lane per MOT event type, bar height = count.
+                 max_bars: int = 800, kinds: Sequence[str] | None = None) -> str:
+    """An SVG with one lane per MOT event type (or those of ``kinds``), bar height = count.
 
     One bar per frame, or per bin of frames on a long sequence, so the page stays small.
     """
+    lanes = [lane for lane in MOT_LANES if kinds is None or lane[0] in kinds]
     lane, label_w = 26, 110
-    height = lane * len(MOT_LANES) + 18
+    height = lane * len(lanes) + 18
     size = max(1, math.ceil(num_frames / max_bars))  # frames per bar
     scale = (width - label_w) / max(1, num_frames)
     parts = [f'<svg class="timeline" width="{width}" height="{height}" '
              f'viewBox="0 0 {width} {height}" role="img" aria-label="error events over time">']
-    for i, (kind, colour, label) in enumerate(MOT_LANES):
+    for i, (kind, colour, label) in enumerate(lanes):
         y0 = i * lane
         frames = events.loc[events["type"] == kind, "frame"].to_numpy(dtype=np.int64)
         counts = pd.Series((frames - 1) // size).value_counts()
@@ -110,7 +111,7 @@ def mot_timeline(events: pd.DataFrame, num_frames: int, width: int = 1000,
             parts.append(f'<rect class="ev-{kind}" x="{x:.1f}" y="{y0 + lane - 2 - h:.1f}" '
                          f'width="{max(1.0, size * scale):.1f}" height="{h:.1f}" '
                          f'fill="{colour}"><title>{where}: {int(count)} {kind}</title></rect>')
-    parts.append(_axis(num_frames, label_w, width, lane * len(MOT_LANES) + 14))
+    parts.append(_axis(num_frames, label_w, width, lane * len(lanes) + 14))
     parts.append("</svg>")
     return "".join(parts)
 

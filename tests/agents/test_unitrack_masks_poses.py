@@ -259,7 +259,7 @@ def test_task_detection_and_defaults(model: AppearanceModel) -> None:
     assert agent.associator.max_lost_frames == 6
     agent.reset({"keypoints": None}, {})
     assert agent.task == "posetrack" and agent.max_tracks == 100
-    assert agent.config.max_mask_area_for("vis") == TASK_DEFAULTS["vis"].max_mask_area == 1000
+    assert agent.config.settings("vis").max_mask_area == TASK_DEFAULTS["vis"].max_mask_area == 1000
     fixed = make_agent("unitrack", appearance_model=model, task="mots",
                        association={"duplicate_iou": 0.5})
     assert fixed.associator.config.duplicate_iou == 0.5

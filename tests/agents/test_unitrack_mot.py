@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -214,6 +215,13 @@ def test_real_pets09_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path) -
         assert unitrack["HOTA"] > peer["HOTA"], name
         assert unitrack["IDF1"] > peer["IDF1"], name
     assert unitrack["MOTA"] >= iou["MOTA"] - 0.01
+    # Issue 23's acceptance, on the same two runs: each one's error events (TP/FP/FN/ID
+    # switches/fragmentations) sum to TrackEval's counts.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "evaluation"))
+    from test_events import assert_counts_match
+
+    assert assert_counts_match(tmp_path / "iou")["PETS09-S2L1"]["idsw"] > 10
+    assert_counts_match(tmp_path / "unitrack")
 
 
 #: roboflow `trackers` 2.6.1 on the hard synthetic scenes (HARD-01..03, combined), measured

@@ -1,14 +1,9 @@
 """What every benchmark shares: ground truth, the official result format, folder scoring.
 
-A benchmark is the evaluation half of a task (TrackEval's split of data set, metric and
-evaluator): it knows which sequences a data set root holds and which can be scored, writes and
-reads one sequence's results in the task's official file format, scores a folder of such
-files with the official metrics, and names the result columns that tables show. It never
-plays an episode and never builds an environment, so a folder can be scored on its own.
-
-The data contract: ``results`` is what an environment records for one sequence (for MOT,
-the ``(k, 10)`` MOTChallenge rows of ``episode_results()``; for DAVIS, one label map per
-frame; ...). Each subclass states its form in its class docstring.
+A benchmark is the evaluation half of a task (as in TrackEval): it knows which sequences
+can be scored, writes and reads results in the official format, scores folders and names
+the table columns. It never plays an episode, so a folder can be scored on its own.
+``results`` is what an environment records for one sequence; each subclass states its form.
 """
 
 from __future__ import annotations
@@ -31,9 +26,7 @@ def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
               **synthetic_kwargs: Any) -> tuple[Path, bool]:
     """The data set folder to read and whether it is the embedded synthetic default.
 
-    ``root`` wins, then ``$UNITRACK_DATA/<folder>``; otherwise the synthetic data set is
-    built (once, cached) by :func:`unitrack_env.datasets.synthetic.ensure_synthetic` with
-    ``synthetic_args`` and ``synthetic_kwargs``.
+    ``root`` wins, then ``$UNITRACK_DATA/<folder>``, else the synthetic data (built once).
     """
     path = resolve_root(root, folder)
     if path is not None:
@@ -83,13 +76,8 @@ class Benchmark(ABC):
     """One task's evaluation: ground-truth facts, official result files, folder scoring.
 
     Subclasses set :attr:`task` and :attr:`columns` and implement the abstract methods.
-    :meth:`build` is the task's one builder: its environment builds its benchmark with it
-    (and reads its data set from it), and :func:`unitrack_env.benchmarks.benchmark_for`
-    passes it the environment arguments its signature names.
-
-    Attributes:
-        dataset: the data set reader whose ground truth is scored against.
-        synthetic: whether the data set is the embedded synthetic default.
+    :meth:`build` is the task's one builder, used by its environment and by
+    :func:`unitrack_env.benchmarks.benchmark_for`.
     """
 
     #: The task family (``"mot"``, ``"vos"``, ...), as in the registration table.
@@ -163,14 +151,8 @@ class Benchmark(ABC):
                      *, allow_missing: bool = False) -> ScoreReport:
         """Score the result files of ``sequences`` (default: every scorable one) in ``folder``.
 
-        A sequence without a result file is refused, naming every such sequence: a combined
-        score over part of a split is not the benchmark's score. ``allow_missing=True``
-        scores the others. The report's :attr:`~ScoreReport.coverage` says what the combined
-        row covers, counted against every scorable sequence of the split (``"2 of 7
-        sequences"`` when two were asked for).
-
-        Raises:
-            MissingResults: result files are missing (and ``allow_missing`` is False).
+        Missing result files raise MissingResults naming them (a partial split is not the
+        benchmark's score) unless ``allow_missing``; the report's coverage says what was scored.
         """
         folder = Path(folder)
         if not folder.is_dir():

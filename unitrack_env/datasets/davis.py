@@ -1,12 +1,7 @@
 """Reader and result writer for DAVIS-2017 semi-supervised video object segmentation.
 
-Layout read, exactly as the benchmark ships it::
-
-    <root>/JPEGImages/480p/<seq>/00000.jpg ...
-    <root>/Annotations/480p/<seq>/00000.png ...     palette PNGs (test-dev: first frame only)
-    <root>/ImageSets/2017/{train,val,test-dev}.txt   one sequence name per line
-
-More in docs/module-notes.md.
+Reads ``JPEGImages/480p/<seq>/*.jpg``, ``Annotations/480p/<seq>/*.png`` (palette PNGs;
+test-dev: first frame only) and ``ImageSets/2017/<split>.txt``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -36,14 +31,7 @@ PALETTE_SIZE: int = 256
 
 
 def voc_palette(size: int = PALETTE_SIZE) -> np.ndarray:
-    """Return the PASCAL VOC colour map, which DAVIS uses as its annotation palette.
-
-    Colour of index ``i``: the bits of ``i`` are dealt out three at a time, bit 0 to red,
-    bit 1 to green, bit 2 to blue, filling each channel from its most significant bit down
-    (so index 1 is dark red ``(128, 0, 0)``, index 2 dark green, 3 olive, 4 navy, ...).
-
-    Returns:
-        ``(size, 3)`` uint8.
+    """Return the ``(size, 3)`` PASCAL VOC colour map, DAVIS's annotation palette.
 
     >>> voc_palette(5).tolist()
     [[0, 0, 0], [128, 0, 0], [0, 128, 0], [128, 128, 0], [0, 0, 128]]
@@ -72,14 +60,9 @@ def _pil_image() -> Any:
 
 
 def read_label_png(path: str | Path) -> np.ndarray:
-    """Read a label map from a palette ("P") or 8-bit grayscale ("L") PNG.
+    """Read a ``(H, W)`` uint8 label map (palette indices) from a "P" or "L" PNG.
 
-    Returns:
-        ``(H, W)`` uint8 of palette indices (labels), not colours.
-
-    Raises:
-        DataFormatError: the file is missing, unreadable, or an RGB/16-bit image whose
-            pixel values are not labels.
+    RGB or 16-bit images whose pixels are not labels raise DataFormatError.
     """
     image_mod = _pil_image()
     check_image_header(path)  # a decompression bomb is refused before Pillow opens it
@@ -121,16 +104,7 @@ def read_png_palette(path: str | Path) -> np.ndarray:
 def write_label_png(
     path: str | Path, labels: np.ndarray, palette: np.ndarray = DAVIS_PALETTE
 ) -> Path:
-    """Write a label map as a palette PNG (the DAVIS result format), atomically.
-
-    Args:
-        path: output file; parent folders are created.
-        labels: ``(H, W)`` integer labels in ``0..255``.
-        palette: ``(256, 3)`` uint8 colours; the DAVIS palette by default.
-
-    Returns:
-        The written path.
-    """
+    """Write ``labels`` (``0..255``) atomically as a palette PNG (the DAVIS result format)."""
     arr = np.asarray(labels)
     if arr.ndim != 2:
         raise ValueError(f"labels must be a 2-D (H, W) array; got shape {arr.shape}")
@@ -150,16 +124,7 @@ def write_label_png(
 
 @dataclass(frozen=True)
 class VOSSequence:
-    """One DAVIS sequence.
-
-    Attributes:
-        name: sequence name.
-        frame_paths: JPEG of every frame, in order.
-        annotation_paths: PNG of every frame, or None where the release has none (test-dev
-            annotates only the first frame).
-        image_size: ``(width, height)``.
-        object_ids: labels of the objects to segment (from the first annotation).
-    """
+    """One DAVIS sequence (``annotation_paths`` None where the release has none, as in test-dev)."""
 
     name: str
     frame_paths: tuple[Path, ...]
@@ -202,15 +167,7 @@ class VOSSequence:
 
 
 class DAVISDataset(SequenceDataset[VOSSequence]):
-    """The sequences of one DAVIS-2017 split.
-
-    Args:
-        root: the DAVIS folder holding ``JPEGImages``, ``Annotations`` and ``ImageSets``.
-        split: ``"train"``, ``"val"``, ``"test-dev"``...: reads ``ImageSets/<year>/<split>.txt``;
-            None lists every sequence folder in ``JPEGImages/<resolution>``.
-        resolution: ``"480p"`` (the benchmark's) or ``"Full-Resolution"``.
-        year: ``ImageSets`` sub-folder.
-    """
+    """The sequences of one DAVIS-2017 split (None: every sequence folder)."""
 
     def __init__(
         self,

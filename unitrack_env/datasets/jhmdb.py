@@ -1,12 +1,8 @@
 """Reader for JHMDB pose propagation (frames + ``joint_positions.mat``).
 
-Layout read, exactly as the benchmark ships it::
-
-    <root>/Rename_Images/<action>/<video>/00001.png ...
-    <root>/joint_positions/<action>/<video>/joint_positions.mat
-    <root>/splits/<action>_test_split<k>.txt          optional; "<video>.avi <1|2>" per line
-                                                      (1 = train, 2 = test, HMDB51 format)
-
+Reads ``Rename_Images/<action>/<video>/*.png``,
+``joint_positions/<action>/<video>/joint_positions.mat`` and optional
+``splits/<action>_test_split<k>.txt`` (HMDB51 format: 1 = train, 2 = test).
 More in docs/module-notes.md.
 """
 
@@ -63,17 +59,9 @@ _SPLIT_FILE = re.compile(r"^(?P<action>.+)_test_split(?P<k>\d+)\.txt$")
 
 
 def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.ndarray:
-    """Read ``pos_img`` from a JHMDB ``joint_positions.mat``.
+    """Read ``pos_img`` ``(2, 15, T)`` of a ``joint_positions.mat`` as ``(T, 15, 2)`` ``(x, y)``.
 
-    Args:
-        path: the ``.mat`` file.
-        zero_based: subtract 1 (see the module docstring); False keeps MATLAB's values.
-
-    Returns:
-        ``(T, 15, 2)`` float64 ``(x, y)`` per frame and joint.
-
-    Raises:
-        DataFormatError: unreadable file, no ``pos_img``, or a shape other than ``(2, 15, T)``.
+    ``zero_based`` subtracts MATLAB's 1; a bad file or shape raises DataFormatError.
     """
     # scipy is a core dependency; imported here to keep ``import unitrack_env`` fast.
     from scipy.io import loadmat
@@ -116,14 +104,7 @@ def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.nda
 
 @dataclass(frozen=True)
 class PoseSequence:
-    """One JHMDB video with its joints.
-
-    Attributes:
-        name: ``"<action>/<video>"``.
-        frame_paths: PNG of every annotated frame, in order.
-        keypoints: ``(num_frames, 15, 2)`` float64 ``(x, y)``, 0-based pixels.
-        image_size: ``(width, height)``.
-    """
+    """One JHMDB video: ``"<action>/<video>"``, its PNGs, ``(T, 15, 2)`` 0-based joints, size."""
 
     name: str
     frame_paths: tuple[Path, ...]
@@ -179,12 +160,8 @@ def read_split_files(split_dir: str | Path, split_index: int = 1) -> dict[str, i
 class JHMDBDataset(SequenceDataset[PoseSequence]):
     """The annotated videos of a JHMDB folder.
 
-    Args:
-        root: the folder holding ``Rename_Images`` and ``joint_positions``.
-        split: None for every annotated video, or ``"train"``/``"test"`` of split file set
-            ``split_index`` (requires the split files).
-        split_index: 1, 2 or 3 (JHMDB's three splits).
-        split_dir: where the split files are; default ``<root>/splits``.
+    ``split`` None lists every annotated video; ``"train"``/``"test"`` reads split file set
+    ``split_index`` (1-3) from ``split_dir`` (default ``<root>/splits``).
     """
 
     def __init__(

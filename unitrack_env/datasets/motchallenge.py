@@ -1,13 +1,7 @@
 """Reader for the MOTChallenge layout (MOT15, MOT16, MOT17, MOT20 and custom data).
 
-Layout read, exactly as the benchmark ships it::
-
-    <root>/<split>/<sequence>/seqinfo.ini
-    <root>/<split>/<sequence>/img1/000001.jpg ...
-    <root>/<split>/<sequence>/det/det.txt      public detections
-    <root>/<split>/<sequence>/gt/gt.txt        ground truth (train splits only)
-
-More in docs/module-notes.md.
+Reads ``<root>/<split>/<sequence>/`` with ``seqinfo.ini``, ``img1/``, ``det/det.txt`` and
+``gt/gt.txt`` (train splits). More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -69,13 +63,8 @@ class SequenceInfo:
 class Annotations:
     """Rows of a detection or ground-truth file, sorted by frame, with per-frame access.
 
-    Attributes:
-        frames: ``(n,)`` 1-based frame index of each row.
-        ids: ``(n,)`` object id (``-1`` for detections).
-        boxes: ``(n, 4)`` boxes ``(x, y, w, h)`` as written in the file (1-based pixels).
-        scores: ``(n,)`` detection score, or the ground truth's flag column (0 = ignore).
-        classes: ``(n,)`` class id (MOT16/17/20 gt); 1 (pedestrian) where the file has none.
-        visibility: ``(n,)`` visible fraction (gt of MOT16/17/20); 1 where the file has none.
+    Boxes as written (1-based pixels); ``ids`` -1 for detections; ``scores`` is the gt's flag
+    column (0 = ignore); ``classes`` and ``visibility`` default to 1 where the file has none.
     """
 
     frames: np.ndarray
@@ -273,12 +262,8 @@ def _root_hint(root: Path, split: str, benchmark: str) -> str:
 class MOTChallengeDataset:
     """The sequences of one split of a MOTChallenge-layout data set.
 
-    Args:
-        root: the benchmark folder (contains ``train/`` and/or ``test/``).
-        benchmark: the rule set (``MOT15``, ``MOT16``, ``MOT17`` or ``MOT20``).
-        split: ``"train"`` or ``"test"`` (any sub-folder name is accepted).
-        detections: ``"public"`` for each sequence's ``det/det.txt``, or a folder holding
-            ``<sequence>.txt`` files (or ``<sequence>/det/det.txt``) in the same format.
+    ``benchmark`` is the rule set; ``detections`` is ``"public"`` (``det/det.txt``) or a folder
+    of ``<sequence>.txt`` (or ``<sequence>/det/det.txt``) files.
     """
 
     def __init__(
@@ -337,13 +322,7 @@ class MOTChallengeDataset:
         return (self.split_dir / name / "gt" / "gt.txt").is_file()
 
     def load(self, name: str, *, check_frames: bool = True) -> MOTSequence:
-        """Read one sequence's files.
-
-        Args:
-            name: the sequence folder name.
-            check_frames: verify that every frame's image exists (a missing frame is an
-                error that names the first missing file).
-        """
+        """Read one sequence's files (``check_frames``: every frame image must exist)."""
         if name not in self.sequence_names:
             raise UnknownSequenceError(
                 f"no sequence '{name}' in {self.split_dir}; available: "

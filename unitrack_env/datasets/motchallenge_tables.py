@@ -35,16 +35,9 @@ def parse_table(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Parse a comma-separated numeric table; on any problem find the exact line and field.
 
-    Args:
-        path: the file.
-        min_columns: columns every row needs.
-        field_names: names of the columns, for messages.
-        official: the file is also read by TrackEval (``gt.txt``): what TrackEval cannot
-            read (a byte-order mark, blank lines) is refused here, at open, rather than at
-            scoring after a whole episode. Otherwise a BOM is skipped and blank lines ignored.
-
-    Returns:
-        The table and the 1-based file line of each row (blank lines are skipped).
+    ``official`` files (``gt.txt``) are also read by TrackEval, so a byte-order mark or blank
+    lines are refused at open rather than at scoring; otherwise they are skipped. Returns the
+    table and each row's 1-based file line.
     """
     lines = _data_lines(path, _read_text(path, official), official)
     if official:  # ground truth: refuse 10 million ids before parsing 10 million rows

@@ -42,19 +42,7 @@ KITTI_SPLITS = ("training", "testing")
 
 @dataclass(frozen=True)
 class MOTSSequenceInfo:
-    """Where a sequence's frames are and how they are numbered.
-
-    Attributes:
-        name: sequence name.
-        image_dir: folder of the frames.
-        length: number of frames.
-        first_frame: number of the first frame in file names and ``time_frame`` (MOTS20 1,
-            KITTI 0).
-        width: frame width.
-        height: frame height.
-        frame_rate: frames per second.
-        image_ext: frame file extension.
-    """
+    """Where a sequence's frames are and how they are numbered (first: MOTS20 1, KITTI 0)."""
 
     name: str
     image_dir: Path
@@ -73,15 +61,8 @@ class MOTSSequenceInfo:
 class MOTSDataset:
     """A MOTS data set on disk in the MOTS20 or the KITTI MOTS layout (module docstring).
 
-    Args:
-        root: the benchmark folder (MOTS20: holding ``train/``, ``test/``; KITTI MOTS:
-            holding ``training/image_02``, ``instances_txt`` or ``instances``).
-        benchmark: ``"MOTS20"`` or ``"KITTI-MOTS"``.
-        split: MOTS20 ``"train"`` / ``"test"``; KITTI ``"training"`` / ``"testing"``.
-        detections: ``"public"``, ``"gt"`` or a folder of ``<seq>.txt`` detection files.
-
-    Raises:
-        DataFormatError: missing folders or no sequences.
+    ``split``: MOTS20 ``"train"``/``"test"``, KITTI ``"training"``/``"testing"``;
+    ``detections``: ``"public"``, ``"gt"`` or a folder of ``<seq>.txt`` files.
     """
 
     def __init__(self, root: str | os.PathLike, benchmark: str = "MOTS20", split: str = "train",
@@ -195,14 +176,8 @@ def _check_ids(gt: MaskAnnotations) -> None:
 def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
     """Refuse ground truth that TrackEval would refuse when scoring, naming file and line.
 
-    Checks: every ``time_frame`` is a frame of the sequence, every mask has the frame's
-    size, no object id twice in one frame (the ignore id 10000 may be: TrackEval merges its
-    rows into one region), and no two masks of a frame overlap (TrackEval's
-    MOTS readers reject overlapping masks). Works on the run-length encodings (no mask is
-    decoded).
-
-    Raises:
-        DataFormatError: the first problem found.
+    Frames in range, masks of the frame's size, no id twice in a frame (except the ignore id
+    10000, which TrackEval merges), no overlapping masks; checked on the RLEs, undecoded.
     """
     from unitrack_env.datasets.rle import mask_api as mask_utils
 

@@ -42,16 +42,9 @@ TXT_FIELDS = ("time_frame", "id", "class_id", "img_height", "img_width", "rle")
 class MaskAnnotations:
     """Mask rows of a MOTS txt/png file (ground truth, detections or results).
 
-    Attributes:
-        frames: ``(n,)`` ``time_frame`` as in the file (MOTS20 1-based, KITTI 0-based).
-        ids: ``(n,)`` object ids.
-        classes: ``(n,)`` class ids.
-        heights: ``(n,)`` image heights of the masks.
-        widths: ``(n,)`` image widths.
-        counts: ``n`` COCO compressed RLE strings.
-        scores: ``(n,)`` detection scores (1.0 where the file has none).
-        lines: ``(n,)`` 1-based line numbers in the source file (0 for png input).
-        source: the file or folder read (None when built in memory).
+    ``frames`` as in the file (MOTS20 1-based, KITTI 0-based); ``counts`` are COCO compressed
+    RLE strings; ``scores`` 1.0 where the file has none; ``lines`` are 1-based source lines
+    (0 for png); ``source`` is the file read (None in memory).
     """
 
     frames: np.ndarray
@@ -143,16 +136,9 @@ def parse_instances_txt(
 ) -> MaskAnnotations:
     """Read a MOTS txt file (``time_frame id class_id img_height img_width rle``).
 
-    Args:
-        path: the file (also named in errors when ``text`` is given).
-        allow_score: accept a 7th field, the detection score (detection files).
-        text: the file's contents, if already read.
-        max_ids: refuse the file at the line that brings more distinct ids (ground truth:
-            :data:`~unitrack_env.datasets.limits.MAX_TRACKS`), before parsing the rest.
-
-    Raises:
-        DataFormatError: naming the file, the 1-based line and the field of the first
-            problem (field count, non-integer, unknown class, non-positive size).
+    ``allow_score`` accepts a 7th field (detections); ``text`` is the content if already read;
+    more than ``max_ids`` distinct ids are refused at that line. DataFormatError names the file,
+    line and field of the first problem.
     """
     path = Path(path)
     if text is None:
@@ -251,14 +237,9 @@ def format_instances_txt(ann: MaskAnnotations, *, with_scores: bool = False) -> 
 
 
 def read_instances_png(folder: str | os.PathLike) -> MaskAnnotations:
-    """Read a folder of MOTS png annotations (``<frame>.png``, 16-bit object ids).
+    """Read a folder of MOTS ``<frame>.png`` annotations (16-bit ids, ``class = id // 1000``).
 
-    Frames are the file names' numbers; objects ``0 < id`` become rows with
-    ``class = id // 1000`` (the ignore id 10000 becomes class 10).
-
-    Raises:
-        DataFormatError: the folder is missing or empty, a file is not a 16-bit
-            single-channel png, or a file name is not a frame number.
+    Raises DataFormatError for a missing or empty folder, a non-16-bit png or a bad name.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -293,14 +274,7 @@ def read_instances_png(folder: str | os.PathLike) -> MaskAnnotations:
 
 def write_instances_png(folder: str | os.PathLike, ann: MaskAnnotations, frames: Sequence[int],
                         image_size: tuple[int, int]) -> None:
-    """Write records as MOTS png files ``<folder>/<frame:06d>.png`` for every frame listed.
-
-    Args:
-        folder: output folder (created).
-        ann: records whose masks do not overlap.
-        frames: frame numbers to write (frames without rows give an all-zero png).
-        image_size: ``(height, width)``.
-    """
+    """Write non-overlapping records as MOTS pngs ``<folder>/<frame:06d>.png`` for ``frames``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     height, width = image_size

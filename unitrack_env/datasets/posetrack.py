@@ -1,12 +1,7 @@
 """Reader and writer of PoseTrack 2018 JSON (ground truth, results and pose detections).
 
-Layout read, exactly as the benchmark ships it (``root`` is the folder holding
-``posetrack_data/``, or ``posetrack_data/`` itself)::
-
-    posetrack_data/annotations/{train,val}/<sequence>.json    one file per video
-    posetrack_data/images/{train,val,test}/<sequence>/000000.jpg ...
-
-More in docs/module-notes.md.
+Reads the release layout: ``posetrack_data/annotations/{train,val}/<sequence>.json`` and
+``posetrack_data/images/{train,val,test}/<sequence>/*.jpg``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -31,18 +26,7 @@ __all__ = ["PoseTrackDataset", "PoseTrackSequence", "images_from_files", "locate
 
 @dataclass(frozen=True)
 class PoseTrackSequence:
-    """One video of a split.
-
-    Attributes:
-        name: the sequence name (file stem / image folder).
-        split: ``train``, ``val`` or ``test``.
-        images: frame entries in order (from the annotation file, or made up from the image
-            files for splits without annotations).
-        frame_paths: the image file of every entry.
-        ground_truth: the annotation file's content, or None (test split).
-        image_size: ``(width, height)``.
-        annotation_path: the annotation file, or None.
-    """
+    """One video of a split (``images`` made up from the files for splits without annotations)."""
 
     name: str
     split: str
@@ -89,13 +73,7 @@ def images_from_files(sequence: str, split: str, paths: list[Path]) -> tuple[Pos
 
 
 class PoseTrackDataset:
-    """The sequences of one split of a PoseTrack 2018 folder.
-
-    Args:
-        root: the folder holding ``posetrack_data/`` (or that folder itself).
-        split: ``train``, ``val`` or ``test``. A split with annotation files lists their
-            sequences; a split without (test) lists the image folders.
-    """
+    """The sequences of one split of a PoseTrack 2018 folder (test: its image folders)."""
 
     def __init__(self, root: str | os.PathLike, split: str = "val") -> None:
         if split not in SPLITS:

@@ -50,18 +50,11 @@ PERSONS_PER_IMAGE = 100
 
 @dataclass
 class PoseTrackImage:
-    """One frame entry of ``images``.
+    """One frame entry of ``images`` (``file_name`` relative to ``posetrack_data/``).
 
-    Attributes:
-        id: the image id annotations refer to.
-        file_name: path relative to ``posetrack_data/``.
-        is_labeled: whether the frame is annotated (None when the entry does not say).
-        nframes: the video's frame count as declared (may exceed the frames present).
-        frame_id: PoseTrack's frame id (equal to ``id`` in the release).
-        vid_id: the 6-digit video id.
-        ignore_regions: polygons, each ``(k, 2)`` float64 ``(x, y)``, where annotations are
-            missing on purpose (crowds); evaluation drops keypoints inside them.
-        extra: every other field, as read.
+    ``is_labeled`` is None when the entry does not say; ``nframes`` may exceed the frames
+    present; ``ignore_regions`` are ``(k, 2)`` polygons (crowds) where evaluation drops
+    keypoints; ``extra`` keeps every other field.
     """
 
     id: int
@@ -83,17 +76,9 @@ class PoseTrackImage:
 class PoseTrackPerson:
     """One person (annotation) in one frame.
 
-    Attributes:
-        image_id: the frame.
-        keypoints: ``(17, 3)`` float64 ``(x, y, v)``; ``(0, 0, 0)`` marks an absent keypoint.
-        track_id: identity (None in detection files).
-        scores: ``(17,)`` per-keypoint scores, or None when the file has none (ground truth
-            writes an empty list, kept as an empty array).
-        score: pose score, if given.
-        bbox: ``(x, y, w, h)``, if given.
-        bbox_head: ``(x, y, w, h)`` head box, the PCKh reference, if given.
-        id: annotation id, if given.
-        extra: every other field, as read.
+    ``keypoints`` ``(17, 3)`` ``(x, y, v)`` with ``(0, 0, 0)`` absent; ``track_id`` None in
+    detection files; ``scores`` None when absent (ground truth's empty list stays empty);
+    ``bbox_head`` is the PCKh reference; ``extra`` keeps every other field.
     """
 
     image_id: int
@@ -114,24 +99,10 @@ class PoseTrackPerson:
 
 @dataclass
 class PoseTrackVideo:
-    """The content of one sequence file.
-
-    Attributes:
-        images: frame entries in file order.
-        people: per image (same order), its persons in file order.
-        categories: the ``categories`` list as read.
-        extra: other top-level fields, as read.
-    """
+    """The content of one sequence file: images, per image its people, categories, other fields."""
 
     images: list[PoseTrackImage]
     people: list[list[PoseTrackPerson]]
     categories: list[dict[str, Any]] = field(default_factory=lambda: [dict(PERSON_CATEGORY)])
     extra: dict[str, Any] = field(default_factory=dict)
-
-    def index_of(self, image_id: int) -> int:
-        """Return the position of image ``image_id`` in :attr:`images`."""
-        for k, image in enumerate(self.images):
-            if image.id == image_id:
-                return k
-        raise KeyError(image_id)
 

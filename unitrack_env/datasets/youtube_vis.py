@@ -28,13 +28,7 @@ FRAME_RATE = 6.0
 
 
 def to_rle(segmentation: Any, height: int, width: int, path: Path, where: str) -> dict | None:
-    """Convert a polygon list / uncompressed RLE / compressed RLE to a compressed RLE dict.
-
-    The result's ``counts`` is ``bytes``; None stays None.
-
-    Raises:
-        DataFormatError: an unrecognised or inconsistent segmentation, naming ``where``.
-    """
+    """Convert a polygon list or (un)compressed RLE to a compressed RLE dict (``bytes`` counts)."""
     from unitrack_env.datasets.rle import mask_api as mask_utils
 
     if segmentation is None:
@@ -113,16 +107,7 @@ class VisVideo:
 
 @dataclass(frozen=True)
 class VisTrack:
-    """One object track: ground-truth annotation, result entry or detection entry.
-
-    Attributes:
-        video_id: its video.
-        category_id: its class.
-        segmentations: one compressed RLE dict (``bytes`` counts) or None per frame.
-        id: annotation id (-1 for results).
-        score: result / detection score (1.0 for ground truth).
-        iscrowd: the annotation's crowd flag.
-    """
+    """One object track: ground truth, result or detection (one RLE or None per frame)."""
 
     video_id: int
     category_id: int
@@ -248,14 +233,10 @@ def parse_vis_json(path: str | os.PathLike, *, text: str | None = None) -> VisDa
 def parse_vis_results(source: str | os.PathLike | list, videos: dict[int, VisVideo], *,
                       path: Path | None = None,
                       categories: Mapping[int, str] | None = None) -> list[VisTrack]:
-    """Read results-format entries (a file or a loaded list) for the given videos.
+    """Read results-format entries (a file or a list) of the given videos; others are skipped.
 
-    Entries of other videos are skipped (a results file covers a whole split). With
-    ``categories`` (detections that become observations), an entry of another category is
-    refused: the scorer would drop its tracks without a word.
-
-    Raises:
-        DataFormatError: naming the file and the entry of the first problem.
+    With ``categories``, an entry of another category is refused (the scorer would silently
+    drop it). DataFormatError names the file and entry.
     """
     if isinstance(source, list):
         data, path = source, path or Path("<results>")
@@ -328,14 +309,7 @@ def format_annotations(data: VisData, videos: list[VisVideo] | None = None) -> s
 
 
 class YouTubeVISDataset:
-    """A YouTube-VIS 2019 data set on disk (module docstring).
-
-    Args:
-        root: the benchmark folder (``train.json``, ``train/JPEGImages/`` ...).
-        split: ``"train"``, ``"valid"`` or ``"test"``.
-        detections: ``"public"``, ``"gt"`` or a results-format JSON file.
-        annotation_file: override of ``<root>/<split>.json``.
-    """
+    """A YouTube-VIS 2019 data set on disk (``detections``: ``"public"``, ``"gt"`` or a file)."""
 
     def __init__(self, root: str | os.PathLike, split: str = "train",
                  detections: str | os.PathLike = "public",

@@ -1,10 +1,8 @@
 """What every unitrack environment shares: episodes over the sequences of a data set.
 
-An episode is one video sequence. ``reset(options={"sequence": name})`` picks a sequence;
-without it the environment walks the split's sequences in order (or in a seeded shuffle with
-``shuffle=True``). Passing ``seed`` restarts that walk, so the same seed gives the same
-episode. :class:`SequenceEnv` owns the episode loop (``reset`` and ``step``); a task
-environment supplies its data set, observations, recording and scoring through a few hooks.
+An episode is one sequence: ``reset(options={"sequence": name})`` picks one; otherwise the
+split is walked in order (or a seeded shuffle), and ``seed`` restarts the walk.
+:class:`SequenceEnv` owns the loop; a task environment supplies a few hooks.
 """
 
 from __future__ import annotations
@@ -34,10 +32,8 @@ SequenceT = TypeVar("SequenceT")
 class EpisodeOptions(TypedDict, total=False):
     """The keyword arguments every environment takes besides its data set's own.
 
-    - ``max_frame_size``: bound ``(height, width)`` of the frame space (default: the
-      environment's :attr:`SequenceEnv.default_max_frame_size`).
-    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
-      never look at pixels; saves the decode time).
+    - ``max_frame_size``: bound ``(height, width)`` of the frame space.
+    - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (saves decoding).
     - ``prefetch``: decode the next frame on a background thread.
     - ``shuffle``: visit sequences in a seeded random order.
     - ``render_mode``: None or ``"rgb_array"``.
@@ -53,30 +49,18 @@ class EpisodeOptions(TypedDict, total=False):
 class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
     """Base class: the episode loop over the sequences of a data set (a template method).
 
-    :meth:`reset` picks a sequence (see the module docstring), closes the previous frame
-    decoder, asks :meth:`_load` to read and check it, opens the new frame decoder and
-    returns the first observation (:meth:`_observe`). :meth:`step` refuses a finished
-    episode, lets :meth:`_record` check, record and score the action, and either moves the
-    cursor to the next frame or ends the episode: the last observation again (fresh
-    arrays), ``info["metrics"]`` (:meth:`episode_metrics`) when the sequence has ground
-    truth, and the frame decoder closed. Every info has ``sequence`` and ``frame_index``
-    (plus :meth:`_frame_info`'s extras and the step's record); the reset info adds
-    :meth:`_load`'s extras, ``task`` and ``capacities``.
-
-    The cursor :attr:`_t` is the key of the current frame: it runs over ``_first_step()
-    .. _first_step() + _length() - 1`` (0-based unless the environment numbers its frames
-    otherwise) and is what :meth:`_observe`, :meth:`_record` and :meth:`_frame_path` get.
+    :meth:`reset` picks a sequence, has :meth:`_load` read and check it, opens the frame decoder
+    and returns :meth:`_observe`'s observation. :meth:`step` lets :meth:`_record` check, record
+    and score the action, then moves to the next frame or ends the episode with
+    ``info["metrics"]`` (when there is ground truth). The cursor :attr:`_t` runs over
+    ``_first_step() .. _first_step() + _length() - 1``.
 
     A task environment sets :attr:`sequence_names`, its spaces and :attr:`scoring` (its
-    :class:`~unitrack_env.benchmarks.base.Benchmark`) in ``__init__``; implements the
-    episode hooks :meth:`_load`, :meth:`_observe`, :meth:`_record`, :meth:`_draw` (the
-    ``rgb_array`` picture) and :meth:`episode_results`; and overrides :meth:`_length`,
-    :meth:`_frame_path` and :meth:`_frame_size` unless its sequences list their frames as
-    ``frame_paths`` with an ``image_size``. The results contract that ``evaluation``
-    relies on (:meth:`sequence_length`, :meth:`has_ground_truth`, :meth:`episode_digest`,
-    :meth:`episode_metrics`, :meth:`write_episode` in the official format and
-    :meth:`score_folder`) delegates to :attr:`scoring`; an environment whose metrics
-    accumulate during the episode overrides :meth:`episode_metrics`.
+    :class:`~unitrack_env.benchmarks.base.Benchmark`) in ``__init__``; implements
+    :meth:`_load`, :meth:`_observe`, :meth:`_record`, :meth:`_draw` and
+    :meth:`episode_results`; and overrides :meth:`_length`, :meth:`_frame_path` and
+    :meth:`_frame_size` unless its sequences have ``frame_paths`` and ``image_size``. The
+    results contract ``evaluation`` relies on delegates to :attr:`scoring`.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 30}
@@ -231,12 +215,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
 
     @abc.abstractmethod
     def _load(self, name: str) -> dict[str, Any]:
-        """Read and check sequence ``name``, set :attr:`_sequence` and clear the recording.
-
-        Returns:
-            The reset-info extras (``seq_length``, ``frame_rate``, ...); they must hold
-            ``has_ground_truth``, which decides whether the episode ends with metrics.
-        """
+        """Read and check sequence ``name``; return reset-info extras incl. ``has_ground_truth``."""
 
     # The next three hooks read a sequence that lists its frames as ``frame_paths`` (one
     # file per step) with ``image_size`` = ``(width, height)``, as the DAVIS, OTB, JHMDB
@@ -259,13 +238,9 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
 
     @abc.abstractmethod
     def _record(self, action: Any, t: int) -> tuple[float, dict[str, Any]]:
-        """Check the action for frame ``t``, record it and score it.
+        """Check (``InvalidActionError`` before recording), record and score frame ``t``'s action.
 
-        Raises ``InvalidActionError`` before anything is recorded. Sets :attr:`_answer`
-        to what :meth:`_draw` shows of the answer (drawn on :attr:`_answer_frame`).
-
-        Returns:
-            The step's reward and the info keys it adds (e.g. ``{"clear": ...}``).
+        Sets :attr:`_answer` for :meth:`_draw`; returns the reward and the info keys it adds.
         """
 
     @property
@@ -316,11 +291,9 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
 
     def _open_frames(self, path_of: Callable[[int], Path], keys: Iterable[int], *,
                      prefetch: bool) -> FramePrefetcher:
-        """The frame decoder of a new episode, after checking every frame file.
+        """The frame decoder of a new episode, after checking every frame file is complete.
 
-        Every frame in ``keys`` must exist and be complete (a truncated JPEG would decode to
-        a flat colour without an error), so that a bad file is refused at reset, before a
-        frame is played. Skipped when frames are not decoded.
+        A truncated JPEG decodes to a flat colour without an error, so it is refused at reset.
         """
         frames = FramePrefetcher(path_of, prefetch=prefetch)
         if self.decode_frames:
@@ -328,12 +301,7 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         return frames
 
     def _read_frame(self, t: int) -> np.ndarray:
-        """Decode frame ``t`` of the episode (kept as :attr:`_frame`), scheduling the next.
-
-        Without decoding, a 1x1 black placeholder. The decoded size is checked against
-        :meth:`_frame_size`, the size that :attr:`frame_size_source` states, raising
-        :class:`DataFormatError` naming the file.
-        """
+        """Decode frame ``t`` (kept as :attr:`_frame`), check its size, schedule the next."""
         if not self.decode_frames:
             self._frame = np.zeros((1, 1, 3), dtype=np.uint8)
             return self._frame
@@ -350,11 +318,9 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
 
     # ----------------------------------------------------------- results contract
     def sequence_inputs(self, name: str) -> list[Path]:
-        """The files that sequence ``name`` is read from (frames, annotations, detections).
+        """The files sequence ``name`` is read from, fingerprinted so a resumed run replays changes.
 
-        The runner fingerprints them (:mod:`unitrack_env.fingerprint`) so that a resumed run
-        replays a sequence whose inputs changed. The default takes the files below the data
-        set's folder that belong to the sequence; environments that read files from
+        The default takes the data set's files of the sequence; environments reading files from
         elsewhere (e.g. user detections) add them.
         """
         dataset = getattr(self, "dataset", None)

@@ -1,4 +1,4 @@
-"""Per-frame error events of box MOT, from the CLEAR matching the official score uses.
+"""Per-frame error events of box and mask MOT, from the CLEAR matching the official score uses.
 
 More in docs/module-notes.md.
 """
@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.mots_format import CLASS_IGNORE, MaskAnnotations
 from unitrack_env.metrics.clear_stream import StreamingClear
 from unitrack_env.metrics.mot_preprocess import (
     PreprocessedFrame,
@@ -23,7 +24,11 @@ from unitrack_env.metrics.mot_preprocess import (
 EVENT_COLUMNS: tuple[str, ...] = (
     "sequence", "frame", "type", "object", "gt_id", "track_id", "prev_track_id",
     "x", "y", "w", "h", "tx", "ty", "tw", "th", "iou", "center_error", "j", "f", "pck",
+    "joint", "distance", "score", "track_iou",
 )
+
+#: Integer columns (nullable: NaN where a task leaves them empty).
+ID_COLUMNS: tuple[str, ...] = ("object", "gt_id", "track_id", "prev_track_id", "joint")
 
 #: Box MOT event types.
 MOT_EVENT_TYPES: tuple[str, ...] = ("tp", "fp", "fn", "idsw", "frag")
@@ -105,4 +110,24 @@ def mot_sequence_events(sequence: str, gt_rows: np.ndarray, tracker_rows: np.nda
                         num_frames: int, benchmark: str) -> EventRows:
     """Events of one sequence from its ``gt.txt`` rows and result rows."""
     frames = preprocessed_frames(gt_rows, tracker_rows, num_frames, benchmark)
+    return clear_events(sequence, frames)
+
+
+def mots_sequence_events(sequence: str, gt: MaskAnnotations, results: MaskAnnotations, *,
+                         first_frame: int, num_frames: int, class_id: int) -> EventRows:
+    """Events of one MOTS sequence (``frame`` = 1-based position; KITTI files count from 0).
+
+    Each frame is preprocessed by :func:`~unitrack_env.metrics.mots.mask_frame`, the step
+    :class:`~unitrack_env.metrics.mots.MaskClearStream` (the environment's reward) uses
+    before the same CLEAR matching; boxes are the masks' bounding boxes.
+    """
+    from unitrack_env.metrics.mots import mask_frame
+
+    frames = []
+    for t in range(first_frame, first_frame + num_frames):
+        g, r = gt.rows(t), results.rows(t)
+        cls = gt.classes[g]
+        scored, ignore = g[cls == class_id], g[cls == CLASS_IGNORE]
+        frames.append(mask_frame(gt.ids[scored], gt.rles(scored), gt.rles(ignore),
+                                 results.ids[r], results.rles(r), boxes=True))
     return clear_events(sequence, frames)

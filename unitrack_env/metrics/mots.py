@@ -32,6 +32,7 @@ from unitrack_env.datasets.mots_format import (
 from unitrack_env.datasets.rle import quiet_pycocotools
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.clear_stream import FrameClear, StreamingClear
+from unitrack_env.metrics.mot_preprocess import PreprocessedFrame
 from unitrack_env.metrics.motchallenge import (
     SequenceScore,
     check_matrix_memory,
@@ -236,24 +237,46 @@ class MaskClearStream:
     def update(self, gt_ids: np.ndarray, gt_rles: list[dict], ignore_rles: list[dict],
                tracker_ids: np.ndarray, tracker_rles: list[dict]) -> FrameClear:
         """Score one frame: gt masks of the evaluated class, ignore regions, tracker masks."""
-        gt_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
-        tracker_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
-        sim = mask_iou(gt_rles, tracker_rles)
-        unmatched = np.ones(len(tracker_ids), dtype=bool)
-        if len(gt_ids) and len(tracker_ids):
-            score = sim.copy()
-            score[score < MATCH_IOU - EPS] = -10000.0
-            rows, cols = linear_sum_assignment(-score)
-            unmatched[cols[score[rows, cols] > EPS]] = False
-        if ignore_rles and unmatched.any():
-            from unitrack_env.datasets.rle import mask_api as mask_utils
+        fr = mask_frame(gt_ids, gt_rles, ignore_rles, tracker_ids, tracker_rles)
+        return self._clear.update(fr.gt_ids, fr.gt_boxes, fr.tracker_ids, fr.tracker_boxes,
+                                  iou=fr.iou)
 
-            region = mask_utils.merge(ignore_rles, intersect=False)
-            idx = np.flatnonzero(unmatched)
-            inside = mask_iou([tracker_rles[i] for i in idx], [region], ioa=True)[:, 0]
-            keep = np.ones(len(tracker_ids), dtype=bool)
-            keep[idx[inside > IGNORE_IOA + EPS]] = False
-            tracker_ids, sim = tracker_ids[keep], sim[:, keep]
-        empty = np.zeros((0, 4))
-        return self._clear.update(gt_ids, np.zeros((len(gt_ids), 4)) if len(gt_ids) else empty,
-                                  tracker_ids, np.zeros((len(tracker_ids), 4)), iou=sim)
+
+def mask_frame(gt_ids: np.ndarray, gt_rles: list[dict], ignore_rles: list[dict],
+               tracker_ids: np.ndarray, tracker_rles: list[dict], *,
+               boxes: bool = False) -> PreprocessedFrame:
+    """TrackEval's MOTS preprocessing of one frame, ready for the CLEAR matching.
+
+    Unmatched tracker masks mostly inside the merged ignore region are dropped
+    (``tracker_kept``). Boxes are the masks' bounding boxes when ``boxes`` (for drawing
+    error events), else zeros (the matching uses only ``iou``).
+    """
+    gt_ids = np.asarray(gt_ids, dtype=np.int64).reshape(-1)
+    tracker_ids = np.asarray(tracker_ids, dtype=np.int64).reshape(-1)
+    sim = mask_iou(gt_rles, tracker_rles)
+    unmatched = np.ones(len(tracker_ids), dtype=bool)
+    if len(gt_ids) and len(tracker_ids):
+        score = sim.copy()
+        score[score < MATCH_IOU - EPS] = -10000.0
+        rows, cols = linear_sum_assignment(-score)
+        unmatched[cols[score[rows, cols] > EPS]] = False
+    keep = np.ones(len(tracker_ids), dtype=bool)
+    if ignore_rles and unmatched.any():
+        from unitrack_env.datasets.rle import mask_api as mask_utils
+
+        region = mask_utils.merge(ignore_rles, intersect=False)
+        idx = np.flatnonzero(unmatched)
+        inside = mask_iou([tracker_rles[i] for i in idx], [region], ioa=True)[:, 0]
+        keep[idx[inside > IGNORE_IOA + EPS]] = False
+    return PreprocessedFrame(
+        gt_ids, _rle_boxes(gt_rles, boxes), tracker_ids[keep],
+        _rle_boxes([r for r, k in zip(tracker_rles, keep, strict=True) if k], boxes),
+        sim[:, keep], np.ones(len(gt_ids), dtype=bool), keep)
+
+
+def _rle_boxes(rles: list[dict], boxes: bool) -> np.ndarray:
+    if not boxes or not rles:
+        return np.zeros((len(rles), 4))
+    from unitrack_env.datasets.rle import mask_api as mask_utils
+
+    return np.asarray(mask_utils.toBbox(rles), dtype=np.float64).reshape(len(rles), 4)

@@ -75,6 +75,11 @@ class PosevalSequence:
     def __init__(self) -> None:
         self.joints = [ClearAccumulator() for _ in range(NUM_JOINTS)]
         self.frames = 0
+        #: The last frame's persons after ignore regions, and per joint the matched pairs
+        #: ``(gt person, predicted person, switched, distance)``, missed gt persons and
+        #: unmatched predicted persons; ``None`` when poseval scored it against dummies
+        #: (no person on one side: one miss and one false positive per joint).
+        self.last_frame: tuple[PoseFrame, PoseFrame, list | None] | None = None
 
     def update(
         self,
@@ -99,11 +104,13 @@ class PosevalSequence:
                 counts = acc.update(np.array([DUMMY_GT_ID]), np.array([DUMMY_PRED_ID]),
                                     np.full((1, 1), np.nan))
                 out[2][j], out[3][j] = counts.misses, counts.false_positives
+            self.last_frame = (gt, pred, None)
             return FrameCounts(*out)
         if np.any(~np.isfinite(gt.head_size[gt.present.any(axis=1)])):
             raise ValueError("a ground-truth person with keypoints has no bbox_head (poseval "
                              "needs the head box to normalise distances)")
         dist = joint_distances(gt, pred)
+        joints = []
         for j, acc in enumerate(self.joints):
             g = np.nonzero(gt.present[:, j])[0]
             p = np.nonzero(pred.present[:, j])[0]
@@ -112,6 +119,10 @@ class PosevalSequence:
             counts = acc.update(gt.ids[g], pred.ids[p], d)
             out[0][j], out[1][j] = counts.matches, counts.switches
             out[2][j], out[3][j] = counts.misses, counts.false_positives
+            pairs, missed, false = acc.last_pairs
+            joints.append(([(int(g[a]), int(p[b]), sw, dd) for a, b, sw, dd in pairs],
+                           g[missed], p[false]))
+        self.last_frame = (gt, pred, joints)
         return FrameCounts(*out)
 
     def counts(self) -> SequenceCounts:

@@ -66,6 +66,10 @@ class ClearAccumulator:
     distance: float = 0.0
     last_match: dict[int, int] = field(default_factory=dict)
     candidate_frames: Counter = field(default_factory=Counter)
+    #: The last :meth:`update`'s pairs ``(row, column, switched, distance)`` and its
+    #: unmatched rows and columns (indices into its inputs), for per-frame error events.
+    last_pairs: tuple[list[tuple[int, int, bool, float]], np.ndarray, np.ndarray] = field(
+        default_factory=lambda: ([], np.zeros(0, np.int64), np.zeros(0, np.int64)), repr=False)
 
     def update(self, oids: np.ndarray, hids: np.ndarray, dist: np.ndarray) -> JointFrameCounts:
         """Add one frame: ``dist`` is ``(len(oids), len(hids))`` with NaN for non-candidates."""
@@ -79,6 +83,7 @@ class ClearAccumulator:
         h_done = np.zeros(len(hids), bool)
         matches = switches = 0
         total = 0.0
+        pairs: list[tuple[int, int, bool, float]] = []
         if len(oids) and len(hids):
             for i, o in enumerate(oids.tolist()):  # 1. keep last frame's partner if a candidate
                 if o not in self.last_match:
@@ -88,17 +93,19 @@ class ClearAccumulator:
                     o_done[i] = h_done[js[0]] = True
                     matches += 1
                     total += d[i, js[0]]
+                    pairs.append((i, int(js[0]), False, float(d[i, js[0]])))
             d[o_done, :] = np.nan
             d[:, h_done] = np.nan
             for i, j in _assignment(d):  # 2. assign the rest
                 o, h = int(oids[i]), int(hids[j])
-                if o in self.last_match and self.last_match[o] != h:
-                    switches += 1
-                else:
-                    matches += 1
+                switched = o in self.last_match and self.last_match[o] != h
+                switches += switched
+                matches += not switched
+                pairs.append((i, j, switched, float(d[i, j])))
                 total += d[i, j]
                 o_done[i] = h_done[j] = True
                 self.last_match[o] = h
+        self.last_pairs = (pairs, np.flatnonzero(~o_done), np.flatnonzero(~h_done))
         frame = JointFrameCounts(matches, switches, int((~o_done).sum()), int((~h_done).sum()),
                                  float(total))
         self.matches += frame.matches

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import io
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -66,13 +67,12 @@ def _flatten(res: dict[str, Any]) -> dict[str, float]:
     return out
 
 
-def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[VisVideo], *,
-                 source: Path | None = None) -> ScoreReport:
-    """Track mAP of ``results`` on ``videos`` of ``ground_truth``, per video and combined.
+def _per_class(ground_truth: VisData, results: list[VisTrack], videos: list[VisVideo],
+               source: Path | None, metric: Any) -> dict[str, dict[str, Any]]:
+    """TrackMAP's ``eval_sequence`` result of every class and video, ``{class: {video: res}}``.
 
-    Raises:
-        ValueError: ``ground_truth`` has no annotations or ``videos`` is empty.
-        DataFormatError: TrackEval rejected the data (naming ``source``).
+    TrackEval numbers the result tracks of the videos from 0 in file order (its
+    ``global_tid_counter``); with one video, a track's id is its index in ``results``.
     """
     if ground_truth.tracks is None:
         raise ValueError(f"{ground_truth.path} has no annotations to score against")
@@ -81,7 +81,6 @@ def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[Vi
     import trackeval.datasets as te_datasets
     from trackeval.utils import TrackEvalException
 
-    metric = _metric()
     ids = {v.id for v in videos}
     kept = [r for r in results if r.video_id in ids]
     with tempfile.TemporaryDirectory(prefix="unitrack-vis-") as tmp:
@@ -109,6 +108,19 @@ def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[Vi
         except TrackEvalException as exc:
             raise DataFormatError(source or Path("<results>"),
                                   f"TrackEval rejected the data: {exc}") from exc
+    return per_class
+
+
+def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[VisVideo], *,
+                 source: Path | None = None) -> ScoreReport:
+    """Track mAP of ``results`` on ``videos`` of ``ground_truth``, per video and combined.
+
+    Raises:
+        ValueError: ``ground_truth`` has no annotations or ``videos`` is empty.
+        DataFormatError: TrackEval rejected the data (naming ``source``).
+    """
+    metric = _metric()
+    per_class = _per_class(ground_truth, results, videos, source, metric)
     seqs = [v.name for v in videos]
     per_sequence = {}
     for seq in seqs:
@@ -118,6 +130,53 @@ def score_videos(ground_truth: VisData, results: list[VisTrack], videos: list[Vi
         {cls: metric.combine_sequences(res) for cls, res in per_class.items()})
     return ScoreReport(benchmark="YouTube-VIS-2019", per_sequence=per_sequence,
                        combined=_flatten(combined), scores={COMBINED: combined})
+
+
+@dataclass(frozen=True)
+class TrackMatch:
+    """TrackEval's matching of one video's tracks of one class at one IoU threshold.
+
+    Attributes:
+        category_id: the class.
+        dt_index: result tracks in TrackEval's order (by score, descending), as indices
+            into the video's results.
+        dt_gt: annotation id each one is matched to, -1 if none.
+        dt_ignored: whether it is ignored (matched to a crowd or out-of-range track).
+        gt_ids: the class's ground-truth annotation ids.
+        gt_matched: whether each one is matched.
+        gt_ignored: whether each one is ignored.
+    """
+
+    category_id: int
+    dt_index: tuple[int, ...]
+    dt_gt: tuple[int, ...]
+    dt_ignored: tuple[bool, ...]
+    gt_ids: tuple[int, ...]
+    gt_matched: tuple[bool, ...]
+    gt_ignored: tuple[bool, ...]
+
+
+def track_matches(ground_truth: VisData, results: list[VisTrack], video: VisVideo, *,
+                  threshold_index: int = IOU50_INDEX) -> list[TrackMatch]:
+    """Per class, the matching behind one video's AP at one IoU threshold (default 0.50).
+
+    The matching of the ``all`` area range, read from TrackEval's ``TrackMAP``.
+    """
+    by_name = {name: cid for cid, name in ground_truth.categories.items()}
+    results = [r for r in results if r.video_id == video.id]
+    out = []
+    for cls, seqs in _per_class(ground_truth, results, [video], None, _metric()).items():
+        res = seqs[video.name][0]
+        if res is None:
+            continue
+        out.append(TrackMatch(
+            by_name[cls], tuple(int(i) for i in res["dt_ids"]),
+            tuple(int(g) for g in np.asarray(res["dt_matches"])[threshold_index]),
+            tuple(bool(v) for v in np.asarray(res["dt_ignore"])[threshold_index]),
+            tuple(int(g) for g in res["gt_ids"]),
+            tuple(bool(m > -1) for m in np.asarray(res["gt_matches"])[threshold_index]),
+            tuple(bool(v) for v in res["gt_ignore"])))
+    return out
 
 
 def merge_result_files(folder: str | Path, sequences: list[str] | None = None) -> list[dict]:

@@ -1,14 +1,9 @@
 """Spaces shared by the environments, and helpers to build valid actions.
 
-Why padded arrays plus a count instead of ``gymnasium.spaces.Sequence``: a frame holds a
-variable number of detections and tracks; fixed-capacity arrays keep every observation a
-plain dict of numpy arrays (cheap to copy, batch, pickle and check), and ``check_env``
-accepts them. The capacity is a constructor argument of each environment.
-
-The spaces live in one module per task family: :mod:`.arrays` (the variable-size
-:class:`Image`, :class:`MaskStack` and :class:`LabelMap`), :mod:`.boxes` (MOT),
-:mod:`.masks` (MOTS, VIS), :mod:`.poses` (PoseTrack), and :mod:`.limits` (the bounds and
-checks they share). Import them from here.
+Padded arrays plus a count, not ``gymnasium.spaces.Sequence``: observations stay plain dicts
+of numpy arrays (cheap to copy, batch, pickle and check) that ``check_env`` accepts. One
+module per task family (:mod:`.arrays`, :mod:`.boxes`, :mod:`.masks`, :mod:`.poses`,
+:mod:`.limits`); import them from here.
 """
 
 from unitrack_env.spaces.arrays import Image, LabelMap, MaskStack

@@ -1,10 +1,7 @@
 """Variable-size array spaces: frames, mask stacks and label maps.
 
-Why a custom :class:`Image` space instead of a fixed ``Box``: tracking benchmarks mix frame
-sizes (MOT17 has 1920x1080 and 640x480 sequences). Resizing would change the benchmark's
-geometry and padding every frame to the largest size would waste memory and time, so a
-frame keeps its native size and the space bounds it instead. :class:`MaskStack` and
-:class:`LabelMap` do the same for masks of the frame's size.
+Benchmarks mix frame sizes (MOT17: 1920x1080 and 640x480); resizing would change their
+geometry and padding would waste memory, so frames keep their native size within bounds.
 """
 
 from __future__ import annotations
@@ -17,14 +14,7 @@ from gymnasium import spaces
 
 
 class Image(spaces.Space[np.ndarray]):
-    """A ``uint8`` image of shape ``(H, W, channels)`` whose size may vary between episodes.
-
-    Args:
-        max_height: largest accepted height.
-        max_width: largest accepted width.
-        channels: number of channels (3 for RGB).
-        seed: seed of the space's own random generator (used by :meth:`sample`).
-    """
+    """A ``uint8`` image ``(H, W, channels)`` of at most ``max_height`` x ``max_width``."""
 
     def __init__(
         self, max_height: int, max_width: int, channels: int = 3, seed: int | None = None
@@ -83,20 +73,10 @@ class Image(spaces.Space[np.ndarray]):
 
 
 class MaskStack(spaces.Space[np.ndarray]):
-    """A ``bool`` stack of ``n`` binary masks of shape ``(n, H, W)``, ``n`` and size variable.
+    """A ``bool`` stack of ``n`` binary masks ``(n, H, W)``, ``n`` and size variable.
 
-    Why a stack and not a label map: video instance segmentation detections may overlap (a
-    label map cannot hold two masks on one pixel), and one representation for every mask task
-    keeps agents simple (``masks[i]`` is detection ``i``). Why not padding to
-    ``(max_detections, H, W)``: at 1080p that is 2 MB per padded slot per frame. The count
-    is bounded by ``max_count`` and the size by ``max_height`` x ``max_width``; the masks have
-    the frame's size, which varies between sequences (as :class:`Image` does).
-
-    Args:
-        max_count: largest number of masks.
-        max_height: largest mask height.
-        max_width: largest mask width.
-        seed: seed of the space's random generator (used by :meth:`sample`).
+    A stack, not a label map, since VIS detections may overlap; not padded, since a 1080p
+    slot costs 2 MB per frame. Bounded by ``max_count`` and ``max_height`` x ``max_width``.
     """
 
     def __init__(
@@ -156,22 +136,10 @@ class MaskStack(spaces.Space[np.ndarray]):
 
 
 class LabelMap(spaces.Space[np.ndarray]):
-    """A ``uint8`` label map of shape ``(H, W)`` whose size may vary between episodes.
+    """A ``uint8`` label map ``(H, W)`` (0 = background, ``k`` = object ``k``, DAVIS 255 = void).
 
-    The 2-D counterpart of :class:`Image` for segmentation masks whose pixel values are
-    labels (0 = background, ``k`` = object ``k``; DAVIS adds 255 = void).
-
-    Sampling: a label map of size ``(H, W)`` is only a valid action for a frame of that
-    size, so an environment calls :meth:`narrow` at every reset with the current frame
-    size and the labels allowed in this episode; :meth:`sample` then draws valid actions.
-    Before any :meth:`narrow`, it draws a small map of random size. :meth:`contains` and
-    equality depend only on the bounds.
-
-    Args:
-        max_height: largest accepted height.
-        max_width: largest accepted width.
-        max_label: largest accepted label (at most 255).
-        seed: seed of the space's own random generator (used by :meth:`sample`).
+    Environments call :meth:`narrow` at every reset with the frame size and allowed labels, so
+    :meth:`sample` draws valid actions; :meth:`contains` and equality depend on the bounds only.
     """
 
     def __init__(

@@ -39,10 +39,8 @@ def mask_observation_space(
 ) -> spaces.Dict:
     """Observation space of mask association tasks (MOTS, VIS).
 
-    Keys: ``frame`` (:class:`Image`), ``masks`` (:class:`MaskStack`, ``num_detections``
-    masks of the frame's size), ``boxes`` / ``scores`` padded as in
-    :func:`detection_observation_space`, ``num_detections``, and with ``num_classes`` a
-    padded ``classes`` ``(max_detections,) int64`` in ``[0, num_classes]`` (0 = padding).
+    ``frame``, ``masks`` (a :class:`MaskStack`), padded ``boxes``/``scores`` and
+    ``num_detections``; with ``num_classes``, padded ``classes`` in ``[0, num_classes]``.
     """
     entries: dict[str, spaces.Space] = {
         "frame": Image(*max_frame_size),
@@ -84,14 +82,9 @@ def pack_mask_ids(ids: Any, max_detections: int) -> dict[str, Any]:
 def unpack_mask_ids(
     action: Any, num_detections: int, max_detections: int | None = None
 ) -> np.ndarray:
-    """Validate a mask-id action and return the ``(num_detections,)`` int64 ids.
+    """Validate a mask-id action (padded or ``(num_detections,)``) and return the int64 ids.
 
-    Accepts ``{"ids": (max_detections,)}`` (padded; entries past ``num_detections`` are
-    ignored) or ``{"ids": (num_detections,)}``.
-
-    Raises:
-        InvalidActionError: not a dict with ``ids``; wrong length or dtype; negative ids;
-            a non-zero id given to two detections of the frame.
+    InvalidActionError on a bad shape or dtype, negative ids, or one non-zero id given twice.
     """
     if not isinstance(action, dict) or "ids" not in action:
         raise InvalidActionError(

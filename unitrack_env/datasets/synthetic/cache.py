@@ -1,17 +1,9 @@
 """The on-disk cache of embedded synthetic data sets.
 
-:func:`ensure_synthetic` returns the root of a synthetic data set (the folder holding
-``train/`` and ``test/``), generating it on first use into::
-
-    $UNITRACK_CACHE/synthetic/<kind>-<benchmark>-v<GENERATOR_VERSION>/
-
-(``platformdirs.user_cache_dir("unitrack-env")`` when ``UNITRACK_CACHE`` is unset).
-
-Creation is atomic: the data set is written into a temporary sibling folder, a marker file
-is written last, and the folder is renamed into place. A process that loses the race to
-another one drops its copy. A final folder without the marker (half-written by an older
-version, or damaged by hand) is moved aside and regenerated; leftover temporary folders of
-interrupted runs are ignored and removed once stale.
+:func:`ensure_synthetic` generates a data set on first use into
+``$UNITRACK_CACHE/synthetic/<kind>-<benchmark>-v<GENERATOR_VERSION>/`` (default: the user
+cache folder). Creation is atomic (a temporary sibling, a marker written last, a rename); a
+final folder without the marker is moved aside and regenerated.
 """
 
 from __future__ import annotations
@@ -99,18 +91,10 @@ def is_complete(path: Path) -> bool:
 
 
 def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
-    """Return the root of the synthetic ``benchmark`` data set, generating it once.
+    """Return the root (holding ``train/`` and ``test/``) of a synthetic data set, generated once.
 
-    Args:
-        benchmark: e.g. ``"MOT17"``; see :data:`KIND_BENCHMARKS`.
-        kind: the data layout family, e.g. ``"motchallenge"``; see :data:`WRITERS`.
-
-    Returns:
-        The folder that holds ``train/`` and ``test/``.
-
-    Raises:
-        ValueError: unknown ``kind`` or ``benchmark``.
-        OSError: the cache folder is not writable (set ``UNITRACK_CACHE`` elsewhere).
+    Unknown ``kind`` or ``benchmark`` raise ValueError; an unwritable cache raises OSError
+    (set ``UNITRACK_CACHE`` elsewhere).
     """
     final = synthetic_path(benchmark, kind)
     if is_complete(final):

@@ -1,13 +1,7 @@
 """Synthetic DAVIS-2017 data set: several people per sequence, segmented, crossing and occluded.
 
-:func:`write_davis` renders the scenes of a :class:`DAVISSpec` and writes them in the exact
-DAVIS-2017 semi-supervised layout, which :class:`unitrack_env.datasets.davis.DAVISDataset`
-reads::
-
-    <root>/JPEGImages/480p/<seq>/00000.jpg ...     JPEG (quality 90)
-    <root>/Annotations/480p/<seq>/00000.png ...    palette PNGs with the DAVIS palette
-    <root>/ImageSets/2017/{train,val,test-dev}.txt one sequence name per line
-
+:func:`write_davis` writes the DAVIS-2017 semi-supervised layout: ``JPEGImages/480p``,
+``Annotations/480p`` (palette PNGs) and ``ImageSets/2017/{train,val,test-dev}.txt``.
 More in docs/module-notes.md.
 """
 
@@ -52,15 +46,7 @@ _SCENE = {
 
 @dataclass(frozen=True)
 class SyntheticDAVISSequence:
-    """One synthetic DAVIS sequence.
-
-    Attributes:
-        name: folder name.
-        split: ``"train"``, ``"val"`` or ``"test-dev"`` (first annotation only).
-        scene: the scene to render.
-        num_objects: number of labelled objects.
-        void_border: half-width in pixels of the void band along label boundaries (0 = none).
-    """
+    """One synthetic DAVIS sequence (``void_border``: half-width of the void band, 0 = none)."""
 
     name: str
     split: str
@@ -108,16 +94,7 @@ def choose_objects(video: SyntheticVideo, count: int) -> tuple[int, ...]:
 
 def label_map(instance_map: np.ndarray, objects: tuple[int, ...], void_border: int = 0
               ) -> np.ndarray:
-    """Turn a scene instance map into a DAVIS label map (object ``objects[k]`` -> ``k + 1``).
-
-    Args:
-        instance_map: ``(H, W)`` scene ids after occlusion.
-        objects: scene ids of the labelled objects, in label order.
-        void_border: half-width of the void band (255) along label boundaries.
-
-    Returns:
-        ``(H, W)`` uint8.
-    """
+    """Turn a scene instance map into a uint8 DAVIS label map (``objects[k]`` -> ``k + 1``)."""
     lookup = np.zeros(int(instance_map.max(initial=0)) + 1, dtype=np.uint8)
     for label, object_id in enumerate(objects, start=1):
         if object_id < len(lookup):
@@ -151,13 +128,7 @@ def write_sequence(root: Path, sequence: SyntheticDAVISSequence) -> None:
 
 def write_davis(root: Path, benchmark: str = "DAVIS-2017", spec: DAVISSpec = DEFAULT_SPEC
                 ) -> None:
-    """Write the synthetic DAVIS data set of ``spec`` into ``root`` (the DAVIS folder).
-
-    Args:
-        root: output folder (gets ``JPEGImages``, ``Annotations`` and ``ImageSets``).
-        benchmark: must be ``"DAVIS-2017"`` (the signature every synthetic writer shares).
-        spec: the sequences to write.
-    """
+    """Write the synthetic DAVIS data set of ``spec`` into ``root`` (``benchmark="DAVIS-2017"``)."""
     if benchmark not in BENCHMARKS:
         raise ValueError(f"write_davis writes {BENCHMARKS}, not {benchmark!r}")
     splits: dict[str, list[str]] = {}

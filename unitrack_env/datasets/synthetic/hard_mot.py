@@ -1,26 +1,13 @@
-"""Long, deliberately hard synthetic MOT sequences (30 FPS) for accuracy benchmarks.
+"""Long, deliberately hard synthetic MOT sequences (30 FPS, 300 frames) for accuracy benchmarks.
 
-The embedded default MOT data (:data:`~unitrack_env.datasets.synthetic.motchallenge.DEFAULT_SPEC`)
-is short (64-80 frames) and easy: every person has a distinct texture and the camera stands
-still. The sequences here stress what separates an association tracker from an IoU tracker
-and what makes appearance *mislead* one:
-
-* **crossings**: several pairs forced to cross with heavy overlap (scene engine);
-* **occlusions**: occluders on walkers' paths, long enough to lose a track for a while;
-* **look-alikes**: some people share another person's texture (same colours and pattern,
-  a different pattern phase), including inside crossing pairs, so appearance alone cannot
-  tell them apart and must not re-attach a lost track to the wrong one;
-* **camera motion**: the camera pans (a moving crop of a wider scene, with a slow sway and
-  a small vertical shake), so the whole image moves and constant-velocity predictions err;
-* **30 FPS, 300 frames**: lost-track ages and confirmation rules meet real time scales.
-
-They are written in the MOTChallenge layout by :func:`write_hard_motchallenge` (MOT17 rules:
-9-column gt with classes and visibility, detections with scores in [0, 1]) and are *not*
-part of the embedded default data set, so nothing that depends on the default changes.
+They stress what separates an association tracker from an IoU tracker: crossings with
+heavy overlap, long occlusions, look-alikes (shared textures, so appearance can mislead)
+and a panning, shaking camera. Written in the MOTChallenge layout by
+:func:`write_hard_motchallenge`; not part of the embedded default data.
 
 Example:
     >>> from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC
-    >>> [s.name for s in HARD_SPEC.sequences]
+    >>> [s.sequence.name for s in HARD_SPEC.sequences]
     ['HARD-01', 'HARD-02', 'HARD-03']
 """
 
@@ -53,20 +40,10 @@ _STREAM_HARD = 3
 
 @dataclass(frozen=True)
 class CameraMotion:
-    """A panning camera: the frame is a moving window on a wider scene.
+    """A panning camera: the frame is a moving window on a scene ``margin``/``margin_y`` larger.
 
-    The window's left edge at frame ``t`` is ``margin / 2 + pan_amplitude * sin(2 pi t /
-    pan_period + phase)`` (clipped to the scene) and its top edge ``shake_amplitude *
-    sin(2 pi t / shake_period)`` below ``margin_y / 2``. The scene is rendered ``margin``
-    pixels wider and ``margin_y`` pixels taller than the frame.
-
-    Attributes:
-        margin: Extra scene width in pixels.
-        margin_y: Extra scene height in pixels.
-        pan_amplitude: Horizontal sway in pixels.
-        pan_period: Sway period in frames.
-        shake_amplitude: Vertical shake in pixels.
-        shake_period: Shake period in frames.
+    The left edge sways by ``pan_amplitude * sin(2 pi t / pan_period + phase)`` around the
+    centre (clipped to the scene); the top edge shakes by ``shake_amplitude`` likewise.
     """
 
     margin: int = 160
@@ -87,15 +64,7 @@ class CameraMotion:
 
 @dataclass(frozen=True)
 class HardSequenceSpec:
-    """One hard sequence.
-
-    Attributes:
-        sequence: Name, split, frame rate and the scene (of the *frame* size; the scene is
-            rendered wider when the camera moves).
-        lookalikes: Number of people (after the crossing pairs' first members) who wear
-            another person's texture; crossing partners are copied first.
-        camera: Camera motion, or None for a static camera.
-    """
+    """One hard sequence: the frame-size scene, ``lookalikes`` copied textures, camera or None."""
 
     sequence: SequenceSpec
     lookalikes: int = 0
@@ -104,13 +73,7 @@ class HardSequenceSpec:
 
 @dataclass(frozen=True)
 class HardMotSpec:
-    """A set of hard sequences.
-
-    Attributes:
-        sequences: The sequences, in writing order.
-        detection_noise: The simulated detector.
-        jpeg_quality: JPEG quality of the frames.
-    """
+    """A set of hard sequences, the simulated detector and the frames' JPEG quality."""
 
     sequences: tuple[HardSequenceSpec, ...]
     detection_noise: DetectionNoise = DetectionNoise(
@@ -208,13 +171,7 @@ def render_hard_sequence(spec: HardSequenceSpec) -> Iterator[SyntheticFrame]:
 
 def write_hard_motchallenge(root: str | Path, benchmark: str = "MOT17", *,
                             spec: HardMotSpec = HARD_SPEC) -> None:
-    """Render ``spec`` and write it under ``root`` in ``benchmark``'s MOTChallenge layout.
-
-    Args:
-        root: The data set folder (gets ``train/<SEQ>/...``).
-        benchmark: ``MOT16``/``MOT17``/``MOT20`` (9-column gt) or ``MOT15``.
-        spec: What to render; equal specs give identical files.
-    """
+    """Render ``spec`` under ``root`` (``train/<SEQ>/...``) in ``benchmark``'s layout."""
     root = Path(root)
     params = [cv2.IMWRITE_JPEG_QUALITY, int(spec.jpeg_quality)]
     for hard in spec.sequences:

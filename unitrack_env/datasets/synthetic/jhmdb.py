@@ -1,13 +1,8 @@
 """Synthetic JHMDB data set (pose propagation), in JHMDB's exact layout.
 
-:func:`write_jhmdb` renders the scenes of a :class:`JHMDBSpec` and writes::
-
-    <root>/Rename_Images/<action>/<video>/00001.png ...        320x240 RGB PNG frames
-    <root>/joint_positions/<action>/<video>/joint_positions.mat pos_img (2, 15, T), MATLAB
-                                                                 1-based x/y (scipy.io.savemat)
-    <root>/splits/<action>_test_split1.txt                      "<video>.avi <1|2>" lines
-
-More in docs/module-notes.md.
+:func:`write_jhmdb` writes ``Rename_Images/<action>/<video>/*.png`` frames,
+``joint_positions/<action>/<video>/joint_positions.mat`` (``pos_img`` ``(2, 15, T)``,
+1-based) and ``splits/<action>_test_split1.txt``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -38,14 +33,7 @@ SPLIT_INDEX = 1
 
 @dataclass(frozen=True)
 class VideoSpec:
-    """One synthetic JHMDB video.
-
-    Attributes:
-        action: action class folder (e.g. ``"walk"``).
-        video: video folder name.
-        scene: the scene (object 1 is the annotated person).
-        split: 1 = train, 2 = test (HMDB51 split-file labels).
-    """
+    """One synthetic JHMDB video (object 1 is the annotated person; split 1 train, 2 test)."""
 
     action: str
     video: str
@@ -103,14 +91,7 @@ MAT_HEADER: bytes = b"MATLAB 5.0 MAT-file, written by unitrack-env".ljust(116)
 
 
 def joint_positions_mat(joints: np.ndarray) -> bytes:
-    """Return the bytes of a ``joint_positions.mat`` holding ``pos_img`` for 0-based joints.
-
-    Args:
-        joints: ``(T, 15, 2)`` 0-based ``(x, y)``.
-
-    Returns:
-        A MATLAB 5 file with ``pos_img`` of shape ``(2, 15, T)`` in MATLAB's 1-based pixels.
-    """
+    """The bytes of a ``joint_positions.mat`` (``pos_img``, 1-based) for ``(T, 15, 2)`` joints."""
     from scipy.io import savemat
 
     pos = (np.asarray(joints, dtype=np.float64) + MATLAB_ORIGIN).transpose(2, 1, 0)
@@ -123,17 +104,7 @@ def joint_positions_mat(joints: np.ndarray) -> bytes:
 
 def write_jhmdb(root: str | Path, benchmark: str = "JHMDB", *,
                 spec: JHMDBSpec = DEFAULT_SPEC) -> None:
-    """Render ``spec`` and write it under ``root`` in JHMDB's layout.
-
-    Args:
-        root: the data set folder to fill (created if missing).
-        benchmark: must be ``"JHMDB"`` (the cache's writer signature).
-        spec: what to render; equal specs give identical files.
-
-    Raises:
-        ValueError: another ``benchmark``.
-        OSError: a file could not be written.
-    """
+    """Render ``spec`` under ``root`` in JHMDB's layout (``benchmark="JHMDB"``)."""
     if benchmark != "JHMDB":
         raise ValueError(f"write_jhmdb writes JHMDB only, not {benchmark!r}")
     root = Path(root)

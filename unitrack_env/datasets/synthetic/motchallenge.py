@@ -50,34 +50,14 @@ class DetectionNoise:
     """How simulated public detections deviate from the ground truth.
 
     A person with visibility ``v`` is missed with probability
-    ``min(1, miss_rate + occlusion_miss_weight * (1 - v) ** occlusion_miss_power)``.
-    A detected box keeps the person's centre and size up to Gaussian noise whose standard
-    deviation is ``position_jitter`` (fraction of the box size) and ``size_jitter`` (of the
-    log size), both multiplied by ``2 - v``; it is then clipped to the image. Its score is
-    ``score_base + score_iou * IoU + score_visibility * v`` plus ``score_noise`` noise,
-    clipped to [``min_score``, ``max_score``].
-
-    Attributes:
-        miss_rate: miss probability of a fully visible person.
-        occlusion_miss_weight: extra miss probability of a fully hidden person.
-        occlusion_miss_power: shape of the miss probability's growth with occlusion.
-        position_jitter: centre noise as a fraction of the box width / height.
-        size_jitter: standard deviation of the log width / height ratio.
-        score_base: score offset of a true detection.
-        score_iou: score weight of the detection's IoU with its person.
-        score_visibility: score weight of the person's visibility.
-        score_noise: standard deviation of the score noise.
-        false_positives_per_frame: Poisson mean of random boxes per frame.
-        false_positive_height_range: height of random boxes in pixels, ``(min, max)``.
-        false_positive_aspect_range: width / height of random boxes, ``(min, max)``.
-        false_positive_score: Beta distribution ``(a, b)`` of false-positive scores.
-        clutter_rate: per-person probability of an extra, poorly fitting box nearby (a
-            shifted or partial box: a typical near-duplicate false positive).
-        clutter_min_visibility: persons less visible than this get no clutter.
-        min_size: detections narrower or lower than this many pixels (after clipping) are
-            dropped.
-        min_score: lowest score.
-        max_score: highest score.
+    ``min(1, miss_rate + occlusion_miss_weight * (1 - v) ** occlusion_miss_power)``. A detected
+    box keeps centre and size up to Gaussian noise (``position_jitter`` of the size,
+    ``size_jitter`` of the log size, both times ``2 - v``), clipped to the image. Its score is
+    ``score_base + score_iou * IoU + score_visibility * v`` plus ``score_noise``, clipped to
+    [``min_score``, ``max_score``]. False positives: a Poisson number of random boxes per frame
+    (Beta-distributed scores) and, with ``clutter_rate`` per person visible at least
+    ``clutter_min_visibility``, a shifted or partial near-duplicate. Boxes under ``min_size``
+    pixels are dropped.
     """
 
     miss_rate: float = 0.04
@@ -102,14 +82,7 @@ class DetectionNoise:
 
 @dataclass(frozen=True)
 class SequenceSpec:
-    """One synthetic sequence.
-
-    Attributes:
-        name: folder name (also ``seqinfo.ini``'s ``name``).
-        split: ``"train"`` (with gt) or ``"test"`` (without).
-        scene: the scene to render.
-        frame_rate: ``seqinfo.ini``'s ``frameRate``.
-    """
+    """One synthetic sequence (``split``: ``"train"`` with gt, ``"test"`` without)."""
 
     name: str
     split: str
@@ -127,13 +100,7 @@ class SequenceSpec:
 
 @dataclass(frozen=True)
 class MotChallengeSpec:
-    """A synthetic MOTChallenge data set.
-
-    Attributes:
-        sequences: the sequences, in writing order.
-        detection_noise: the simulated detector.
-        jpeg_quality: JPEG quality of the frames (cv2's 0-100 scale).
-    """
+    """A synthetic MOTChallenge data set: sequences, the simulated detector, JPEG quality."""
 
     sequences: tuple[SequenceSpec, ...]
     detection_noise: DetectionNoise = field(default_factory=DetectionNoise)
@@ -161,15 +128,7 @@ DEFAULT_SPEC = MotChallengeSpec(sequences=(
 
 @dataclass(frozen=True)
 class Detections:
-    """Simulated detections of a whole sequence.
-
-    Attributes:
-        frames: ``(n,)`` 0-based frame index.
-        boxes: ``(n, 4)`` ``(x, y, w, h)`` in 0-based pixels, inside the image.
-        scores: ``(n,)`` in [0, 1].
-        sources: ``(n,)`` id of the object a detection was made from, ``-1`` for false
-            positives (random boxes and clutter); for measuring the noise, never written.
-    """
+    """Simulated detections of a sequence (``sources``: object id, -1 for false positives)."""
 
     frames: np.ndarray
     boxes: np.ndarray
@@ -192,17 +151,7 @@ def simulate_detections(
     noise: DetectionNoise,
     rng: np.random.Generator,
 ) -> Detections:
-    """Make noisy detections from per-frame ground truth.
-
-    Args:
-        annotations: for each frame (0-based), the objects present (as rendered).
-        image_size: ``(width, height)``; boxes are clipped to it.
-        noise: the detector model.
-        rng: the only randomness.
-
-    Returns:
-        Detections sorted by frame.
-    """
+    """Make noisy detections (sorted by frame) from per-frame ground truth, clipped to the image."""
     width, height = image_size
     out = _DetectionList(width, height, noise)
     for t, objects in enumerate(annotations):
@@ -352,17 +301,8 @@ def write_motchallenge(
 ) -> None:
     """Render ``spec`` and write it under ``root`` in ``benchmark``'s MOTChallenge layout.
 
-    Args:
-        root: the data set folder to fill (created if missing); it will hold ``train/`` and
-            ``test/``. Existing files of the same names are overwritten.
-        benchmark: ``MOT15``, ``MOT16``, ``MOT17`` or ``MOT20`` (decides the gt.txt columns
-            and the detection score range).
-        spec: what to render; equal specs give byte-identical text files and identical
-            frames.
-
-    Raises:
-        ValueError: ``benchmark`` is not one of :data:`BENCHMARKS`.
-        OSError: a file could not be written.
+    ``benchmark`` (one of :data:`BENCHMARKS`) decides the gt.txt columns and the score range.
+    Equal specs give byte-identical text files and identical frames; files are overwritten.
     """
     if benchmark not in BENCHMARKS:
         raise ValueError(
@@ -379,16 +319,7 @@ def write_sequence(
     seq_dir: Path, seq: SequenceSpec, frames: Iterable[SyntheticFrame], benchmark: str,
     noise: DetectionNoise, jpeg_params: list[int],
 ) -> None:
-    """Write one sequence's frames, ``seqinfo.ini``, ground truth and detections.
-
-    Args:
-        seq_dir: The sequence folder (``<root>/<split>/<name>``).
-        seq: What the sequence is (its scene seeds the detections).
-        frames: The rendered frames, in order.
-        benchmark: Decides the gt.txt columns and the detection score range.
-        noise: The simulated detector.
-        jpeg_params: cv2's JPEG parameters of the frames.
-    """
+    """Write one sequence's frames, ``seqinfo.ini``, ground truth and detections."""
     image_dir = seq_dir / "img1"
     image_dir.mkdir(parents=True, exist_ok=True)
     annotations: list[tuple[ObjectAnnotation, ...]] = []

@@ -1,9 +1,4 @@
-"""Synthetic MOTS data sets in the MOTS20 and KITTI MOTS layouts.
-
-:func:`write_mots` renders scenes with the shared scene engine and writes, for ``MOTS20``::
-
-    <root>/train/<SEQ>/{seqinfo.ini, img1/000001.jpg ..., gt/gt.txt, det/det.txt}
-    <root>/test/<SEQ>/{seqinfo.ini, img1/, det/det.txt}
+"""Synthetic MOTS data sets in the MOTS20 and KITTI MOTS layouts (:func:`write_mots`).
 
 More in docs/module-notes.md.
 """
@@ -42,19 +37,10 @@ _STREAM_DETECTIONS = 3
 class MaskNoise:
     """How simulated mask detections deviate from the ground truth.
 
-    Attributes:
-        miss_rate: miss probability of a fully visible person.
-        occlusion_miss_weight: extra miss probability of a fully hidden person (times
-            ``(1 - visibility) ** 2``).
-        max_morph: masks are dilated (or eroded) by up to this many pixels.
-        max_shift: masks are shifted by up to this many pixels per axis.
-        score_base: score of a true detection before the visibility term and noise.
-        score_visibility: score weight of the person's visibility.
-        score_noise: standard deviation of the score noise.
-        false_positives_per_frame: Poisson mean of false-positive blobs per frame.
-        occluder_false_positive_rate: per-frame probability of a false positive on the occluder.
-        false_positive_score: Beta ``(a, b)`` of false-positive scores.
-        min_pixels: masks (gt and detections) smaller than this are dropped.
+    Misses as for boxes (``miss_rate + occlusion_miss_weight * (1 - v) ** 2``); masks are
+    dilated or eroded by up to ``max_morph`` and shifted by up to ``max_shift`` pixels; scores
+    ``score_base + score_visibility * v`` plus noise; Poisson false-positive blobs, some on the
+    occluder; masks under ``min_pixels`` are dropped.
     """
 
     miss_rate: float = 0.04
@@ -136,18 +122,11 @@ class FrameMasks:
 
 def simulate_frame(frame, noise: MaskNoise, rng: np.random.Generator, *,
                    resolve: bool = True, class_noise: float = 0.0) -> FrameMasks:
-    """Ground truth and noisy detections of one rendered frame.
+    """Ground truth and noisy detections (:class:`FrameMasks`) of one rendered frame.
 
-    Args:
-        frame: a :class:`~unitrack_env.datasets.synthetic.scene.SyntheticFrame`.
-        noise: the detector model.
-        rng: the only randomness (a fixed number of draws per object keeps streams aligned).
-        resolve: make detection masks disjoint (MOTS) or keep overlaps (VIS).
-        class_noise: probability that a detection reports the other class (VIS).
-
-    Returns:
-        :class:`FrameMasks`; detection classes are 1 (person) or 2 (occluder object), and
-        ``det_sources`` holds the object id a detection was made from (-1 = false positive).
+    ``resolve`` makes detection masks disjoint (MOTS); ``class_noise`` flips a detection's class
+    (VIS: 1 person, 2 occluder object); ``det_sources`` is -1 for false positives. A fixed
+    number of draws per object keeps the random streams aligned.
     """
     imap = frame.instance_map
     shape = imap.shape
@@ -268,12 +247,7 @@ def _seqinfo(seq: SequenceSpec) -> str:
 
 
 def write_mots(root: str | Path, benchmark: str, *, spec: MOTSSpec = DEFAULT_SPEC) -> None:
-    """Render ``spec`` and write it under ``root`` in ``benchmark``'s layout (module docstring).
-
-    Raises:
-        ValueError: unknown ``benchmark``.
-        OSError: a file could not be written.
-    """
+    """Render ``spec`` and write it under ``root`` in ``benchmark``'s layout."""
     if benchmark not in BENCHMARKS:
         raise ValueError(f"unknown MOTS benchmark {benchmark!r}; valid: {', '.join(BENCHMARKS)}")
     root = Path(root)

@@ -154,16 +154,7 @@ def select_joints(skeleton: np.ndarray, names: tuple[str | None, ...]) -> np.nda
 def joint_visibility(
     joints: np.ndarray, instance_map: np.ndarray, object_id: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Classify joints as inside the image and not occluded by another object.
-
-    Args:
-        joints: ``(J, 2)`` 0-based ``(x, y)``; NaN rows count as absent.
-        instance_map: ``(H, W)`` object id per pixel after occlusion (0 = background).
-        object_id: the joints' own object.
-
-    Returns:
-        ``(inside, visible)``: two ``(J,)`` bool arrays; ``visible`` implies ``inside``.
-    """
+    """``(inside, visible)`` ``(J,)`` masks: joints in the image, and not occluded by others."""
     height, width = instance_map.shape
     finite = np.all(np.isfinite(joints), axis=1)
     cols = np.where(finite, np.round(np.nan_to_num(joints[:, 0])), -1).astype(np.int64)

@@ -1,12 +1,8 @@
 """Synthetic PoseTrack 2018 data set (multi-person pose tracking), in the release's layout.
 
-:func:`write_posetrack` renders the scenes of a :class:`PoseTrackSpec` and writes::
-
-    <root>/posetrack_data/annotations/{train,val}/<seq>.json   PoseTrack 2018 ground truth
-    <root>/posetrack_data/images/{train,val,test}/<seq>/000000.jpg ...   every frame
-    <root>/detections/{train,val,test}/<seq>.json              simulated pose detections
-
-More in docs/module-notes.md.
+:func:`write_posetrack` writes ``posetrack_data/annotations/{train,val}/<seq>.json``,
+``posetrack_data/images/{train,val,test}/<seq>/*.jpg`` and simulated pose detections in
+``detections/{train,val,test}/<seq>.json``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -57,27 +53,13 @@ _STREAM_DETECTIONS = 2
 class PoseDetectionNoise:
     """How the simulated pose estimator deviates from the ground truth.
 
-    A person with silhouette visibility ``v`` is missed with probability
-    ``min(1, miss_rate + occlusion_miss_weight * (1 - v) ** 2)``. A visible joint is found
-    with probability ``joint_recall`` and jittered by Gaussian noise of standard deviation
-    ``joint_jitter`` x the person's height; an occluded joint (inside the image) is
-    hallucinated with probability ``occluded_joint_rate`` with ``occluded_jitter``.
-    Joint scores are uniform in ``visible_score`` / ``occluded_score``; the pose score is
-    their mean. Poses with fewer than ``min_joints`` joints are dropped.
-
-    Attributes:
-        miss_rate: miss probability of a fully visible person.
-        occlusion_miss_weight: extra miss probability of a fully hidden person.
-        joint_recall: probability of finding a visible joint.
-        joint_jitter: joint noise of visible joints, fraction of the person's height.
-        occluded_joint_rate: probability of reporting an occluded joint.
-        occluded_jitter: joint noise of occluded joints, fraction of the height.
-        visible_score: ``(min, max)`` score of a visible joint.
-        occluded_score: ``(min, max)`` score of an occluded joint.
-        static_person_rate: probability of detecting a standing (unannotated) person.
-        false_poses_per_frame: Poisson mean of random poses per frame.
-        false_pose_height: ``(min, max)`` height in pixels of a random pose.
-        min_joints: fewest joints a reported pose has.
+    A person with visibility ``v`` is missed with probability
+    ``min(1, miss_rate + occlusion_miss_weight * (1 - v) ** 2)``. A visible joint is found with
+    probability ``joint_recall``, jittered by ``joint_jitter`` x height; an occluded joint in the
+    image is hallucinated with ``occluded_joint_rate`` (``occluded_jitter``). Joint scores are
+    uniform in ``visible_score`` / ``occluded_score``; the pose score is their mean. Standing
+    people are detected with ``static_person_rate``; random poses arrive Poisson
+    (``false_poses_per_frame``); poses with under ``min_joints`` joints are dropped.
     """
 
     miss_rate: float = 0.03
@@ -96,13 +78,7 @@ class PoseDetectionNoise:
 
 @dataclass(frozen=True)
 class SequenceSpec:
-    """One synthetic PoseTrack video.
-
-    Attributes:
-        name: sequence name (``<6-digit id>_<source>_<set>``).
-        split: ``train``, ``val`` (with annotations) or ``test`` (frames only).
-        scene: the scene to render.
-    """
+    """One synthetic PoseTrack video (``split``: ``train``/``val`` annotated, ``test`` not)."""
 
     name: str
     split: str
@@ -264,18 +240,7 @@ def simulate_pose_detections(
 
 def write_posetrack(root: str | Path, benchmark: str = "PoseTrack2018", *,
                     spec: PoseTrackSpec = DEFAULT_SPEC) -> None:
-    """Render ``spec`` and write it under ``root`` in the PoseTrack 2018 layout.
-
-    Args:
-        root: the data set folder to fill; it will hold ``posetrack_data/`` and
-            ``detections/``.
-        benchmark: must be ``"PoseTrack2018"`` (the cache's writer signature).
-        spec: what to render; equal specs give identical files.
-
-    Raises:
-        ValueError: another ``benchmark``.
-        OSError: a file could not be written.
-    """
+    """Render ``spec`` under ``root`` in the PoseTrack 2018 layout (``benchmark``: its name)."""
     if benchmark not in BENCHMARKS:
         raise ValueError(f"write_posetrack writes {BENCHMARKS}, not {benchmark!r}")
     root = Path(root)

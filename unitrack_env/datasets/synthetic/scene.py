@@ -28,16 +28,7 @@ _STREAM_BACKGROUND = 1
 
 
 class SyntheticVideo:
-    """A rendered-on-demand synthetic video; build it with :func:`render_scene`.
-
-    Frames are produced lazily (``video.frame(t)`` or iterating), so only one frame is in
-    memory at a time; rendered sprites are cached per object and size.
-
-    Attributes:
-        config: the scene's configuration.
-        objects: every object of the scene, sorted by id.
-        background: ``(H, W, 3)`` uint8 RGB static background (read-only).
-    """
+    """A synthetic video rendered on demand one frame at a time (:func:`render_scene`)."""
 
     def __init__(
         self, config: SceneConfig, objects: tuple[SceneObject, ...], background: np.ndarray
@@ -144,13 +135,7 @@ def _background(config: SceneConfig, rng: np.random.Generator) -> np.ndarray:
 
 
 def render_scene(config: SceneConfig) -> SyntheticVideo:
-    """Build the scene described by ``config``; frames are rendered lazily.
-
-    Args:
-        config: the scene parameters (``config.seed`` is the only randomness).
-
-    Returns:
-        The video; equal configs give identical videos.
+    """Build the scene of ``config`` (its seed is the only randomness); frames render lazily.
 
     >>> video = render_scene(SceneConfig(num_frames=3, num_objects=2, num_crossings=1))
     >>> frame = video.frame(0)

@@ -1,9 +1,7 @@
 """The synthetic scene's model: configuration, objects, their motion and per-frame records.
 
-Plain frozen records shared by the layout (:mod:`.layout`, which draws the objects of a
-scene), the sprite renderer (:mod:`.sprites`) and the video (:mod:`.scene`). Conventions
-(0-based frames, amodal ``(x, y, w, h)`` boxes in 0-based pixels) are those of
-:mod:`unitrack_env.datasets.synthetic.scene`.
+Frozen records shared by the layout, the sprite renderer and the video; 0-based frames,
+amodal ``(x, y, w, h)`` boxes in 0-based pixels.
 """
 
 from __future__ import annotations
@@ -43,16 +41,7 @@ class Silhouette(enum.Enum):
 
 @dataclass(frozen=True)
 class Texture:
-    """An object's appearance.
-
-    Attributes:
-        pattern: the pattern family.
-        colour_a: first RGB colour.
-        colour_b: second RGB colour (the pattern mixes ``colour_a`` and ``colour_b``).
-        period: pattern period in pixels at the object's base size.
-        angle: pattern orientation in radians.
-        seed: seed of the random field of :attr:`Pattern.BLOBS` (unused by the others).
-    """
+    """An object's appearance: a pattern mixing two RGB colours (``seed``: of the BLOBS field)."""
 
     pattern: Pattern
     colour_a: tuple[int, int, int]
@@ -66,10 +55,8 @@ class Texture:
 class Trajectory:
     """Smooth motion: constant velocity plus a sinusoidal wobble, and a slow scale change.
 
-    The box centre at (0-based, possibly fractional) frame ``t`` is
-    ``anchor_centre + velocity * (t - anchor_frame) + wobble(t)`` with
-    ``wobble(t) = amplitude * sin(2 pi t / period + phase)`` per axis; the size is the base
-    size times ``1 + scale_rate * (t - anchor_frame)``.
+    Centre at frame ``t``: ``anchor_centre + velocity * (t - anchor_frame) + amplitude *
+    sin(2 pi t / period + phase)``; size: base size times ``1 + scale_rate * (t - anchor_frame)``.
     """
 
     anchor_frame: float
@@ -98,17 +85,7 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class SceneObject:
-    """One object of a scene.
-
-    Attributes:
-        id: positive object id (also its value in the instance map).
-        role: what the object is.
-        base_size: ``(w, h)`` in pixels at scale 1.
-        depth: distance from the camera (larger is farther); ties are broken by id.
-        texture: appearance.
-        silhouette: mask shape.
-        trajectory: motion.
-    """
+    """One object of a scene (``id``: its instance-map value; larger depth is farther)."""
 
     id: int
     role: ObjectRole
@@ -134,38 +111,11 @@ class SceneObject:
 class SceneConfig:
     """Parameters of one synthetic scene. Equal configs give identical scenes.
 
-    Attributes:
-        width: image width in pixels.
-        height: image height in pixels.
-        num_frames: number of frames.
-        num_objects: number of walking pedestrians.
-        num_crossings: pairs of pedestrians forced to cross each other with overlap
-            (``2 * num_crossings <= num_objects``); the pairs get ids ``(1, 2)``,
-            ``(3, 4)``, ... Other objects may cross by chance too.
-        num_static_persons: persons standing still.
-        num_occluders: static occluders, each placed on a pedestrian's path.
-        seed: the only source of randomness.
-        object_height_range: person height in pixels, ``(min, max)``.
-        aspect_ratio_range: person width / height, ``(min, max)`` (pedestrian-like, tall).
-        crossing_size_ratio: max relative height difference inside a crossing pair, so
-            that box size does not tell the two apart.
-        crossing_offset_range: vertical offset between a crossing pair's centres, as a
-            fraction of the height, ``(min, max)``; small so that the boxes overlap.
-        speed_range: horizontal walking speed in pixels per frame, ``(min, max)``.
-        max_vertical_speed: largest vertical speed in pixels per frame.
-        scale_rate_range: relative size change per frame, ``(min, max)``.
-        wobble_amplitude: largest wobble amplitude in pixels (the "small noise").
-        wobble_period_range: wobble period in frames, ``(min, max)``.
-        pattern_period_range: texture period in pixels, ``(min, max)``.
-        occluder_width_range: occluder width in pixels, ``(min, max)``.
-        occluder_height_fraction: occluder height as a fraction of the image height,
-            ``(min, max)``.
-        background_colour: mean RGB colour of the background.
-        background_contrast: standard deviation (grey levels) of the background's
-            low-frequency texture.
-        background_cell: size in pixels of the background texture's blobs.
-        background_gradient: brightness change (grey levels) from top to bottom.
-        background_grain: standard deviation (grey levels) of fine static grain.
+    ``seed`` is the only source of randomness; ranges are ``(min, max)``, sizes in pixels,
+    speeds per frame. ``num_crossings`` pairs (ids ``(1, 2)``, ``(3, 4)``, ...) are forced to
+    cross with overlap, their heights within ``crossing_size_ratio`` so size does not tell them
+    apart. Occluders are placed on pedestrians' paths. Background: mean colour, low-frequency
+    ``background_contrast`` blobs of ``background_cell`` pixels, a vertical gradient and grain.
     """
 
     width: int = 640
@@ -231,17 +181,8 @@ class SceneConfig:
 class ObjectAnnotation:
     """One object in one frame (present when its amodal box overlaps the image).
 
-    Attributes:
-        id: object id (its value in the frame's instance map).
-        role: what the object is.
-        box: amodal ``(x, y, w, h)`` in 0-based pixels, tight around the full silhouette;
-            may extend past the image border.
-        visibility: visible fraction of the full silhouette (0..1): pixels of this id in
-            the instance map divided by the silhouette's area, so both occlusion and
-            truncation at the border lower it.
-        visible_pixels: pixels of this object in the instance map.
-        area: pixels of the full (amodal) silhouette.
-        depth: the object's depth (larger is farther).
+    ``box`` is amodal (may extend past the border); ``visibility`` is its instance-map pixels
+    over the silhouette's ``area``, so occlusion and truncation both lower it.
     """
 
     id: int
@@ -255,14 +196,7 @@ class ObjectAnnotation:
 
 @dataclass(frozen=True)
 class SyntheticFrame:
-    """One rendered frame.
-
-    Attributes:
-        index: 0-based frame index.
-        image: ``(H, W, 3)`` uint8 RGB.
-        instance_map: ``(H, W)`` int32 object id per pixel after occlusion (0 = background).
-        objects: annotations of the objects present, sorted by id.
-    """
+    """One rendered frame: RGB ``image``, ``instance_map`` (0 = background), objects by id."""
 
     index: int
     image: np.ndarray

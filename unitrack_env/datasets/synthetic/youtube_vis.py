@@ -1,13 +1,8 @@
 """Synthetic YouTube-VIS 2019 data sets.
 
-:func:`write_youtube_vis` renders scenes with the shared scene engine and writes::
-
-    <root>/train.json  <root>/valid.json            (valid: videos and categories only)
-    <root>/{train,valid}/JPEGImages/<video>/00000.jpg, 00005.jpg, ...   (every 5th frame
-                                                     numbering, as the 2019 release)
-    <root>/detections/{train,valid}.json             noisy detections, results format
-
-More in docs/module-notes.md.
+:func:`write_youtube_vis` writes ``train.json``/``valid.json``, frames under
+``{train,valid}/JPEGImages/<video>/`` (every-5th numbering, as the 2019 release) and noisy
+detections in ``detections/{train,valid}.json``. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
