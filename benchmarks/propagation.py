@@ -14,6 +14,10 @@ Parts:
   normalize, gather, affinity, top-k, labels, weights, memory; "matmul" is the time in
   ``aten::mm``/``aten::bmm`` inside them, the floor of any float32 formulation that computes
   the same affinities), and the largest label difference over the recurrent run.
+* ``precision``: label propagation in float32 (the default) against
+  ``propagation_precision="bf16"`` with several candidate counts, interleaved step by step on
+  the DAVIS features at 854x480: milliseconds per step, and how far the labels of the
+  recurrent runs drift from float32's (CPUs with native bfloat16 only).
 * ``heads``: seconds per frame of the whole ``unitrack-vos`` head at 854x480 (DAVIS) and of
   ``unitrack-pose`` (JHMDB, 320x320) with either propagator, interleaved frame by frame on
   one shared model, split into backbone, propagation and the rest (upsampling + argmax for
@@ -54,7 +58,12 @@ from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.agents.base import Agent
 from unitrack_env.agents.heads.vos import VOID_LABEL, labels_to_onehot
-from unitrack_env.agents.primitives.label_propagation import LabelPropagator
+from unitrack_env.agents.primitives import label_propagation
+from unitrack_env.agents.primitives.label_propagation import (
+    CANDIDATE_FACTOR,
+    LabelPropagationConfig,
+    LabelPropagator,
+)
 from unitrack_env.agents.primitives.label_search import STAGE_PREFIX
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -65,7 +74,7 @@ DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
 @dataclass
 class Config:
-    parts: tuple[str, ...] = ("stages", "heads", "speed", "memory", "accuracy")
+    parts: tuple[str, ...] = ("stages", "precision", "heads", "speed", "memory", "accuracy")
     threads: int = 2
     frames: int = 20
     sequences: tuple[str, ...] = ("blackswan", "dog")
@@ -149,7 +158,7 @@ TASKS = {
 FORMULATIONS: dict[str, bool] = {"old": True, "new": False}
 #: Reported stages: the ``stage`` labels, "matmul" (aten::mm + aten::bmm inside them) and
 #: "other" (the step's time outside every label).
-STAGES = ("normalize", "gather", "affinity", "matmul", "top-k", "labels", "weights",
+STAGES = ("normalize", "gather", "affinity", "matmul", "top-k", "rescore", "labels", "weights",
           "memory", "other")
 
 
@@ -191,22 +200,26 @@ def profiled_step(prop: LabelPropagator, feats: torch.Tensor) -> dict[str, float
     return times
 
 
-def run_formulations(feats: list[torch.Tensor], labels: torch.Tensor, profiled: bool
+def run_formulations(feats: list[torch.Tensor], labels: torch.Tensor, profiled: bool,
+                     props: dict[str, LabelPropagator] | None = None
                      ) -> tuple[dict[str, dict[str, list[float]]], float]:
-    """Both propagators over the same frames, alternating which goes first.
+    """Propagators (default: ``FORMULATIONS``) over the same frames, rotating the order.
 
     Returns:
         Per formulation, seconds per step (and per stage when ``profiled``), warm-up steps
-        (the memory filling up) left out; the largest label difference between the two.
+        (the memory filling up) left out; the largest label difference between the first
+        two.
     """
-    props = {name: LabelPropagator(reference=ref) for name, ref in FORMULATIONS.items()}
+    if props is None:
+        props = {name: LabelPropagator(reference=ref) for name, ref in FORMULATIONS.items()}
+    first, second = list(props)[:2]
     for prop in props.values():
         prop.reset(feats[0], labels)
     times: dict[str, dict[str, list[float]]] = {name: defaultdict(list) for name in props}
     diff = 0.0
     for t, frame in enumerate(feats[1:], 1):
         outs = {}
-        for name in list(props)[::1 if t % 2 else -1]:
+        for name in list(props)[t % len(props):] + list(props)[:t % len(props)]:
             if profiled:
                 for stage_name, seconds in profiled_step(props[name], frame).items():
                     times[name][stage_name].append(seconds)
@@ -215,7 +228,7 @@ def run_formulations(feats: list[torch.Tensor], labels: torch.Tensor, profiled: 
             outs[name] = props[name].step(frame)
             times[name]["step (wall)"].append(time.perf_counter() - start)
         if outs:
-            diff = max(diff, float((outs["old"] - outs["new"]).abs().max()))
+            diff = max(diff, float((outs[first] - outs[second]).abs().max()))
     warm = min(5, len(feats) // 3)
     return {n: {k: v[warm:] for k, v in d.items()} for n, d in times.items()}, diff
 
@@ -240,6 +253,53 @@ def stages(cfg: Config) -> None:
             ratio = f"{old / new:7.2f}x" if new > 0.05 else ""
             print(f"{row:<18} {old:9.1f} {new:9.1f} {ratio:>8}")
         print(f"max |labels old - new| over {len(feats) - 1} recurrent steps: {diff:.1e}")
+
+
+#: ``precision`` part: bf16 candidates per query, in multiples of ``topk``, measured.
+CANDIDATE_FACTORS = (1, 2, 3)
+
+
+def precision(cfg: Config) -> None:
+    print(f"\n== label propagation precision: float32 vs bf16 (k' = factor * top-k "
+          f"candidates by bfloat16 affinity, scored again in float32), interleaved step by "
+          f"step, {cfg.threads} threads ==")
+    flags = label_propagation.cpu_flags() or set()
+    print(f"CPU flags: {', '.join(sorted(flags & {'avx512_bf16', 'amx_bf16', 'avx512f'}))}")
+    model = AppearanceModel(runtime=cfg.runtime)
+    for sequence in cfg.sequences:
+        feats, labels = davis_features(model, sequence, cfg.frames + 1)
+        props = {"float32": LabelPropagator()}
+        for factor in CANDIDATE_FACTORS:  # the factor is read when a propagator is made
+            label_propagation.CANDIDATE_FACTOR = factor
+            props[f"bf16 x{factor}"] = LabelPropagator(
+                LabelPropagationConfig(propagation_precision="bf16"))
+        label_propagation.CANDIDATE_FACTOR = CANDIDATE_FACTOR
+        for prop in props.values():
+            prop.reset(feats[0], labels)
+        seconds: dict[str, list[float]] = defaultdict(list)
+        diff: dict[str, list[torch.Tensor]] = defaultdict(list)
+        for t, frame in enumerate(feats[1:], 1):
+            outs = {}
+            for name in list(props)[t % len(props):] + list(props)[:t % len(props)]:
+                start = time.perf_counter()
+                outs[name] = props[name].step(frame)
+                seconds[name].append(time.perf_counter() - start)
+            for name in props:
+                diff[name].append((outs[name] - outs["float32"]).abs().amax(0).flatten())
+        c, h, w = feats[0].shape
+        warm = min(5, len(feats) // 3)
+        print(f"DAVIS {sequence}: 854x480 frames, features {c} x {h} x {w}, "
+              f"{labels.shape[0]} labels; M = 6, radius 12, top-10; median of "
+              f"{len(feats) - 1 - warm} steps after the memory filled; label differences "
+              f"over all {len(feats) - 1} recurrent steps")
+        print(f"{'precision':<12} {'ms/step':>8} {'speed-up':>9} {'max |diff|':>11} "
+              f"{'locations > 1e-4':>17}")
+        base = statistics.median(seconds["float32"][warm:])
+        for name in props:
+            ms = statistics.median(seconds[name][warm:])
+            d = torch.cat(diff[name])
+            print(f"{name:<12} {ms * 1e3:8.1f} {base / ms:8.2f}x {float(d.max()):11.1e} "
+                  f"{float((d > 1e-4).float().mean()):17.2%}")
 
 
 def _lockstep(envs: dict[str, gym.Env], agents: dict[str, Any], sequence: str,
@@ -410,8 +470,8 @@ def main() -> None:
     torch.set_num_threads(cfg.threads)
     print(f"torch {torch.__version__}, {cfg.threads} threads; peak RSS so far "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
-    parts = {"stages": stages, "heads": heads, "speed": speed, "memory": memory,
-             "accuracy": accuracy}
+    parts = {"stages": stages, "precision": precision, "heads": heads, "speed": speed,
+             "memory": memory, "accuracy": accuracy}
     for part in cfg.parts:
         parts[part](cfg)
 

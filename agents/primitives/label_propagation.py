@@ -15,6 +15,7 @@ from .label_search import (
     MemorySearch,
     grid_positions,
     merge_topk,
+    rescore,
     search_dense,
     stage,
 )
@@ -48,8 +49,15 @@ MAX_AFFINITY_ELEMENTS: int = 1 << 22
 480p step on DAVIS dog / blackswan (2 cores, AVX-512): 137 / 134 ms, against 148 / 142 ms at
 8 Mi and 138 / 134 ms at 2 Mi (smaller blocks: more Python-level calls)."""
 
-AFFINITY_DTYPES: dict[str, torch.dtype] = {"float32": torch.float32, "bfloat16": torch.bfloat16}
-"""Allowed ``affinity_dtype`` names and their torch dtypes."""
+PRECISIONS: tuple[str, ...] = ("float32", "bf16")
+"""Allowed ``propagation_precision`` values (docs/design-decisions.md)."""
+
+CANDIDATE_FACTOR: int = 2
+"""``bf16`` precision: candidates per query scored again in float32, in multiples of
+``topk`` (docs/design-decisions.md has the measurement that chose it)."""
+
+NATIVE_BF16_FLAGS: tuple[str, ...] = ("avx512_bf16", "amx_bf16")
+"""CPU flags (Linux ``/proc/cpuinfo``) of native bfloat16 matrix products."""
 
 NORM_EPS: float = 1e-12
 """Guard of the L2 normalisation of all-zero features."""
@@ -71,8 +79,10 @@ class LabelPropagationConfig:
         normalize: L2-normalise every location's feature (cosine affinities).
         tile_size: Query tile side of the local search (speed and memory only).
         max_affinity_elements: Most affinity values held at once.
-        affinity_dtype: ``"float32"`` (exact) or ``"bfloat16"`` (faster on CPUs with
-            AVX512-BF16, ~3 significant digits lost; docs/design-decisions.md).
+        propagation_precision: ``"float32"`` (default, the paper's exact formulation) or
+            ``"bf16"``: bfloat16 affinities pick ``CANDIDATE_FACTOR * topk`` candidates per
+            query, rescored in float32 (float32's result unless its top-k falls outside
+            them); CPUs with native bfloat16 only (docs/design-decisions.md).
     """
 
     memory_size: int = MEMORY_SIZE
@@ -84,7 +94,7 @@ class LabelPropagationConfig:
     normalize: bool = True
     tile_size: int = TILE_SIZE
     max_affinity_elements: int = MAX_AFFINITY_ELEMENTS
-    affinity_dtype: str = "float32"
+    propagation_precision: str = "float32"
 
     def for_stride(self, stride: int) -> LabelPropagationConfig:
         """These options for a model whose feature cell is ``stride`` pixels (radii rescaled)."""
@@ -96,10 +106,10 @@ class LabelPropagationConfig:
             for name in ("radius", "first_frame_radius")})
 
     def __post_init__(self) -> None:
-        if self.affinity_dtype not in AFFINITY_DTYPES:
+        if self.propagation_precision not in PRECISIONS:
             raise ValueError(
-                f"affinity_dtype must be one of {sorted(AFFINITY_DTYPES)}, "
-                f"got {self.affinity_dtype!r}"
+                f"propagation_precision must be one of {', '.join(map(repr, PRECISIONS))}, "
+                f"got {self.propagation_precision!r}"
             )
         if self.memory_size < 1:
             raise ValueError(f"memory_size must be >= 1 (the first frame), got {self.memory_size}")
@@ -115,6 +125,34 @@ class LabelPropagationConfig:
             raise ValueError(f"tile_size must be >= 1, got {self.tile_size}")
         if self.max_affinity_elements < 1:
             raise ValueError("max_affinity_elements must be >= 1")
+
+
+def cpu_flags() -> set[str] | None:
+    """The CPU's feature flags from Linux ``/proc/cpuinfo`` (None: not readable)."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as info:
+            for line in info:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        return None
+    return None
+
+
+def check_precision(precision: str) -> None:
+    """Refuse ``"bf16"`` on a CPU without native bfloat16, naming the reason and the fix."""
+    if precision != "bf16":
+        return
+    flags = cpu_flags()
+    if flags is not None and flags & set(NATIVE_BF16_FLAGS):
+        return
+    seen = ("the CPU flags could not be read from /proc/cpuinfo" if flags is None
+            else "this CPU has neither (/proc/cpuinfo)")
+    raise ValueError(
+        f"propagation_precision='bf16' needs a CPU with native bfloat16 (flag "
+        f"{' or '.join(NATIVE_BF16_FLAGS)}), and {seen}: emulated bfloat16 is slower than "
+        "float32. Use propagation_precision='float32' (the default, exact)"
+    )
 
 
 def normalize_features(features: torch.Tensor) -> torch.Tensor:
@@ -172,17 +210,29 @@ class LabelPropagator:
     ``reset(features_0, labels_0)`` then ``labels_t = step(features_t)`` per frame.
     ``reference=True`` searches with the formulation the default replaced
     (:mod:`~unitrack_env.agents.primitives.label_search_tiled`): same results, slower.
+    ``"bf16"`` precision: the same searches see bfloat16 features, ``CANDIDATE_FACTOR *
+    topk`` and, as labels, each location's row in a float32 memory bank, from which
+    :func:`~unitrack_env.agents.primitives.label_search.rescore` scores the candidates
+    again; refused (ValueError) on a CPU without native bfloat16.
     """
 
     def __init__(self, config: LabelPropagationConfig | None = None, *,
                  reference: bool = False) -> None:
         self.config = config or LabelPropagationConfig()
-        self.search: MemorySearch = (TiledSearch if reference else WindowSearch)(self.config)
+        check_precision(self.config.propagation_precision)
+        self.bf16 = self.config.propagation_precision == "bf16"
+        search_config = (replace(self.config, topk=self.config.topk * CANDIDATE_FACTOR)
+                         if self.bf16 else self.config)
+        self.search: MemorySearch = (TiledSearch if reference else WindowSearch)(search_config)
         self._first: tuple[torch.Tensor, torch.Tensor] | None = None
         self._recent: deque[tuple[torch.Tensor, torch.Tensor]] = deque(
             maxlen=self.config.memory_size - 1
         )
         self._slots: deque[int] = deque()  # ring slots in use, oldest first
+        # bf16: float32 features (N, C) and labels (N, K) of every memory location, N =
+        # M h w (row r h w + p: position p of the first frame, r = 0, or of ring slot r - 1).
+        self._bank: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._labels = 0  # label maps of the current video
 
     # ------------------------------------------------------------------ memory
     def _prepare(self, features: torch.Tensor) -> torch.Tensor:
@@ -194,16 +244,31 @@ class LabelPropagator:
                 f"features must be (C, h, w) or (1, C, h, w); got {tuple(features.shape)}"
             )
         with stage("normalize"):
-            features = (normalize_features(features) if self.config.normalize
-                        else features.float())
-            return features.to(AFFINITY_DTYPES[self.config.affinity_dtype])
+            return (normalize_features(features) if self.config.normalize
+                    else features.float())
+
+    def _searched(self, row: int, feats: torch.Tensor, labels: torch.Tensor
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
+        """What the search sees of a frame in bank row ``row``; bf16: also fills that row."""
+        if not self.bf16:
+            return feats.contiguous(), labels.contiguous()
+        c, h, w = feats.shape
+        if self._bank is None or row == 0:
+            size = self.config.memory_size * h * w
+            self._bank = (feats.new_empty(size, c), labels.new_empty(size, labels.shape[0]))
+        rows = slice(row * h * w, (row + 1) * h * w)
+        self._bank[0][rows] = feats.reshape(c, -1).t()
+        self._bank[1][rows] = labels.reshape(labels.shape[0], -1).t()
+        ids = torch.arange(rows.start, rows.stop, dtype=torch.float32, device=feats.device)
+        return feats.to(torch.bfloat16).contiguous(), ids.view(1, h, w)
 
     def reset(self, features: torch.Tensor, labels: torch.Tensor) -> None:
         """Start a video: the first frame's features ``(C, h, w)`` and labels ``(K, h, w)``."""
         feats = self._prepare(features)
         labels = labels.detach().float().to(feats.device)
         _check_pair(feats, labels)
-        self._first = (feats.contiguous(), labels.contiguous())
+        self._labels = labels.shape[0]
+        self._first = self._searched(0, feats, labels)
         self._recent.clear()
         self._slots.clear()
         self.search.clear()
@@ -214,10 +279,10 @@ class LabelPropagator:
         feats = self._prepare(features)
         labels = labels.detach().float().to(feats.device)
         _check_pair(feats, labels)
-        if feats.shape != first[0].shape or labels.shape[0] != first[1].shape[0]:
+        if feats.shape != first[0].shape or labels.shape[0] != self._labels:
             raise ValueError(
                 f"frame features {tuple(feats.shape)} / labels {tuple(labels.shape)} do not match "
-                f"the first frame's {tuple(first[0].shape)} / {tuple(first[1].shape)}"
+                f"the first frame's {tuple(first[0].shape)} / {self._labels} label maps"
             )
         self._remember(feats, labels)
 
@@ -237,11 +302,12 @@ class LabelPropagator:
         slots = self.config.memory_size - 1
         if slots < 1:
             return
-        self._recent.append((feats.contiguous(), labels.contiguous()))
         # The oldest frame's slot is overwritten once the ring is full.
         slot = self._slots.popleft() if len(self._slots) == slots else len(self._slots)
+        searched = self._searched(1 + slot, feats, labels)
+        self._recent.append(searched)
         with torch.inference_mode():
-            self.search.write(slot, feats, labels)
+            self.search.write(slot, *searched)
         self._slots.append(slot)
 
     @property
@@ -262,15 +328,24 @@ class LabelPropagator:
                 f"query features {tuple(query.shape)} differ from the first frame's "
                 f"{tuple(first[0].shape)} (frames of one video must have one size)"
             )
-        _, h, w = query.shape
+        c, h, w = query.shape
+        cfg = self.config
+        searched = query.to(torch.bfloat16) if self.bf16 else query
         with torch.inference_mode():
-            out = self.search.propagate(query, first, list(self._recent), list(self._slots))
+            values, labels = self.search.candidates(searched, first, list(self._recent),
+                                                    list(self._slots))
+            if self._bank is None:  # float32
+                out = merge_topk(values, labels, cfg.topk, cfg.temperature)
+            else:
+                q = query.reshape(c, -1).t().contiguous()
+                out = rescore(q, values, labels, *self._bank, self.search.config.topk,
+                              cfg.topk, cfg.temperature, cfg.max_affinity_elements)
         return out.t().reshape(-1, h, w).clone()
 
     # Stage entry points of benchmarks/runtime.py (one search each, as the heads run them).
     def _search_first(self, q: torch.Tensor, feats: torch.Tensor, lbl: torch.Tensor, h: int,
                       w: int) -> tuple[torch.Tensor, torch.Tensor]:
-        cfg = self.config
+        cfg = self.search.config
         return search_dense(q, feats, lbl, h, w, cfg.first_frame_radius, cfg.topk,
                             cfg.max_affinity_elements)
 

@@ -72,6 +72,34 @@ def merge_topk(
         return torch.einsum("qk,qkc->qc", weights, kept)
 
 
+def rescore(q: torch.Tensor, values: list[torch.Tensor], ids: list[torch.Tensor],
+            keys: torch.Tensor, labels: torch.Tensor, width: int, topk: int,
+            temperature: float, max_elements: int) -> torch.Tensor:
+    """``(Q, K)`` labels from the exact float32 top-k of approximate candidates.
+
+    The ``width`` best candidates by their approximate (bfloat16) affinities ``values``,
+    whose rows of ``keys`` ``(N, C)`` / ``labels`` ``(N, K)`` are ``ids`` (per group ``(Q,
+    k_g, 1)``, float), are scored again against ``q`` ``(Q, C)`` in float32; the usual top-k
+    and softmax follow: float32's result wherever its top-k lies among those candidates.
+    """
+    with stage("top-k"):
+        value = torch.cat(values, dim=1).float()
+        best, pick = value.topk(min(width, value.shape[1]), dim=1)
+        index = torch.cat(ids, dim=1)[..., 0].gather(1, pick).long()
+    with stage("rescore"):
+        exact = torch.empty_like(best)
+        chunk = max(1, max_elements // (best.shape[1] * keys.shape[1]))
+        for start in range(0, q.shape[0], chunk):
+            stop = min(q.shape[0], start + chunk)
+            gathered = keys.index_select(0, index[start:stop].reshape(-1)).view(
+                stop - start, best.shape[1], -1)
+            exact[start:stop] = torch.bmm(gathered, q[start:stop].unsqueeze(2)).squeeze(2)
+        exact.masked_fill_(best == float("-inf"), float("-inf"))  # not a candidate
+    with stage("labels"):
+        kept = labels.index_select(0, index.view(-1)).view(*index.shape, labels.shape[1])
+    return merge_topk([exact], [kept], topk, temperature)
+
+
 def kth_best(values: list[torch.Tensor], k: int) -> torch.Tensor:
     """``(Q,)`` the ``k``-th largest of the sorted candidate groups per query (``-inf``: fewer)."""
     if len(values) == 1 and values[0].shape[1] == k:  # one group, sorted by its top-k
@@ -222,10 +250,14 @@ class MemorySearch(ABC):
         """``(h * w, k)`` affinities and ``(h * w, k, K)`` labels over the recent windows."""
 
     @abstractmethod
-    def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
-                  recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
-                  slots: Sequence[int]) -> torch.Tensor:
-        """``(h * w, K)`` labels of the prepared ``query`` ``(C, h, w)`` from the whole memory."""
+    def candidates(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
+                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                   slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Candidate groups (affinities, labels) of the prepared ``query`` ``(C, h, w)``.
+
+        Their merged top-k (:func:`merge_topk`, ``k = config.topk``) is the query's top-k
+        over the whole memory.
+        """
 
     def recent_candidates(self, query: torch.Tensor,
                           recent: Sequence[tuple[torch.Tensor, torch.Tensor]],

@@ -18,7 +18,6 @@ import torch.nn.functional as F
 
 from .label_search import (
     MemorySearch,
-    merge_topk,
     search_dense,
     stage,
 )
@@ -179,14 +178,14 @@ class TiledSearch(MemorySearch):
         return search_local(query, geo, self._ring_keys, self._ring_labels, slots, cfg.topk,
                             cfg.max_affinity_elements)
 
-    def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
-                  recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
-                  slots: Sequence[int]) -> torch.Tensor:
-        """``(h * w, K)`` labels: first frame and recent frames searched apart, then merged."""
+    def candidates(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
+                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                   slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Candidates: the first frame and the recent frames, searched apart."""
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
         v, lab = search_dense(q, *first, h, w, cfg.first_frame_radius, cfg.topk,
                               cfg.max_affinity_elements)
         values, labels = self.recent_candidates(query, recent, slots)
-        return merge_topk([v, *values], [lab, *labels], cfg.topk, cfg.temperature)
+        return [v, *values], [lab, *labels]

@@ -20,7 +20,6 @@ from .label_search import (
     MemorySearch,
     Workspace,
     kth_best,
-    merge_topk,
     search_above,
     search_dense,
     stage,
@@ -36,8 +35,9 @@ class WindowLayout:
 
     ``R`` rows of ``g`` keys per tile (padded with dummy keys); ``key_index`` gives their flat
     positions in the zero-padded frame (the last, always zero, serves dummies),
-    ``key_position`` in the ``h x w`` map; ``bias`` is ``-inf`` for keys beyond a query's
-    radius, off the map or dummy, else 0.
+    ``key_position`` in the ``h x w`` map; ``bias`` (the affinities' dtype: a bfloat16 sum
+    with a float32 bias is ~50x slower) is ``-inf`` for keys beyond a query's radius, off the
+    map or dummy, else 0.
     """
 
     key: tuple[object, ...]
@@ -53,7 +53,8 @@ class WindowLayout:
 
     @classmethod
     def build(cls, h: int, w: int, tile: int, radius: float, slots: int, topk: int,
-              device: torch.device, key: tuple[object, ...]) -> WindowLayout:
+              device: torch.device, dtype: torch.dtype, key: tuple[object, ...]
+              ) -> WindowLayout:
         """Lay out the windows of an ``h x w`` map for ``slots`` recent frames."""
         pad = int(math.floor(radius))
         tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
@@ -86,7 +87,7 @@ class WindowLayout:
             len(on_map), tile * tile, rows, 1, width)
         bias = torch.zeros(excluded.shape).masked_fill_(excluded, float("-inf"))
         return cls(key, tile, pad, tiles_y, tiles_x, rows, width, key_index.to(device),
-                   key_position.to(device), bias.to(device))
+                   key_position.to(device), bias.to(device, dtype))
 
     @property
     def num_tiles(self) -> int:
@@ -187,14 +188,15 @@ class WindowSearch(MemorySearch):
         """Forget the ring (a new video)."""
         self._ring = self._ring_labels = None
 
-    def layout(self, h: int, w: int, device: torch.device) -> WindowLayout:
+    def layout(self, h: int, w: int, device: torch.device, dtype: torch.dtype) -> WindowLayout:
         """The window layout for an ``h x w`` map (cached: one video, one size)."""
         cfg = self.config
         tile = max(1, min(cfg.tile_size, max(h, w)))
         radius, slots = float(cfg.radius or 0.0), cfg.memory_size - 1
-        key = (h, w, tile, radius, slots, cfg.topk, str(device))
+        key = (h, w, tile, radius, slots, cfg.topk, str(device), dtype)
         if self._layout is None or self._layout.key != key:
-            self._layout = WindowLayout.build(h, w, tile, radius, slots, cfg.topk, device, key)
+            self._layout = WindowLayout.build(h, w, tile, radius, slots, cfg.topk, device,
+                                              dtype, key)
         return self._layout
 
     def write(self, slot: int, feats: torch.Tensor, labels: torch.Tensor) -> None:
@@ -204,7 +206,7 @@ class WindowSearch(MemorySearch):
             return
         c, h, w = feats.shape
         with stage("memory"):
-            layout = self.layout(h, w, feats.device)
+            layout = self.layout(h, w, feats.device, feats.dtype)
             if self._ring is None or self._ring_labels is None:
                 slots = cfg.memory_size - 1
                 self._ring = feats.new_zeros(layout.num_tiles, layout.rows, slots,
@@ -221,14 +223,14 @@ class WindowSearch(MemorySearch):
         if self._ring is None or self._ring_labels is None:
             raise RuntimeError("the recent memory has no ring")  # never: write() made it
         cfg = self.config
-        layout = self.layout(query.shape[1], query.shape[2], query.device)
+        layout = self.layout(query.shape[1], query.shape[2], query.device, query.dtype)
         return search_windows(query, layout, self._ring, self._ring_labels, len(slots),
                               cfg.topk, cfg.max_affinity_elements, self.workspace)
 
-    def propagate(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
-                  recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
-                  slots: Sequence[int]) -> torch.Tensor:
-        """``(h * w, K)`` labels: recent windows first, then the first frame above a floor."""
+    def candidates(self, query: torch.Tensor, first: tuple[torch.Tensor, torch.Tensor],
+                   recent: Sequence[tuple[torch.Tensor, torch.Tensor]],
+                   slots: Sequence[int]) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Candidates: recent windows first, then the first frame above their floor."""
         cfg = self.config
         c, h, w = query.shape
         q = query.reshape(c, -1).t().contiguous()
@@ -241,4 +243,4 @@ class WindowSearch(MemorySearch):
         else:  # the first frame alone: nothing to set a floor
             v, lab = search_dense(q, *first, h, w, cfg.first_frame_radius, cfg.topk,
                                   cfg.max_affinity_elements)
-        return merge_topk([v, *values], [lab, *labels], cfg.topk, cfg.temperature)
+        return [v, *values], [lab, *labels]

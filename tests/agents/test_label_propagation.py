@@ -7,9 +7,13 @@ from __future__ import annotations
 import pytest
 import torch
 
+from unitrack_env.agents.appearance.model import torch_threads
+from unitrack_env.agents.primitives import label_propagation
 from unitrack_env.agents.primitives.label_propagation import (
+    NATIVE_BF16_FLAGS,
     LabelPropagationConfig,
     LabelPropagator,
+    cpu_flags,
     normalize_features,
     propagate_dense,
 )
@@ -128,23 +132,51 @@ def test_soft_labels_stay_convex_and_recurrent():
     assert prop.memory_length == 6
 
 
-def test_bfloat16_affinities_are_close_to_float32():
-    feats, labels = random_video(7, c=32, seed=6)
-    out = {}
-    for dtype in ("float32", "bfloat16"):
-        prop = LabelPropagator(LabelPropagationConfig(affinity_dtype=dtype, temperature=0.5))
-        prop.reset(feats[0], labels[0])
+NATIVE_BF16 = bool((cpu_flags() or set()) & set(NATIVE_BF16_FLAGS))
+
+
+@pytest.mark.skipif(not NATIVE_BF16, reason="this CPU has no native bfloat16")
+@pytest.mark.parametrize("reference", [False, True])
+@pytest.mark.parametrize(("radius", "memory_size", "channels"), [
+    (12.0, 6, 2),  # the heads' settings
+    (3.0, 4, 15),  # pose-like: 15 belief maps
+    (None, 3, 3),  # dense recent frames
+    (2.0, 1, 3),  # the first frame alone
+])
+def test_bf16_candidates_rescored_give_float32s_labels(reference, radius, memory_size,
+                                                         channels):
+    # bfloat16 only picks the candidates; their float32 affinities decide, so the labels
+    # are float32's to float rounding (pure bfloat16 affinities differ by ~1e-2 here).
+    feats, labels = random_video(6, c=64, h=17, w=23, k=channels, seed=11)
+    props = {precision: LabelPropagator(LabelPropagationConfig(
+        radius=radius, memory_size=memory_size, max_affinity_elements=20000,
+        propagation_precision=precision), reference=reference)
+        for precision in ("float32", "bf16")}
+    with torch_threads(1):  # tiny maps: threads only add overhead
+        for prop in props.values():
+            prop.reset(feats[0], labels[0])
         for t in range(1, 6):
-            prop.push(feats[t], labels[t])
-        out[dtype] = prop.propagate(feats[6])
-    assert (out["float32"] - out["bfloat16"]).abs().mean() < 0.02
+            torch.testing.assert_close(props["bf16"].step(feats[t]),
+                                       props["float32"].step(feats[t]), atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("flags", [set(), {"avx512f", "avx512bw"}, None])
+def test_bf16_is_refused_without_native_bf16(monkeypatch, flags):
+    monkeypatch.setattr(label_propagation, "cpu_flags", lambda: flags)
+    config = LabelPropagationConfig(propagation_precision="bf16")  # a value: allowed
+    with pytest.raises(ValueError, match=r"propagation_precision='bf16'.*avx512_bf16 or "
+                                         r"amx_bf16.*propagation_precision='float32'"):
+        LabelPropagator(config)
+    LabelPropagator()  # float32 needs nothing
+    monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx512f", "amx_bf16"})
+    assert LabelPropagator(config).bf16
 
 
 def test_errors_name_what_to_fix():
     with pytest.raises(ValueError, match="memory_size"):
         LabelPropagationConfig(memory_size=0)
-    with pytest.raises(ValueError, match="affinity_dtype"):
-        LabelPropagationConfig(affinity_dtype="float16")
+    with pytest.raises(ValueError, match="propagation_precision"):
+        LabelPropagationConfig(propagation_precision="bfloat16")
     prop = LabelPropagator()
     with pytest.raises(RuntimeError, match="reset"):
         prop.step(torch.zeros(4, 5, 5))

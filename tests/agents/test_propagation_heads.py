@@ -15,6 +15,7 @@ import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.agents.base import agent_class
+from unitrack_env.agents.primitives import label_propagation
 
 GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
 ONE = {"num_threads": 1}
@@ -64,6 +65,16 @@ def test_registered_with_their_tasks():
         make_agent("unitrack-vos", radius=3)
     with pytest.raises(TypeError, match="valid"):
         make_agent("unitrack-dcf", propagation={"lamda": 1.0})
+
+
+@pytest.mark.parametrize("head", ["unitrack-vos", "unitrack-pose"])
+def test_bf16_precision_is_an_option_refused_without_native_bf16(model, monkeypatch, head):
+    bf16 = {"propagation": {"propagation_precision": "bf16"}}
+    monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx512f", "avx512_bf16"})
+    assert make_agent(head, appearance_model=model, **bf16).propagator.bf16
+    monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx512f", "avx2"})
+    with pytest.raises(ValueError, match="propagation_precision='bf16'.*avx512_bf16"):
+        make_agent(head, appearance_model=model, **bf16)  # when built: before any frame
 
 
 def test_vos_first_answer_and_void(model):

@@ -12,6 +12,7 @@ import sys
 import pytest
 
 import unitrack_env
+from unitrack_env.agents.primitives import label_propagation
 from unitrack_env.evaluation import doctor
 from unitrack_env.evaluation.cli import build_parser, main
 from unitrack_env.evaluation.tables import metrics_table
@@ -116,6 +117,17 @@ def test_numbers_and_names_are_checked_by_the_parser(argv, message, tmp_path, ca
     with pytest.raises(SystemExit) as exit_info:
         main([command, *env, "--out", str(tmp_path / "out.mp4"), *rest])
     assert exit_info.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_bf16_propagation_is_refused_before_the_first_frame(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx2"})
+    assert main(["evaluate", "--env", "UniTrack/DAVIS-v0", "--agent", "unitrack-vos",
+                 "--agent-arg", "propagation={'propagation_precision': 'bf16'}",
+                 "--agent-arg", "feature_cache=False",
+                 "--out", str(tmp_path / "out"), "--quiet"]) != 0
+    err = capsys.readouterr().err
+    assert "propagation_precision='bf16'" in err and "avx512_bf16" in err
+    assert "Traceback" not in err and not (tmp_path / "out" / "metrics.json").exists()
 
 
 def test_a_subset_rerun_says_what_metrics_json_covers(tmp_path, capsys):
