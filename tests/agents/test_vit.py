@@ -185,17 +185,35 @@ def test_infer_arch_from_shapes() -> None:
     assert infer_vit_arch({"conv1.weight": torch.zeros(64, 3, 7, 7)}) is None
 
 
-def test_exported_runtime_matches_torch(tmp_path: Path) -> None:
-    """ViT-S/14 through ONNX Runtime (the export every compiled runtime uses) = torch."""
-    pytest.importorskip("onnxruntime")
-    pytest.importorskip("onnx")
+@pytest.mark.parametrize("runtime", ["openvino", "onnxruntime"])
+@pytest.mark.parametrize("arch", ["vit_small_patch14", "vit_small_patch14_reg4"])
+def test_exported_runtime_matches_torch(tmp_path: Path, runtime: str, arch: str) -> None:
+    """ViT-S/14 (the last block, the default) through each compiled runtime = torch."""
+    for module in (runtime, "onnx"):
+        pytest.importorskip(module)
+    import onnx
+
     image = np.random.default_rng(1).integers(0, 256, (2, 60, 90, 3), dtype=np.uint8)
-    eager = AppearanceModel("random", arch="vit_small_patch14_reg4", layer="block3")
-    compiled = AppearanceModel("random", arch="vit_small_patch14_reg4", layer="block3",
-                               runtime="onnxruntime", runtime_cache=tmp_path)
+    eager = AppearanceModel("random", arch=arch)
+    compiled = AppearanceModel("random", arch=arch, runtime=runtime, runtime_cache=tmp_path)
     a, b = eager.features(image), compiled.features(image)
     assert a.shape == b.shape == (2, 384, 5, 7)
     assert torch.nn.functional.cosine_similarity(a, b, dim=1).min() >= 0.9999
+    # the position embedding resized to the 5 x 7 grid is a constant of the graph: OpenVINO
+    # would otherwise constant-fold the bicubic resize when compiling (minutes at 10k tokens)
+    (graph,) = tmp_path.glob("*.onnx")
+    assert "Resize" not in {node.op_type for node in onnx.load(str(graph)).graph.node}
+
+
+def test_frozen_positions_are_the_resized_embedding() -> None:
+    net = VisionTransformer("vit_small_patch16").eval()
+    x = torch.randn(1, 3, 50, 70)
+    want = net.forward_features(x, "block2")
+    with net.frozen_positions(50, 70):
+        assert torch.equal(net.position_embedding(4, 5), net._frozen_positions[1])
+        assert net.position_embedding(5, 5).shape[1] == 26  # another grid: resized as usual
+        assert torch.equal(net.forward_features(x, "block2"), want)
+    assert net._frozen_positions is None
 
 
 def test_heads_keep_their_reach_in_pixels_at_another_stride() -> None:
