@@ -14,7 +14,11 @@ from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.appearance.vit import VIT_SPECS, VisionTransformer, infer_vit_arch
 from unitrack_env.agents.base import make_agent
 from unitrack_env.agents.heads.vos import make_propagation_config
-from unitrack_env.agents.primitives.box_propagation import BoxPropagationConfig
+from unitrack_env.agents.primitives.box_propagation import (
+    BoxPropagationConfig,
+    BoxPropagator,
+    BoxState,
+)
 from unitrack_env.agents.primitives.box_response import XCorrHead
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
 from unitrack_env.evaluation.scorecard import ModelSpec
@@ -237,3 +241,36 @@ def test_scorecard_model_option_stride() -> None:
     assert spec.name == "random+vit_small_patch14+block9+s8-upsample"
     vos = make_agent("unitrack-vos", weights="random", arch="vit_small_patch16", layer="block1")
     assert vos.model.stride == 16 and vos.propagator.config.radius == pytest.approx(6)
+
+
+def _cell_pixels(stride: int):
+    """Appearance-free features laid out like a ViT map of ``stride``: the normalised colour of
+    each 2 x 2 sub-block of every cell (cell ``j`` covers pixels ``[s j, s j + s)``)."""
+    def features(crops: np.ndarray) -> torch.Tensor:
+        x = torch.from_numpy(np.ascontiguousarray(crops)).permute(0, 3, 1, 2).float() / 255
+        x = (x - x.mean((2, 3), keepdim=True)) / (x.std((2, 3), keepdim=True) + 1e-6)
+        gh, gw = math.ceil(x.shape[2] / stride), math.ceil(x.shape[3] / stride)
+        x = torch.nn.functional.pad(x, (0, gw * stride - x.shape[3], 0, gh * stride - x.shape[2]))
+        x = torch.nn.functional.interpolate(x, size=(2 * gh, 2 * gw), mode="area")
+        return torch.nn.functional.pixel_unshuffle(x, 2)
+    return features
+
+
+@pytest.mark.parametrize("method", ["xcorr", "dcf"])
+@pytest.mark.parametrize("stride", [8, 14, 16])
+def test_box_propagation_finds_a_known_shift_at_any_stride(method: str, stride: int) -> None:
+    """The SOT heads' geometry at the ViT strides: a textured frame moved by (+19, -11) px."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    image = cv2.resize(rng.integers(0, 256, (45, 60, 3), dtype=np.uint8), (480, 360),
+                       interpolation=cv2.INTER_CUBIC)
+    shift = (19.0, -11.0)
+    moved = cv2.warpAffine(image, np.array([[1, 0, shift[0]], [0, 1, shift[1]]]), (480, 360),
+                           borderMode=cv2.BORDER_REFLECT)
+    tracker = BoxPropagator(_cell_pixels(stride), BoxPropagationConfig(method=method),
+                            stride=stride)
+    tracker.reset(image, BoxState(240.0, 180.0, 60.0, 60.0))
+    state = tracker.step(moved)
+    cell = stride * 60 * 4.5 / 520  # image pixels per feature cell
+    assert abs(state.cx - 240 - shift[0]) < cell and abs(state.cy - 180 - shift[1]) < cell
