@@ -254,10 +254,13 @@ class VisionTransformer(nn.Module):
         return self.spec.patch if self.stride_option is None else self.stride_option.stride
 
     def required_prefixes(self, layer: str) -> tuple[str, ...]:
-        """The whole encoder: a ViT checkpoint must fit every block, whatever the layer."""
+        """The whole encoder: a ViT checkpoint must fit every block, whatever the layer.
+
+        ``register_tokens`` even without registers: a ``_reg4`` file is refused, not run
+        without its registers.
+        """
         self._block_index(layer)
-        extra = ("register_tokens",) if self.spec.registers else ()
-        return ("cls_token", "pos_embed", *extra, "patch_embed.", "blocks.", "norm.")
+        return ("cls_token", "pos_embed", "register_tokens", "patch_embed.", "blocks.", "norm.")
 
     def _block_index(self, layer: str) -> int:
         if layer not in self.spec.layers:
