@@ -131,7 +131,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None
         self._first_answer: np.ndarray | None = None
-        self._frame_size = (1, 1)  # (width, height)
+        self._frame_size = (1.0, 1.0)  # (width, height) of frame pixels the grid covers
         self._grid = (1, 1)  # (w, h) of the feature map
         self.cached = with_cache(self.model, self.config.feature_cache)  # float32: exact
 
@@ -156,10 +156,14 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         """Build the first frame's belief maps and start the memory bank."""
         pose = np.array(observation["init_keypoints"], dtype=np.float64)
         frame = observation["frame"]
-        self._frame_size = (frame.shape[1], frame.shape[0])
         with torch_threads(self.config.num_threads), torch.inference_mode():
             features = self._features(frame)
             self._grid = (features.shape[2], features.shape[1])
+            # cell j covers input pixels [s j, s j + s): the grid spans ceil(size / s) * s
+            # input pixels (more than the frame when s does not divide it, e.g. a ViT's 14)
+            width, height = self.config.input_size or (frame.shape[1], frame.shape[0])
+            span = self.model.stride * np.array(self._grid, np.float64)
+            self._frame_size = tuple(span * [frame.shape[1] / width, frame.shape[0] / height])
             grid_points = self._to_grid(pose)
             self.sigma = max(self.config.sigma_eta * body_size(grid_points),
                              self.config.min_sigma)

@@ -128,7 +128,8 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
         with torch_threads(self.config.num_threads):
             features = self.cached.features(frame)[0]
             onehot = labels_to_onehot(labels, self.object_ids).to(features.device)
-            small = F.interpolate(onehot[None], size=features.shape[1:], mode="bilinear",
+            small = F.interpolate(self._grid_canvas(onehot, features.shape[1:])[None],
+                                  size=features.shape[1:], mode="bilinear",
                                   align_corners=False, antialias=self.config.antialias)[0]
             self.propagator.reset(features, small)
 
@@ -144,9 +145,27 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
             soft = self.propagator.step(features)
             return self.decode(soft)
 
+    def _grid_canvas(self, onehot: torch.Tensor, grid: tuple[int, ...]) -> torch.Tensor:
+        """``onehot`` padded (background) to the ``ceil(size / s) * s`` pixels the grid covers.
+
+        Cell ``j`` covers pixels ``[s j, s j + s)``: resizing the frame's own extent to the
+        grid would shift the bottom rows by up to a cell when ``s`` does not divide the frame
+        (a ViT's 14 on 480 rows).
+        """
+        stride = self.model.stride
+        pad_h, pad_w = grid[0] * stride - onehot.shape[1], grid[1] * stride - onehot.shape[2]
+        if pad_h <= 0 and pad_w <= 0:
+            return onehot
+        canvas = F.pad(onehot, (0, max(pad_w, 0), 0, max(pad_h, 0)))
+        canvas[0] = 1.0 - canvas[1:].sum(0).clamp(max=1.0)
+        return canvas
+
     def decode(self, soft: torch.Tensor) -> np.ndarray:
         """Soft labels ``(1 + n, h, w)`` -> ``(H, W)`` uint8 object labels (bilinear + argmax)."""
-        full = F.interpolate(soft[None], size=self._size, mode="bilinear", align_corners=False)[0]
+        stride, (height, width) = self.model.stride, self._size
+        span = (max(soft.shape[1] * stride, height), max(soft.shape[2] * stride, width))
+        full = F.interpolate(soft[None], size=span, mode="bilinear",
+                             align_corners=False)[0, :, :height, :width]
         # max(0).indices: the first maximal channel, as argmax(0), but a reduction over the
         # leading dim that runs 30-60x faster on CPU (480p: ~1 ms vs ~31 ms per frame).
         channel = full.max(0).indices.numpy().astype(np.intp)

@@ -274,3 +274,21 @@ def test_box_propagation_finds_a_known_shift_at_any_stride(method: str, stride: 
     state = tracker.step(moved)
     cell = stride * 60 * 4.5 / 520  # image pixels per feature cell
     assert abs(state.cx - 240 - shift[0]) < cell and abs(state.cy - 180 - shift[1]) < cell
+
+
+def test_vos_labels_sit_on_the_cells_that_cover_them() -> None:
+    """Stride 16 on a 40 x 50 frame: 3 x 4 cells covering 48 x 64 pixels, not 40 x 50."""
+    vos = make_agent("unitrack-vos", weights="random", arch="vit_small_patch16", layer="block1")
+    vos._size = (40, 50)
+    vos._lookup = np.array([0, 1], np.uint8)
+    soft = torch.zeros(2, 3, 4)
+    soft[1, 1, 1] = 1.0
+    soft[0] = 1.0 - soft[1]
+    rows, cols = np.nonzero(vos.decode(soft))
+    assert set(rows) == set(range(16, 32)) and set(cols) == set(range(16, 32))
+    onehot = torch.zeros(2, 40, 50)
+    onehot[1, 16:32, 16:32] = 1.0
+    onehot[0] = 1.0 - onehot[1]
+    canvas = vos._grid_canvas(onehot, (3, 4))
+    assert canvas.shape == (2, 48, 64) and torch.equal(canvas[:, :40, :50], onehot)
+    assert canvas[0, 40:].eq(1).all() and canvas[1, :, 50:].eq(0).all()
