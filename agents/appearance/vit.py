@@ -273,6 +273,16 @@ class VisionTransformer(nn.Module):
         step = self.embed_stride
         return math.ceil(height / step), math.ceil(width / step)
 
+    def map_extent(self, height: int, width: int) -> tuple[int, int]:
+        """Pixels from the top-left the feature map spans: whole patches (or stride cells).
+
+        ``stride="8-upsample"`` resizes the native map, so it spans the native patches.
+        """
+        option = self.stride_option
+        step = option.stride if option is not None and option.mode == "overlap" \
+            else self.spec.patch
+        return math.ceil(height / step) * step, math.ceil(width / step) * step
+
     @contextlib.contextmanager
     def frozen_positions(self, height: int, width: int) -> Iterator[None]:
         """Within: the position embedding of ``height`` x ``width`` inputs is a constant.

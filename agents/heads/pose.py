@@ -159,11 +159,11 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         with torch_threads(self.config.num_threads), torch.inference_mode():
             features = self._features(frame)
             self._grid = (features.shape[2], features.shape[1])
-            # cell j covers input pixels [s j, s j + s): the grid spans ceil(size / s) * s
-            # input pixels (more than the frame when s does not divide it, e.g. a ViT's 14)
+            # the input pixels the map spans (a ViT's whole patches: more than the input
+            # when the patch does not divide it), in frame pixels
             width, height = self.config.input_size or (frame.shape[1], frame.shape[0])
-            span = self.model.stride * np.array(self._grid, np.float64)
-            self._frame_size = tuple(span * [frame.shape[1] / width, frame.shape[0] / height])
+            rows, cols = self.model.map_extent(height, width)
+            self._frame_size = (cols * frame.shape[1] / width, rows * frame.shape[0] / height)
             grid_points = self._to_grid(pose)
             self.sigma = max(self.config.sigma_eta * body_size(grid_points),
                              self.config.min_sigma)

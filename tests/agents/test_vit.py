@@ -289,6 +289,11 @@ def test_vos_labels_sit_on_the_cells_that_cover_them() -> None:
     onehot = torch.zeros(2, 40, 50)
     onehot[1, 16:32, 16:32] = 1.0
     onehot[0] = 1.0 - onehot[1]
-    canvas = vos._grid_canvas(onehot, (3, 4))
+    canvas = vos._grid_canvas(onehot)
     assert canvas.shape == (2, 48, 64) and torch.equal(canvas[:, :40, :50], onehot)
     assert canvas[0, 40:].eq(1).all() and canvas[1, :, 50:].eq(0).all()
+    assert vos.model.map_extent(40, 50) == (48, 64)
+    assert AppearanceModel("random", arch="resnet18").map_extent(40, 50) == (40, 50)
+    upsampled = AppearanceModel("random", arch="vit_small_patch14", layer="block1",
+                                stride="8-upsample")
+    assert upsampled.map_extent(40, 50) == (42, 56)
