@@ -39,7 +39,7 @@ from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.base import make_agent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import timed_acts  # noqa: E402  (a sibling file of this script)
+from _timing import PEAK_RSS_GIB, timed_acts  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / ".." / "shared" / "data"
@@ -99,6 +99,9 @@ def backbone(models: dict[str, AppearanceModel], repeats: int, sizes: list[str])
         print(f"{label:<14}" + "".join(f"{c:>22}" for c in cells))
     reference = next(iter(models))
     print(f"(map size h x w; ratios to {reference}: see the heads part)")
+    scope: dict[str, Any] = {}
+    exec(PEAK_RSS_GIB, scope)  # the process's peak: run one model and size to read its own
+    print(f"peak resident memory of this process: {scope['peak_rss_gib']():.2f} GiB")
 
 
 def _head_run(env: gym.Env, agent_name: str, sequence: str, model: AppearanceModel,
