@@ -17,8 +17,9 @@ Parts:
   blackswan), SOT XCorr and DCF (OTB Crossing), MOT (MOT17-05, letterboxed to 1088 x 608).
 
 Models: ``lite0`` (stride 8), ``vit-s14`` (stride 14), ``vit-s14-s8o`` (``stride="8"``:
-overlapping patch embedding, 3x the tokens) and ``vit-s14-s8u`` (``stride="8-upsample"``).
-``--models`` picks a subset.
+overlapping patch embedding, 3x the tokens), ``vit-s14-s8u`` (``stride="8-upsample"``) and
+``vit-b8`` (ViT-B/8: 4,225 tokens per SOT crop, 10,336 at the MOT letterbox). ``--models``
+picks a subset (the default leaves out ``vit-b8``: minutes per frame on a CPU).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.base import make_agent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import timed_acts  # noqa: E402  (a sibling file of this script)
+from _timing import PEAK_RSS_GIB, timed_acts  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / ".." / "shared" / "data"
@@ -48,6 +49,7 @@ MODELS: dict[str, dict[str, Any]] = {
     "vit-s14": {"arch": "vit_small_patch14"},
     "vit-s14-s8o": {"arch": "vit_small_patch14", "stride": "8"},
     "vit-s14-s8u": {"arch": "vit_small_patch14", "stride": "8-upsample"},
+    "vit-b8": {"arch": "vit_base_patch8"},
 }
 
 SIZES: dict[str, tuple[int, int, int]] = {  # batch, height, width
@@ -97,6 +99,9 @@ def backbone(models: dict[str, AppearanceModel], repeats: int, sizes: list[str])
         print(f"{label:<14}" + "".join(f"{c:>22}" for c in cells))
     reference = next(iter(models))
     print(f"(map size h x w; ratios to {reference}: see the heads part)")
+    scope: dict[str, Any] = {}
+    exec(PEAK_RSS_GIB, scope)  # the process's peak: run one model and size to read its own
+    print(f"peak resident memory of this process: {scope['peak_rss_gib']():.2f} GiB")
 
 
 def _head_run(env: gym.Env, agent_name: str, sequence: str, model: AppearanceModel,
@@ -131,7 +136,7 @@ def heads(models: dict[str, AppearanceModel], frames: int, repeats: int) -> None
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--parts", default="backbone,heads")
-    parser.add_argument("--models", default=",".join(MODELS))
+    parser.add_argument("--models", default=",".join(m for m in MODELS if m != "vit-b8"))
     parser.add_argument("--sizes", default="sot,vos,mot", help="backbone input sizes")
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=2)

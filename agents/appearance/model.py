@@ -223,6 +223,16 @@ class AppearanceModel:
         """Shape ``(C, h, w)`` of the feature map of one ``height`` x ``width`` image."""
         return self.channels, math.ceil(height / self.stride), math.ceil(width / self.stride)
 
+    def map_extent(self, height: int, width: int) -> tuple[int, int]:
+        """Pixels ``(rows, columns)`` from the top-left that the feature map of one image spans.
+
+        A ViT's patches tile ``ceil(H / s) * s`` pixels (the image zero-padded); a CNN's map
+        is taken to span the image itself, as UniTrack resizes masks to it. The propagation
+        heads place labels and keypoints on the cells with it.
+        """
+        extent = getattr(self.module, "map_extent", None)
+        return extent(height, width) if extent is not None else (height, width)
+
     def describe(self) -> dict[str, Any]:
         """A plain dict for logs and reports: identity, channels, stride, device."""
         info: dict[str, Any] = {

@@ -146,6 +146,14 @@ class FeatureNetwork(nn.Module):
         """Normalised images ``(B, 3, H, W)`` -> features ``(B, C, h, w)``."""
         return self.combine(self.module.forward_layers(x, self.layers))
 
+    def export_scope(self, height: int, width: int) -> contextlib.AbstractContextManager[Any]:
+        """The context to trace one input size in: the backbone's ``frozen_positions``, if any.
+
+        (A ViT's resized position embedding then enters the graph as a constant.)
+        """
+        frozen = getattr(self.module, "frozen_positions", None)
+        return frozen(height, width) if frozen is not None else contextlib.nullcontext()
+
 
 def export_onnx(network: nn.Module, height: int, width: int, path: Path) -> Path:
     """Export ``network`` for ``(B, 3, height, width)`` inputs (dynamic B) to ``path``.
@@ -163,7 +171,9 @@ def export_onnx(network: nn.Module, height: int, width: int, path: Path) -> Path
     handle, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".onnx.tmp", dir=path.parent)
     os.close(handle)
     try:
-        with warnings.catch_warnings(), torch.inference_mode(False), torch.no_grad():
+        scope = getattr(network, "export_scope", None)
+        with warnings.catch_warnings(), torch.inference_mode(False), torch.no_grad(), \
+                (scope(height, width) if scope is not None else contextlib.nullcontext()):
             # Sizes computed in Python (SAME padding) trace as constants: intended, the
             # graph is per input size.
             warnings.simplefilter("ignore")

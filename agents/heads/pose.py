@@ -116,7 +116,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None
         self._first_answer: np.ndarray | None = None
-        self._frame_size = (1, 1)  # (width, height)
+        self._frame_size = (1.0, 1.0)  # (width, height) of frame pixels the grid covers
         self._grid = (1, 1)  # (w, h) of the feature map
         self.cached = with_cache(self.model, self.config.feature_cache)  # float32: exact
 
@@ -141,10 +141,14 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
         """Build the first frame's belief maps and start the memory bank."""
         pose = np.array(observation["init_keypoints"], dtype=np.float64)
         frame = observation["frame"]
-        self._frame_size = (frame.shape[1], frame.shape[0])
         with torch_threads(self.config.num_threads), torch.inference_mode():
             features = self._features(frame)
             self._grid = (features.shape[2], features.shape[1])
+            # the input pixels the map spans (a ViT's whole patches: more than the input
+            # when the patch does not divide it), in frame pixels
+            width, height = self.config.input_size or (frame.shape[1], frame.shape[0])
+            rows, cols = self.model.map_extent(height, width)
+            self._frame_size = (cols * frame.shape[1] / width, rows * frame.shape[0] / height)
             grid_points = self._to_grid(pose)
             self.sigma = max(self.config.sigma_eta * body_size(grid_points),
                              self.config.min_sigma)

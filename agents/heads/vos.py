@@ -109,7 +109,8 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
         with torch_threads(self.config.num_threads):
             features = self.cached.features(frame)[0]
             onehot = labels_to_onehot(labels, self.object_ids).to(features.device)
-            small = F.interpolate(onehot[None], size=features.shape[1:], mode="bilinear",
+            small = F.interpolate(self._grid_canvas(onehot)[None],
+                                  size=features.shape[1:], mode="bilinear",
                                   align_corners=False, antialias=self.config.antialias)[0]
             self.propagator.reset(features, small)
 
@@ -125,9 +126,27 @@ class UniTrackVOSAgent(Agent, name="unitrack-vos", tasks=("vos",)):
             soft = self.propagator.step(features)
             return self.decode(soft)
 
+    def _grid_canvas(self, onehot: torch.Tensor) -> torch.Tensor:
+        """``onehot`` padded (background) to the pixels the feature map spans.
+
+        A ViT's cell ``j`` covers pixels ``[s j, s j + s)``: resizing the frame's own extent
+        to its grid would shift the bottom rows by up to a cell when ``s`` does not divide
+        the frame (14 on 480 rows). A CNN's map spans the frame (no padding).
+        """
+        rows, cols = self.model.map_extent(*onehot.shape[1:])
+        pad_h, pad_w = rows - onehot.shape[1], cols - onehot.shape[2]
+        if pad_h <= 0 and pad_w <= 0:
+            return onehot
+        canvas = F.pad(onehot, (0, max(pad_w, 0), 0, max(pad_h, 0)))
+        canvas[0] = 1.0 - canvas[1:].sum(0).clamp(max=1.0)
+        return canvas
+
     def decode(self, soft: torch.Tensor) -> np.ndarray:
         """Soft labels ``(1 + n, h, w)`` -> ``(H, W)`` uint8 object labels (bilinear + argmax)."""
-        full = F.interpolate(soft[None], size=self._size, mode="bilinear", align_corners=False)[0]
+        height, width = self._size
+        rows, cols = self.model.map_extent(height, width)
+        full = F.interpolate(soft[None], size=(max(rows, height), max(cols, width)),
+                             mode="bilinear", align_corners=False)[0, :, :height, :width]
         # max(0).indices: the first maximal channel, as argmax(0), but a reduction over the
         # leading dim that runs 30-60x faster on CPU (480p: ~1 ms vs ~31 ms per frame).
         channel = full.max(0).indices.numpy().astype(np.intp)

@@ -14,7 +14,11 @@ from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.appearance.vit import VIT_SPECS, VisionTransformer, infer_vit_arch
 from unitrack_env.agents.base import make_agent
 from unitrack_env.agents.heads.vos import make_propagation_config
-from unitrack_env.agents.primitives.box_propagation import BoxPropagationConfig
+from unitrack_env.agents.primitives.box_propagation import (
+    BoxPropagationConfig,
+    BoxPropagator,
+    BoxState,
+)
 from unitrack_env.agents.primitives.box_response import XCorrHead
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
 from unitrack_env.evaluation.scorecard import ModelSpec
@@ -185,17 +189,35 @@ def test_infer_arch_from_shapes() -> None:
     assert infer_vit_arch({"conv1.weight": torch.zeros(64, 3, 7, 7)}) is None
 
 
-def test_exported_runtime_matches_torch(tmp_path: Path) -> None:
-    """ViT-S/14 through ONNX Runtime (the export every compiled runtime uses) = torch."""
-    pytest.importorskip("onnxruntime")
-    pytest.importorskip("onnx")
+@pytest.mark.parametrize("runtime", ["openvino", "onnxruntime"])
+@pytest.mark.parametrize("arch", ["vit_small_patch14", "vit_small_patch14_reg4"])
+def test_exported_runtime_matches_torch(tmp_path: Path, runtime: str, arch: str) -> None:
+    """ViT-S/14 (the last block, the default) through each compiled runtime = torch."""
+    for module in (runtime, "onnx"):
+        pytest.importorskip(module)
+    import onnx
+
     image = np.random.default_rng(1).integers(0, 256, (2, 60, 90, 3), dtype=np.uint8)
-    eager = AppearanceModel("random", arch="vit_small_patch14_reg4", layer="block3")
-    compiled = AppearanceModel("random", arch="vit_small_patch14_reg4", layer="block3",
-                               runtime="onnxruntime", runtime_cache=tmp_path)
+    eager = AppearanceModel("random", arch=arch)
+    compiled = AppearanceModel("random", arch=arch, runtime=runtime, runtime_cache=tmp_path)
     a, b = eager.features(image), compiled.features(image)
     assert a.shape == b.shape == (2, 384, 5, 7)
     assert torch.nn.functional.cosine_similarity(a, b, dim=1).min() >= 0.9999
+    # the position embedding resized to the 5 x 7 grid is a constant of the graph: OpenVINO
+    # would otherwise constant-fold the bicubic resize when compiling (minutes at 10k tokens)
+    (graph,) = tmp_path.glob("*.onnx")
+    assert "Resize" not in {node.op_type for node in onnx.load(str(graph)).graph.node}
+
+
+def test_frozen_positions_are_the_resized_embedding() -> None:
+    net = VisionTransformer("vit_small_patch16").eval()
+    x = torch.randn(1, 3, 50, 70)
+    want = net.forward_features(x, "block2")
+    with net.frozen_positions(50, 70):
+        assert torch.equal(net.position_embedding(4, 5), net._frozen_positions[1])
+        assert net.position_embedding(5, 5).shape[1] == 26  # another grid: resized as usual
+        assert torch.equal(net.forward_features(x, "block2"), want)
+    assert net._frozen_positions is None
 
 
 def test_heads_keep_their_reach_in_pixels_at_another_stride() -> None:
@@ -219,3 +241,59 @@ def test_scorecard_model_option_stride() -> None:
     assert spec.name == "random+vit_small_patch14+block9+s8-upsample"
     vos = make_agent("unitrack-vos", weights="random", arch="vit_small_patch16", layer="block1")
     assert vos.model.stride == 16 and vos.propagator.config.radius == pytest.approx(6)
+
+
+def _cell_pixels(stride: int):
+    """Appearance-free features laid out like a ViT map of ``stride``: the normalised colour of
+    each 2 x 2 sub-block of every cell (cell ``j`` covers pixels ``[s j, s j + s)``)."""
+    def features(crops: np.ndarray) -> torch.Tensor:
+        x = torch.from_numpy(np.ascontiguousarray(crops)).permute(0, 3, 1, 2).float() / 255
+        x = (x - x.mean((2, 3), keepdim=True)) / (x.std((2, 3), keepdim=True) + 1e-6)
+        gh, gw = math.ceil(x.shape[2] / stride), math.ceil(x.shape[3] / stride)
+        x = torch.nn.functional.pad(x, (0, gw * stride - x.shape[3], 0, gh * stride - x.shape[2]))
+        x = torch.nn.functional.interpolate(x, size=(2 * gh, 2 * gw), mode="area")
+        return torch.nn.functional.pixel_unshuffle(x, 2)
+    return features
+
+
+@pytest.mark.parametrize("method", ["xcorr", "dcf"])
+@pytest.mark.parametrize("stride", [8, 14, 16])
+def test_box_propagation_finds_a_known_shift_at_any_stride(method: str, stride: int) -> None:
+    """The SOT heads' geometry at the ViT strides: a textured frame moved by (+19, -11) px."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    image = cv2.resize(rng.integers(0, 256, (45, 60, 3), dtype=np.uint8), (480, 360),
+                       interpolation=cv2.INTER_CUBIC)
+    shift = (19.0, -11.0)
+    moved = cv2.warpAffine(image, np.array([[1, 0, shift[0]], [0, 1, shift[1]]]), (480, 360),
+                           borderMode=cv2.BORDER_REFLECT)
+    tracker = BoxPropagator(_cell_pixels(stride), BoxPropagationConfig(method=method),
+                            stride=stride)
+    tracker.reset(image, BoxState(240.0, 180.0, 60.0, 60.0))
+    state = tracker.step(moved)
+    cell = stride * 60 * 4.5 / 520  # image pixels per feature cell
+    assert abs(state.cx - 240 - shift[0]) < cell and abs(state.cy - 180 - shift[1]) < cell
+
+
+def test_vos_labels_sit_on_the_cells_that_cover_them() -> None:
+    """Stride 16 on a 40 x 50 frame: 3 x 4 cells covering 48 x 64 pixels, not 40 x 50."""
+    vos = make_agent("unitrack-vos", weights="random", arch="vit_small_patch16", layer="block1")
+    vos._size = (40, 50)
+    vos._lookup = np.array([0, 1], np.uint8)
+    soft = torch.zeros(2, 3, 4)
+    soft[1, 1, 1] = 1.0
+    soft[0] = 1.0 - soft[1]
+    rows, cols = np.nonzero(vos.decode(soft))
+    assert set(rows) == set(range(16, 32)) and set(cols) == set(range(16, 32))
+    onehot = torch.zeros(2, 40, 50)
+    onehot[1, 16:32, 16:32] = 1.0
+    onehot[0] = 1.0 - onehot[1]
+    canvas = vos._grid_canvas(onehot)
+    assert canvas.shape == (2, 48, 64) and torch.equal(canvas[:, :40, :50], onehot)
+    assert canvas[0, 40:].eq(1).all() and canvas[1, :, 50:].eq(0).all()
+    assert vos.model.map_extent(40, 50) == (48, 64)
+    assert AppearanceModel("random", arch="resnet18").map_extent(40, 50) == (40, 50)
+    upsampled = AppearanceModel("random", arch="vit_small_patch14", layer="block1",
+                                stride="8-upsample")
+    assert upsampled.map_extent(40, 50) == (42, 56)

@@ -106,6 +106,10 @@ def test_wrong_arch_is_refused_with_the_keys(tmp_path: Path) -> None:
         AppearanceModel(path, arch="vit_base_patch16", layer="block1")
     with pytest.raises(CheckpointError, match=r"missing keys: conv1\.weight"):
         AppearanceModel(path, arch="resnet18")
+    registers = tmp_path / "dinov2-s16-reg4.pth"
+    torch.save(official_state(f"{S16}_reg4", 4), registers)
+    with pytest.raises(CheckpointError, match=r"does not have.*: register_tokens"):
+        AppearanceModel(registers, arch=S16, layer="block1")  # not run without its registers
     resnet = tmp_path / "r18.pth"
     torch.save(ResNet("resnet18").state_dict(), resnet)
     with pytest.raises(CheckpointError, match=r"missing keys: cls_token, pos_embed"):
