@@ -302,6 +302,10 @@ def _compile(runtime: str, path: Path, shape: tuple[int, int, int, int], threads
             "INFERENCE_PRECISION_HINT": "f32",
             "PERFORMANCE_HINT": "LATENCY",
             "INFERENCE_NUM_THREADS": threads,
+            # OpenVINO pins its threads, the caller's included, from core 0 up: two pool
+            # workers of one thread each then share core 0 (measured: 2 workers ran at 1.05
+            # cores). A library must not pin its user's threads.
+            "ENABLE_CPU_PINNING": False,
         })
     import onnxruntime as ort
 

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import threading
+import time
 from pathlib import Path
 
 import cv2
@@ -89,6 +92,38 @@ def test_compiled_features_match_torch_on_synthetic_batches(torch_model, name, t
     assert torch.allclose(out, ref, atol=1e-3, rtol=1e-3)
     one = model.features(images[1])  # another batch size of the same input size
     assert _cosine(one, ref[1:2]) >= COSINE_FLOOR
+
+
+@pytest.mark.parametrize("name", COMPILED)
+def test_a_compiled_runtime_leaves_the_callers_cpu_affinity_alone(name, tmp_path):
+    # OpenVINO pinned the calling thread to core 0 while it inferred: two one-thread pool
+    # workers then shared one core (the synthetic scorecard with --workers 2 ran at 1.05 cores).
+    caller = threading.get_native_id()
+    before = os.sched_getaffinity(caller)
+    if len(before) < 2:
+        pytest.skip("needs 2 CPUs to see a thread pinned to one")
+    pytest.importorskip(name)
+    pytest.importorskip("onnx")
+    model = AppearanceModel(runtime=name, runtime_cache=tmp_path, num_threads=1)
+    frames = np.zeros((1, 320, 320, 3), np.uint8)
+    model.features(frames)  # compiled and warm
+    seen: set[frozenset[int]] = set()
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            seen.add(frozenset(os.sched_getaffinity(caller)))
+            time.sleep(0.001)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        for _ in range(20):
+            model.features(frames)
+    finally:
+        done.set()
+        watcher.join()
+    assert seen == {frozenset(before)}
 
 
 @pytest.mark.parametrize("name", COMPILED)
