@@ -333,17 +333,13 @@ def _run_unitrack(argv: list[str]) -> str:
 
 def run_source(command: str, work: Path) -> dict[str, dict[str, str]]:
     """Run one ``$`` command from the repository root; its output rows (cell text)."""
-    from unitrack_env.evaluation.tables import format_cell
-
     words = shlex.split(command)
     folder = work / "out"
     if words[:2] == ["unitrack", "evaluate"]:
-        argv = _redirect_out(words[1:], folder) + ["--format", "json", "--quiet"]
+        argv = _redirect_out(words[1:], folder) + ["--quiet"]
         with _in_repo():
-            payload = json.loads(_run_unitrack(argv))
-        rows = {**payload["per_sequence"], "COMBINED": payload["combined"]}
-        return {name: {k: format_cell(k, v) for k, v in values.items()}
-                for name, values in rows.items()}
+            _run_unitrack(argv)
+        return evaluate_rows(folder)
     if words[:2] == ["unitrack", "scorecard"]:
         with _in_repo():
             _run_unitrack(_redirect_out(words[1:], folder) + ["--quiet"])
@@ -357,6 +353,16 @@ def run_source(command: str, work: Path) -> dict[str, dict[str, str]]:
         return _markdown_rows(done.stdout)
     raise ValueError(f"cannot replay {command!r}: a source is `unitrack evaluate`, "
                      "`unitrack scorecard` or `python <script>`")
+
+
+def evaluate_rows(folder: Path) -> dict[str, dict[str, str]]:
+    """The rows (each sequence and ``COMBINED``) of the ``metrics.json`` a run wrote."""
+    from unitrack_env.evaluation.tables import format_cell
+
+    payload = json.loads((folder / "metrics.json").read_text())
+    rows = {**payload["per_sequence"], "COMBINED": payload["combined"]}
+    return {name: {k: format_cell(k, v) for k, v in values.items()}
+            for name, values in rows.items()}
 
 
 def scorecard_rows(folder: Path) -> dict[str, dict[str, str]]:

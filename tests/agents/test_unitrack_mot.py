@@ -222,6 +222,16 @@ def test_real_pets09_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path) -
 
     assert assert_counts_match(tmp_path / "iou")["PETS09-S2L1"]["idsw"] > 10
     assert_counts_match(tmp_path / "unitrack")
+    # README's table shows this run (its figures comment names this test): the same agent and
+    # environment at their defaults, so CI checks the documented cells on this output.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from test_doc_figures import load_figures
+
+    doc_figures = load_figures()
+    figures = next(f for f in doc_figures.figures_of("README.md")[0]
+                   if "--agent unitrack --out runs/pets-unitrack" in f.sources[0])
+    wrong = doc_figures.compare(figures, {1: doc_figures.evaluate_rows(tmp_path / "unitrack")})
+    assert not wrong, "\n".join(map(str, wrong))
 
 
 #: roboflow `trackers` 2.6.1 on the hard synthetic scenes (HARD-01..03, combined), measured
