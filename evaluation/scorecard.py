@@ -1,11 +1,9 @@
 """The paper's question in one command: how well does a representation track, on every task?
 
 ``unitrack scorecard`` plays every task's UniTrack head with one shared appearance model per
-row (one row per ``--model``), plus each task's appearance-free baseline as a reference row,
-over every sequence of the data it finds, and reports the metrics of the UniTrack paper's
-Table 2 (and a radar chart, :mod:`unitrack_env.evaluation.radar`).
-
-More in docs/module-notes.md.
+row (one per ``--model``) and each task's appearance-free baseline, over every sequence of the
+data it finds, and reports the metrics of the paper's Table 2 and a radar chart
+(:mod:`unitrack_env.evaluation.radar`). More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -333,8 +331,9 @@ def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank")
 
 
 def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
-                     data: str | os.PathLike | None) -> tuple[list[str], Path | None]:
-    """The task names and data folder of a scorecard request, refused when wrong."""
+                     data: str | os.PathLike | None,
+                     ) -> tuple[list[str], Path | None, dict[str, dict[str, float]]]:
+    """Task names, data folder and each model's GFLOP per megapixel per task; refused if wrong."""
     names = list(tasks) if tasks else list(TASKS)
     unknown = [t for t in names if t not in TASKS]
     if unknown:
@@ -349,27 +348,31 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
         raise ValueError(f"--data {data} is not a folder")
     from unitrack_env.agents.appearance.weights import load_weights
 
-    for model in models:  # a bad checkpoint or layer is one error now, not one per cell later
-        load_weights(model.weights, arch=model.arch, layer=model.layer, stride=model.stride)
-    return names, data_path
+    from .scorecard_eta import megapixel_gflops
+    gflops: dict[str, dict[str, float]] = {}
+    for m in models:  # a bad checkpoint or layer is one error now, not one per cell later
+        loaded = load_weights(m.weights, arch=m.arch, layer=m.layer, stride=m.stride)
+        gflops[m.name] = megapixel_gflops(loaded.module, loaded.layers, names)
+    return names, data_path, gflops
 
 
 def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
               on_progress: Callable[[int, int, Cell | None], None] | None,
               on_estimate: Callable[[float], None] | None = None,
-              torch_runtime: bool = False) -> None:
+              torch_runtime: bool = False, gflop_per_mp: dict | None = None) -> None:
     """Play and store every cell not done yet, longest first; each warning is shown once.
 
     ``on_estimate`` gets the seconds left (:class:`~.scorecard_eta.CellClock`) at the start
-    and after every cell.
+    and after every cell; ``gflop_per_mp`` is :func:`~.scorecard_eta.schedule`'s.
     """
     from .backends import make_backend
     from .runner import RunFailed
     from .scorecard_eta import schedule
     from .workers import SequenceFailure
 
-    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE,
-                           1 if backend == "pool" and workers <= 1 else workers, torch_runtime)
+    slots = 1 if backend == "pool" and workers <= 1 else workers
+    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE, slots,
+                           torch_runtime, gflop_per_mp)
     position = {id(cell): i for i, cell in enumerate(todo)}
     done = len(cells) - len(todo)
     if on_progress is not None:
@@ -417,15 +420,15 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         workers: processes of the pool (Ray uses the cluster's CPUs).
         address: Ray cluster address (``auto``, ``ray://host:port``; None: a local Ray).
         motion: keep motion cues in the association heads (the paper's Table 2 drops them).
-        runtime: inference runtime of the appearance models (``torch``, ``openvino``,
-            ``onnxruntime``, ``auto``; None: ``$UNITRACK_RUNTIME``, else torch).
+        runtime: ``torch``, ``openvino``, ``onnxruntime`` or ``auto`` (None:
+            ``$UNITRACK_RUNTIME``, else ``auto``).
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
         on_estimate: called with the estimated seconds left, at the start and per cell.
     """
     from .runner import check_out_folder
 
-    names, data_path = _checked_request(models, tasks, data)
+    names, data_path, gflops = _checked_request(models, tasks, data)
     if backend == "pool" and workers > 1:
         from .workers import refuse_unguarded_script
 
@@ -441,7 +444,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
         _play_all(out, cells, backend=backend, workers=workers, address=address,
                   on_progress=on_progress, on_estimate=on_estimate,
-                  torch_runtime=chosen == "torch")
+                  torch_runtime=chosen == "torch", gflop_per_mp=gflops)
         card = combine(out, cells, sources) | {"runtime": runtime_label(runtime, chosen)}
         write_outputs(out, card, radar_scale=radar_scale)
     return card

@@ -15,48 +15,73 @@ remaining cells over the workers, counting the time the running cells have alrea
 
 from __future__ import annotations
 
+import os
 import time
-from collections.abc import Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-#: Network input per frame, in megapixels, of each task's appearance head: SOT feeds three
-#: 520 x 520 scale crops; VOS the DAVIS 480p frame; MOT, MOTS, PoseTrack and VIS the
+#: Network input per frame of each task's appearance head, (images, height, width): SOT feeds
+#: three 520 x 520 scale crops; VOS the DAVIS 480p frame; MOT, MOTS, PoseTrack and VIS the
 #: 1088 x 608 letterbox; pose propagation the JHMDB 320 x 240 frame.
-INPUT_MEGAPIXELS: dict[str, float] = {
-    "sot": 3 * 520 * 520 / 1e6, "vos": 480 * 854 / 1e6, "mot": 1088 * 608 / 1e6,
-    "mots": 1088 * 608 / 1e6, "posetrack": 1088 * 608 / 1e6, "vis": 1088 * 608 / 1e6,
-    "pose-prop": 320 * 240 / 1e6,
+INPUT_SIZES: dict[str, tuple[int, int, int]] = {
+    "sot": (3, 520, 520), "vos": (1, 480, 854), "mot": (1, 608, 1088), "mots": (1, 608, 1088),
+    "posetrack": (1, 608, 1088), "vis": (1, 608, 1088), "pose-prop": (1, 240, 320),
 }
+DEFAULT_INPUT: tuple[int, int, int] = (1, 512, 512)
 
-#: Seconds per megapixel of backbone input (OpenVINO, 1 worker of 2 cores; eager torch is
-#: about 4x this), and per frame besides the backbone (decoding, the head itself; label
-#: propagation dominates VOS and pose propagation).
-SECONDS_PER_MEGAPIXEL: float = 0.25
+#: Backbone seconds per frame = megapixels x (PIXEL_SECONDS + GFLOP per megapixel x
+#: GFLOP_SECONDS): OpenVINO, 1 worker of 2 cores, fitted to the fixture scorecard's SOT cells
+#: (EfficientNet-Lite0, 24 GFLOP/MP: 0.25 s/MP; ResNet-18 layer3, 105 GFLOP/MP: 0.65 s/MP).
+#: Eager torch is about TORCH_FACTOR times slower. Per frame besides the backbone (decoding,
+#: the head itself; label propagation dominates VOS and pose propagation): HEAD_SECONDS.
+#: Threads of the calibration, and how a cell's time grows with fewer: (2 / threads) ** 0.75
+#: (the synthetic scorecard's cells took 1.6-1.7x longer on 1 thread of 2 workers).
+CALIBRATION_THREADS: int = 2
+THREAD_SCALING: float = 0.75
+PIXEL_SECONDS: float = 0.13
+GFLOP_SECONDS: float = 0.005
+LITE0_GFLOP_PER_MP: float = 24.3
 HEAD_SECONDS: dict[str, float] = {"sot": 0.02, "vos": 0.6, "pose-prop": 0.15}
 ASSOCIATION_SECONDS: float = 0.05
 BASELINE_SECONDS: float = 0.01
-#: Slower backbone of eager torch, relative to a compiled runtime.
 TORCH_FACTOR: float = 4.0
-#: Fixed cost of a cell (a process starting a sequence: the environment, the model).
+#: Fixed cost of a cell (a process starting a sequence: the environment, the model; for a
+#: baseline, the environment only).
 CELL_SECONDS: float = 2.0
+BASELINE_CELL_SECONDS: float = 0.2
 
 
-def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool = False) -> float:
+def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool = False,
+              gflop_per_mp: float = LITE0_GFLOP_PER_MP) -> float:
     """Estimated seconds of one cell: ``frames`` frames of ``task``'s head.
 
     Args:
-        task: The task name (a key of :data:`INPUT_MEGAPIXELS`).
+        task: The task name (a key of :data:`INPUT_SIZES`).
         frames: Frames of the sequence.
         appearance: Whether the head runs the appearance model (baselines do not).
         torch_runtime: The backbone runs in eager torch (slower).
+        gflop_per_mp: The backbone's GFLOP per megapixel at the task's input
+            (:func:`megapixel_gflops`).
     """
     if not appearance:
-        return CELL_SECONDS + frames * BASELINE_SECONDS
-    megapixels = INPUT_MEGAPIXELS.get(task, 0.5)
-    backbone = megapixels * SECONDS_PER_MEGAPIXEL * (TORCH_FACTOR if torch_runtime else 1.0)
+        return BASELINE_CELL_SECONDS + frames * BASELINE_SECONDS
+    images, height, width = INPUT_SIZES.get(task, DEFAULT_INPUT)
+    megapixels = images * height * width / 1e6
+    backbone = megapixels * (PIXEL_SECONDS + gflop_per_mp * GFLOP_SECONDS)
+    backbone *= TORCH_FACTOR if torch_runtime else 1.0
     head = HEAD_SECONDS.get(task, ASSOCIATION_SECONDS)
     return CELL_SECONDS + frames * (backbone + head)
+
+
+def megapixel_gflops(module: Any, layers: tuple[str, ...], tasks: Sequence[str],
+                     ) -> dict[str, float]:
+    """A network's GFLOP per megapixel of each task's input (:data:`INPUT_SIZES`)."""
+    from unitrack_env.agents.appearance.architectures import network_gflops
+
+    sizes = [INPUT_SIZES.get(task, DEFAULT_INPUT)[1:] for task in tasks]
+    flops = network_gflops(module, layers, sizes)
+    return {task: g / (h * w / 1e6) for task, g, (h, w) in zip(tasks, flops, sizes, strict=True)}
 
 
 def longest_first(costs: Sequence[float]) -> list[int]:
@@ -80,7 +105,7 @@ class CellClock:
         now: Start time (``time.monotonic()``).
     """
 
-    def __init__(self, costs: Sequence[float], groups: Sequence[str], workers: int,
+    def __init__(self, costs: Sequence[float], groups: Sequence[Hashable], workers: int,
                  now: float | None = None) -> None:
         self.costs = list(costs)
         self.groups = list(groups)
@@ -88,7 +113,7 @@ class CellClock:
         start = time.monotonic() if now is None else now
         self._next = min(self.workers, len(self.costs))
         self._running = [_Slot(i, start) for i in range(self._next)]
-        self._measured: dict[str, list[float]] = {}  # group -> [measured, estimated]
+        self._measured: dict[Hashable, list[float]] = {}  # group -> [measured, estimated]
 
     def finished(self, index: int, seconds: float | None, now: float | None = None) -> None:
         """Cell ``index`` finished after ``seconds`` of work (None: time since it started)."""
@@ -108,12 +133,22 @@ class CellClock:
             self._running.append(_Slot(self._next, now))
             self._next += 1
 
-    def _rate(self, group: str) -> float:
-        pair = self._measured.get(group)
-        if pair and pair[1] > 0:
-            return pair[0] / pair[1]
-        total = [sum(p[i] for p in self._measured.values()) for i in (0, 1)]
-        return total[0] / total[1] if total[1] > 0 else 1.0
+    def _rate(self, group: Hashable) -> float:
+        """Measured / estimated seconds of finished cells of the group, else of its model.
+
+        A group is ``(model, head)``; with no finished cell of the model, every finished
+        cell's ratio, else 1.
+        """
+
+        def model(g: Hashable) -> Hashable:
+            return g[0] if isinstance(g, tuple) else g
+
+        for keep in (lambda g: g == group, lambda g: model(g) == model(group), lambda g: True):
+            pairs = [pair for g, pair in self._measured.items() if keep(g)]
+            estimated = sum(pair[1] for pair in pairs)
+            if estimated > 0:
+                return sum(pair[0] for pair in pairs) / estimated
+        return 1.0
 
     def remaining(self, now: float | None = None) -> float:
         """Seconds until the last cell ends (a list schedule over the workers)."""
@@ -127,8 +162,9 @@ class CellClock:
         return max(free) if free else 0.0
 
 
-def schedule(cells: Sequence[Any], baseline: str, workers: int,
-             torch_runtime: bool = False) -> tuple[list[Any], CellClock]:
+def schedule(cells: Sequence[Any], baseline: str, workers: int, torch_runtime: bool = False,
+             gflop_per_mp: Mapping[str, Mapping[str, float]] | None = None,
+             ) -> tuple[list[Any], CellClock]:
     """Scorecard cells longest first, and the clock of their ETA.
 
     Args:
@@ -137,11 +173,23 @@ def schedule(cells: Sequence[Any], baseline: str, workers: int,
         baseline: The row label of the appearance-free baselines.
         workers: Cells running at once.
         torch_runtime: The appearance models run in eager torch.
+        gflop_per_mp: model -> task -> its backbone's GFLOP per megapixel of the task's
+            input (:func:`megapixel_gflops`; None: EfficientNet-Lite0's for every model).
     """
-    costs = [cell_cost(c.task, c.frames, appearance=c.model != baseline,
-                       torch_runtime=torch_runtime) for c in cells]
+    # Each of the workers has cpu_count / workers threads; the constants are for 2 threads.
+    threads = max(1, (os.cpu_count() or 1) // max(1, workers))
+    slower = (CALIBRATION_THREADS / min(threads, CALIBRATION_THREADS)) ** THREAD_SCALING
+
+    def cost(cell: Any) -> float:
+        appearance = cell.model != baseline
+        flops = gflop_per_mp[cell.model][cell.task] if appearance and gflop_per_mp else \
+            LITE0_GFLOP_PER_MP
+        return slower * cell_cost(cell.task, cell.frames, appearance=appearance,
+                                  torch_runtime=torch_runtime, gflop_per_mp=flops)
+
+    costs = [cost(c) for c in cells]
     order = longest_first(costs)
     ordered = [cells[i] for i in order]
-    clock = CellClock([costs[i] for i in order], [f"{c.task}/{c.head}" for c in ordered],
-                      workers)
+    clock = CellClock([costs[i] for i in order],
+                      [(c.model, f"{c.task}/{c.head}") for c in ordered], workers)
     return ordered, clock

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -12,7 +13,7 @@ from torch import nn
 
 from .efficientnet_lite import LITE0_LAYERS, EfficientNetLite0
 from .resnet import RESNET_SPECS, ResNet
-from .vit import VIT_SPECS, StrideOption, VisionTransformer
+from .vit import VIT_SPECS, Attention, StrideOption, VisionTransformer
 
 FEATURE_STRIDE: int = 8
 """Stride of every CNN feature map this model produces (UniTrack's r = 8); a ViT's map has
@@ -45,6 +46,9 @@ evaluation uses."""
 
 LAYER_SEPARATOR: str = "+"
 """Joins several layers into one hypercolumn output, e.g. ``"stage3+stage5"``."""
+
+REFERENCE_SIZE: int = 224
+"""Input side at which :func:`network_gflops` counts (a multiple of 8, 14 and 16)."""
 
 NORM_EPS: float = 1e-12
 """Guards the L2 normalisation of hypercolumn parts against all-zero feature vectors."""
@@ -115,3 +119,37 @@ def required_prefixes(module: nn.Module, layers: tuple[str, ...]) -> tuple[str, 
     """Module prefixes the output ``layers`` depend on (what a checkpoint must cover)."""
     return tuple(dict.fromkeys(
         p for name in layers for p in module.required_prefixes(name)))
+
+
+def network_gflops(module: nn.Module, layers: tuple[str, ...],
+                   sizes: Sequence[tuple[int, int]]) -> list[float]:
+    """GFLOP (2 per multiply-add) of one image of each ``(height, width)`` through ``layers``.
+
+    For cost estimates such as the scorecard's ETA. Counted once, at 224 x 224, by hooks on
+    the convolutions, linear layers and ViT attention, then scaled: convolutions and linear
+    layers grow with the pixels, attention with their square. (torch's FlopCounterMode
+    would cost 1.5 s of imports on first use.)
+    """
+    macs = {"pixels": 0, "pixels2": 0}
+
+    def conv(mod: nn.Conv2d, _: Any, out: torch.Tensor) -> None:
+        macs["pixels"] += out.numel() * mod.in_channels // mod.groups * math.prod(mod.kernel_size)
+
+    def linear(mod: nn.Linear, _: Any, out: torch.Tensor) -> None:
+        macs["pixels"] += out.numel() * mod.in_features
+
+    def attention(_: nn.Module, inputs: tuple[torch.Tensor, ...], __: Any) -> None:
+        batch, tokens, dim = inputs[0].shape
+        macs["pixels2"] += 2 * batch * tokens * tokens * dim  # q @ k.T and weights @ v
+
+    kinds = ((nn.Conv2d, conv), (nn.Linear, linear), (Attention, attention))
+    hooks = [m.register_forward_hook(hook) for m in module.modules()
+             for kind, hook in kinds if isinstance(m, kind)]
+    try:
+        with torch.no_grad():
+            module.forward_layers(torch.zeros(1, 3, REFERENCE_SIZE, REFERENCE_SIZE), layers)
+    finally:
+        for hook in hooks:
+            hook.remove()
+    scales = [height * width / REFERENCE_SIZE**2 for height, width in sizes]
+    return [2e-9 * (macs["pixels"] * k + macs["pixels2"] * k * k) for k in scales]

@@ -256,3 +256,26 @@ def test_letterbox_layout_matches_letterbox_geometry():
         assert layout.image is None
         assert (layout.scale, layout.offset, layout.original_size) == (
             full.scale, full.offset, full.original_size)
+
+
+@pytest.mark.parametrize("arch", ["efficientnet-lite0", "resnet18", "vit_small_patch14"])
+def test_network_gflops_agree_with_torchs_flop_counter(arch: str) -> None:
+    from torch.utils.flop_counter import FlopCounterMode
+
+    from unitrack_env.agents.appearance.architectures import network_gflops
+    from unitrack_env.agents.appearance.vit import Attention
+    from unitrack_env.agents.appearance.weights import load_weights
+
+    loaded = load_weights("random", arch=arch)
+    sizes = [(224, 224), (448, 448)]
+    ours = network_gflops(loaded.module, loaded.layers, sizes)
+    blocks = [m.proj.in_features for m in loaded.module.modules() if isinstance(m, Attention)]
+    for (height, width), count in zip(sizes, ours, strict=True):
+        counter = FlopCounterMode(display=False)
+        with counter, torch.no_grad():
+            loaded.module.forward_layers(torch.zeros(1, 3, height, width), loaded.layers)
+        # torch's counter skips the CPU's fused attention: 4 n^2 d per block (n tokens + CLS)
+        tokens = height * width // 14**2 + 1
+        attention = sum(4 * tokens**2 * dim for dim in blocks)
+        expected = (counter.get_total_flops() + attention) / 1e9
+        assert count == pytest.approx(expected, rel=0.01)

@@ -50,3 +50,29 @@ def test_schedule_orders_cells_longest_first():
     ordered, clock = schedule(cells, "base", workers=2)
     assert [c.task for c in ordered] == ["vos", "pose-prop", "vos"]
     assert clock.remaining(now=None) > 0
+
+
+def test_a_group_borrows_its_own_models_speed_before_the_others():
+    # model "big" runs at 3x its estimate, model "small" at its estimate
+    clock = CellClock([10.0, 10.0, 10.0], [("big", "sot"), ("small", "sot"), ("big", "vos")],
+                      workers=1, now=0.0)
+    clock.finished(0, 30.0, now=30.0)
+    clock.finished(1, 10.0, now=40.0)
+    assert clock.remaining(now=40.0) == pytest.approx(30.0)  # big's 3x, not the mean 2x
+
+
+def test_a_heavier_backbone_costs_more_and_schedules_first():
+    from unitrack_env.agents.appearance.weights import load_weights
+    from unitrack_env.evaluation.scorecard_eta import megapixel_gflops
+
+    flops = {}
+    for name, arch in (("small", None), ("big", "resnet18")):
+        loaded = load_weights("random", arch=arch or "efficientnet-lite0")
+        flops[name] = megapixel_gflops(loaded.module, loaded.layers, ["sot", "vos"])
+    assert flops["small"]["sot"] == pytest.approx(24.3, abs=0.1)  # GFLOP per megapixel
+    assert flops["big"]["vos"] == pytest.approx(105.1, abs=0.2)
+    cells = [SimpleNamespace(task="sot", head="XCorr", model=m, frames=100)
+             for m in ("small", "big")]
+    ordered, clock = schedule(cells, "base", workers=1, gflop_per_mp=flops)
+    assert [c.model for c in ordered] == ["big", "small"]
+    assert clock.costs[0] > 2 * clock.costs[1]
