@@ -2,7 +2,7 @@
 
 An entry is one ``.npy`` file written to a temporary sibling and renamed into place, so
 readers see a complete file or none; :func:`_load_entry` names what is wrong with a corrupt
-one; :func:`_file_lock` is the inter-process lock (``flock`` / ``msvcrt.locking``).
+one; :func:`file_lock` is the inter-process lock (``flock`` / ``msvcrt.locking``).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ else:
 
 
 @contextlib.contextmanager
-def _file_lock(path: Path) -> Iterator[None]:
+def file_lock(path: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``path`` (created if needed) across processes and threads."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)

@@ -29,8 +29,8 @@ from .cache_files import (
     _ENTRY_SUFFIX,
     _atomic_write,
     _Entry,
-    _file_lock,
     _subdirs,
+    file_lock,
 )
 from .cache_keys import CacheKey
 from .cache_runs import CacheStats
@@ -109,7 +109,7 @@ class CacheFolder:
                 / f"{key.content}{_ENTRY_SUFFIX}")
 
     def _lock(self) -> contextlib.AbstractContextManager[None]:
-        return _file_lock(self.root / ".lock")
+        return file_lock(self.root / ".lock")
 
     # -- writing
     def _write_identity(self, namespace: str, info: dict[str, Any]) -> None:

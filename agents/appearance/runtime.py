@@ -25,6 +25,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from .cache_files import file_lock
+
 TORCH: str = "torch"
 OPENVINO: str = "openvino"
 ONNXRUNTIME: str = "onnxruntime"
@@ -233,8 +235,11 @@ class CompiledBackbone:
         engine = _ENGINES.get(memo)
         if engine is None:
             export_onnx(self.network, height, width, path)
-            engine = _ENGINES[memo] = _compile(self.runtime, path, shape, self.num_threads,
-                                               self.cache_dir / "openvino")
+            # OpenVINO writes its blob cache unlocked: two pool workers compiling one model
+            # at once failed with "cannot set permissions: No such file" on the blob.
+            with file_lock(self.cache_dir / "openvino.lock"):
+                engine = _ENGINES[memo] = _compile(self.runtime, path, shape, self.num_threads,
+                                                   self.cache_dir / "openvino")
         return engine
 
     def _run(self, array: np.ndarray) -> torch.Tensor:

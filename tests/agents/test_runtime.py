@@ -5,6 +5,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -124,6 +126,25 @@ def test_a_compiled_runtime_leaves_the_callers_cpu_affinity_alone(name, tmp_path
         done.set()
         watcher.join()
     assert seen == {frozenset(before)}
+
+
+def test_two_processes_compile_into_one_openvino_cache(tmp_path):
+    # OpenVINO writes its blob cache unlocked: two pool workers compiling the same model
+    # failed 3 times in 4 ("cannot set permissions: No such file or directory" on the blob).
+    pytest.importorskip("openvino")
+    pytest.importorskip("onnx")
+    script = ("import sys, numpy as np\n"
+              "from unitrack_env.agents.appearance import AppearanceModel\n"
+              "m = AppearanceModel(weights='random', runtime='openvino', "
+              "runtime_cache=sys.argv[1], num_threads=1)\n"
+              "for size in [(96, 128), (128, 96), (160, 160), (200, 120)]:\n"
+              "    m.features(np.zeros((3, *size, 3), np.uint8))\n")
+    for attempt in range(2):
+        cache = tmp_path / str(attempt)
+        runs = [subprocess.Popen([sys.executable, "-c", script, str(cache)],
+                                 stderr=subprocess.PIPE, text=True) for _ in range(2)]
+        errors = [run.communicate(timeout=300)[1] for run in runs]
+        assert [run.returncode for run in runs] == [0, 0], errors
 
 
 @pytest.mark.parametrize("name", COMPILED)
