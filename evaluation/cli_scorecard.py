@@ -114,8 +114,9 @@ def _eta_column() -> Any:
 
         def render(self, task: Any) -> Text:
             stamp, seconds = task.fields.get("eta", (None, None))
-            if stamp is None or task.finished:
-                return Text("-:--:--", style="progress.remaining")
+            if stamp is None or task.finished:  # before the plan: models and data load
+                return Text("-:--:--" if task.finished else "planning",
+                            style="progress.remaining")
             left = max(0, round(seconds - (time.monotonic() - stamp)))
             return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d}",
                         style="progress.remaining")

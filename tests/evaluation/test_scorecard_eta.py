@@ -76,3 +76,17 @@ def test_a_heavier_backbone_costs_more_and_schedules_first():
     ordered, clock = schedule(cells, "base", workers=1, gflop_per_mp=flops)
     assert [c.model for c in ordered] == ["big", "small"]
     assert clock.costs[0] > 2 * clock.costs[1]
+
+
+def test_the_bar_says_planning_until_the_first_estimate_then_counts_down():
+    import time
+
+    from unitrack_env.evaluation.cli_scorecard import _eta_column
+
+    column = _eta_column()
+    task = SimpleNamespace(fields={}, finished=False)
+    assert column.render(task).plain == "planning"
+    task.fields["eta"] = (time.monotonic(), 3725.0)
+    assert column.render(task).plain == "1:02:05"
+    task.finished = True
+    assert column.render(task).plain == "-:--:--"
