@@ -1,16 +1,17 @@
 """What a scorecard cell costs, in what order cells run, and when the whole card will end.
 
-Before a cell runs, its cost is estimated from its frame count and the network input its head
-feeds the backbone per frame (:func:`cell_cost`: seconds per frame = a per-head constant plus
-seconds per megapixel of input, both measured on the project's 2-core CPU). Cells are then
-played longest first (:func:`longest_first`), so that the last cells of a pool are short and
-no worker idles while another finishes a long sequence.
+Before a cell runs, its cost is estimated from its frame count, the network input its head
+feeds the backbone per frame and the model's GFLOP per megapixel of that input
+(:func:`cell_cost`, constants measured on the project's 2-core CPU), scaled by the threads
+each worker gets. Cells are then played longest first (:func:`longest_first`), so that the
+last cells of a pool are short and no worker idles while another finishes a long sequence.
 
 :class:`CellClock` turns the estimates into an ETA the moment the card starts, and corrects
-them with the measured speed as cells finish: each (task, head) group's estimates are scaled
-by the ratio of measured to estimated seconds of its finished cells (before any of its cells
-finished, by the ratio over all finished cells). The ETA is the end of a list schedule of the
-remaining cells over the workers, counting the time the running cells have already spent.
+them with the measured speed as cells finish: each (model, task/head) group's estimates are
+scaled by the ratio of measured to estimated seconds of its finished cells (before any of its
+cells finished, by that of its model's finished cells, else of all). The ETA is the end of a
+list schedule of the remaining cells over the workers, counting the time the running cells
+have already spent.
 """
 
 from __future__ import annotations
