@@ -51,6 +51,12 @@ TORCH_FACTOR: float = 4.0
 #: baseline, the environment only).
 CELL_SECONDS: float = 2.0
 BASELINE_CELL_SECONDS: float = 0.2
+#: Before the first cell starts, after the first estimate (:func:`setup_seconds`): importing
+#: torch, building and loading the models, starting the workers; and per annotated frame of
+#: an embedded synthetic data set written on first use (its sequences without ground truth
+#: are written too).
+SETUP_SECONDS: float = 3.0
+SYNTHETIC_FRAME_SECONDS: float = 0.01
 
 
 def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool = False,
@@ -73,6 +79,15 @@ def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool =
     backbone *= TORCH_FACTOR if torch_runtime else 1.0
     head = HEAD_SECONDS.get(task, ASSOCIATION_SECONDS)
     return CELL_SECONDS + frames * (backbone + head)
+
+
+def setup_seconds(synthetic_frames: int = 0) -> float:
+    """Estimated seconds before the cells start: the setup and the synthetic data to write.
+
+    Args:
+        synthetic_frames: Annotated frames of the synthetic data sets not generated yet.
+    """
+    return SETUP_SECONDS + synthetic_frames * SYNTHETIC_FRAME_SECONDS
 
 
 def megapixel_gflops(module: Any, layers: tuple[str, ...], tasks: Sequence[str],

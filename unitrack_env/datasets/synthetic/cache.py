@@ -8,12 +8,14 @@ final folder without the marker is moved aside and regenerated.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextvars import ContextVar
 from pathlib import Path
 from types import MappingProxyType
 
@@ -57,6 +59,54 @@ KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "jhmdb": ("JHMDB",),
     "posetrack": posetrack_synthetic.BENCHMARKS,
 })
+#: Each kind's ``annotated_frames(benchmark, split)``: the frames of every annotated sequence
+#: its writer writes, known before writing.
+ANNOTATED_FRAMES: Mapping[str, Callable[[str, str | None], dict[str, int]]] = MappingProxyType({
+    "motchallenge": motchallenge.annotated_frames,
+    "otb": otb.annotated_frames,
+    "davis": davis.annotated_frames,
+    "mots": mots_synthetic.annotated_frames,
+    "youtube_vis": vis_synthetic.annotated_frames,
+    "jhmdb": jhmdb_synthetic.annotated_frames,
+    "posetrack": posetrack_synthetic.annotated_frames,
+})
+_GENERATE: ContextVar[bool] = ContextVar("unitrack_generate_synthetic", default=True)
+
+
+class NotGenerated(LookupError):
+    """A synthetic data set is not in the cache, and :func:`without_generating` is in force.
+
+    ``benchmark`` and ``kind`` are :func:`ensure_synthetic`'s arguments; ``path`` where the
+    data set will be.
+    """
+
+    def __init__(self, benchmark: str, kind: str, path: Path) -> None:
+        super().__init__(f"the synthetic {kind} data set {benchmark} is not generated yet "
+                         f"({path})")
+        self.benchmark, self.kind, self.path = benchmark, kind, path
+
+
+@contextlib.contextmanager
+def without_generating() -> Iterator[None]:
+    """Within: :func:`ensure_synthetic` raises :class:`NotGenerated` instead of writing.
+
+    For quick looks (how many frames will a run play?) that must not wait for generation.
+    """
+    token = _GENERATE.set(False)
+    try:
+        yield
+    finally:
+        _GENERATE.reset(token)
+
+
+def annotated_frames(benchmark: str, kind: str = "motchallenge", split: str | None = None,
+                     ) -> dict[str, int]:
+    """Frames of each annotated sequence of ``split`` (None: any) of a synthetic data set.
+
+    The same as reading the generated data set, without generating it.
+    """
+    synthetic_path(benchmark, kind)  # validates both
+    return ANNOTATED_FRAMES[kind](benchmark, split)
 
 
 def cache_root() -> Path:
@@ -95,6 +145,8 @@ def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
     final = synthetic_path(benchmark, kind)
     if is_complete(final):
         return final
+    if not _GENERATE.get():
+        raise NotGenerated(benchmark, kind, final)
     parent = final.parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
