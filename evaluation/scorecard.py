@@ -156,8 +156,7 @@ def _gflops(models: Sequence[ModelSpec], names: list[str]) -> dict[str, dict[str
 
 def _first_estimate(out: Path, models: Sequence[ModelSpec], names: list[str],
                     data: Path | None, *, slots: int, motion: bool, runtime: str | None,
-                    on_progress: Callable[[int, int, Cell | None], None] | None,
-                    on_estimate: Callable[[float], None] | None) -> None:
+                    on_estimate: Callable[[float], None]) -> None:
     """The ETA before torch is imported or synthetic data are written.
 
     Frame counts from the benchmarks (or the synthetic specs), GFLOP from
@@ -170,12 +169,9 @@ def _first_estimate(out: Path, models: Sequence[ModelSpec], names: list[str],
     cells, _, pending = plan(models, names, data, motion=motion, runtime=runtime,
                              generate=False)
     todo = [c for c in cells if not cell_done(out, c)]
-    if on_progress is not None:
-        on_progress(len(cells) - len(todo), len(cells), None)
-    if on_estimate is None:
-        return
     gflops = {m.name: estimated_megapixel_gflops(m.weights, m.arch, m.layer, m.stride, names)
               for m in models}
+    # "auto" is taken to find a compiled runtime; the exact choice (torch's import) follows.
     chosen = runtime or os.environ.get("UNITRACK_RUNTIME", "").strip() or "auto"
     _, clock = schedule(todo, BASELINE, slots, chosen == "torch", gflops)
     # Each task has one baseline head: its cells hold the task's sequences once.
@@ -263,9 +259,9 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
 
     names, data_path = _checked_request(models, tasks, data)
     out = Path(out)
-    _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
-                    motion=motion, runtime=runtime, on_progress=on_progress,
-                    on_estimate=on_estimate)
+    if on_estimate is not None:
+        _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
+                        motion=motion, runtime=runtime, on_estimate=on_estimate)
     gflops = _gflops(models, names)
     if backend == "pool" and workers > 1:
         from .workers import refuse_unguarded_script
