@@ -255,13 +255,13 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
             (before the models load or synthetic data are written), then when the cells
             start and after each cell.
     """
-    from .runner import check_out_folder
-
     names, data_path = _checked_request(models, tasks, data)
     out = Path(out)
     if on_estimate is not None:
         _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
                         motion=motion, runtime=runtime, on_estimate=on_estimate)
+    from .runner import check_out_folder
+
     gflops = _gflops(models, names)
     if backend == "pool" and workers > 1:
         from .workers import refuse_unguarded_script
