@@ -2,10 +2,10 @@
 
 :func:`plan` lists every cell (model x task head x sequence) with its frame count, read
 from each task's benchmark (:func:`unitrack_env.benchmarks.benchmark_for`: no environment
-is made, no agent or torch imported). With ``generate=False`` an embedded synthetic data set
-that is not generated yet is counted from its writer's spec
-(:func:`unitrack_env.datasets.synthetic.cache.annotated_frames`) instead of being written:
-the scorecard's first ETA comes from that plan, at once.
+is made, no agent or torch imported). With ``generate=False`` the embedded synthetic data
+sets are counted from their writers' specs
+(:func:`unitrack_env.datasets.synthetic.cache.annotated_frames`), neither generated nor
+read: the scorecard's first ETA comes from that plan, at once.
 """
 
 from __future__ import annotations
@@ -20,11 +20,7 @@ from typing import Any
 
 import unitrack_env
 from unitrack_env.benchmarks import benchmark_class, benchmark_for
-from unitrack_env.datasets.synthetic.cache import (
-    NotGenerated,
-    annotated_frames,
-    without_generating,
-)
+from unitrack_env.datasets.synthetic.cache import SpecsOnly, annotated_frames, specs_only
 from unitrack_env.registration import variant
 
 
@@ -218,18 +214,19 @@ def _split(env_id: str, env_kwargs: dict[str, Any]) -> Any:
 
 
 def task_frames(source: Source, *, generate: bool = True) -> tuple[dict[str, int], bool]:
-    """Frames of each sequence of ``source`` that can be scored, and whether they are a spec's.
+    """Frames of each sequence of ``source`` that can be scored; whether data are to be written.
 
-    With ``generate=False`` a synthetic data set not generated yet is counted from its
-    writer's spec (True), not written.
+    With ``generate=False`` the embedded synthetic data are counted from their writer's spec
+    (the same counts, tests/evaluation/test_scorecard_plan.py), neither read nor written; the
+    flag says whether they are still to be generated. Else they are generated if need be.
     """
     env_kwargs = {"root": source.root} if source.root else {}
     try:
-        with contextlib.nullcontext() if generate else without_generating():
+        with contextlib.nullcontext() if generate else specs_only():
             benchmark = benchmark_for(source.env_id, **env_kwargs)
-    except NotGenerated as missing:
-        return annotated_frames(missing.benchmark, missing.kind,
-                                _split(source.env_id, env_kwargs)), True
+    except SpecsOnly as synthetic:
+        return annotated_frames(synthetic.benchmark, synthetic.kind,
+                                _split(source.env_id, env_kwargs)), not synthetic.generated
     return {name: benchmark.sequence_length(name) for name in benchmark.sequence_names
             if benchmark.has_ground_truth(name)}, False
 
@@ -251,8 +248,8 @@ def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *
         task = TASKS[name]
         source = sources[name] = data_source(data, task)
         env_kwargs = {"root": source.root} if source.root else {}
-        frames, counted = task_frames(source, generate=generate)
-        if counted:
+        frames, to_generate = task_frames(source, generate=generate)
+        if to_generate:
             pending.append(name)
         for head in (*task.heads, task.baseline):
             for model, appearance in (rows if head.appearance else [(BASELINE, {})]):

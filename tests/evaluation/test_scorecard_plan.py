@@ -13,7 +13,7 @@ import gymnasium as gym
 import pytest
 
 from unitrack_env.benchmarks import benchmark_for
-from unitrack_env.datasets.synthetic.cache import NotGenerated, without_generating
+from unitrack_env.datasets.synthetic.cache import SpecsOnly, specs_only
 from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, data_source, plan
 
 REPO = Path(__file__).resolve().parents[2]
@@ -31,13 +31,15 @@ def test_synthetic_cells_are_known_before_the_data_are_written(tmp_path, monkeyp
     early, _, pending = plan(MODELS, list(TASKS), None, generate=False)
     assert pending == list(TASKS)
     assert not empty.exists()  # nothing written
-    with without_generating(), pytest.raises(NotGenerated) as missing:
+    with specs_only(), pytest.raises(SpecsOnly) as asked:
         benchmark_for("UniTrack/DAVIS-v0")
-    assert (missing.value.benchmark, missing.value.kind) == ("DAVIS-2017", "davis")
+    assert (asked.value.benchmark, asked.value.kind, asked.value.generated) == \
+        ("DAVIS-2017", "davis", False)
     monkeypatch.setenv("UNITRACK_CACHE", session_cache)  # generated once per test session
     cells, _, pending = plan(MODELS, list(TASKS), None)
     assert pending == []
     assert sorted(early, key=_key) == sorted(cells, key=_key)
+    assert plan(MODELS, list(TASKS), None, generate=False)[2] == []  # now generated
 
 
 def test_the_plan_counts_what_the_environments_play(shared_data):

@@ -70,33 +70,35 @@ ANNOTATED_FRAMES: Mapping[str, Callable[[str, str | None], dict[str, int]]] = Ma
     "jhmdb": jhmdb_synthetic.annotated_frames,
     "posetrack": posetrack_synthetic.annotated_frames,
 })
-_GENERATE: ContextVar[bool] = ContextVar("unitrack_generate_synthetic", default=True)
+_SPECS_ONLY: ContextVar[bool] = ContextVar("unitrack_synthetic_specs_only", default=False)
 
 
-class NotGenerated(LookupError):
-    """A synthetic data set is not in the cache, and :func:`without_generating` is in force.
+class SpecsOnly(LookupError):
+    """:func:`ensure_synthetic` was called within :func:`specs_only`.
 
-    ``benchmark`` and ``kind`` are :func:`ensure_synthetic`'s arguments; ``path`` where the
-    data set will be.
+    ``benchmark`` and ``kind`` are its arguments, ``path`` where the data set is (or will
+    be), ``generated`` whether it is complete there.
     """
 
     def __init__(self, benchmark: str, kind: str, path: Path) -> None:
-        super().__init__(f"the synthetic {kind} data set {benchmark} is not generated yet "
-                         f"({path})")
         self.benchmark, self.kind, self.path = benchmark, kind, path
+        self.generated = is_complete(path)
+        super().__init__(f"the synthetic {kind} data set {benchmark} ({path}) was asked for "
+                         "within specs_only()")
 
 
 @contextlib.contextmanager
-def without_generating() -> Iterator[None]:
-    """Within: :func:`ensure_synthetic` raises :class:`NotGenerated` instead of writing.
+def specs_only() -> Iterator[None]:
+    """Within: :func:`ensure_synthetic` raises :class:`SpecsOnly`, generating nothing.
 
-    For quick looks (how many frames will a run play?) that must not wait for generation.
+    For quick looks that must not wait for generation or reading, such as how many frames a
+    run will play: :func:`annotated_frames` tells that from the writers' specs.
     """
-    token = _GENERATE.set(False)
+    token = _SPECS_ONLY.set(True)
     try:
         yield
     finally:
-        _GENERATE.reset(token)
+        _SPECS_ONLY.reset(token)
 
 
 def annotated_frames(benchmark: str, kind: str = "motchallenge", split: str | None = None,
@@ -143,10 +145,10 @@ def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
     (set ``UNITRACK_CACHE`` elsewhere).
     """
     final = synthetic_path(benchmark, kind)
+    if _SPECS_ONLY.get():
+        raise SpecsOnly(benchmark, kind, final)
     if is_complete(final):
         return final
-    if not _GENERATE.get():
-        raise NotGenerated(benchmark, kind, final)
     parent = final.parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
