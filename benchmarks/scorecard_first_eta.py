@@ -15,9 +15,11 @@ Starts the real command line in a pseudo-terminal (so the bar draws as a user se
 
 and prints the seconds from starting the process to the first ``ETA h:mm:ss`` on the screen,
 the CPU seconds (user + system, the whole process group) spent by then, and the ETA shown;
-then stops the command. With ``--old PATH`` each case also runs with ``PATH`` first on
-``PYTHONPATH`` and the ratios old / new are printed. The load average is printed too: on a
-busy machine both columns are inflated alike.
+then stops the command. It also times writing the synthetic card's data into an empty cache
+(the first estimate adds ``SYNTHETIC_FRAME_SECONDS`` per annotated frame for it). With
+``--old PATH`` each case also runs with ``PATH`` first on ``PYTHONPATH`` and the ratios
+old / new are printed. The load average is printed too: on a busy machine both columns are
+inflated alike.
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ import tempfile
 import termios
 import time
 from pathlib import Path
+
+from unitrack_env.evaluation.scorecard_eta import SYNTHETIC_FRAME_SECONDS
 
 ETA = re.compile(r"ETA\s+(\d+:\d\d:\d\d)")
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07")
@@ -98,14 +102,30 @@ def first_eta(code: Path, args: list[str], env: dict[str, str], timeout: float,
         os.close(master)
 
 
-def generate(code: Path, env: dict[str, str]) -> None:
-    """Write the synthetic data sets of every scorecard task into ``env``'s cache."""
+GENERATE = """
+import sys, time
+from unitrack_env.benchmarks import benchmark_for
+start, cpu, frames = time.monotonic(), time.process_time(), 0
+for env_id in sys.argv[1:]:
+    bench = benchmark_for(env_id)
+    frames += sum(bench.sequence_length(s) for s in bench.scorable())
+print(time.monotonic() - start, time.process_time() - cpu, frames)
+"""
+
+
+def generate(code: Path, env: dict[str, str]) -> tuple[float, float, int]:
+    """Write the synthetic data of every scorecard task into ``env``'s cache.
+
+    Returns the seconds and CPU seconds that took and the annotated frames of those data.
+    """
     from unitrack_env.evaluation.scorecard_plan import TASKS
 
     ids = [task.env_ids[0] for task in TASKS.values()]
-    script = f"from unitrack_env.benchmarks import benchmark_for\nfor i in {ids}: benchmark_for(i)"
-    subprocess.run([sys.executable, "-c", script], env={**env, "PYTHONPATH": str(code)},
-                   cwd=code, check=True)
+    done = subprocess.run([sys.executable, "-c", GENERATE, *ids], capture_output=True,
+                          text=True, env={**env, "PYTHONPATH": str(code)}, cwd=code,
+                          check=True)
+    wall, cpu, frames = done.stdout.split()
+    return float(wall), float(cpu), int(frames)
 
 
 def cases(data: str) -> list[tuple[str, list[str], bool]]:
@@ -152,6 +172,11 @@ def main() -> None:
     found = {label: {name: (statistics.median(r[name][0] for r in each),
                             statistics.median(r[name][1] for r in each), each[-1][name][2])
                      for name in each[0]} for label, each in runs.items()}
+    with tempfile.TemporaryDirectory(prefix="first-eta-cache-") as cache:
+        wall, cpu, frames = generate(Path.cwd(), {**os.environ, "UNITRACK_CACHE": cache})
+    print(f"writing the synthetic card's data: {wall:.1f} s ({cpu:.1f} s CPU) for {frames} "
+          f"annotated frames, {cpu / frames:.4f} CPU s per frame "
+          f"(scorecard_eta.SYNTHETIC_FRAME_SECONDS: {SYNTHETIC_FRAME_SECONDS})")
     print(f"load average at end:   {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print(f"median of {args.repeats}")
     print(f"{'case':<16} {'checkout':<8} {'first ETA (s)':>13} {'CPU (s)':>8}  ETA shown")
