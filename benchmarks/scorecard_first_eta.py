@@ -128,6 +128,33 @@ def generate(code: Path, env: dict[str, str]) -> tuple[float, float, int]:
     return float(wall), float(cpu), int(frames)
 
 
+TWO_ESTIMATES = """
+import os, sys, time
+from unitrack_env.evaluation import cli_scorecard
+from unitrack_env.evaluation.cli import main
+seen = []
+def estimate(self, seconds):
+    seen.append((time.monotonic(), seconds))
+    if len(seen) == 2:
+        print(*(v for pair in seen for v in pair), flush=True)
+        os._exit(0)
+cli_scorecard._Update.estimate = estimate
+main(["scorecard", *sys.argv[1:], "--quiet"])
+"""
+
+
+def predicted_ends(code: Path, args: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """When the first and the exact estimate (at the cells' start) say the card will end.
+
+    Seconds after the first estimate; the command line's own callbacks, then stopped.
+    """
+    done = subprocess.run([sys.executable, "-c", TWO_ESTIMATES, *args], capture_output=True,
+                          text=True, env={**env, "PYTHONPATH": str(code)}, cwd=code,
+                          check=True)
+    first_at, first, second_at, second = map(float, done.stdout.split())
+    return first, second_at - first_at + second
+
+
 def cases(data: str) -> list[tuple[str, list[str], bool]]:
     """(name, arguments, fresh cache?) of each measured command."""
     return [("fixture", [*MODELS, "--data", str(Path(data).resolve())], False),
@@ -135,8 +162,11 @@ def cases(data: str) -> list[tuple[str, list[str], bool]]:
             ("synthetic-warm", list(MODELS), False)]
 
 
-def measure(code: Path, data: str, timeout: float) -> dict[str, tuple[float, float, str]]:
-    """Each case's first ETA with the checkout ``code``."""
+def measure(code: Path, data: str, timeout: float,
+            ends: dict[str, tuple[float, float]] | None = None,
+            ) -> dict[str, tuple[float, float, str]]:
+    """Each case's first ETA with the checkout ``code`` (and into ``ends``, its
+    :func:`predicted_ends`)."""
     results = {}
     with tempfile.TemporaryDirectory(prefix="first-eta-") as scratch:
         env = {k: v for k, v in os.environ.items() if k != "UNITRACK_DATA"}
@@ -149,6 +179,11 @@ def measure(code: Path, data: str, timeout: float) -> dict[str, tuple[float, flo
             out = Path(scratch) / f"out-{name}"
             results[name] = first_eta(code, [*args, "--out", str(out)], env, timeout)
             shutil.rmtree(out, ignore_errors=True)
+            if ends is not None:
+                if fresh:
+                    shutil.rmtree(env["UNITRACK_CACHE"], ignore_errors=True)
+                ends[name] = predicted_ends(code, [*args, "--out", str(out)], env)
+                shutil.rmtree(out, ignore_errors=True)
     return results
 
 
@@ -166,9 +201,11 @@ def main() -> None:
     print(f"load average at start: {' '.join(f'{v:.2f}' for v in os.getloadavg())}, "
           f"{os.cpu_count()} CPUs")
     runs: dict[str, list[dict[str, tuple[float, float, str]]]] = {k: [] for k in checkouts}
-    for _ in range(args.repeats):
+    ends: dict[str, tuple[float, float]] = {}
+    for repeat in range(args.repeats):
         for label, code in checkouts.items():
-            runs[label].append(measure(code, args.data, args.timeout))
+            runs[label].append(measure(code, args.data, args.timeout,
+                                       ends if label == "new" and not repeat else None))
     found = {label: {name: (statistics.median(r[name][0] for r in each),
                             statistics.median(r[name][1] for r in each), each[-1][name][2])
                      for name in each[0]} for label, each in runs.items()}
@@ -178,6 +215,10 @@ def main() -> None:
           f"annotated frames, {cpu / frames:.4f} CPU s per frame "
           f"(scorecard_eta.SYNTHETIC_FRAME_SECONDS: {SYNTHETIC_FRAME_SECONDS})")
     print(f"load average at end:   {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print("new: the end of the card as the first estimate and the exact one (when the cells "
+          "start) predict it, seconds after the first")
+    for name, (first, exact) in ends.items():
+        print(f"  {name:<16} first {first:7.1f}  exact {exact:7.1f}  ({first / exact - 1:+.1%})")
     print(f"median of {args.repeats}")
     print(f"{'case':<16} {'checkout':<8} {'first ETA (s)':>13} {'CPU (s)':>8}  ETA shown")
     for name, _, _ in cases(args.data):
