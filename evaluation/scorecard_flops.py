@@ -6,7 +6,8 @@ multiply-adds at 224 x 224 (convolutions and linear layers, ``pixels``; ViT atte
 imports), so the scorecard first estimates from the same counts kept here: a table for the
 CNNs (per architecture and deepest output layer; the counts of a stride-8 layer do not depend
 on the other layers asked for) and a closed form for the ViTs. Then the real count replaces
-the estimate. tests/evaluation/test_scorecard_flops.py checks every entry against
+the estimate. tests/evaluation/test_scorecard_flops.py checks every table entry, and the
+closed form on every ViT size, patch, register and stride option, against
 ``network_gflops``. A model whose architecture is known only from its checkpoint's keys gets
 EfficientNet-Lite0's figure until then.
 """
@@ -32,9 +33,10 @@ CNN_MACS: dict[str, dict[str, int]] = {
     "resnet50": {"layer2": 1813561344, "layer3": 7362625536, "layer4": 19077316608},
     "resnet101": {"layer2": 1813561344, "layer3": 22211510272, "layer4": 33926201344},
 }
-#: ViT embedding width per size (agents/appearance/vit.py), MLP width over it, registers of
-#: the ``_reg4`` variants.
+#: ViT embedding width and depth per size (agents/appearance/vit.py), MLP width over the
+#: embedding's, registers of the ``_reg4`` variants.
 VIT_WIDTHS: dict[str, int] = {"small": 384, "base": 768, "large": 1024}
+VIT_DEPTHS: dict[str, int] = {"small": 12, "base": 12, "large": 24}
 VIT_MLP_RATIO: int = 4
 VIT_REGISTERS: int = 4
 _VIT = re.compile(r"vit_(?P<size>[a-z]+)_patch(?P<patch>\d+)(?P<reg>_reg4)?")
@@ -47,6 +49,15 @@ DEFAULT_CNN_LAYERS: dict[str, str] = {"efficientnet-lite0": "stage5", "resnet18"
                                       "resnet101": "layer3"}
 
 
+def vit_shape(arch: str) -> tuple[int, int, int, int] | None:
+    """(width, patch, registers, depth) of a ViT named ``vit_<size>_patch<p>[_reg4]``."""
+    match = _VIT.fullmatch(arch)
+    if match is None or match["size"] not in VIT_WIDTHS:
+        return None
+    return (VIT_WIDTHS[match["size"]], int(match["patch"]),
+            VIT_REGISTERS if match["reg"] else 0, VIT_DEPTHS[match["size"]])
+
+
 def vit_macs(arch: str, layers: Sequence[str], stride: str | None = None,
              ) -> tuple[int, int] | None:
     """(``pixels``, ``pixels2``) multiply-adds of a ViT at 224 x 224 (None: not a ViT).
@@ -55,16 +66,16 @@ def vit_macs(arch: str, layers: Sequence[str], stride: str | None = None,
     attention products (``2 N^2 D``); ``N`` is the class token, the registers and the patch
     grid at the embedding's stride (``stride="s-overlap"``: ``s``; else the patch).
     """
-    match = _VIT.fullmatch(arch)
-    if match is None or match["size"] not in VIT_WIDTHS:
+    shape = vit_shape(arch)
+    if shape is None:
         return None
-    dim, patch = VIT_WIDTHS[match["size"]], int(match["patch"])
+    dim, patch, registers, _ = shape
     step = patch
     if stride:
         value, _, mode = str(stride).partition("-")
         step = int(value) if (mode or "overlap") == "overlap" else patch
     blocks = max(int(layer.removeprefix("block")) for layer in layers)
-    tokens = 1 + (VIT_REGISTERS if match["reg"] else 0) + math.ceil(REFERENCE_SIZE / step) ** 2
+    tokens = 1 + registers + math.ceil(REFERENCE_SIZE / step) ** 2
     per_block = tokens * dim * dim * (4 + 2 * VIT_MLP_RATIO)
     return blocks * per_block, blocks * 2 * tokens * tokens * dim
 
@@ -78,10 +89,10 @@ def reference_macs(arch: str, layer: str | None, stride: str | None = None,
         if stride or not all(name in known for name in layers):
             return None  # refused when the model is built
         return max(known[name] for name in layers), 0
-    match = _VIT.fullmatch(arch)
-    if match is None:
+    shape = vit_shape(arch)
+    if shape is None:
         return None
-    layers = (layer or f"block{24 if match['size'] == 'large' else 12}").split("+")
+    layers = (layer or f"block{shape[3]}").split("+")
     if not all(re.fullmatch(r"block\d+", name) for name in layers):
         return None
     return vit_macs(arch, layers, stride)

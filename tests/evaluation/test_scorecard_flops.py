@@ -20,6 +20,7 @@ from unitrack_env.evaluation.scorecard_flops import (
     REFERENCE_SIZE,
     estimated_megapixel_gflops,
     reference_macs,
+    vit_shape,
 )
 from unitrack_env.evaluation.scorecard_plan import TASKS
 
@@ -39,12 +40,14 @@ def test_every_cnn_entry_is_the_networks_own_count(arch):
                                                                      rel=1e-12), layer
 
 
-# Each size, patch and register variant once (the closed form is per block, so one depth
-# each, and block1 once), and the stride options (overlap adds tokens, upsample does not).
-VITS = [(arch, f"block{spec.depth}", None) for arch, spec in VIT_SPECS.items()] + [
-    ("vit_small_patch16", "block1", None), ("vit_small_patch16", "block12", "8"),
-    ("vit_base_patch14_reg4", "block3+block12", "7-overlap"),
-    ("vit_small_patch8", "block12", "4-upsample")]
+# Every size, patch and register option (the closed form is per block: one depth each, and
+# block1 once), and the stride options (overlap adds tokens, upsample does not).
+VITS = [("vit_small_patch8", "block12", None), ("vit_small_patch14_reg4", "block12", None),
+        ("vit_base_patch16", "block12", None), ("vit_base_patch8_reg4", "block12", None),
+        ("vit_large_patch14", "block24", None), ("vit_large_patch16_reg4", "block24", None),
+        ("vit_small_patch16", "block1", None), ("vit_small_patch16", "block12", "8"),
+        ("vit_base_patch14_reg4", "block3+block12", "7-overlap"),
+        ("vit_small_patch8", "block12", "4-upsample")]
 
 
 def test_the_vit_closed_form_is_the_networks_own_count():
@@ -61,6 +64,12 @@ def test_named_weights_and_default_layers_are_the_models():
     assert DEFAULT_CNN_LAYERS == {a: DEFAULT_LAYERS[a] for a in CNN_MACS}
     for arch in VIT_SPECS:  # the ViT default, the last block, is implied
         assert reference_macs(arch, None) == reference_macs(arch, DEFAULT_LAYERS[arch])
+
+
+def test_every_vit_is_read_from_its_name_as_the_network_builds_it():
+    for arch, spec in VIT_SPECS.items():
+        parsed = vit_shape(arch)
+        assert parsed == (spec.dim, spec.patch, spec.registers, spec.depth), arch
 
 
 def test_the_estimate_per_task_is_what_the_scorecard_counts_later():
