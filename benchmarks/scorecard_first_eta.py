@@ -139,7 +139,7 @@ def estimate(self, seconds):
         print(*(v for pair in seen for v in pair), flush=True)
         os._exit(0)
 cli_scorecard._Update.estimate = estimate
-main(["scorecard", *sys.argv[1:], "--quiet"])
+main(["scorecard", *sys.argv[1:]])
 """
 
 

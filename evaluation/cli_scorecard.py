@@ -69,7 +69,8 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
                                 workers=args.workers, address=args.address,
                                 motion=args.motion, runtime=args.runtime,
                                 radar_scale=args.radar_scale,
-                                on_progress=progress, on_estimate=progress.estimate)
+                                on_progress=progress,
+                                on_estimate=None if args.quiet else progress.estimate)
         files = sorted(out.glob("scorecard.*"))
     if args.ci:
         from .intervals import write_card_intervals

@@ -70,7 +70,7 @@ def test_the_first_eta_comes_before_torch_is_imported_then_the_exact_one(tmp_pat
                 os._exit(0)
         cli_scorecard._Update.estimate = estimate
         main(["scorecard", "--model", "imagenet-lite0", "--tasks", "pose-prop", "--runtime",
-              "torch", "--out", {str(tmp_path / "card")!r}, "--quiet"])
+              "torch", "--out", {str(tmp_path / "card")!r}])
     """)
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                           cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
