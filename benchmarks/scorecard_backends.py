@@ -17,9 +17,10 @@ import time
 from pathlib import Path
 
 from unitrack_env.evaluation import scorecard as sc
+from unitrack_env.evaluation.scorecard_plan import ModelSpec
 
 
-def _timed(backend: str, tasks: list[str], workers: int, models: list[sc.ModelSpec]) -> tuple[
+def _timed(backend: str, tasks: list[str], workers: int, models: list[ModelSpec]) -> tuple[
         float, int, dict]:
     with tempfile.TemporaryDirectory(prefix=f"bench-{backend}-") as out:
         start = time.perf_counter()
@@ -50,7 +51,7 @@ def main() -> None:
     args = parser.parse_args()
     os.environ["UNITRACK_FEATURE_CACHE"] = "off"
     tasks = args.tasks.split(",")
-    models = [sc.ModelSpec.parse("imagenet-lite0"), sc.ModelSpec.parse("random")]
+    models = [ModelSpec.parse("imagenet-lite0"), ModelSpec.parse("random")]
     rows = {"pool": [], "ray": []}
     cards = {}
     for _ in range(args.repeats):

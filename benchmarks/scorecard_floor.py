@@ -67,13 +67,13 @@ def main() -> None:
 
     from unitrack_env.agents.appearance.architectures import network_gflops
     from unitrack_env.agents.appearance.weights import load_weights
-    from unitrack_env.evaluation import scorecard as sc
+    from unitrack_env.evaluation.scorecard_plan import ModelSpec, plan
 
-    models = [sc.ModelSpec.parse(m) for m in args.model or ["imagenet-lite0", "random"]]
+    models = [ModelSpec.parse(m) for m in args.model or ["imagenet-lite0", "random"]]
     float32, bf16 = product_rate(torch.float32), product_rate(torch.bfloat16)
     print(f"matrix product, {args.threads} threads: float32 {float32:.0f} GFLOP/s, "
           f"bfloat16 {bf16:.0f} GFLOP/s")
-    cells, _ = sc.plan(models, ["sot"], Path(args.data))
+    cells, _, _ = plan(models, ["sot"], Path(args.data))
     total_gflop = total_seconds = best_model = 0.0
     for spec in models:
         loaded = load_weights(spec.weights, arch=spec.arch, layer=spec.layer, stride=spec.stride)

@@ -33,6 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 def _child(args: argparse.Namespace) -> None:
     """This checkout's scorecard, logging every ETA estimate (time, seconds left)."""
     from unitrack_env.evaluation import scorecard as sc
+    from unitrack_env.evaluation.scorecard_plan import ModelSpec
 
     start = time.monotonic()
     log: list[tuple[float, float]] = []
@@ -41,7 +42,7 @@ def _child(args: argparse.Namespace) -> None:
         log.append((time.monotonic() - start, left))
         Path(args.eta_log).write_text(json.dumps({"total": None, "estimates": log}))
 
-    sc.scorecard([sc.ModelSpec.parse(m) for m in args.model], out=args.out,
+    sc.scorecard([ModelSpec.parse(m) for m in args.model], out=args.out,
                  tasks=args.tasks.split(",") if args.tasks else None, data=args.data,
                  workers=args.workers, on_estimate=estimate)
     total = time.monotonic() - start

@@ -51,6 +51,7 @@ def add_options(card: argparse.ArgumentParser) -> None:
 def run_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
     from . import scorecard as sc
+    from .scorecard_plan import ModelSpec
     from .scorecard_report import merge_cards
 
     out = Path(args.out)
@@ -60,7 +61,7 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
     else:
         if not args.model:
             raise ValueError("give --model (one or more), or --compare earlier scorecards")
-        models = [sc.ModelSpec.parse(text) for text in args.model]
+        models = [ModelSpec.parse(text) for text in args.model]
         tasks = args.tasks.split(",") if args.tasks else None
         data = args.data or os.environ.get("UNITRACK_DATA")
         with cell_progress(enabled=not args.quiet) as progress:
@@ -68,7 +69,8 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
                                 workers=args.workers, address=args.address,
                                 motion=args.motion, runtime=args.runtime,
                                 radar_scale=args.radar_scale,
-                                on_progress=progress, on_estimate=progress.estimate)
+                                on_progress=progress,
+                                on_estimate=None if args.quiet else progress.estimate)
         files = sorted(out.glob("scorecard.*"))
     if args.ci:
         from .intervals import write_card_intervals
@@ -107,10 +109,11 @@ def _eta_column() -> Any:
         """The scorecard's own ETA, counting down between cells.
 
         From the cells' frames and input sizes, corrected as they finish; rich's own column
-        would wait for two finished cells.
+        would wait for two finished cells. Drawn at every refresh (a countdown in whole
+        seconds does not flicker), so a new estimate shows at once.
         """
 
-        max_refresh = 1.0
+        max_refresh = None
 
         def render(self, task: Any) -> Text:
             stamp, seconds = task.fields.get("eta", (None, None))

@@ -185,7 +185,7 @@ def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
 def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                    resamples: int = 1000) -> dict[tuple[str, str, str], dict]:
     """Intervals of every (model, task, head) row of a scorecard made in ``out``."""
-    from .scorecard import Cell
+    from .scorecard_plan import Cell
 
     result = {}
     for row in card["rows"]:
@@ -200,7 +200,7 @@ def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
 def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                          resamples: int = 1000) -> list[Path]:
     """``scorecard_ci.md`` and ``scorecard_ci.json``: each cell's value with its interval."""
-    from .scorecard import BASELINE, TASKS
+    from .scorecard_plan import BASELINE, TASKS
     from .scorecard_report import columns, value
 
     found = card_intervals(out, card, resamples=resamples)

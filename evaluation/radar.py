@@ -16,7 +16,7 @@ SOURCE_NOTES = {"benchmark": "", "fixture": "\n(fixture)", "synthetic": "\n[synt
 
 def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     """(task, head, metric, label) of every radar axis."""
-    from .scorecard import TASKS
+    from .scorecard_plan import TASKS
 
     out = []
     for task in card["tasks"]:
@@ -80,7 +80,7 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
 
 def _style(plt: Any, name: str, index: int) -> dict[str, Any]:
     """Line style of one polygon: the baselines grey and dashed, the models in tab10."""
-    from .scorecard import BASELINE
+    from .scorecard_plan import BASELINE
 
     if name == BASELINE:
         return {"color": "0.5", "linestyle": "--", "linewidth": 1.2}
@@ -95,7 +95,7 @@ def _title(scale: str, better: str = "outer") -> str:
 def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
               data: dict[str, list[float | None]], scale: str) -> Any:
     """The radar proper (three axes or more)."""
-    from .scorecard import BASELINE
+    from .scorecard_plan import BASELINE
 
     angles = [2 * math.pi * i / len(spokes) for i in range(len(spokes))]
     figure, ax = plt.subplots(figsize=(6.4, 6.4), subplot_kw={"projection": "polar"})
@@ -138,7 +138,7 @@ def _bars(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]
     """One or two tasks: grouped bars (no radar polygon has fewer than three vertices)."""
     from matplotlib.patches import Patch
 
-    from .scorecard import BASELINE
+    from .scorecard_plan import BASELINE
 
     figure, ax = plt.subplots(figsize=(3.2 + 1.6 * len(spokes), 4.8))
     width = 0.8 / len(data)

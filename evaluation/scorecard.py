@@ -15,224 +15,15 @@ import tempfile
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import unitrack_env
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
+from .scorecard_plan import BASELINE, TASKS, Cell, ModelSpec, Source, plan
 from .scorecard_report import runtime_label
-
-
-@dataclass(frozen=True)
-class Head:
-    """One head (or baseline) of a task and the metrics the scorecard reports for it."""
-
-    agent: str
-    label: str
-    metrics: tuple[str, ...]
-    appearance: bool = True
-    association: bool = False
-
-
-@dataclass(frozen=True)
-class Task:
-    """A task of the scorecard: its environments (first with data wins), heads and axis."""
-
-    name: str
-    title: str
-    env_ids: tuple[str, ...]
-    heads: tuple[Head, ...]
-    baseline: Head
-    axis: tuple[str, str]  # (head label, metric) drawn on the radar chart
-    lower_is_better: frozenset[str] = frozenset()
-
-
-def _assoc(metrics: tuple[str, ...]) -> Head:
-    return Head("unitrack", "UniTrack", metrics, association=True)
-
-
-def _iou(metrics: tuple[str, ...]) -> Head:
-    return Head("iou", "IoU baseline", metrics, appearance=False)
-
-
-#: The tasks in the paper's Table 2 order, then the appendix tasks.
-TASKS: dict[str, Task] = {task.name: task for task in (
-    Task("sot", "SOT", ("UniTrack/OTB-v0",),
-         (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
-          Head("unitrack-dcf", "DCF", ("AUC", "Precision@20px"))),
-         Head("repeat-box", "repeat-box", ("AUC", "Precision@20px"), appearance=False),
-         ("XCorr", "AUC")),
-    Task("vos", "VOS", ("UniTrack/DAVIS-v0",),
-         (Head("unitrack-vos", "UniTrack", ("J-Mean", "J&F-Mean", "F-Mean")),),
-         Head("repeat-mask", "repeat-mask", ("J-Mean", "J&F-Mean", "F-Mean"), appearance=False),
-         ("UniTrack", "J-Mean")),
-    Task("mot", "MOT", ("UniTrack/MOT16-v0", "UniTrack/MOT17-v0", "UniTrack/MOT20-v0",
-                        "UniTrack/MOT15-v0"),
-         (_assoc(("IDF1", "HOTA", "MOTA", "IDSW")),), _iou(("IDF1", "HOTA", "MOTA", "IDSW")),
-         ("UniTrack", "IDF1"), frozenset({"IDSW"})),
-    Task("mots", "MOTS", ("UniTrack/MOTS-v0",), (_assoc(("IDF1", "HOTA", "sMOTSA")),),
-         _iou(("IDF1", "HOTA", "sMOTSA")), ("UniTrack", "IDF1")),
-    Task("posetrack", "PoseTrack", ("UniTrack/PoseTrack-v0",),
-         (_assoc(("IDF1", "MOTA", "IDSW")),), _iou(("IDF1", "MOTA", "IDSW")),
-         ("UniTrack", "IDF1"), frozenset({"IDSW"})),
-    Task("pose-prop", "Pose prop.", ("UniTrack/JHMDB-v0",),
-         (Head("unitrack-pose", "UniTrack", ("PCK@0.1", "PCK@0.2")),),
-         Head("repeat-pose", "repeat-pose", ("PCK@0.1", "PCK@0.2"), appearance=False),
-         ("UniTrack", "PCK@0.1")),
-    Task("vis", "VIS", ("UniTrack/VIS-v0",), (_assoc(("AP", "AP50")),), _iou(("AP", "AP50")),
-         ("UniTrack", "AP")),
-)}
-#: Row label of the appearance-free baselines.
-BASELINE = "baseline (no appearance)"
-
-
-@dataclass(frozen=True)
-class ModelSpec:
-    """One appearance model (a scorecard row).
-
-    ``weights[,arch=..][,layer=..][,stride=..][,label=..]`` (``stride``: ViT only).
-    """
-
-    weights: str
-    arch: str | None = None
-    layer: str | None = None
-    label: str = ""
-    stride: str | None = None
-
-    @classmethod
-    def parse(cls, text: str) -> ModelSpec:
-        """Read ``imagenet-lite0``, ``random,arch=resnet18`` or ``moco.pth,layer=layer3``."""
-        weights, *options = [part.strip() for part in text.split(",")]
-        values: dict[str, str] = {}
-        for option in options:
-            key, sep, value = option.partition("=")
-            if not sep or key not in ("arch", "layer", "stride", "label"):
-                raise ValueError(f"--model '{text}': options are arch=, layer=, stride= and "
-                                 "label= "
-                                 f"(comma-separated after the weights); got '{option}'")
-            values[key] = value
-        if not weights:
-            raise ValueError(f"--model '{text}' names no weights")
-        return cls(weights, values.get("arch"), values.get("layer"), values.get("label", ""),
-                   values.get("stride"))
-
-    @property
-    def name(self) -> str:
-        """The row label: ``label=``, or the weights (a file's stem) with arch and layer."""
-        if self.label:
-            return self.label
-        base = Path(self.weights).stem if os.sep in self.weights or "." in self.weights \
-            else self.weights
-        stride = f"s{self.stride}" if self.stride else ""
-        return "+".join(part for part in (base, self.arch, self.layer, stride) if part)
-
-    def agent_kwargs(self) -> dict[str, Any]:
-        """The appearance options every UniTrack head takes.
-
-        A checkpoint file is given by its absolute path: the same file typed from another
-        folder is the same run (and resumes).
-        """
-        path = Path(self.weights).expanduser()
-        weights = str(path.resolve()) if path.is_file() else self.weights
-        kwargs: dict[str, Any] = {"weights": weights}
-        if self.arch:
-            kwargs["arch"] = self.arch
-        if self.layer:
-            kwargs["layer"] = self.layer
-        if self.stride:
-            kwargs["stride"] = self.stride
-        return kwargs
-
-
-@dataclass(frozen=True)
-class Source:
-    """Where a task's data came from: ``benchmark``, ``fixture`` or ``synthetic``."""
-
-    kind: str
-    root: str | None = None
-    env_id: str = ""
-
-
-def data_source(data: Path | None, task: Task) -> Source:
-    """The first environment of ``task`` whose folder is in ``data``, else synthetic data.
-
-    A folder counts as a ``fixture`` (real data, but a small sample, as in ``../shared``)
-    when its data folder's ``README.md`` starts with a heading that says so; otherwise as the
-    ``benchmark``.
-    """
-    if data is not None:
-        for env_id in task.env_ids:
-            folder = unitrack_env.variant(env_id).folder
-            if folder and (data / folder).is_dir():
-                readme = data / "README.md"
-                head = readme.read_text(errors="replace").lstrip()[:200] if readme.is_file() \
-                    else ""
-                kind = "fixture" if head.startswith("#") and "fixture" in head.split("\n")[
-                    0].lower() else "benchmark"
-                return Source(kind, str((data / folder).resolve()), env_id)
-    return Source("synthetic", None, task.env_ids[0])
-
-
-@dataclass(frozen=True)
-class Cell:
-    """One (model, task, head, sequence): the unit of work a backend schedules."""
-
-    model: str
-    task: str
-    head: str
-    agent: str
-    env_id: str
-    sequence: str
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    agent_kwargs: dict[str, Any] = field(default_factory=dict)
-    frames: int = 0
-
-    @property
-    def folder(self) -> Path:
-        """The cell's run folder below ``<out>/cells``."""
-        return Path(_safe(self.model)) / self.task / _safe(self.head)
-
-    @property
-    def label(self) -> str:
-        """Short description for progress displays."""
-        return f"{self.model} / {self.task} {self.head} / {self.sequence}"
-
-
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name)
-
-
-def plan(models: Sequence[ModelSpec], tasks: Sequence[str], data: Path | None, *,
-         motion: bool = False, runtime: str | None = None,
-         ) -> tuple[list[Cell], dict[str, Source]]:
-    """Every cell of the scorecard, and each task's data source."""
-    import gymnasium as gym
-
-    cells: list[Cell] = []
-    sources: dict[str, Source] = {}
-    for name in tasks:
-        task = TASKS[name]
-        source = sources[name] = data_source(data, task)
-        env_kwargs = {"root": source.root} if source.root else {}
-        env = gym.make(source.env_id, **env_kwargs)
-        try:
-            base = env.unwrapped
-            sequences = [s for s in base.sequence_names if base.has_ground_truth(s)]
-            frames = {s: base.sequence_length(s) for s in sequences}
-        finally:
-            env.close()
-        rows = [(m.name, m.agent_kwargs() | ({"runtime": runtime} if runtime else {}))
-                for m in models]
-        for head in (*task.heads, task.baseline):
-            for model, appearance in (rows if head.appearance else [(BASELINE, {})]):
-                kwargs = dict(appearance)
-                if head.association and not motion:
-                    kwargs["use_motion"] = False
-                cells += [Cell(model, name, head.label, head.agent, source.env_id, sequence,
-                               env_kwargs, kwargs, frames[sequence]) for sequence in sequences]
-    return cells, sources
 
 
 def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
@@ -331,9 +122,8 @@ def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank")
 
 
 def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
-                     data: str | os.PathLike | None,
-                     ) -> tuple[list[str], Path | None, dict[str, dict[str, float]]]:
-    """Task names, data folder and each model's GFLOP per megapixel per task; refused if wrong."""
+                     data: str | os.PathLike | None) -> tuple[list[str], Path | None]:
+    """Task names and data folder; refused if wrong (models are checked by :func:`_gflops`)."""
     names = list(tasks) if tasks else list(TASKS)
     unknown = [t for t in names if t not in TASKS]
     if unknown:
@@ -346,14 +136,52 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
     data_path = Path(data).expanduser() if data is not None else None
     if data_path is not None and not data_path.is_dir():
         raise ValueError(f"--data {data} is not a folder")
+    return names, data_path
+
+
+def _gflops(models: Sequence[ModelSpec], names: list[str]) -> dict[str, dict[str, float]]:
+    """Each model's GFLOP per megapixel per task, counted on the built network.
+
+    Loads every model: a bad checkpoint or layer is one error now, not one per cell later.
+    """
     from unitrack_env.agents.appearance.weights import load_weights
 
     from .scorecard_eta import megapixel_gflops
     gflops: dict[str, dict[str, float]] = {}
-    for m in models:  # a bad checkpoint or layer is one error now, not one per cell later
+    for m in models:
         loaded = load_weights(m.weights, arch=m.arch, layer=m.layer, stride=m.stride)
         gflops[m.name] = megapixel_gflops(loaded.module, loaded.layers, names)
-    return names, data_path, gflops
+    return gflops
+
+
+def _first_estimate(out: Path, models: Sequence[ModelSpec], names: list[str],
+                    data: Path | None, *, slots: int, motion: bool, runtime: str | None,
+                    on_estimate: Callable[[float], None]) -> None:
+    """The ETA before torch is imported or synthetic data are written.
+
+    Frame counts from the benchmarks (or the synthetic specs), GFLOP from
+    :mod:`.scorecard_flops` and the time to set up (:func:`~.scorecard_eta.setup_seconds`);
+    the exact ETA follows when the cells start.
+    """
+    from .scorecard_eta import schedule, setup_seconds
+    from .scorecard_flops import estimated_megapixel_gflops
+
+    cells, _, pending = plan(models, names, data, motion=motion, runtime=runtime,
+                             generate=False)
+    todo = [c for c in cells if not cell_done(out, c)]
+    gflops = {m.name: estimated_megapixel_gflops(m.weights, m.arch, m.layer, m.stride, names)
+              for m in models}
+    # "auto" is taken to find a compiled runtime; the exact choice (torch's import) follows.
+    chosen = runtime or os.environ.get("UNITRACK_RUNTIME", "").strip() or "auto"
+    _, clock = schedule(todo, BASELINE, slots, chosen == "torch", gflops)
+    # Each task has one baseline head: its cells hold the task's sequences once.
+    generated = sum(c.frames for c in cells if c.task in pending and c.model == BASELINE)
+    on_estimate(setup_seconds(generated) + clock.remaining())
+
+
+def _slots(backend: str, workers: int) -> int:
+    """Cells running at once."""
+    return 1 if backend == "pool" and workers <= 1 else workers
 
 
 def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, address: str | None,
@@ -370,9 +198,8 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
     from .scorecard_eta import schedule
     from .workers import SequenceFailure
 
-    slots = 1 if backend == "pool" and workers <= 1 else workers
-    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE, slots,
-                           torch_runtime, gflop_per_mp)
+    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE,
+                           _slots(backend, workers), torch_runtime, gflop_per_mp)
     position = {id(cell): i for i, cell in enumerate(todo)}
     done = len(cells) - len(todo)
     if on_progress is not None:
@@ -424,11 +251,18 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
             ``$UNITRACK_RUNTIME``, else ``auto``).
         radar_scale: ``"rank"`` (the paper's Figure 1) or ``"value"``.
         on_progress: called with (cells done, cells in all, the cell just finished).
-        on_estimate: called with the estimated seconds left, at the start and per cell.
+        on_estimate: called with the estimated seconds left: first within about a second
+            (before the models load or synthetic data are written), then when the cells
+            start and after each cell.
     """
+    names, data_path = _checked_request(models, tasks, data)
+    out = Path(out)
+    if on_estimate is not None:
+        _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
+                        motion=motion, runtime=runtime, on_estimate=on_estimate)
     from .runner import check_out_folder
 
-    names, data_path, gflops = _checked_request(models, tasks, data)
+    gflops = _gflops(models, names)
     if backend == "pool" and workers > 1:
         from .workers import refuse_unguarded_script
 
@@ -438,10 +272,9 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     from .ownership import hold_folder
 
     chosen = resolve_runtime(runtime)  # not installed: one error now, not one per cell
-    out = Path(out)
     check_out_folder(out)
     with hold_folder(out, "scorecard"):  # one scorecard at a time (each cell run locks too)
-        cells, sources = plan(models, names, data_path, motion=motion, runtime=runtime)
+        cells, sources, _ = plan(models, names, data_path, motion=motion, runtime=runtime)
         _play_all(out, cells, backend=backend, workers=workers, address=address,
                   on_progress=on_progress, on_estimate=on_estimate,
                   torch_runtime=chosen == "torch", gflop_per_mp=gflops)

@@ -11,7 +11,9 @@ them with the measured speed as cells finish: each (model, task/head) group's es
 scaled by the ratio of measured to estimated seconds of its finished cells (before any of its
 cells finished, by that of its model's finished cells, else of all). The ETA is the end of a
 list schedule of the remaining cells over the workers, counting the time the running cells
-have already spent.
+have already spent. The scorecard's first estimate, made before the models load
+(:mod:`.scorecard_flops`), adds the seconds still to come before the cells start
+(:func:`setup_seconds`).
 """
 
 from __future__ import annotations
@@ -51,6 +53,12 @@ TORCH_FACTOR: float = 4.0
 #: baseline, the environment only).
 CELL_SECONDS: float = 2.0
 BASELINE_CELL_SECONDS: float = 0.2
+#: Between the scorecard's first estimate and the exact one (:func:`setup_seconds`):
+#: importing torch, building and loading the models, reading the data to plan; and per
+#: annotated frame of an embedded synthetic data set written on first use (its sequences
+#: without ground truth are written too; benchmarks/scorecard_first_eta.py times it).
+SETUP_SECONDS: float = 3.0
+SYNTHETIC_FRAME_SECONDS: float = 0.01
 
 
 def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool = False,
@@ -73,6 +81,15 @@ def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool =
     backbone *= TORCH_FACTOR if torch_runtime else 1.0
     head = HEAD_SECONDS.get(task, ASSOCIATION_SECONDS)
     return CELL_SECONDS + frames * (backbone + head)
+
+
+def setup_seconds(synthetic_frames: int = 0) -> float:
+    """Estimated seconds before the cells start: the setup and the synthetic data to write.
+
+    Args:
+        synthetic_frames: Annotated frames of the synthetic data sets not generated yet.
+    """
+    return SETUP_SECONDS + synthetic_frames * SYNTHETIC_FRAME_SECONDS
 
 
 def megapixel_gflops(module: Any, layers: tuple[str, ...], tasks: Sequence[str],

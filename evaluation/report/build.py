@@ -162,7 +162,7 @@ def scorecard_section(folder: Path, out: Path) -> str:
 
     card = json.loads((folder / "scorecard.json").read_text(encoding="utf-8"))
     cols = columns(card)
-    from ..scorecard import BASELINE
+    from ..scorecard_plan import BASELINE
 
     rows = []
     for model in [*card["models"], BASELINE]:

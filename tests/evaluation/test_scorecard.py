@@ -15,65 +15,74 @@ from unitrack_env.evaluation import scorecard as sc
 from unitrack_env.evaluation.cli import main
 from unitrack_env.evaluation.radar import radii
 from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.scorecard_plan import (
+    BASELINE,
+    TASKS,
+    Cell,
+    ModelSpec,
+    Source,
+    data_source,
+    plan,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests"))
 from test_doc_figures import load_figures  # noqa: E402  (tests/ is not a package)
 
 doc_figures = load_figures()
-MODELS = [sc.ModelSpec.parse("imagenet-lite0"), sc.ModelSpec.parse("random,label=random")]
+MODELS = [ModelSpec.parse("imagenet-lite0"), ModelSpec.parse("random,label=random")]
 
 
 def test_model_specs():
-    spec = sc.ModelSpec.parse("/ckpt/moco_v2.pth,arch=resnet50,layer=layer3")
+    spec = ModelSpec.parse("/ckpt/moco_v2.pth,arch=resnet50,layer=layer3")
     assert spec.name == "moco_v2+resnet50+layer3"
     assert spec.agent_kwargs() == {"weights": "/ckpt/moco_v2.pth", "arch": "resnet50",
                                    "layer": "layer3"}
-    assert sc.ModelSpec.parse("random,label=Random Init.").name == "Random Init."
+    assert ModelSpec.parse("random,label=Random Init.").name == "Random Init."
     with pytest.raises(ValueError, match="options are arch=, layer=, stride= and label="):
-        sc.ModelSpec.parse("random,lr=0.1")
+        ModelSpec.parse("random,lr=0.1")
 
 
 def test_a_checkpoint_typed_from_another_folder_is_the_same_model(tmp_path, monkeypatch):
     (tmp_path / "ckpt.pth").write_bytes(b"")
     monkeypatch.chdir(tmp_path)
-    assert sc.ModelSpec.parse("ckpt.pth").agent_kwargs() == {"weights": str(tmp_path / "ckpt.pth")}
-    assert sc.ModelSpec.parse(str(tmp_path / "ckpt.pth")).agent_kwargs() == \
-        sc.ModelSpec.parse("./ckpt.pth").agent_kwargs()
+    assert ModelSpec.parse("ckpt.pth").agent_kwargs() == {"weights": str(tmp_path / "ckpt.pth")}
+    assert ModelSpec.parse(str(tmp_path / "ckpt.pth")).agent_kwargs() == \
+        ModelSpec.parse("./ckpt.pth").agent_kwargs()
 
 
 def test_cells_of_another_model_under_the_same_label_are_named(tmp_path):
-    cell = sc.Cell("mine", "mot", "IoU", "iou", "UniTrack/MOT16-v0", "SYN-01",
+    cell = Cell("mine", "mot", "IoU", "iou", "UniTrack/MOT16-v0", "SYN-01",
                    agent_kwargs={"min_hits": 3})
     run(cell.env_id, cell.agent, out=tmp_path / "cells" / cell.folder, progress=False,
         sequences=[cell.sequence], agent_kwargs={"min_hits": 2})
     with pytest.raises(ValueError, match="holds the cells of another model labelled 'mine' "
                                          r"\(agent option min_hits: 2 -> 3\); give this model "
                                          "another label= or use another --out"):
-        sc.combine(tmp_path, [cell], {"mot": sc.Source("synthetic", None, cell.env_id)})
+        sc.combine(tmp_path, [cell], {"mot": Source("synthetic", None, cell.env_id)})
 
 
 def test_data_sources(tmp_path):
     (tmp_path / "OTB").mkdir()
-    assert sc.data_source(tmp_path, sc.TASKS["sot"]).kind == "benchmark"
+    assert data_source(tmp_path, TASKS["sot"]).kind == "benchmark"
     (tmp_path / "README.md").write_text("# Benchmark fixtures (real data, small)\n")
-    source = sc.data_source(tmp_path, sc.TASKS["sot"])
+    source = data_source(tmp_path, TASKS["sot"])
     assert (source.kind, source.env_id) == ("fixture", "UniTrack/OTB-v0")
-    assert sc.data_source(tmp_path, sc.TASKS["vos"]) == sc.Source("synthetic", None,
-                                                                  "UniTrack/DAVIS-v0")
+    assert data_source(tmp_path, TASKS["vos"]) == Source("synthetic", None,
+                                                            "UniTrack/DAVIS-v0")
     (tmp_path / "MOT17").mkdir()
-    assert sc.data_source(tmp_path, sc.TASKS["mot"]).env_id == "UniTrack/MOT17-v0"
+    assert data_source(tmp_path, TASKS["mot"]).env_id == "UniTrack/MOT17-v0"
 
 
 def test_plan_gives_every_appearance_head_the_runtime_and_drops_motion():
-    models = [sc.ModelSpec.parse("random")]
-    cells, _ = sc.plan(models, ["mot", "sot"], None, runtime="openvino")
+    models = [ModelSpec.parse("random")]
+    cells, _, _ = plan(models, ["mot", "sot"], None, runtime="openvino")
     kwargs = {(c.task, c.head): c.agent_kwargs for c in cells}
     assert kwargs[("mot", "UniTrack")] == {"weights": "random", "runtime": "openvino",
                                           "use_motion": False}
     assert kwargs[("sot", "DCF")] == {"weights": "random", "runtime": "openvino"}
     assert kwargs[("mot", "IoU baseline")] == kwargs[("sot", "repeat-box")] == {}
-    cells, _ = sc.plan(models, ["mot"], None, motion=True)
+    cells, _, _ = plan(models, ["mot"], None, motion=True)
     assert {c.head: c.agent_kwargs for c in cells}["UniTrack"] == {"weights": "random"}
 
 
@@ -187,7 +196,7 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path, monkeypatc
         monkeypatch.setenv("UNITRACK_RUNTIME", named.group(1))
     assert main([*argv, "--workers", "2", "--quiet"]) == 0
     card = json.loads((out / "scorecard.json").read_text())
-    assert card["tasks"] == list(sc.TASKS)
+    assert card["tasks"] == list(TASKS)
     assert f"Appearance models ran on {card['runtime']}." in (out / "scorecard.md").read_text()
     assert {card["sources"][t]["kind"] for t in ("sot", "vos", "mot", "posetrack",
                                                  "pose-prop")} == {"fixture"}
@@ -196,7 +205,7 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path, monkeypatc
     # per-task evaluate agrees to 1e-9: every baseline, and the heads on their short clips
     # (test_scorecard_outputs_and_values_equal_evaluate covers a whole head the same way)
     for row in card["rows"]:
-        cheap = row["model"] == sc.BASELINE or row["task"] in ("mot", "posetrack", "pose-prop")
+        cheap = row["model"] == BASELINE or row["task"] in ("mot", "posetrack", "pose-prop")
         if not cheap or row["model"] == "random":
             continue
         sequence = min(row["per_sequence"])
@@ -225,7 +234,7 @@ def heads_beat_their_baselines(card: dict, model: str) -> None:
     rows = {(row["model"], row["task"], row["head"]): row for row in card["rows"]}
 
     def scores(task: str, head: str, key: str = "per_sequence") -> dict:
-        name = sc.BASELINE if head == sc.TASKS[task].baseline.label else model
+        name = BASELINE if head == TASKS[task].baseline.label else model
         return rows[(name, task, head)][key]
 
     repeat = scores("sot", "repeat-box")
@@ -264,9 +273,9 @@ def test_a_bad_checkpoint_or_layer_is_refused_before_any_cell(tmp_path):
     bad.write_text("not a checkpoint")
     out = tmp_path / "card"
     with pytest.raises(CheckpointError, match="bad.pth: not a readable PyTorch checkpoint"):
-        sc.scorecard([sc.ModelSpec(str(bad))], out=out, tasks=["vos"])
+        sc.scorecard([ModelSpec(str(bad))], out=out, tasks=["vos"])
     with pytest.raises(ValueError, match="layer 'stage9'"):
-        sc.scorecard([sc.ModelSpec("imagenet-lite0", layer="stage9")], out=out, tasks=["vos"])
+        sc.scorecard([ModelSpec("imagenet-lite0", layer="stage9")], out=out, tasks=["vos"])
     assert not out.exists()
 
 
@@ -277,7 +286,7 @@ def test_a_runtime_that_is_not_installed_is_refused_before_any_cell(tmp_path, mo
     out = tmp_path / "card"
     with pytest.raises(ImportError, match=r"runtime='openvino' needs .*pip install "
                                           r"'unitrack-env\[openvino\]'"):
-        sc.scorecard([sc.ModelSpec("imagenet-lite0")], out=out, tasks=["vos"],
+        sc.scorecard([ModelSpec("imagenet-lite0")], out=out, tasks=["vos"],
                      runtime="openvino")
     assert not out.exists()
 
@@ -286,12 +295,12 @@ def _card(tasks: list[str]) -> dict:
     """A hand-made scorecard: two models and the baselines on ``tasks`` (no episode played)."""
     rows = []
     for offset, task in enumerate(tasks):
-        spec = sc.TASKS[task]
+        spec = TASKS[task]
         head, metric = spec.axis
         for model, number in (("a", 0.6), ("b", 0.4)):
             rows.append({"model": model, "task": task, "head": head,
                          "combined": {metric: number + offset / 10}})
-        rows.append({"model": sc.BASELINE, "task": task, "head": spec.baseline.label,
+        rows.append({"model": BASELINE, "task": task, "head": spec.baseline.label,
                      "combined": {metric: 0.3}})
     kinds = ["synthetic", "fixture", "benchmark"]
     return {"models": ["a", "b"], "tasks": tasks, "rows": rows,

@@ -13,7 +13,6 @@ from unitrack_env.datasets.posetrack import PoseTrackDataset
 from unitrack_env.datasets.posetrack_json import read_posetrack_json, write_posetrack_json
 from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.errors import DataFormatError
-from unitrack_env.metrics.posetrack import evaluate_video, summarise
 from unitrack_env.metrics.posetrack_frames import POSEVAL_DROPS_LAST_FRAME
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
@@ -77,6 +76,10 @@ class PoseTrackBenchmark(Benchmark):
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
+        # Imported here: the metrics pull in scipy.optimize (0.5 s), which planning a run
+        # (sequence names and lengths) does not need.
+        from unitrack_env.metrics.posetrack import evaluate_video, summarise
+
         per_sequence: dict[str, dict[str, float]] = {}
         counts = []
         for name in sequences:

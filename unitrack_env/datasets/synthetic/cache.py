@@ -8,12 +8,14 @@ final folder without the marker is moved aside and regenerated.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextvars import ContextVar
 from pathlib import Path
 from types import MappingProxyType
 
@@ -57,6 +59,56 @@ KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "jhmdb": ("JHMDB",),
     "posetrack": posetrack_synthetic.BENCHMARKS,
 })
+#: Each kind's ``annotated_frames(benchmark, split)``: the frames of every annotated sequence
+#: its writer writes, known before writing.
+ANNOTATED_FRAMES: Mapping[str, Callable[[str, str | None], dict[str, int]]] = MappingProxyType({
+    "motchallenge": motchallenge.annotated_frames,
+    "otb": otb.annotated_frames,
+    "davis": davis.annotated_frames,
+    "mots": mots_synthetic.annotated_frames,
+    "youtube_vis": vis_synthetic.annotated_frames,
+    "jhmdb": jhmdb_synthetic.annotated_frames,
+    "posetrack": posetrack_synthetic.annotated_frames,
+})
+_SPECS_ONLY: ContextVar[bool] = ContextVar("unitrack_synthetic_specs_only", default=False)
+
+
+class SpecsOnly(LookupError):
+    """:func:`ensure_synthetic` was called within :func:`specs_only`.
+
+    ``benchmark`` and ``kind`` are its arguments, ``path`` where the data set is (or will
+    be), ``generated`` whether it is complete there.
+    """
+
+    def __init__(self, benchmark: str, kind: str, path: Path) -> None:
+        self.benchmark, self.kind, self.path = benchmark, kind, path
+        self.generated = is_complete(path)
+        super().__init__(f"the synthetic {kind} data set {benchmark} ({path}) was asked for "
+                         "within specs_only()")
+
+
+@contextlib.contextmanager
+def specs_only() -> Iterator[None]:
+    """Within: :func:`ensure_synthetic` raises :class:`SpecsOnly`, generating nothing.
+
+    For quick looks that must not wait for generation or reading, such as how many frames a
+    run will play: :func:`annotated_frames` tells that from the writers' specs.
+    """
+    token = _SPECS_ONLY.set(True)
+    try:
+        yield
+    finally:
+        _SPECS_ONLY.reset(token)
+
+
+def annotated_frames(benchmark: str, kind: str = "motchallenge", split: str | None = None,
+                     ) -> dict[str, int]:
+    """Frames of each annotated sequence of ``split`` (None: any) of a synthetic data set.
+
+    The same as reading the generated data set, without generating it.
+    """
+    synthetic_path(benchmark, kind)  # validates both
+    return ANNOTATED_FRAMES[kind](benchmark, split)
 
 
 def cache_root() -> Path:
@@ -93,6 +145,8 @@ def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
     (set ``UNITRACK_CACHE`` elsewhere).
     """
     final = synthetic_path(benchmark, kind)
+    if _SPECS_ONLY.get():
+        raise SpecsOnly(benchmark, kind, final)
     if is_complete(final):
         return final
     parent = final.parent

@@ -75,6 +75,16 @@ DEFAULT_SPEC = DAVISSpec(sequences=(
 """The embedded default: two val, one train and one test-dev sequence."""
 
 
+def annotated_frames(benchmark: str = "DAVIS-2017", split: str | None = None,
+                     spec: DAVISSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each sequence of ``split`` (None: any) annotated in every frame.
+
+    Known without writing anything, e.g. to plan work on data not generated yet.
+    """
+    return {s.name: s.scene.num_frames for s in spec.sequences
+            if s.split in SPLITS_WITH_GROUND_TRUTH and split in (None, s.split)}
+
+
 def choose_objects(video: SyntheticVideo, count: int) -> tuple[int, ...]:
     """Return the scene ids of the ``count`` labelled objects (walkers visible in frame 0)."""
     first = video.frame(0)

@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.jhmdb import MATLAB_ORIGIN
+from unitrack_env.datasets.jhmdb import MATLAB_ORIGIN, SPLIT_TEST, SPLIT_TRAIN
 from unitrack_env.datasets.synthetic.poses import (
     JHMDB_FROM_SKELETON,
     select_joints,
@@ -76,6 +76,17 @@ DEFAULT_SPEC = JHMDBSpec(videos=(
     VideoSpec("walk", "SYN_walk_f_cm_np1_le_med_2", _scene(32, 40, (1.5, 2.2)), split=1),
     VideoSpec("run", "SYN_run_f_cm_np1_ri_med_1", _scene(33, 36, (2.0, 3.0)), split=2),
 ))
+
+
+def annotated_frames(benchmark: str = "JHMDB", split: str | None = None,
+                     spec: JHMDBSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each video of ``split`` (None: any; ``train``/``test`` of split set 1).
+
+    Every video is annotated. Known without writing anything, e.g. to plan work on data not
+    generated yet.
+    """
+    wanted = {None: None, "train": SPLIT_TRAIN, "test": SPLIT_TEST}[split]
+    return {v.name: v.scene.num_frames for v in spec.videos if wanted in (None, v.split)}
 
 
 def puppet_joints(spec: VideoSpec) -> np.ndarray:

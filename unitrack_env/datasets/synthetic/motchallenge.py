@@ -126,6 +126,16 @@ DEFAULT_SPEC = MotChallengeSpec(sequences=(
 ))
 
 
+def annotated_frames(benchmark: str = "MOT17", split: str | None = None,
+                     spec: MotChallengeSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each sequence of ``split`` (None: any) that has ground truth.
+
+    Known without writing anything, e.g. to plan work on data not generated yet.
+    """
+    return {s.name: s.scene.num_frames for s in spec.sequences
+            if s.split in SPLITS_WITH_GROUND_TRUTH and split in (None, s.split)}
+
+
 @dataclass(frozen=True)
 class Detections:
     """Simulated detections of a sequence (``sources``: object id, -1 for false positives)."""

@@ -78,6 +78,25 @@ DEFAULT_SPEC = MOTSSpec(sequences=(
         object_height_range=(70.0, 110.0)), frame_rate=30),
 ))
 
+#: The split whose sequences have ground truth.
+ANNOTATED_SPLIT = "train"
+
+
+def split_folder(benchmark: str, split: str) -> str:
+    """The folder (and reader split) of ``split``: KITTI MOTS says training / testing."""
+    return ({"train": "training", "test": "testing"}[split] if benchmark == "KITTI-MOTS"
+            else split)
+
+
+def annotated_frames(benchmark: str = "MOTS20", split: str | None = None,
+                     spec: MOTSSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each sequence of ``split`` (None: any; a reader's split name) with ground truth.
+
+    Known without writing anything, e.g. to plan work on data not generated yet.
+    """
+    return {s.name: s.scene.num_frames for s in spec.sequences if s.split == ANNOTATED_SPLIT
+            and split in (None, split_folder(benchmark, s.split))}
+
 
 def _morph(mask: np.ndarray, amount: int) -> np.ndarray:
     if amount == 0:
@@ -254,9 +273,9 @@ def write_mots(root: str | Path, benchmark: str, *, spec: MOTSSpec = DEFAULT_SPE
     kitti = benchmark == "KITTI-MOTS"
     first = 0 if kitti else 1
     for seq in spec.sequences:
-        train = seq.split == "train"
+        train = seq.split == ANNOTATED_SPLIT
         if kitti:
-            split = "training" if train else "testing"
+            split = split_folder(benchmark, seq.split)
             image_dir = root / split / "image_02" / seq.name
             det_file = root / split / "det_02" / f"{seq.name}.txt"
         else:

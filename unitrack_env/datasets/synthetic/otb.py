@@ -69,6 +69,15 @@ DEFAULT_SPEC = OTBSpec(sequences=(
 """The embedded default: three short sequences (see the module docstring)."""
 
 
+def annotated_frames(benchmark: str = "OTB", split: str | None = None,
+                     spec: OTBSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each sequence ``spec`` writes (OTB has no splits; every one is annotated).
+
+    Known without writing anything, e.g. to plan work on data not generated yet.
+    """
+    return {s.name: s.scene.num_frames for s in spec.sequences}
+
+
 def choose_target(video: SyntheticVideo) -> int:
     """Return the id of the walker that stays in frame and is most occluded at some point."""
     width, height = video.width, video.height

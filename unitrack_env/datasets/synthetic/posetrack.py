@@ -122,6 +122,16 @@ DEFAULT_SPEC = PoseTrackSpec(sequences=(
 ))
 
 
+def annotated_frames(benchmark: str = "PoseTrack2018", split: str | None = None,
+                     spec: PoseTrackSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each video of ``split`` (None: any) that has an annotation file.
+
+    Known without writing anything, e.g. to plan work on data not generated yet.
+    """
+    return {s.name: s.scene.num_frames for s in spec.sequences
+            if s.split in ANNOTATED_SPLITS and split in (None, s.split)}
+
+
 def labeled_frames(num_frames: int) -> np.ndarray:
     """Return the ``(num_frames,)`` bool mask of annotated frames."""
     index = np.arange(num_frames)

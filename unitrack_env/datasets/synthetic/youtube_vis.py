@@ -62,6 +62,24 @@ DEFAULT_SPEC = VISSpec(sequences=(
         object_height_range=(70.0, 110.0))),
 ))
 
+#: The split written with annotations (the other is written as ``valid``).
+ANNOTATED_SPLIT = "train"
+
+
+def split_folder(split: str) -> str:
+    """The folder (and reader split) a sequence of ``split`` is written to."""
+    return "train" if split == ANNOTATED_SPLIT else "valid"
+
+
+def annotated_frames(benchmark: str = "YouTube-VIS-2019", split: str | None = None,
+                     spec: VISSpec = DEFAULT_SPEC) -> dict[str, int]:
+    """Frames of each annotated video of ``split`` (None: any; a reader's split name).
+
+    Known without writing anything, e.g. to plan work on data not generated yet.
+    """
+    return {s.name: s.scene.num_frames for s in spec.sequences if s.split == ANNOTATED_SPLIT
+            and split in (None, split_folder(s.split))}
+
 
 def _polygon(mask: np.ndarray) -> list[list[float]]:
     """The visible rectangle of a mask as one polygon ``[x0, y0, x1, y0, x1, y1, x0, y1]``."""
@@ -78,7 +96,7 @@ def write_youtube_vis(root: str | Path, benchmark: str = "YouTube-VIS-2019", *,
     root = Path(root)
     splits: dict[str, tuple[list, list, list]] = {"train": ([], [], []), "valid": ([], [], [])}
     for number, seq in enumerate(spec.sequences, start=1):
-        split = "train" if seq.split == "train" else "valid"
+        split = split_folder(seq.split)
         videos, tracks, detections = splits[split]
         scene = seq.scene
         names = tuple(f"{seq.name}/{FRAME_STEP * t:05d}.jpg" for t in range(scene.num_frames))
