@@ -154,6 +154,18 @@ def _gflops(models: Sequence[ModelSpec], names: list[str]) -> dict[str, dict[str
     return gflops
 
 
+def _check_environments(sources: dict[str, Source]) -> None:
+    """Make each task's environment once, before any cell plays.
+
+    What an environment refuses (a missing scoring library, a bad option) is then one error
+    at the door, not one per cell.
+    """
+    import gymnasium as gym
+
+    for source in sources.values():
+        gym.make(source.env_id, **({"root": source.root} if source.root else {})).close()
+
+
 def _first_estimate(out: Path, models: Sequence[ModelSpec], names: list[str],
                     data: Path | None, *, slots: int, motion: bool, runtime: str | None,
                     on_estimate: Callable[[float], None]) -> None:
@@ -275,6 +287,7 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     check_out_folder(out)
     with hold_folder(out, "scorecard"):  # one scorecard at a time (each cell run locks too)
         cells, sources, _ = plan(models, names, data_path, motion=motion, runtime=runtime)
+        _check_environments(sources)
         _play_all(out, cells, backend=backend, workers=workers, address=address,
                   on_progress=on_progress, on_estimate=on_estimate,
                   torch_runtime=chosen == "torch", gflop_per_mp=gflops)

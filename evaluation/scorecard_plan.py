@@ -203,7 +203,6 @@ def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name)
 
 
-
 def _split(env_id: str, env_kwargs: dict[str, Any]) -> Any:
     """The ``split`` argument the benchmark of ``env_id`` is built with (None: it has none)."""
     row = variant(env_id)

@@ -291,6 +291,22 @@ def test_a_runtime_that_is_not_installed_is_refused_before_any_cell(tmp_path, mo
     assert not out.exists()
 
 
+def test_a_missing_scoring_library_is_refused_before_any_cell(tmp_path, monkeypatch):
+    import importlib.util
+
+    from unitrack_env.dependencies import MissingDependencyError
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "trackeval" else real(name, *a))
+    played = []
+    monkeypatch.setattr(sc, "play_cell", lambda *a, **k: played.append(a))
+    out = tmp_path / "card"
+    with pytest.raises(MissingDependencyError, match="needs the 'trackeval' package"):
+        sc.scorecard([ModelSpec("imagenet-lite0")], out=out, tasks=["mot"])
+    assert played == [] and not (out / "cells").exists()
+
+
 def _card(tasks: list[str]) -> dict:
     """A hand-made scorecard: two models and the baselines on ``tasks`` (no episode played)."""
     rows = []
