@@ -221,6 +221,11 @@ def test_real_scorecard_on_the_shared_fixtures(shared_data, tmp_path, monkeypatc
     # The documentation shows this table, within the tolerances its figures comment states
     # (SOT 1 point: a tracker carries each frame's rounding into the next search window).
     wrong = doc_figures.compare(figures, {1: doc_figures.scorecard_rows(out)})
+    # The page's per-clip XCorr table: its random ResNet-18 row is this card's cell.
+    clips = next(f for f in doc_figures.figures_of("docs/evaluate-your-representation.md")[0]
+                 if "--agent unitrack-xcorr --agent-arg weights=random --out" in f.sources[0])
+    wrong += doc_figures.compare(clips, {1: doc_figures.evaluate_rows(
+        out / "cells" / "random" / "sot" / "XCorr")})
     assert not wrong, "\n".join(map(str, wrong))
 
 
