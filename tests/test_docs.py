@@ -36,10 +36,19 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
     assert commands[1] in ci
 
 
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a markdown heading: lower case, punctuation dropped, spaces to -."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
 def test_readme_links_exist():
     readme = (REPO / "README.md").read_text()
     for link in re.findall(r"\]\(((?:docs|benchmarks)/[^)]+)\)", readme):
-        assert (REPO / link).exists(), link
+        path, _, anchor = link.partition("#")
+        assert (REPO / path).exists(), link
+        if anchor:
+            headings = re.findall(r"^#+ (.+)$", (REPO / path).read_text(), re.M)
+            assert anchor in {_anchor(h) for h in headings}, link
 
 
 def _python_blocks(path: Path) -> list[str]:
