@@ -13,6 +13,7 @@ from typing import Any
 import gymnasium as gym
 
 from unitrack_env.benchmarks.base import Benchmark
+from unitrack_env.provenance import recording_runtimes
 
 
 @dataclass
@@ -26,6 +27,9 @@ class SequenceRecord:
     episode_return: float
     inputs: str = ""
     results: str = ""
+    runtimes: list[str] | None = None
+    """What computed the appearance features (:mod:`unitrack_env.provenance`): ``[]`` for an
+    appearance-free agent, None in records written before it was kept."""
 
     @property
     def fps(self) -> float:
@@ -64,27 +68,29 @@ def play_episode(
     called after every step.
     """
     start = time.perf_counter()
-    observation, info = env.reset(options={"sequence": sequence})
-    if on_reset is not None:
-        on_reset(info)
-    agent.reset(observation, info)
-    frames, total = 0, 0.0
-    terminated = truncated = False
-    while not (terminated or truncated):
-        try:
-            action = agent.act(observation)
-        except Exception as exc:
-            raise RuntimeError(
-                f"agent '{getattr(agent, 'name', '') or type(agent).__name__}' failed on "
-                f"sequence '{sequence}', frame {info.get('frame_index')}: "
-                f"{type(exc).__name__}: {exc}"
-            ) from exc
-        observation, reward, terminated, truncated, info = env.step(action)
-        total += float(reward)
-        frames += 1
-        if on_frame is not None:
-            on_frame()
+    with recording_runtimes() as runtimes:
+        observation, info = env.reset(options={"sequence": sequence})
+        if on_reset is not None:
+            on_reset(info)
+        agent.reset(observation, info)
+        frames, total = 0, 0.0
+        terminated = truncated = False
+        while not (terminated or truncated):
+            try:
+                action = agent.act(observation)
+            except Exception as exc:
+                raise RuntimeError(
+                    f"agent '{getattr(agent, 'name', '') or type(agent).__name__}' failed on "
+                    f"sequence '{sequence}', frame {info.get('frame_index')}: "
+                    f"{type(exc).__name__}: {exc}"
+                ) from exc
+            observation, reward, terminated, truncated, info = env.step(action)
+            total += float(reward)
+            frames += 1
+            if on_frame is not None:
+                on_frame()
     seconds = time.perf_counter() - start
     digest = (benchmark.digest(recorded_results(env)) if benchmark is not None
               else env.unwrapped.episode_digest())
-    return SequenceRecord(sequence, frames, seconds, digest, total), info
+    return SequenceRecord(sequence, frames, seconds, digest, total,
+                          runtimes=sorted(runtimes)), info

@@ -5,6 +5,11 @@ options, and the content of every file an option names (a checkpoint, a detectio
 a sequence's fingerprint adds its input files (:meth:`SequenceEnv.sequence_inputs
 <unitrack_env.envs.base.SequenceEnv.sequence_inputs>`). The result digest covers every byte
 of the result files a sequence wrote.
+
+None of them depends on where things live: the data folder (``root``) is left out of the
+identity and input files are named relative to it, files named by options and the agent's
+code count by name and content. A run folder copied to another machine, or resumed with the
+same data moved elsewhere, reuses its sequences; different data or code replays them.
 """
 
 from __future__ import annotations
@@ -68,22 +73,32 @@ class RunIdentity:
     @classmethod
     def of(cls, spec: Any) -> RunIdentity:
         """The identity of a :class:`~unitrack_env.evaluation.runner.RunSpec`."""
+        env_kwargs = {k: v for k, v in spec.env_kwargs.items() if k != "root"}
         described = json.dumps(
-            {"env": spec.env_id, "env_kwargs": spec.env_kwargs, "agent": spec.agent_ref
+            {"env": spec.env_id, "env_kwargs": env_kwargs, "agent": spec.agent_ref
              or spec.agent, "agent_kwargs": spec.agent_kwargs,
              "version": unitrack_env.__version__},
             sort_keys=True, default=str,
         )
-        named = [*spec.agent_kwargs.values(), *(
-            v for k, v in spec.env_kwargs.items() if k != "root")]
+        named = [*spec.agent_kwargs.values(), *env_kwargs.values()]
         code = _agent_source(spec.agent_ref or spec.agent)
-        files = files_fingerprint(_named_files(named) + code, content=True)
+        files = _located_anywhere(_named_files(named) + code)
         return cls(hashlib.blake2b(f"{described}\n{files}".encode(), digest_size=16).hexdigest())
 
-    def sequence_fingerprint(self, inputs: Iterable[Path]) -> str:
-        """This identity combined with a sequence's input files."""
-        return hashlib.blake2b(f"{self.digest}:{files_fingerprint(inputs)}".encode(),
+    def sequence_fingerprint(self, inputs: Iterable[Path], root: Path | None = None) -> str:
+        """This identity combined with a sequence's input files.
+
+        Files are named relative to ``root`` (the data folder); files outside it keep their
+        full names.
+        """
+        return hashlib.blake2b(f"{self.digest}:{files_fingerprint(inputs, root)}".encode(),
                                digest_size=16).hexdigest()
+
+
+def _located_anywhere(paths: Iterable[Path]) -> str:
+    """A digest of files by base name and every byte, whatever folder holds them."""
+    each = sorted(files_fingerprint([path], path.parent, content=True) for path in set(paths))
+    return hashlib.blake2b("\n".join(each).encode(), digest_size=16).hexdigest()
 
 
 def result_digest(folder: Path, sequence: str, all_sequences: Iterable[str]) -> str:

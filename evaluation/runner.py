@@ -214,6 +214,22 @@ def _run_difference(previous: Any, spec: RunSpec) -> str:
     return "; ".join(changes) or "another run.json format"
 
 
+def _same_run(previous: Any, now: dict[str, Any]) -> bool:
+    """Whether a stored ``run.json`` describes this run; the data folder may have moved.
+
+    Another ``root`` holding the same data resumes: the sequences' input fingerprints name
+    files relative to it, and a sequence whose files differ is played again.
+    """
+    if not isinstance(previous, dict) or not isinstance(previous.get("env_kwargs"), dict):
+        return previous == now
+
+    def rootless(run: dict[str, Any]) -> dict[str, Any]:
+        return run | {"env_kwargs": {k: v for k, v in run["env_kwargs"].items() if k != "root"},
+                      "rooted": "root" in run["env_kwargs"]}
+
+    return rootless(previous) == rootless(now)
+
+
 def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) -> None:
     run_file = out / "run.json"
     if run_file.is_file() and not overwrite:
@@ -221,7 +237,7 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) 
             previous = json.loads(run_file.read_text())
         except ValueError:
             previous = None
-        if previous != spec.to_json():
+        if not _same_run(previous, spec.to_json()):
             raise RunMismatch(out, _run_difference(previous, spec))
     try:
         manifest.add(run_file)
@@ -320,6 +336,39 @@ def run(
         env.close()
 
 
+def stale_sequences(env_id: str, agent: str | type, out: str | os.PathLike[str], *,
+                    env_kwargs: dict[str, Any] | None = None,
+                    agent_kwargs: dict[str, Any] | None = None,
+                    sequences: Sequence[str] | None = None) -> dict[str, str]:
+    """The finished sequences in ``out`` that :func:`run` would play again, with the reason.
+
+    Nothing is played and the agent is not built: its class is imported (its code counts in
+    the fingerprints) and the environment reads its files. Sequences without a record are
+    not listed (they are unplayed, not stale).
+    """
+    agent_kwargs = dict(agent_kwargs or {})
+    cls = agent_class(agent)
+    name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
+    spec = RunSpec(env_id, name, portable_reference(cls), dict(env_kwargs or {}), agent_kwargs)
+    out = Path(out)
+    env = spec.make_env()
+    try:
+        base = env.unwrapped
+        names = select_sequences(sequences, base.sequence_names, env_id)
+        identity = RunIdentity.of(spec)
+        stale = {}
+        for n in names:
+            if not _record_path(out, n).is_file():
+                continue
+            inputs = identity.sequence_fingerprint(outside(base.sequence_inputs(n), out),
+                                                   base.inputs_root())
+            if (why := _stale_reason(out, base, n, inputs)) is not None:
+                stale[n] = why
+        return stale
+    finally:
+        env.close()
+
+
 @dataclass(frozen=True)
 class _Options:
     workers: int
@@ -333,8 +382,8 @@ def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, ou
     """The run, once ``out`` is locked: claim the folder, fingerprint the inputs, play."""
     base = env.unwrapped
     identity = RunIdentity.of(spec)
-    inputs = {n: identity.sequence_fingerprint(outside(base.sequence_inputs(n), out))
-              for n in names}
+    inputs = {n: identity.sequence_fingerprint(outside(base.sequence_inputs(n), out),
+                                               base.inputs_root()) for n in names}
     manifest = own_folder(out, base.sequence_names, names, options.overwrite)
     _prepare_out(out, spec, options.overwrite, manifest)
     return _run_prepared(spec, env, bench, agent_obj, out, names, inputs, manifest, options)

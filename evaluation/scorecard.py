@@ -23,7 +23,7 @@ import unitrack_env
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
 from .scorecard_plan import BASELINE, TASKS, Cell, ModelSpec, Source, plan
-from .scorecard_report import runtime_label
+from .scorecard_report import ran_on
 
 
 def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
@@ -67,6 +67,27 @@ def cell_done(out: Path, cell: Cell) -> bool:
     return (out / "cells" / cell.folder / "sequences" / f"{cell.sequence}.json").is_file()
 
 
+def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
+    """The cells to play: those without a record in ``out``, and stale stored ones.
+
+    A stored cell is stale when its data or code changed since it was played; the runner
+    would replay it while the card is scored, so it goes to the workers instead.
+    """
+    from .runner import stale_sequences
+
+    stored: dict[str, list[Cell]] = {}
+    for cell in cells:
+        if cell_done(out, cell):
+            stored.setdefault(cell.folder, []).append(cell)
+    stale: set[tuple[str, str]] = set()
+    for folder, members in stored.items():
+        first = members[0]
+        stale |= {(folder, name) for name in stale_sequences(
+            first.env_id, first.agent, out / "cells" / folder, env_kwargs=first.env_kwargs,
+            agent_kwargs=first.agent_kwargs, sequences=[c.sequence for c in members])}
+    return [c for c in cells if not cell_done(out, c) or (c.folder, c.sequence) in stale]
+
+
 def _finite(value: Any) -> float | None:
     return float(value) if isinstance(value, (int, float)) and math.isfinite(value) else None
 
@@ -79,6 +100,8 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
     for cell in cells:
         groups.setdefault((cell.model, cell.task, cell.head), []).append(cell)
     rows = []
+    runtimes: dict[str, int] = {}
+    unrecorded = 0
     for (model, task, head), members in groups.items():
         first = members[0]
         try:
@@ -91,6 +114,11 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
                 f"({exc.difference}); give this model another label= or use another --out"
             ) from None
         scores = report.scores
+        for cell in members if model != BASELINE else ():
+            labels = report.records[cell.sequence].runtimes
+            unrecorded += labels is None
+            for label in labels or ():
+                runtimes[label] = runtimes.get(label, 0) + 1
         rows.append({
             "model": model, "task": task, "head": head, "agent": first.agent,
             "env_id": first.env_id, "agent_kwargs": first.agent_kwargs,
@@ -104,7 +132,7 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
                              key=[c.model for c in cells].index),
             "tasks": list(dict.fromkeys(c.task for c in cells)),
             "sources": {task: asdict(source) for task, source in sources.items()},
-            "rows": rows}
+            "rows": rows, "runtime": ran_on(runtimes, unrecorded)}
 
 
 def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank") -> list[Path]:
@@ -210,7 +238,7 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
     from .scorecard_eta import schedule
     from .workers import SequenceFailure
 
-    todo, clock = schedule([c for c in cells if not cell_done(out, c)], BASELINE,
+    todo, clock = schedule(cells_to_play(out, cells), BASELINE,
                            _slots(backend, workers), torch_runtime, gflop_per_mp)
     position = {id(cell): i for i, cell in enumerate(todo)}
     done = len(cells) - len(todo)
@@ -291,6 +319,6 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         _play_all(out, cells, backend=backend, workers=workers, address=address,
                   on_progress=on_progress, on_estimate=on_estimate,
                   torch_runtime=chosen == "torch", gflop_per_mp=gflops)
-        card = combine(out, cells, sources) | {"runtime": runtime_label(runtime, chosen)}
+        card = combine(out, cells, sources)
         write_outputs(out, card, radar_scale=radar_scale)
     return card

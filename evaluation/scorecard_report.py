@@ -107,12 +107,21 @@ def markdown_table(card: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def runtime_label(runtime: str | None, chosen: str) -> str:
-    """How the appearance models ran, for the card: ``openvino (auto, checked against torch)``."""
-    from unitrack_env.agents.appearance.runtime import TORCH, is_auto
+def ran_on(labels: dict[str, int], unrecorded: int) -> str:
+    """How the appearance models ran, for the card, from the cells' own records.
 
-    return f"{chosen} (auto, checked against torch)" if is_auto(runtime) and chosen != TORCH \
-        else chosen
+    ``labels`` counts the model cells per runtime label (``openvino (auto, checked against
+    torch)``); ``unrecorded`` cells were stored before records kept it. One runtime reads as
+    its label; several name their cells: ``openvino in 40 cells, torch in 2 cells``.
+    """
+    if len(labels) == 1 and not unrecorded:
+        return next(iter(labels))
+    parts = [f"{label} in {n} cell{'s' * (n != 1)}" for label, n in sorted(
+        labels.items(), key=lambda item: (-item[1], item[0]))]
+    if unrecorded:
+        parts.append(f"an unrecorded runtime in {unrecorded} cell{'s' * (unrecorded != 1)} "
+                     "(stored by an earlier version)")
+    return ", ".join(parts)
 
 
 def rows_csv(card: dict[str, Any]) -> str:

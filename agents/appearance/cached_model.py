@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from unitrack_env.provenance import note_runtime
+
 from .cache_config import CACHE_DIR_ENV
 from .cache_files import _as_float32
 from .cache_keys import CacheKey, content_key
@@ -67,6 +69,7 @@ class CachedAppearanceModel:
         if array is None:
             return None
         self.cache.stats.hits += 1
+        note_runtime(self.model.runtime_label(*input_size))
         return _as_float32(array)[None]
 
     def features(
@@ -103,6 +106,8 @@ class CachedAppearanceModel:
                     stats.corrupt += 1
                 else:
                     stats.misses += 1
+        if found:  # served from the cache: computed by the runtime its key names
+            note_runtime(self.model.runtime_label(*input_size))
         if todo:
             computed = self.model.features(batch[[i for i, _ in todo]]).to("cpu")
             info = self._info()

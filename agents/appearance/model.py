@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from unitrack_env.provenance import note_runtime
+
 from .architectures import combine_layers
 from .checkpoints import DEFAULT_REMAPS, KeyRemap, LoadReport
 from .identity import ModelIdentity, weights_digest
@@ -215,9 +217,23 @@ class AppearanceModel:
         if tuple(out.shape[2:]) != expected:  # an architecture bug, never user input
             raise RuntimeError(
                 f"feature map {tuple(out.shape)} is not stride {self.stride} of {x.shape}")
+        note_runtime(self.runtime_label(int(x.shape[2]), int(x.shape[3])))
         return out
 
     __call__ = features
+
+    def runtime_label(self, height: int, width: int) -> str:
+        """What computes the features of ``height x width`` inputs, as run records name it.
+
+        ``torch``, ``openvino``, ``openvino (auto, checked against torch)`` or, where the
+        check failed, ``torch (auto: openvino differed)``.
+        """
+        compiled = self._compiled
+        if compiled is None:
+            return TORCH
+        if (height, width) in compiled.fallbacks:
+            return f"{TORCH} (auto: {self.runtime} differed)"
+        return f"{self.runtime} (auto, checked against torch)" if compiled.verify else self.runtime
 
     def feature_shape(self, height: int, width: int) -> tuple[int, int, int]:
         """Shape ``(C, h, w)`` of the feature map of one ``height`` x ``width`` image."""

@@ -18,6 +18,7 @@ import torch
 
 from unitrack_env.agents.appearance import AppearanceModel, letterbox
 from unitrack_env.agents.appearance import runtime as rt
+from unitrack_env.provenance import recording_runtimes
 
 COMPILED = ("openvino", "onnxruntime")
 COSINE_FLOOR = 0.9999
@@ -67,6 +68,24 @@ def test_errors_name_the_valid_choices_and_the_extra(monkeypatch):
     with pytest.raises(ImportError, match=r"unitrack-env\[openvino\]"):
         rt.resolve_runtime("openvino")
     assert rt.resolve_runtime("auto") in ("onnxruntime", "torch")
+
+
+def test_features_note_the_runtime_that_computed_them_also_from_the_cache(torch_model,
+                                                                           tmp_path):
+    from unitrack_env.agents.appearance.cached_model import CachedAppearanceModel
+
+    frame = np.zeros((40, 48, 3), np.uint8)
+    with recording_runtimes() as outer, recording_runtimes() as inner:
+        torch_model.features(frame)
+    assert outer == inner == {"torch"}
+    cached = CachedAppearanceModel(torch_model, tmp_path)
+    cached.features(frame)
+    with recording_runtimes() as seen:  # a hit: the cache key's runtime computed it
+        cached.features(frame)
+    assert cached.cache.stats.hits == 1 and seen == {"torch"}
+    with recording_runtimes() as seen:
+        pass
+    assert seen == set()
 
 
 def test_identity_keeps_runtimes_apart_and_torch_keys_unchanged(torch_model):
@@ -167,9 +186,14 @@ def test_exported_graph_is_cached_on_disk_and_reused(name, tmp_path):
 def test_auto_checks_each_size_once_records_it_and_falls_back_to_torch(name, tmp_path,
                                                                        monkeypatch):
     model = _compiled(name, tmp_path, weights="random", arch="resnet18")
-    model._compiled.verify = True
     rng = np.random.default_rng(0)
-    model.features(rng.integers(0, 255, (64, 96, 3), np.uint8))
+    with recording_runtimes() as seen:  # what a run record names, as the model runs
+        model.features(rng.integers(0, 255, (64, 96, 3), np.uint8))
+    assert seen == {name}
+    model._compiled.verify = True
+    with recording_runtimes() as seen:
+        model.features(rng.integers(0, 255, (64, 96, 3), np.uint8))
+    assert seen == {f"{name} (auto, checked against torch)"}
     records = list(tmp_path.glob(f"*.{name}.check.json"))
     assert len(records) == 1 and json.loads(records[0].read_text())["cosine"] >= rt.MIN_COSINE
     network, model._compiled.network = model._compiled.network, None
@@ -177,9 +201,10 @@ def test_auto_checks_each_size_once_records_it_and_falls_back_to_torch(name, tmp
     model._compiled.network = network
     monkeypatch.setattr(rt, "MIN_COSINE", 1.5)  # another size that no runtime can pass
     frame = rng.integers(0, 255, (32, 48, 3), np.uint8)
-    with pytest.warns(UserWarning, match="runs in eager torch"):
+    with pytest.warns(UserWarning, match="runs in eager torch"), recording_runtimes() as seen:
         ours = model.features(frame)
     assert model._compiled.fallbacks == {(32, 48)}
+    assert seen == {f"torch (auto: {name} differed)"}
     reference = AppearanceModel("random", arch="resnet18", runtime="torch").features(frame)
     assert torch.equal(ours, reference)
 

@@ -31,6 +31,17 @@ def test_run_writes_official_files_and_combined_metrics(tmp_path):
     assert not list(tmp_path.rglob("*.tmp"))
 
 
+def test_records_name_the_runtime_of_the_appearance_features(tmp_path):
+    iou = run(ENV, "iou", out=tmp_path / "iou", progress=False, sequences=["SYN-01"])
+    assert iou.records["SYN-01"].runtimes == []  # no appearance model
+    record = json.loads((tmp_path / "iou" / "sequences" / "SYN-01.json").read_text())
+    assert record["runtimes"] == []
+    del record["runtimes"]  # a record of an earlier version reads as unrecorded
+    from unitrack_env.evaluation.episode import SequenceRecord
+
+    assert SequenceRecord.from_json(record).runtimes is None
+
+
 def test_resume_keeps_finished_sequences(tmp_path):
     first = run(ENV, "iou", out=tmp_path, progress=False)
     kept = tmp_path / "data" / "SYN-01.txt"
@@ -39,6 +50,35 @@ def test_resume_keeps_finished_sequences(tmp_path):
     second = run(ENV, "iou", out=tmp_path, progress=False)
     assert second.skipped == ["SYN-01"] and kept.stat().st_mtime_ns == stamp
     assert second.combined == pytest.approx(first.combined)
+
+
+def test_a_run_folder_resumes_with_its_data_moved_and_replays_what_changed(tmp_path,
+                                                                          mot17_root):
+    """Run folders are tied to what the data and code are, not where they live: a folder copied
+    to another machine (or a committed scorecard) reuses every sequence; changed data replays."""
+    import shutil
+
+    shutil.copytree(mot17_root, tmp_path / "a" / "MOT17")
+    first = run("UniTrack/MOT17-v0", "iou", out=tmp_path / "a" / "run", progress=False,
+                env_kwargs={"root": str(tmp_path / "a" / "MOT17")})
+    shutil.copytree(tmp_path / "a" / "MOT17", tmp_path / "b" / "MOT17")
+    shutil.copytree(tmp_path / "a" / "run", tmp_path / "b" / "run")
+    shutil.rmtree(tmp_path / "a")
+    elsewhere = {"root": str(tmp_path / "b" / "MOT17")}
+    moved = run("UniTrack/MOT17-v0", "iou", out=tmp_path / "b" / "run", progress=False,
+                env_kwargs=elsewhere)
+    assert sorted(moved.skipped) == sorted(first.records) and not moved.replayed
+    assert moved.combined == first.combined
+    assert json.loads((tmp_path / "b" / "run" / "run.json").read_text())["env_kwargs"] == \
+        elsewhere  # the record names where the data are now
+    changed = min(first.records)
+    gt = tmp_path / "b" / "MOT17" / "train" / changed / "gt" / "gt.txt"
+    gt.write_text(gt.read_text().replace(",1,", ",1, ", 1))  # the same boxes, other bytes
+    again = run("UniTrack/MOT17-v0", "iou", out=tmp_path / "b" / "run", progress=False,
+                env_kwargs=elsewhere)
+    assert list(again.replayed) == [changed]
+    with pytest.raises(ValueError, match="env option root"):  # real data vs synthetic
+        run("UniTrack/MOT17-v0", "iou", out=tmp_path / "b" / "run", progress=False)
 
 
 def test_a_crash_mid_run_loses_no_finished_sequence(tmp_path, monkeypatch):

@@ -62,6 +62,21 @@ def test_cells_of_another_model_under_the_same_label_are_named(tmp_path):
         sc.combine(tmp_path, [cell], {"mot": Source("synthetic", None, cell.env_id)})
 
 
+def test_stored_cells_whose_inputs_changed_are_played_again(tmp_path):
+    """Stale stored cells go to the workers, not to a serial replay while the card is scored."""
+    cells = [Cell("m", "mot", "IoU", "iou", "UniTrack/MOT16-v0", name)
+             for name in ("SYN-01", "SYN-02")]
+    folder = tmp_path / "cells" / cells[0].folder
+    run(cells[0].env_id, cells[0].agent, out=folder, progress=False)
+    assert sc.cells_to_play(tmp_path, cells) == []
+    record = folder / "sequences" / "SYN-02.json"
+    stored = json.loads(record.read_text())
+    record.write_text(json.dumps(stored | {"inputs": "0" * 32}))  # played on other data
+    assert sc.cells_to_play(tmp_path, cells) == [cells[1]]
+    (folder / "sequences" / "SYN-01.json").unlink()
+    assert sc.cells_to_play(tmp_path, cells) == cells
+
+
 def test_data_sources(tmp_path):
     (tmp_path / "OTB").mkdir()
     assert data_source(tmp_path, TASKS["sot"]).kind == "benchmark"
@@ -131,6 +146,28 @@ def test_killed_scorecard_reuses_finished_cells(pose_card, monkeypatch):
                         or original(cell, threads))
     again = sc.scorecard(MODELS, out=copy, tasks=["pose-prop"])
     assert len(played) == 1 and again["rows"] == card["rows"]
+
+
+@pytest.mark.slow
+def test_a_resumed_scorecard_names_the_runtime_its_cells_ran_on(pose_card, monkeypatch):
+    """The footer comes from the cells' records, not from the command that assembled them."""
+    out, card, _ = pose_card
+    assert card["runtime"] == "torch"  # tests run on torch (conftest)
+    copy = out.parent / "other-runtime"
+    shutil.copytree(out, copy)
+    record = next(p for p in (copy / "cells" / "random").rglob("*.json")
+                  if "sequences" in p.parts)
+    stored = json.loads(record.read_text())
+    assert stored["runtimes"] == ["torch"]
+    del stored["runtimes"]  # as an earlier version stored it
+    record.write_text(json.dumps(stored))
+    monkeypatch.setattr(sc, "play_cell", lambda cell, threads=None: pytest.fail("replayed"))
+    monkeypatch.setenv("UNITRACK_RUNTIME", "auto")  # the resuming command would use another
+    again = sc.scorecard(MODELS, out=copy, tasks=["pose-prop"])
+    model_cells = sum(len(r["per_sequence"]) for r in again["rows"] if r["model"] != BASELINE)
+    assert again["runtime"] == (f"torch in {model_cells - 1} cells, an unrecorded runtime in 1 "
+                                "cell (stored by an earlier version)")
+    assert f"Appearance models ran on {again['runtime']}." in (copy / "scorecard.md").read_text()
 
 
 @pytest.mark.slow

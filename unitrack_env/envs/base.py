@@ -323,12 +323,21 @@ class SequenceEnv(gym.Env, Generic[SequenceT], metaclass=abc.ABCMeta):
         The default takes the data set's files of the sequence; environments reading files from
         elsewhere (e.g. user detections) add them.
         """
-        dataset = getattr(self, "dataset", None)
-        root = getattr(dataset, "root", None) or getattr(dataset, "data_dir", None)
+        root = self.inputs_root()
         if root is None:
             return []
-        names = getattr(dataset, "sequence_names", self.sequence_names)
-        return sequence_files(Path(root), name, names)
+        names = getattr(self.dataset, "sequence_names", self.sequence_names)
+        return sequence_files(root, name, names)
+
+    def inputs_root(self) -> Path | None:
+        """The data set's folder, or None without one.
+
+        Fingerprints name the input files relative to it, so the same data in another
+        folder resumes a run.
+        """
+        dataset = getattr(self, "dataset", None)
+        root = getattr(dataset, "root", None) or getattr(dataset, "data_dir", None)
+        return None if root is None else Path(root)
 
     def sequence_length(self, name: str) -> int:
         """Number of frames (steps) of sequence ``name``, without loading it."""
