@@ -345,12 +345,23 @@ def stale_sequences(env_id: str, agent: str | type, out: str | os.PathLike[str],
     Nothing is played and the agent is not built: its class is imported (its code counts in
     the fingerprints) and the environment reads its files. Sequences without a record are
     not listed (they are unplayed, not stale).
+
+    Raises:
+        RunMismatch: ``out`` holds another run (as :func:`run` would refuse it; its
+            sequences are not stale, they are someone else's).
     """
     agent_kwargs = dict(agent_kwargs or {})
     cls = agent_class(agent)
     name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
     spec = RunSpec(env_id, name, portable_reference(cls), dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
+    if (out / "run.json").is_file():
+        try:
+            previous = json.loads((out / "run.json").read_text())
+        except ValueError:
+            previous = None
+        if not _same_run(previous, spec.to_json()):
+            raise RunMismatch(out, _run_difference(previous, spec))
     env = spec.make_env()
     try:
         base = env.unwrapped

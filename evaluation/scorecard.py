@@ -67,13 +67,19 @@ def cell_done(out: Path, cell: Cell) -> bool:
     return (out / "cells" / cell.folder / "sequences" / f"{cell.sequence}.json").is_file()
 
 
+def _other_model(folder: Path, difference: str, model: str) -> ValueError:
+    """The error for a cell folder that holds another model's cells under this label."""
+    return ValueError(f"{folder} holds the cells of another model labelled {model!r} "
+                      f"({difference}); give this model another label= or use another --out")
+
+
 def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     """The cells to play: those without a record in ``out``, and stale stored ones.
 
     A stored cell is stale when its data or code changed since it was played; the runner
     would replay it while the card is scored, so it goes to the workers instead.
     """
-    from .runner import stale_sequences
+    from .runner import RunMismatch, stale_sequences
 
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
@@ -82,9 +88,12 @@ def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     stale: set[tuple[str, str]] = set()
     for folder, members in stored.items():
         first = members[0]
-        stale |= {(folder, name) for name in stale_sequences(
-            first.env_id, first.agent, out / "cells" / folder, env_kwargs=first.env_kwargs,
-            agent_kwargs=first.agent_kwargs, sequences=[c.sequence for c in members])}
+        try:
+            stale |= {(folder, name) for name in stale_sequences(
+                first.env_id, first.agent, out / "cells" / folder, env_kwargs=first.env_kwargs,
+                agent_kwargs=first.agent_kwargs, sequences=[c.sequence for c in members])}
+        except RunMismatch as exc:  # refused before any cell overwrites another model's
+            raise _other_model(exc.out, exc.difference, first.model) from None
     return [c for c in cells if not cell_done(out, c) or (c.folder, c.sequence) in stale]
 
 
@@ -109,10 +118,7 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
                          env_kwargs=first.env_kwargs, agent_kwargs=first.agent_kwargs,
                          sequences=[c.sequence for c in members], progress=False)
         except RunMismatch as exc:
-            raise ValueError(
-                f"{exc.out} holds the cells of another model labelled {model!r} "
-                f"({exc.difference}); give this model another label= or use another --out"
-            ) from None
+            raise _other_model(exc.out, exc.difference, model) from None
         scores = report.scores
         for cell in members if model != BASELINE else ():
             labels = report.records[cell.sequence].runtimes

@@ -56,10 +56,15 @@ def test_cells_of_another_model_under_the_same_label_are_named(tmp_path):
                    agent_kwargs={"min_hits": 3})
     run(cell.env_id, cell.agent, out=tmp_path / "cells" / cell.folder, progress=False,
         sequences=[cell.sequence], agent_kwargs={"min_hits": 2})
-    with pytest.raises(ValueError, match="holds the cells of another model labelled 'mine' "
-                                         r"\(agent option min_hits: 2 -> 3\); give this model "
-                                         "another label= or use another --out"):
+    message = ("holds the cells of another model labelled 'mine' "
+               r"\(agent option min_hits: 2 -> 3\); give this model another label= or use "
+               "another --out")
+    stored = sorted(p.read_bytes() for p in tmp_path.rglob("*") if p.is_file())
+    with pytest.raises(ValueError, match=message):  # before any cell is played over them
+        sc.cells_to_play(tmp_path, [cell])
+    with pytest.raises(ValueError, match=message):
         sc.combine(tmp_path, [cell], {"mot": Source("synthetic", None, cell.env_id)})
+    assert sorted(p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()) == stored
 
 
 def test_stored_cells_whose_inputs_changed_are_played_again(tmp_path):
