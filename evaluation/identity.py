@@ -7,9 +7,10 @@ a sequence's fingerprint adds its input files (:meth:`SequenceEnv.sequence_input
 of the result files a sequence wrote.
 
 None of them depends on where things live: the data folder (``root``) is left out of the
-identity and input files are named relative to it, files named by options and the agent's
-code count by name and content. A run folder copied to another machine, or resumed with the
-same data moved elsewhere, reuses its sequences; different data or code replays them.
+identity and input files are named relative to it; files named by options (a checkpoint) and
+an agent given by its file count by base name and content, wherever they are. A run folder
+copied to another machine, or resumed with the data or the checkpoint moved elsewhere, reuses
+its sequences; different data, weights or code replay them.
 """
 
 from __future__ import annotations
@@ -26,20 +27,61 @@ import unitrack_env
 from unitrack_env.fingerprint import files_fingerprint, sequence_files
 
 
+def _named_file(value: Any) -> Path | None:
+    """The existing file a string option value names, if it names one."""
+    if not isinstance(value, str) or not value or len(value) >= 4096:
+        return None
+    path = Path(value).expanduser()
+    try:
+        return path if path.is_file() else None
+    except OSError:
+        return None
+
+
 def _named_files(values: Iterable[Any]) -> list[Path]:
-    """Existing files (or the files in existing folders) named by string option values."""
+    """Existing files named by string option values (also inside lists)."""
     found: list[Path] = []
     for value in values:
         if isinstance(value, (list, tuple)):
             found += _named_files(value)
-        elif isinstance(value, str) and value and len(value) < 4096:
-            path = Path(value).expanduser()
-            try:
-                if path.is_file():
-                    found.append(path)
-            except OSError:
-                continue
+        elif (path := _named_file(value)) is not None:
+            found.append(path)
     return found
+
+
+def placeless(value: Any, like: Any = None) -> Any:
+    """An option value with the folders of the files it names left out.
+
+    A string naming an existing file becomes the file's base name (its content is in the
+    identity). ``like`` is the same option of the run at hand when ``value`` comes from an
+    older run, whose files may have moved since: ``value`` is then read as a file name where
+    ``like`` names an existing file.
+    """
+    probe = value if like is None else like
+    if isinstance(value, (list, tuple)):
+        probes = probe if isinstance(probe, (list, tuple)) and len(probe) == len(value) \
+            else value
+        return [placeless(v, p) for v, p in zip(value, probes)]
+    if isinstance(value, str) and _named_file(probe) is not None:
+        return Path(value).name
+    return value
+
+
+def placeless_options(options: dict[str, Any], like: dict[str, Any] | None = None
+                      ) -> dict[str, Any]:
+    """:func:`placeless` for every option (``like``: the options of the run at hand)."""
+    return {k: placeless(v, (like or {}).get(k)) for k, v in options.items()}
+
+
+def placeless_reference(reference: str | None) -> str | None:
+    """``path/to/agent.py:Class`` as ``agent.py:Class`` (the file's content is in the
+    identity); module references are unchanged."""
+    if reference is None:
+        return None
+    target, sep, name = reference.rpartition(":")
+    if sep and (target.endswith(".py") or "/" in target or "\\" in target):
+        return f"{Path(target).name}:{name}"
+    return reference
 
 
 def _shown(options: dict[str, Any], name: str) -> str:
@@ -75,8 +117,9 @@ class RunIdentity:
         """The identity of a :class:`~unitrack_env.evaluation.runner.RunSpec`."""
         env_kwargs = {k: v for k, v in spec.env_kwargs.items() if k != "root"}
         described = json.dumps(
-            {"env": spec.env_id, "env_kwargs": env_kwargs, "agent": spec.agent_ref
-             or spec.agent, "agent_kwargs": spec.agent_kwargs,
+            {"env": spec.env_id, "env_kwargs": placeless_options(env_kwargs),
+             "agent": placeless_reference(spec.agent_ref or spec.agent),
+             "agent_kwargs": placeless_options(spec.agent_kwargs),
              "version": unitrack_env.__version__},
             sort_keys=True, default=str,
         )

@@ -25,7 +25,8 @@ from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
 from .episode import SequenceRecord, recorded_results
-from .identity import RunIdentity, option_changes, result_digest
+from .identity import (RunIdentity, option_changes, placeless_options, placeless_reference,
+                       result_digest)
 from .ownership import Manifest, hold_folder, outside, own_folder, settle
 from .serial import play_here
 from .watchdog import DEFAULT_STEP_TIMEOUT
@@ -215,19 +216,27 @@ def _run_difference(previous: Any, spec: RunSpec) -> str:
 
 
 def _same_run(previous: Any, now: dict[str, Any]) -> bool:
-    """Whether a stored ``run.json`` describes this run; the data folder may have moved.
+    """Whether a stored ``run.json`` describes this run; its files may have moved.
 
     Another ``root`` holding the same data resumes: the sequences' input fingerprints name
-    files relative to it, and a sequence whose files differ is played again.
+    files relative to it, and a sequence whose files differ is played again. So do a
+    checkpoint (any option naming a file) and an agent file given from another folder: the
+    identity counts them by base name and content.
     """
-    if not isinstance(previous, dict) or not isinstance(previous.get("env_kwargs"), dict):
+    if not isinstance(previous, dict) or not all(
+            isinstance(previous.get(key), dict) for key in ("env_kwargs", "agent_kwargs")):
         return previous == now
 
-    def rootless(run: dict[str, Any]) -> dict[str, Any]:
-        return run | {"env_kwargs": {k: v for k, v in run["env_kwargs"].items() if k != "root"},
+    def placeless_run(run: dict[str, Any]) -> dict[str, Any]:
+        env = {k: v for k, v in run["env_kwargs"].items() if k != "root"}
+        return run | {"env_kwargs": placeless_options(env, now["env_kwargs"]),
+                      "agent_kwargs": placeless_options(run["agent_kwargs"],
+                                                                 now["agent_kwargs"]),
+                      "agent": placeless_reference(run.get("agent")),
+                      "agent_ref": placeless_reference(run.get("agent_ref")),
                       "rooted": "root" in run["env_kwargs"]}
 
-    return rootless(previous) == rootless(now)
+    return placeless_run(previous) == placeless_run(now)
 
 
 def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) -> None:

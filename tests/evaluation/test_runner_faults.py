@@ -107,6 +107,37 @@ def test_an_edited_agent_file_replays_its_sequences(tmp_path):
     assert again.skipped == [] and "agent code" in again.replayed["SYN-01"]
 
 
+def test_a_moved_agent_file_and_checkpoint_resume_and_changed_weights_replay(tmp_path):
+    """An agent given by its file and an option naming a file (a checkpoint) count by base
+    name and content: moved elsewhere with the run folder they resume every sequence, and
+    other bytes at the same path replay."""
+    code = ("from unitrack_env.agents.baselines.iou import IoUAgent\n\n"
+            "class Mine(IoUAgent):\n    def __init__(self, weights: str, **options):\n"
+            "        super().__init__(**options)\n"
+            "        self.scale = float(open(weights).read())\n")
+    here, there = tmp_path / "here", tmp_path / "there"
+    here.mkdir()
+    (here / "my_agent.py").write_text(code)
+    (here / "weights.txt").write_text("1.0")
+
+    def play(folder: Path):
+        return run(ENV, f"{folder / 'my_agent.py'}:Mine", out=folder / "run", progress=False,
+                   agent_kwargs={"weights": str(folder / "weights.txt")})
+
+    first = play(here)
+    shutil.copytree(here, there)
+    shutil.rmtree(here)
+    moved = play(there)
+    assert sorted(moved.skipped) == sorted(first.records) and not moved.replayed
+    (there / "weights.txt").write_text("2.0")
+    again = play(there)
+    assert again.skipped == [] and sorted(again.replayed) == sorted(first.records)
+    (there / "other.txt").write_text("2.0")
+    with pytest.raises(ValueError, match="agent option weights"):  # another file: another run
+        run(ENV, f"{there / 'my_agent.py'}:Mine", out=there / "run", progress=False,
+            agent_kwargs={"weights": str(there / "other.txt")})
+
+
 def test_a_tampered_result_file_is_replayed(tmp_path):
     out = tmp_path / "run"
     first = run(ENV, "iou", out=out, progress=False)
