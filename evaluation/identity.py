@@ -8,7 +8,8 @@ of the result files a sequence wrote.
 
 None of them depends on where things live: the data folder (``root``) is left out of the
 identity and input files are named relative to it; files named by options (a checkpoint) and
-an agent given by its file count by base name and content, wherever they are. A run folder
+the agent's code (:func:`~unitrack_env.evaluation.agent_code.agent_code`: its file and the
+modules of ``unitrack_env.agents`` it imports) count by base name and content. A run folder
 copied to another machine, or resumed with the data or the checkpoint moved elsewhere, reuses
 its sequences; different data, weights or code replay them.
 """
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +25,8 @@ from typing import Any
 
 import unitrack_env
 from unitrack_env.fingerprint import files_fingerprint, sequence_files
+
+from .agent_code import agent_code
 
 
 def _named_file(value: Any) -> Path | None:
@@ -61,7 +63,7 @@ def placeless(value: Any, like: Any = None) -> Any:
     if isinstance(value, (list, tuple)):
         probes = probe if isinstance(probe, (list, tuple)) and len(probe) == len(value) \
             else value
-        return [placeless(v, p) for v, p in zip(value, probes)]
+        return [placeless(v, p) for v, p in zip(value, probes, strict=True)]
     if isinstance(value, str) and _named_file(probe) is not None:
         return Path(value).name
     return value
@@ -74,8 +76,10 @@ def placeless_options(options: dict[str, Any], like: dict[str, Any] | None = Non
 
 
 def placeless_reference(reference: str | None) -> str | None:
-    """``path/to/agent.py:Class`` as ``agent.py:Class`` (the file's content is in the
-    identity); module references are unchanged."""
+    """``path/to/agent.py:Class`` as ``agent.py:Class``; module references are unchanged.
+
+    The file's content is in the identity.
+    """
     if reference is None:
         return None
     target, sep, name = reference.rpartition(":")
@@ -92,18 +96,6 @@ def option_changes(old: dict[str, Any], new: dict[str, Any], label: str) -> list
     """``["<label> <name>: <old> -> <new>", ...]`` for every option that differs (sorted)."""
     return [f"{label} {name}: {_shown(old, name)} -> {_shown(new, name)}"
             for name in sorted(old.keys() | new.keys()) if _shown(old, name) != _shown(new, name)]
-
-
-def _agent_source(reference: str) -> list[Path]:
-    """The file that defines the agent class: edited code must not reuse old results."""
-    target, sep, _ = reference.rpartition(":")
-    if not sep:
-        return []
-    if target.endswith(".py") or "/" in target or "\\" in target:
-        path = Path(target)
-    else:
-        path = Path(getattr(sys.modules.get(target), "__file__", None) or "")
-    return [path] if path.name and path.is_file() else []
 
 
 @dataclass(frozen=True)
@@ -124,7 +116,7 @@ class RunIdentity:
             sort_keys=True, default=str,
         )
         named = [*spec.agent_kwargs.values(), *env_kwargs.values()]
-        code = _agent_source(spec.agent_ref or spec.agent)
+        code = agent_code(spec.agent_ref or spec.agent)
         files = _located_anywhere(_named_files(named) + code)
         return cls(hashlib.blake2b(f"{described}\n{files}".encode(), digest_size=16).hexdigest())
 

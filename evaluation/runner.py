@@ -25,8 +25,13 @@ from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
 from .episode import SequenceRecord, recorded_results
-from .identity import (RunIdentity, option_changes, placeless_options, placeless_reference,
-                       result_digest)
+from .identity import (
+    RunIdentity,
+    option_changes,
+    placeless_options,
+    placeless_reference,
+    result_digest,
+)
 from .ownership import Manifest, hold_folder, outside, own_folder, settle
 from .serial import play_here
 from .watchdog import DEFAULT_STEP_TIMEOUT

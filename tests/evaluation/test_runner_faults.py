@@ -107,6 +107,27 @@ def test_an_edited_agent_file_replays_its_sequences(tmp_path):
     assert again.skipped == [] and "agent code" in again.replayed["SYN-01"]
 
 
+def test_an_edited_helper_module_beside_the_agent_file_replays_its_sequences(tmp_path):
+    """The agent's code is its file and what it imports beside it (or from the agents
+    package): a change one import away is a change of the agent."""
+    (tmp_path / "my_agent.py").write_text(
+        "from my_helpers import Base\n\nclass Mine(Base):\n    pass\n")
+    helpers = tmp_path / "my_helpers.py"
+    helpers.write_text("from unitrack_env.agents.baselines.iou import IoUAgent as Base\n")
+    reference = f"{tmp_path / 'my_agent.py'}:Mine"
+    out = tmp_path / "run"
+    sys.path.insert(0, str(tmp_path))  # how a user's agent finds its own modules
+    try:
+        first = run(ENV, reference, out=out, progress=False)
+        assert run(ENV, reference, out=out, progress=False).skipped == sorted(first.records)
+        helpers.write_text(helpers.read_text() + "# retuned\n")
+        again = run(ENV, reference, out=out, progress=False)
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("my_helpers", None)
+    assert again.skipped == [] and sorted(again.replayed) == sorted(first.records)
+
+
 def test_a_moved_agent_file_and_checkpoint_resume_and_changed_weights_replay(tmp_path):
     """An agent given by its file and an option naming a file (a checkpoint) count by base
     name and content: moved elsewhere with the run folder they resume every sequence, and
