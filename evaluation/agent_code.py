@@ -14,6 +14,7 @@ identity for those.
 from __future__ import annotations
 
 import ast
+import hashlib
 import sys
 from collections.abc import Iterator
 from functools import lru_cache
@@ -121,3 +122,33 @@ def agent_code(reference: str) -> list[Path]:
         todo += [target.resolve() for target in _targets(path, root.resolve())
                  if target.resolve() not in seen]
     return sorted(seen)
+
+
+def code_manifest(reference: str) -> dict[str, str]:
+    """``{name: digest of the content}`` of :func:`agent_code`, for a run's records.
+
+    Files of the agents package are named from ``unitrack_env/agents/``, files of yours
+    relative to the agent's folder (or by base name, outside it): where they live does not
+    count, what they hold does.
+    """
+    files = agent_code(reference)
+    if not files:
+        return {}
+    root = _agents_root().resolve()
+    home = files[0].parent if (start := agent_file(reference)) is None \
+        else start.resolve().parent
+    manifest: dict[str, str] = {}
+    for path in files:
+        if path.is_relative_to(root):
+            name = f"unitrack_env/agents/{path.relative_to(root).as_posix()}"
+        elif path.is_relative_to(home):
+            name = path.relative_to(home).as_posix()
+        else:
+            name = path.name
+        manifest[name] = hashlib.blake2b(path.read_bytes(), digest_size=16).hexdigest()
+    return dict(sorted(manifest.items()))
+
+
+def code_changes(old: dict[str, str], new: dict[str, str]) -> list[str]:
+    """The files whose content differs between two manifests (added and removed ones too)."""
+    return [name for name in sorted(old.keys() | new.keys()) if old.get(name) != new.get(name)]

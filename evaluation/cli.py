@@ -160,7 +160,7 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
                      sequences=args.sequences,
                      workers=args.workers, overwrite=args.overwrite,
                      progress=not args.quiet and args.format == "table",
-                     step_timeout=args.step_timeout)
+                     step_timeout=args.step_timeout, restamp=args.restamp)
     log = console if args.format == "table" else _console(stderr=True)
     if cache_summary():
         log.print(cache_summary(), markup=False)
@@ -169,6 +169,9 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
                   f"{', '.join(report.skipped)}", markup=False)
     for name, why in report.replayed.items():
         log.print(f"replayed {name}: {why}", markup=False)
+    for name, files in report.restamped.items():
+        log.print(f"re-stamped {name}: kept across your edit of {', '.join(files)}",
+                  markup=False)
     if report.scores is None:
         log.print(f"{len(report.records)} sequence(s) written to {report.out / 'data'} "
                   "(no ground truth in this split, nothing to score)", markup=False)
@@ -322,6 +325,10 @@ def _add_evaluate(ev: argparse.ArgumentParser) -> None:
     ev.add_argument("--overwrite", action="store_true",
                     help="discard a previous run in --out instead of resuming it (deletes only "
                     "the files runs of ours wrote, listed in <out>/manifest.json)")
+    ev.add_argument("--restamp", action="store_true",
+                    help="keep finished sequences whose only change is the agent's code (you "
+                    "vouch the edit cannot change them: a comment, a rename); each is checked, "
+                    "and the changed files are printed")
     ev.add_argument("--step-timeout", type=non_negative_float, default=DEFAULT_STEP_TIMEOUT,
                     metavar="SECONDS", help="a step (the agent's act() and the env's step) "
                     "longer than this fails its sequence (default: %(default)g; 0: no limit)")

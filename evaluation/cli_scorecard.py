@@ -42,10 +42,22 @@ def add_options(card: argparse.ArgumentParser) -> None:
                       help="radar axes: rank among the models (the paper's) or the value")
     card.add_argument("--compare", nargs="+", metavar="SCORECARD_JSON",
                       help="redraw earlier scorecard.json files together (plays nothing)")
+    card.add_argument("--restamp", action="store_true",
+                      help="keep stored cells whose only change is the agent's code (you vouch "
+                      "the edit cannot change them); each is checked and the changed files "
+                      "are printed")
     card.add_argument("--quiet", action="store_true", help="no progress bar")
     card.add_argument("--ci", action="store_true", help="also write each cell's 95%% bootstrap "
                       "interval (scorecard_ci.md/.json; see docs/report.md)")
     card.set_defaults(func=run_command)
+
+
+def _print_restamp(console: Console, label: str, result: list[str] | str) -> None:
+    if isinstance(result, str):
+        console.print(f"not re-stamped {label}: {result}; it is played again", markup=False)
+    else:
+        console.print(f"re-stamped {label}: kept across your edit of {', '.join(result)}",
+                      markup=False)
 
 
 def run_command(args: argparse.Namespace, console: Console) -> int:
@@ -70,7 +82,10 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
                                 motion=args.motion, runtime=args.runtime,
                                 radar_scale=args.radar_scale,
                                 on_progress=progress,
-                                on_estimate=None if args.quiet else progress.estimate)
+                                on_estimate=None if args.quiet else progress.estimate,
+                                restamp=args.restamp,
+                                on_restamp=lambda label, result: _print_restamp(
+                                    console, label, result))
         files = sorted(out.glob("scorecard.*"))
     if args.ci:
         from .intervals import write_card_intervals

@@ -30,6 +30,9 @@ class SequenceRecord:
     runtimes: list[str] | None = None
     """What computed the appearance features (:mod:`unitrack_env.provenance`): ``[]`` for an
     appearance-free agent, None in records written before it was kept."""
+    code: dict[str, str] | None = None
+    """The agent's code when it was played: ``{file: content digest}``
+    (:func:`~unitrack_env.evaluation.agent_code.code_manifest`); None in older records."""
 
     @property
     def fps(self) -> float:

@@ -19,14 +19,14 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import unitrack_env
 from unitrack_env.fingerprint import files_fingerprint, sequence_files
 
-from .agent_code import agent_code
+from .agent_code import code_manifest
 
 
 def _named_file(value: Any) -> Path | None:
@@ -100,13 +100,22 @@ def option_changes(old: dict[str, Any], new: dict[str, Any], label: str) -> list
 
 @dataclass(frozen=True)
 class RunIdentity:
-    """A digest of everything but the data that decides a sequence's results."""
+    """A digest of everything but the data that decides a sequence's results.
+
+    ``code`` is the agent's code manifest (:func:`~.agent_code.code_manifest`), kept in each
+    record so that a replay can say which file changed and :mod:`.restamp` can tell an edit
+    of the code alone.
+    """
 
     digest: str
+    code: dict[str, str] = field(default_factory=dict, compare=False)
 
     @classmethod
-    def of(cls, spec: Any) -> RunIdentity:
-        """The identity of a :class:`~unitrack_env.evaluation.runner.RunSpec`."""
+    def of(cls, spec: Any, code: dict[str, str] | None = None) -> RunIdentity:
+        """The identity of a :class:`~unitrack_env.evaluation.run_spec.RunSpec`.
+
+        ``code``: the agent's code manifest to assume (default: the files as they are now).
+        """
         env_kwargs = {k: v for k, v in spec.env_kwargs.items() if k != "root"}
         described = json.dumps(
             {"env": spec.env_id, "env_kwargs": placeless_options(env_kwargs),
@@ -115,10 +124,12 @@ class RunIdentity:
              "version": unitrack_env.__version__},
             sort_keys=True, default=str,
         )
-        named = [*spec.agent_kwargs.values(), *env_kwargs.values()]
-        code = agent_code(spec.agent_ref or spec.agent)
-        files = _located_anywhere(_named_files(named) + code)
-        return cls(hashlib.blake2b(f"{described}\n{files}".encode(), digest_size=16).hexdigest())
+        if code is None:
+            code = code_manifest(spec.agent_ref or spec.agent)
+        files = _located_anywhere(_named_files([*spec.agent_kwargs.values(),
+                                                *env_kwargs.values()]))
+        text = f"{described}\n{files}\n{json.dumps(code, sort_keys=True)}"
+        return cls(hashlib.blake2b(text.encode(), digest_size=16).hexdigest(), dict(code))
 
     def sequence_fingerprint(self, inputs: Iterable[Path], root: Path | None = None) -> str:
         """This identity combined with a sequence's input files.
@@ -128,6 +139,22 @@ class RunIdentity:
         """
         return hashlib.blake2b(f"{self.digest}:{files_fingerprint(inputs, root)}".encode(),
                                digest_size=16).hexdigest()
+
+    def stamp(self, inputs: Iterable[Path], root: Path | None = None) -> Stamp:
+        """What a sequence's record keeps of this identity and its input files."""
+        return Stamp(self.sequence_fingerprint(inputs, root), self.code)
+
+
+@dataclass(frozen=True)
+class Stamp:
+    """A sequence's input fingerprint and the agent's code manifest, as its record keeps them."""
+
+    inputs: str
+    code: dict[str, str] = field(default_factory=dict, compare=False)
+
+    def apply(self, record: Any) -> None:
+        """Stamp a freshly played :class:`~.episode.SequenceRecord`."""
+        record.inputs, record.code = self.inputs, dict(self.code)
 
 
 def _located_anywhere(paths: Iterable[Path]) -> str:

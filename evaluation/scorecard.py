@@ -79,7 +79,7 @@ def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     A stored cell is stale when its data or code changed since it was played; the runner
     would replay it while the card is scored, so it goes to the workers instead.
     """
-    from .runner import RunMismatch, stale_sequences
+    from .resume import RunMismatch, stale_sequences
 
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
@@ -97,13 +97,39 @@ def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     return [c for c in cells if not cell_done(out, c) or (c.folder, c.sequence) in stale]
 
 
+def restamp_cells(out: Path, cells: Sequence[Cell]) -> dict[str, list[str] | str]:
+    """Keep stored cells whose only change is the agent's code (``--restamp``).
+
+    Returns, for each stale stored cell, the changed code files (kept) or why it cannot be
+    kept (:mod:`.restamp`); nothing is played.
+    """
+    from .resume import RunMismatch, restamp_sequences
+
+    stored: dict[str, list[Cell]] = {}
+    for cell in cells:
+        if cell_done(out, cell):
+            stored.setdefault(cell.folder, []).append(cell)
+    outcome: dict[str, list[str] | str] = {}
+    for folder, members in stored.items():
+        first, by_name = members[0], {c.sequence: c for c in members}
+        try:
+            kept = restamp_sequences(first.env_id, first.agent, out / "cells" / folder,
+                                     env_kwargs=first.env_kwargs,
+                                     agent_kwargs=first.agent_kwargs, sequences=list(by_name))
+        except RunMismatch as exc:
+            raise _other_model(exc.out, exc.difference, first.model) from None
+        outcome |= {by_name[name].label: result for name, result in kept.items()}
+    return outcome
+
+
 def _finite(value: Any) -> float | None:
     return float(value) if isinstance(value, (int, float)) and math.isfinite(value) else None
 
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from .runner import RunMismatch, run
+    from .resume import RunMismatch
+    from .runner import run
 
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
@@ -280,7 +306,10 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
               backend: str = "pool", workers: int = 1, address: str | None = None,
               motion: bool = False, runtime: str | None = None, radar_scale: str = "rank",
               on_progress: Callable[[int, int, Cell | None], None] | None = None,
-              on_estimate: Callable[[float], None] | None = None) -> dict[str, Any]:
+              on_estimate: Callable[[float], None] | None = None,
+              restamp: bool = False,
+              on_restamp: Callable[[str, list[str] | str], None] | None = None,
+              ) -> dict[str, Any]:
     """Play, store and score every cell; write the outputs; return the scorecard.
 
     Args:
@@ -300,6 +329,8 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
         on_estimate: called with the estimated seconds left: first within about a second
             (before the models load or synthetic data are written), then when the cells
             start and after each cell.
+        restamp: keep stored cells whose only change is the agent's code (:mod:`.restamp`).
+        on_restamp: gets each such cell's label and changed files, or why it is replayed.
     """
     names, data_path = _checked_request(models, tasks, data)
     out = Path(out)
@@ -322,6 +353,8 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     with hold_folder(out, "scorecard"):  # one scorecard at a time (each cell run locks too)
         cells, sources, _ = plan(models, names, data_path, motion=motion, runtime=runtime)
         _check_environments(sources)
+        for label, result in (restamp_cells(out, cells) if restamp else {}).items():
+            (on_restamp or (lambda *_: None))(label, result)
         _play_all(out, cells, backend=backend, workers=workers, address=address,
                   on_progress=on_progress, on_estimate=on_estimate,
                   torch_runtime=chosen == "torch", gflop_per_mp=gflops)

@@ -15,12 +15,13 @@ import gymnasium as gym
 from unitrack_env.benchmarks.base import Benchmark
 
 from .episode import SequenceRecord, play_episode
+from .identity import Stamp
 from .watchdog import StepTimeout, StepWatchdog
 from .workers import SequenceFailure
 
 
 def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
-              todo: list[str], inputs: dict[str, str], bar: Any,
+              todo: list[str], stamps: dict[str, Stamp], bar: Any,
               causes: dict[str, BaseException], step_timeout: float | None = None,
               ) -> tuple[dict[str, SequenceRecord], dict[str, str]]:
     """Play ``todo`` in this process; a failed sequence's exception goes into ``causes``.
@@ -56,7 +57,7 @@ def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Pa
                    player = spec.make_env()
                    continue
                watchdog.stop()
-               record.inputs = inputs[name]
+               stamps[name].apply(record)
                save_episode(out, player, record, bench)
                records[name] = record
     finally:

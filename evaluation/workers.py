@@ -66,7 +66,7 @@ def init_worker(parent: int, threads: int) -> None:
         torch.set_num_threads(threads)
 
 
-def _play_one(spec: Any, out: str, sequence: str, inputs: str,
+def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
               beat: Any = None) -> tuple[str, Any]:
     """Worker: play one sequence and save it; ``("ok", record)`` or ``("error", message)``.
 
@@ -85,7 +85,7 @@ def _play_one(spec: Any, out: str, sequence: str, inputs: str,
         if beat is not None:
             beat(0)  # the episode starts: the parent's step clock runs from here
         record, _ = play_episode(env, agent, sequence, benchmark=bench, on_frame=beat)
-        record.inputs = inputs
+        stamp.apply(record)  # an identity.Stamp
         save_episode(Path(out), env, record, bench)
         return "ok", record.to_json()
     except OutputError:
@@ -131,7 +131,7 @@ def refuse_unguarded_script() -> None:
         raise RuntimeError(message.format(f"{path} (line {line})"))
 
 
-def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str],
+def play_in_workers(spec: Any, out: Path, todo: list[str], stamps: dict[str, Any],
                     lengths: dict[str, int], workers: int, bar: Any,
                     step_timeout: float | None = None) -> tuple[dict[str, Any], dict[str, str]]:
     """Play ``todo`` in ``workers`` supervised processes; return (records, failures).
@@ -146,7 +146,7 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], inputs: dict[str, str
     failures: dict[str, str] = {}
     threads = max(1, (os.cpu_count() or 1) // workers)
     with SupervisedPool(min(workers, len(todo)), threads, step_timeout) as pool:
-        played = pool.run(_play_one, todo, lambda s: (spec, str(out), s, inputs[s]),
+        played = pool.run(_play_one, todo, lambda s: (spec, str(out), s, stamps[s]),
                           on_beat=lambda s, frames: bar.advance(frames))
         for name, outcome in played:
             if isinstance(outcome, BaseException):

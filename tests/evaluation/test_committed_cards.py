@@ -4,7 +4,7 @@ Some cards take hours on a laptop (a ViT-B/8 plays one OTB clip in 45 minutes), 
 repository keeps their cells; the documented command, rerun with the same ``--out``, resumes
 from them. This test checks that the committed folder holds every cell the command needs and
 that scoring them again prints the documented table (nothing is played): a cell missing, or
-stale because the data or the head's code changed, fails here in seconds instead of being
+stale because the data or the agents' code changed, fails here in seconds instead of being
 played for hours.
 """
 
@@ -54,8 +54,10 @@ def test_committed_scorecard_replays_its_table(figures, n, shared_data, tmp_path
                        (REPO / args.data).resolve(), motion=args.motion, runtime=args.runtime)
     missing = [cell.label for cell in cells_to_play(card, cells)]
     assert not missing, (f"{card.relative_to(REPO)} lacks {len(missing)} cells of `{command}`, "
-                         "or its stored cells are stale (their data or the head's code changed): "
-                         f"run it from the repository root to play them: {missing}")
+                         "or its stored cells are stale (their data or the agents' code changed): "
+                         "run it from the repository root to play them, or, for an edit that "
+                         "cannot move a number, add --restamp to keep them (it checks that the "
+                         f"code is all that changed and names the files): {missing}")
     wrong = doc_figures.compare(figures, {n: doc_figures.run_source(command, tmp_path)})
     assert not wrong, (f"documented cells differ from the stored cells of `{command}`:\n"
                        + "\n".join(map(str, wrong)))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -104,7 +105,7 @@ def test_an_edited_agent_file_replays_its_sequences(tmp_path):
     agent.write_text(agent.read_text().replace("raise ValueError('the new code')",
                                                "return super().act(observation)"))
     again = run(ENV, f"{agent}:Mine", out=out, progress=False)
-    assert again.skipped == [] and "agent code" in again.replayed["SYN-01"]
+    assert again.skipped == [] and "code changed" in again.replayed["SYN-01"]
 
 
 def test_an_edited_helper_module_beside_the_agent_file_replays_its_sequences(tmp_path):
@@ -126,6 +127,40 @@ def test_an_edited_helper_module_beside_the_agent_file_replays_its_sequences(tmp
         sys.path.remove(str(tmp_path))
         sys.modules.pop("my_helpers", None)
     assert again.skipped == [] and sorted(again.replayed) == sorted(first.records)
+    assert "the agent's code changed since it was played (my_helpers.py)" in \
+        again.replayed["SYN-01"]
+
+
+def test_restamp_keeps_sequences_across_a_code_only_edit_and_checks_it(tmp_path, mot16,
+                                                                        capsys):
+    """--restamp keeps a sequence only where the code is all that changed, and says which
+    files; changed data, or a record without a code manifest, still replay."""
+    agent = tmp_path / "my_agent.py"
+    agent.write_text("from unitrack_env.agents.baselines.iou import IoUAgent\n\n"
+                     "class Mine(IoUAgent):\n    pass\n")
+    out = tmp_path / "run"
+    command = ["evaluate", "--env", ENV, "--root", str(mot16), "--agent", f"{agent}:Mine",
+               "--out", str(out), "--quiet"]
+    assert main(command) == 0
+    records = {p.name: p.read_text() for p in (out / "sequences").iterdir()}
+    agent.write_text(agent.read_text() + "# a comment cannot move a box\n")
+    old = json.loads(records["SYN-02.json"])
+    del old["code"]  # as written before records kept the agent's code
+    (out / "sequences" / "SYN-02.json").write_text(json.dumps(old))
+    assert main(command + ["--restamp"]) == 0
+    printed = capsys.readouterr().out
+    assert "re-stamped SYN-01: kept across your edit of my_agent.py" in printed
+    assert "replayed SYN-02:" in printed and "predates code manifests" in printed
+    assert (out / "sequences" / "SYN-01.json").read_text() != records["SYN-01.json"]
+    assert run(ENV, f"{agent}:Mine", out=out, env_kwargs={"root": str(mot16)},
+               progress=False).skipped == ["SYN-01", "SYN-02"]  # both stamped for today's code
+    agent.write_text(agent.read_text() + "# another\n")
+    detections = mot16 / "train" / "SYN-01" / "det" / "det.txt"
+    detections.write_text(detections.read_text().replace(",", ", ", 1))
+    report = run(ENV, f"{agent}:Mine", out=out, env_kwargs={"root": str(mot16)},
+                 progress=False, restamp=True)
+    assert report.restamped == {"SYN-02": ["my_agent.py"]}
+    assert "data files or options changed too" in report.replayed["SYN-01"]
 
 
 def test_a_moved_agent_file_and_checkpoint_resume_and_changed_weights_replay(tmp_path):

@@ -108,6 +108,38 @@ def test_plan_gives_every_appearance_head_the_runtime_and_drops_motion():
 
 # The tests below play real heads over whole synthetic clips (minutes on 2 cores): they are
 # marked slow and named "scorecard", and CI runs them (`-m slow -k "scorecard or pets"`).
+def test_restamp_keeps_cells_played_by_code_that_differs_only(tmp_path):
+    """--restamp: a cell whose record is rebuilt exactly from its stored code manifest is
+    kept (the changed file named); one whose data changed is played again."""
+    from unitrack_env.evaluation.identity import RunIdentity
+    from unitrack_env.evaluation.run_spec import RunSpec
+
+    cells = [Cell("m", "mot", "IoU", "iou", "UniTrack/MOT16-v0", name)
+             for name in ("SYN-01", "SYN-02")]
+    folder = tmp_path / "cells" / cells[0].folder
+    run(cells[0].env_id, cells[0].agent, out=folder, progress=False)
+    first = folder / "sequences" / "SYN-01.json"
+    stored = json.loads(first.read_text())
+    then = dict(stored["code"])
+    edited = next(name for name in then if name.endswith("/overlap.py"))
+    then[edited] = "f" * 32  # as if played before an edit of that file
+    spec = RunSpec(cells[0].env_id, "iou", "unitrack_env.agents.baselines.iou:IoUAgent")
+    env = spec.make_env()
+    inputs = env.unwrapped.sequence_inputs("SYN-01")
+    fingerprint = RunIdentity.of(spec, code=then).sequence_fingerprint(
+        inputs, env.unwrapped.inputs_root())
+    env.close()
+    first.write_text(json.dumps(stored | {"code": then, "inputs": fingerprint}))
+    second = folder / "sequences" / "SYN-02.json"
+    second.write_text(json.dumps(json.loads(second.read_text()) | {"inputs": "0" * 32}))
+    assert sc.cells_to_play(tmp_path, cells) == cells
+    outcome = sc.restamp_cells(tmp_path, cells)
+    assert outcome[cells[0].label] == [edited]
+    assert "data files or options changed too" in outcome[cells[1].label]
+    assert sc.cells_to_play(tmp_path, cells) == [cells[1]]
+    assert json.loads(first.read_text())["code"] == stored["code"]
+
+
 @pytest.fixture(scope="module")
 def pose_card(tmp_path_factory):
     """A small real scorecard: pose propagation on the synthetic JHMDB, two models."""
