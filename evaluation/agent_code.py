@@ -3,12 +3,14 @@
 An agent's results are decided by its own module and by the code it imports: for the
 UniTrack heads, the primitives and the appearance model in :mod:`unitrack_env.agents`; for an
 agent of yours, also the modules beside its file. :func:`agent_code` reads the imports of
-those files (statically, without importing anything) and returns every such file it reaches.
+those files (statically, without importing anything) and returns every such file it reaches,
+plus the other modules of ``unitrack_env`` they import directly (``geometry``'s IoU, a mask
+codec, an environment's track cap), without following those further.
 
 Left out on purpose: installed third-party packages (their versions are not this package's to
-track) and the rest of ``unitrack_env`` (environments, readers, geometry), which turn the same
-data into the same observations for every agent; ``unitrack_env.__version__`` is in the run
-identity for those.
+track) and the rest of ``unitrack_env`` (environment internals, readers, metrics), which turn
+the same data into the same observations for every agent; ``unitrack_env.__version__`` is in
+the run identity for those.
 """
 
 from __future__ import annotations
@@ -20,13 +22,13 @@ from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
 
-AGENTS_PACKAGE = "unitrack_env.agents"
 
-
-def _agents_root() -> Path:
+def _roots() -> tuple[Path, Path]:
+    """The folders of ``unitrack_env`` and of ``unitrack_env.agents`` (links resolved)."""
     import unitrack_env.agents
 
-    return Path(unitrack_env.agents.__file__).parent
+    return (Path(unitrack_env.__file__).resolve().parent,
+            Path(unitrack_env.agents.__file__).resolve().parent)
 
 
 def _module_file(folder: Path, parts: list[str]) -> Path | None:
@@ -36,17 +38,18 @@ def _module_file(folder: Path, parts: list[str]) -> Path | None:
     base = folder.joinpath(*parts)
     for candidate in (base.with_suffix(".py"), base / "__init__.py"):
         if candidate.is_file():
-            return candidate
+            return candidate.resolve()
     return None
 
 
-def _package_parts(path: Path, root: Path) -> list[str] | None:
-    """The package of a file under the agents root, as names after ``unitrack_env.agents``."""
+def _module_name(path: Path, agents: Path) -> list[str] | None:
+    """``["unitrack_env", "agents", ...]`` for a file of the agents package, else None."""
     try:
-        relative = path.relative_to(root)
+        relative = path.relative_to(agents)
     except ValueError:
         return None
-    return list(relative.parts[:-1])
+    parts = ["unitrack_env", "agents", *relative.with_suffix("").parts]
+    return parts[:-1] if parts[-1] == "__init__" else parts
 
 
 @lru_cache(maxsize=512)
@@ -65,29 +68,42 @@ def _imports(path: Path, _stamp: tuple[int, int]) -> tuple[tuple[int, str, str |
     return tuple(found)
 
 
-def _targets(path: Path, root: Path) -> Iterator[Path]:
-    """The files of the agents package, or beside a file of yours, that ``path`` imports."""
+def _targets(path: Path) -> Iterator[tuple[Path, bool]]:
+    """The files ``path`` imports that count, each with whether its imports count too."""
+    package_root, agents = _roots()
     stat = path.stat()
-    package = _package_parts(path, root)
+    own = _module_name(path, agents)
+    package = None if own is None else (own if path.name == "__init__.py" else own[:-1])
     for level, module, name in _imports(path, (stat.st_mtime_ns, stat.st_size)):
-        if level:  # relative: within the agents package, or within your folder
-            if package is not None:
-                if level - 1 > len(package):
-                    continue
-                base, parts = root, package[:len(package) - level + 1]
-            else:
-                base, parts = path.parents[level - 1], []
-            parts = parts + [p for p in module.split(".") if p]
-        elif module == AGENTS_PACKAGE or module.startswith(AGENTS_PACKAGE + "."):
-            base, parts = root, module.split(".")[2:]
-        elif package is None and module:  # a module of yours beside the agent's file
-            base, parts = path.parent, module.split(".")
+        words = [w for w in module.split(".") if w]
+        if level and package is not None:  # relative, inside the package
+            if level - 1 >= len(package):
+                continue
+            words = package[:len(package) - level + 1] + words
+        elif level:  # relative, in your folder
+            found = _resolve(path.parents[level - 1], words, name)
+            if found is not None:
+                yield found, True
+            continue
+        if words[:2] == ["unitrack_env", "agents"]:
+            found = _resolve(agents, words[2:], name)
+        elif words[:1] == ["unitrack_env"] and len(words) > 1:
+            found = _resolve(package_root, words[1:], name)
+            if found is not None:
+                yield found, False  # one hop into the rest of unitrack_env
+            continue
+        elif package is None and words:  # a module of yours beside the agent's file
+            found = _resolve(path.parent, words, name)
         else:
             continue
-        target = (_module_file(base, [*parts, name]) if name and name != "*" else None) \
-            or _module_file(base, parts)
-        if target is not None:
-            yield target
+        if found is not None:
+            yield found, True
+
+
+def _resolve(folder: Path, parts: list[str], name: str | None) -> Path | None:
+    """The file of ``from <parts> import <name>``: the submodule ``name``, else ``parts``."""
+    return (_module_file(folder, [*parts, name]) if name and name != "*" else None) \
+        or _module_file(folder, parts)
 
 
 def agent_file(reference: str) -> Path | None:
@@ -103,24 +119,24 @@ def agent_file(reference: str) -> Path | None:
 
 
 def agent_code(reference: str) -> list[Path]:
-    """The agent's file and every file it imports from the agents package or from beside it.
+    """The agent's file and the files it imports from the agents package or from beside it.
 
-    Imports are followed through the files they reach; the list is sorted, and empty for a
-    reference without a file.
+    Imports are followed through the files they reach; other ``unitrack_env`` modules they
+    import are listed, not followed. The list is sorted, and empty for a reference without a
+    file.
     """
     start = agent_file(reference)
     if start is None:
         return []
-    root = _agents_root()
     seen: set[Path] = set()
-    todo = [start.resolve()]
+    todo = [(start.resolve(), True)]
     while todo:
-        path = todo.pop()
+        path, follow = todo.pop()
         if path in seen:
             continue
         seen.add(path)
-        todo += [target.resolve() for target in _targets(path, root.resolve())
-                 if target.resolve() not in seen]
+        if follow:
+            todo += [(target, more) for target, more in _targets(path) if target not in seen]
     return sorted(seen)
 
 
@@ -134,13 +150,15 @@ def code_manifest(reference: str) -> dict[str, str]:
     files = agent_code(reference)
     if not files:
         return {}
-    root = _agents_root().resolve()
-    home = files[0].parent if (start := agent_file(reference)) is None \
-        else start.resolve().parent
+    package_root, agents = _roots()
+    start = agent_file(reference)
+    home = start.resolve().parent if start is not None else files[0].parent
     manifest: dict[str, str] = {}
     for path in files:
-        if path.is_relative_to(root):
-            name = f"unitrack_env/agents/{path.relative_to(root).as_posix()}"
+        if path.is_relative_to(agents):
+            name = f"unitrack_env/agents/{path.relative_to(agents).as_posix()}"
+        elif path.is_relative_to(package_root):
+            name = f"unitrack_env/{path.relative_to(package_root).as_posix()}"
         elif path.is_relative_to(home):
             name = path.relative_to(home).as_posix()
         else:

@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import unitrack_env.agents.baselines.iou  # noqa: F401  (module references resolve once imported)
+import unitrack_env.agents.heads.association  # noqa: F401
 import unitrack_env.agents.heads.sot  # noqa: F401
-from unitrack_env.evaluation.agent_code import agent_code
+from unitrack_env.evaluation.agent_code import agent_code, code_manifest
 
 
 def _names(paths: list[Path]) -> set[str]:
@@ -18,6 +19,17 @@ def test_a_head_counts_its_primitives_and_the_appearance_model():
     assert {"heads/sot.py", "primitives/box_propagation.py", "appearance/model.py",
             "appearance/vit.py", "appearance/resnet.py", "agents/base.py"} <= code
     assert not any(name.startswith(("envs/", "metrics/", "evaluation/")) for name in code)
+
+
+def test_other_modules_of_the_package_count_one_import_away_and_are_not_followed():
+    """geometry's IoU or an environment's track cap decide actions too; what those modules
+    import (the environment's readers) does not."""
+    names = set(code_manifest("unitrack_env.agents.heads.association:UniTrackAgent"))
+    assert {"unitrack_env/agents/heads/association.py", "unitrack_env/geometry.py",
+            "unitrack_env/envs/motchallenge.py"} <= names
+    assert "unitrack_env/envs/base.py" not in names
+    assert not any(name.startswith(("unitrack_env/metrics/", "unitrack_env/evaluation/"))
+                   for name in names)
 
 
 def test_a_baseline_counts_only_what_it_imports():
