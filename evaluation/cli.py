@@ -168,10 +168,10 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
         log.print(f"resumed: kept {len(report.skipped)} finished sequence(s): "
                   f"{', '.join(report.skipped)}", markup=False)
     for name, why in report.replayed.items():
-        log.print(f"replayed {name}: {why}", markup=False)
+        log.print(f"replayed {name}: {why}", markup=False, soft_wrap=True)
     for name, files in report.restamped.items():
         log.print(f"re-stamped {name}: kept across your edit of {', '.join(files)}",
-                  markup=False)
+                  markup=False, soft_wrap=True)
     if report.scores is None:
         log.print(f"{len(report.records)} sequence(s) written to {report.out / 'data'} "
                   "(no ground truth in this split, nothing to score)", markup=False)

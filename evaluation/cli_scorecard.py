@@ -54,10 +54,11 @@ def add_options(card: argparse.ArgumentParser) -> None:
 
 def _print_restamp(console: Console, label: str, result: list[str] | str) -> None:
     if isinstance(result, str):
-        console.print(f"not re-stamped {label}: {result}; it is played again", markup=False)
+        console.print(f"not re-stamped {label}: {result}; it is played again", markup=False,
+                      soft_wrap=True)
     else:
         console.print(f"re-stamped {label}: kept across your edit of {', '.join(result)}",
-                      markup=False)
+                      markup=False, soft_wrap=True)
 
 
 def run_command(args: argparse.Namespace, console: Console) -> int:

@@ -140,6 +140,25 @@ def test_restamp_keeps_cells_played_by_code_that_differs_only(tmp_path):
     assert json.loads(first.read_text())["code"] == stored["code"]
 
 
+def test_the_restamp_option_reaches_the_scorecard_and_each_outcome_is_printed(
+        tmp_path, monkeypatch, capsys):
+    def fake(models, **options):
+        assert options["restamp"] is True
+        options["on_restamp"]("m / mot IoU / SYN-01", ["unitrack_env/geometry.py"])
+        options["on_restamp"]("m / mot IoU / SYN-02", "its data files or options changed too")
+        (tmp_path / "scorecard.md").write_text("| table |\n")
+        return {}
+
+    monkeypatch.setattr(sc, "scorecard", fake)
+    assert main(["scorecard", "--model", "random", "--tasks", "mot", "--out", str(tmp_path),
+                 "--restamp", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert ("re-stamped m / mot IoU / SYN-01: kept across your edit of "
+            "unitrack_env/geometry.py") in printed
+    assert ("not re-stamped m / mot IoU / SYN-02: its data files or options changed too; it "
+            "is played again") in printed
+
+
 @pytest.fixture(scope="module")
 def pose_card(tmp_path_factory):
     """A small real scorecard: pose propagation on the synthetic JHMDB, two models."""
