@@ -82,8 +82,7 @@ def _same_run(previous: Any, now: dict[str, Any]) -> bool:
     def placeless_run(run: dict[str, Any]) -> dict[str, Any]:
         env = {k: v for k, v in run["env_kwargs"].items() if k != "root"}
         return run | {"env_kwargs": placeless_options(env, now["env_kwargs"]),
-                      "agent_kwargs": placeless_options(run["agent_kwargs"],
-                                                                 now["agent_kwargs"]),
+                      "agent_kwargs": placeless_options(run["agent_kwargs"], now["agent_kwargs"]),
                       "agent": placeless_reference(run.get("agent")),
                       "agent_ref": placeless_reference(run.get("agent_ref")),
                       "rooted": "root" in run["env_kwargs"]}
