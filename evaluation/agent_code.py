@@ -1,11 +1,11 @@
 """The source files an agent's actions depend on, so that edited code never reuses old results.
 
-An agent's results are decided by its own module and by the code it imports: for the
-UniTrack heads, the primitives and the appearance model in :mod:`unitrack_env.agents`; for an
-agent of yours, also the modules beside its file. :func:`agent_code` reads the imports of
-those files (statically, without importing anything) and returns every such file it reaches,
-plus the other modules of ``unitrack_env`` they import directly (``geometry``'s IoU, a mask
-codec, an environment's track cap), without following those further.
+An agent's results are decided by its own module and by the code it imports: for the UniTrack
+heads, the primitives and the appearance model in :mod:`unitrack_env.agents`; for an agent of
+yours, also the modules beside its file or in its package. :func:`agent_code` reads the
+imports of those files (statically, without importing anything) and returns every such file it
+reaches, plus the other modules of ``unitrack_env`` they import directly (``geometry``'s IoU,
+a mask codec, an environment's track cap), without following those further.
 
 Left out on purpose: installed third-party packages (their versions are not this package's to
 track) and the rest of ``unitrack_env`` (environment internals, readers, metrics), which turn
@@ -92,12 +92,20 @@ def _targets(path: Path) -> Iterator[tuple[Path, bool]]:
             if found is not None:
                 yield found, False  # one hop into the rest of unitrack_env
             continue
-        elif package is None and words:  # a module of yours beside the agent's file
-            found = _resolve(path.parent, words, name)
+        elif package is None and words:  # yours: beside the file, or in its package
+            found = _resolve(path.parent, words, name) \
+                or _resolve(_import_root(path.parent), words, name)
         else:
             continue
         if found is not None:
             yield found, True
+
+
+def _import_root(folder: Path) -> Path:
+    """The folder above the outermost package holding ``folder`` (itself outside packages)."""
+    while (folder / "__init__.py").is_file() and folder.parent != folder:
+        folder = folder.parent
+    return folder
 
 
 def _resolve(folder: Path, parts: list[str], name: str | None) -> Path | None:

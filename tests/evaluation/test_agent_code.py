@@ -43,6 +43,7 @@ def test_an_agent_file_counts_its_relative_and_sibling_imports_and_nothing_insta
     (tmp_path / "pkg" / "__init__.py").write_text("")
     (tmp_path / "pkg" / "agent.py").write_text(
         "import numpy\nfrom . import tools\nfrom .more import thing\nimport helper\n"
+        "from pkg.sub.absolute import y\n"
         "from unitrack_env.agents.baselines.iou import IoUAgent\n"
         "class Mine(IoUAgent):\n    pass\n")
     (tmp_path / "pkg" / "tools.py").write_text("from .deep import x\n")
@@ -50,9 +51,12 @@ def test_an_agent_file_counts_its_relative_and_sibling_imports_and_nothing_insta
     (tmp_path / "pkg" / "more.py").write_text("thing = 2\n")
     (tmp_path / "pkg" / "helper.py").write_text("import helper\n")  # imports itself: no loop
     (tmp_path / "pkg" / "unused.py").write_text("")
+    (tmp_path / "pkg" / "sub").mkdir()
+    (tmp_path / "pkg" / "sub" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "sub" / "absolute.py").write_text("y = 3\n")
     code = _names(agent_code(f"{tmp_path / 'pkg' / 'agent.py'}:Mine"))
     assert {"pkg/agent.py", "pkg/tools.py", "pkg/deep.py", "pkg/more.py",
-            "pkg/helper.py", "baselines/iou.py"} <= code
+            "pkg/helper.py", "sub/absolute.py", "baselines/iou.py"} <= code
     assert "pkg/unused.py" not in code and not any("numpy" in name for name in code)
 
 
