@@ -150,7 +150,10 @@ def write_sequence_events(run: str | os.PathLike, bench: Benchmark, sequence: st
     path = events_path(run, sequence)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    df.to_csv(tmp, index=False, compression="gzip", float_format="%.4f")
+    # mtime 0: the same events give the same bytes, so scoring a stored run again (a
+    # committed scorecard) leaves its files untouched
+    df.to_csv(tmp, index=False, compression={"method": "gzip", "mtime": 0},
+              float_format="%.4f")
     os.replace(tmp, path)
     return path
 

@@ -49,6 +49,20 @@ def test_runner_writes_events_that_sum_to_trackeval(iou_run: Path) -> None:
     assert sum(c.get("idsw", 0) for c in counts.values()) > 0  # something to look at
 
 
+def test_events_written_again_are_the_same_bytes(iou_run: Path, tmp_path, monkeypatch) -> None:
+    """Scoring a stored run again (a committed scorecard) does not rewrite its event files."""
+    import time
+
+    from unitrack_env.evaluation.events import run_benchmark, write_sequence_events
+
+    first = events_path(iou_run, "SYN-01").read_bytes()
+    again = tmp_path / "again"
+    shutil.copytree(iou_run, again)
+    later = time.time() + 3600  # gzip would stamp this hour into its header
+    monkeypatch.setattr(time, "time", lambda: later)
+    assert write_sequence_events(again, run_benchmark(again), "SYN-01").read_bytes() == first
+
+
 def test_events_of_an_older_run_are_computed_from_its_files(iou_run: Path, tmp_path) -> None:
     old = tmp_path / "old"
     shutil.copytree(iou_run, old)
