@@ -69,11 +69,14 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
     figure = draw(plt, card, spokes, data, scale)
     stem.parent.mkdir(parents=True, exist_ok=True)
     written = []
-    for suffix in (".png", ".svg"):
-        path = stem.with_suffix(suffix)
-        figure.savefig(path, dpi=150, bbox_inches="tight",
-                       metadata={"Date": None} if suffix == ".svg" else None)
-        written.append(path)
+    # No date and a fixed salt for the SVG's element ids: the same card draws the same bytes,
+    # so scoring a committed scorecard again leaves its charts untouched
+    with matplotlib.rc_context({"svg.hashsalt": "unitrack-radar"}):
+        for suffix in (".png", ".svg"):
+            path = stem.with_suffix(suffix)
+            figure.savefig(path, dpi=150, bbox_inches="tight",
+                           metadata={"Date": None} if suffix == ".svg" else None)
+            written.append(path)
     plt.close(figure)
     return written
 

@@ -456,3 +456,15 @@ def test_radar_shows_an_undefined_axis_as_a_gap(tmp_path):
     assert radii(card, "rank")["a"][2] is None
     svg = radar.draw_radar(card, tmp_path / "chart")[1].read_text()
     assert "(no value)" in svg
+
+
+def test_the_same_card_draws_the_same_bytes(tmp_path):
+    """A committed scorecard scored again rewrites its charts byte for byte (no date, no
+    random SVG ids), so the repository stays clean."""
+    pytest.importorskip("matplotlib")
+    from unitrack_env.evaluation import radar
+
+    card = _card(["pose-prop", "sot", "vos"])
+    first = [f.read_bytes() for f in radar.draw_radar(card, tmp_path / "one")]
+    again = [f.read_bytes() for f in radar.draw_radar(card, tmp_path / "two")]
+    assert first == again
