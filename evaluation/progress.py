@@ -55,12 +55,27 @@ def format_warning(message: Warning | str, category: type[Warning], filename: st
 
 @contextlib.contextmanager
 def one_line_warnings() -> Iterator[None]:
-    """Within the block, warnings are formatted by :func:`format_warning`."""
+    """Within the block, warnings are formatted by :func:`format_warning`, each message once.
+
+    Python's own once-per-location memory is reset whenever a ``catch_warnings`` block ends
+    (every scorecard cell has one), so a data warning would be repeated for each cell.
+    """
+    shown: set[tuple[type[Warning], str]] = set()
+    previous_show = warnings.showwarning
+
+    def show_once(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        key = (category, str(message))
+        if key not in shown:
+            shown.add(key)
+            previous_show(message, category, filename, lineno, file, line)
+
     previous, warnings.formatwarning = warnings.formatwarning, format_warning
+    warnings.showwarning = show_once
     try:
         yield
     finally:
         warnings.formatwarning = previous
+        warnings.showwarning = previous_show
 
 
 class _FpsColumn(ProgressColumn):

@@ -162,6 +162,27 @@ def test_the_commands_show_this_packages_warnings_as_one_line():
     assert warnings.formatwarning is before  # restored: the command leaves no trace
 
 
+def test_the_commands_show_each_warning_once():
+    """A scorecard plays and scores many cells, each inside its own ``catch_warnings``; a data
+    warning (a trimmed OTB copy) is still shown once per command."""
+    import warnings
+
+    import unitrack_env.benchmarks.otb as ours
+    from unitrack_env.evaluation.progress import one_line_warnings
+
+    with warnings.catch_warnings(record=True) as shown:  # what reaches the screen
+        warnings.simplefilter("default")
+        before = warnings.showwarning
+        with one_line_warnings():
+            for _ in range(3):
+                with warnings.catch_warnings():  # resets Python's once-per-location memory
+                    pass
+                warnings.warn_explicit("trimmed copy", UserWarning, ours.__file__, 64)
+            warnings.warn_explicit("another", UserWarning, ours.__file__, 64)
+        assert warnings.showwarning is before
+    assert [str(w.message) for w in shown] == ["trimmed copy", "another"]
+
+
 def np_file() -> str:
     import numpy
 
