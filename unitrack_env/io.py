@@ -1,10 +1,79 @@
-"""Atomic file writes: readers see the old file or the whole new one, never half of one."""
+"""Files written and named safely.
+
+Atomic writes (readers see the old file or the whole new one, never half of one) that never
+write through a symbolic link, and :func:`path_inside`, the check of every path read from a
+file (a split list, a JSON file name, a manifest): data, never a way out of its folder.
+"""
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
+from typing import Any
+
+from unitrack_env.errors import DataFormatError
+
+
+class LinkRefused(OSError):
+    """A symbolic link where a file is to be written: writes never go through links."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        super().__init__(errno.ELOOP, f"{self.path} is a symbolic link; unitrack-env never "
+                                      "writes through a link (it would change the file it "
+                                      "points to): remove the link, or choose another folder")
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.path,))
+
+
+def refuse_link(path: str | os.PathLike) -> None:
+    """Raise :class:`LinkRefused` when ``path`` is a symbolic link (even a dangling one)."""
+    if os.path.islink(path):
+        raise LinkRefused(path)
+
+
+def _name_problem(name: object) -> str | None:
+    """What makes ``name`` more than a plain relative path (None: nothing)."""
+    if not isinstance(name, str):
+        return f"is not a name but JSON {type(name).__name__} data"
+    if not name.strip():
+        return "is empty"
+    if "\0" in name:
+        return "holds a NUL byte"
+    windows = PureWindowsPath(name)
+    if name.startswith(("/", "\\")) or windows.drive or windows.root:
+        return "is an absolute path"
+    parts = PurePosixPath(name.replace("\\", "/")).parts
+    if ".." in parts:
+        return "climbs out of its folder with '..'"
+    if not parts:
+        return "names the folder itself"
+    return None
+
+
+def path_inside(folder: str | os.PathLike, name: object, source: str | os.PathLike, *,
+                line: int | None = None, field: str | None = None) -> Path:
+    """``folder / name`` for a ``name`` read from the file ``source``, once it is checked.
+
+    A name from a file is data: it must be a relative path (``seq``, ``seq/00001.jpg``)
+    that stays inside ``folder``, with no ``..`` part and no absolute or drive path. Links
+    inside ``folder`` are the owner's and are not looked at here (writes refuse them).
+
+    Raises:
+        DataFormatError: naming ``source``, its ``line`` or ``field`` and the value.
+    """
+    problem = _name_problem(name)
+    if problem is not None:
+        raise DataFormatError(source, f"{name!r} {problem}; a name read from a file must be a "
+                                      f"relative path inside {folder}, so it is refused",
+                              line=line, field=field)
+    return Path(folder) / str(name)
 
 
 def _umask() -> int:
@@ -15,9 +84,14 @@ def _umask() -> int:
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary sibling file and ``os.replace``."""
+    """Write ``data`` to ``path`` via a temporary sibling file and ``os.replace``.
+
+    The temporary file is created new (``O_EXCL``, never through a link) and renamed over
+    ``path``; a link at ``path`` is refused (:class:`LinkRefused`), not replaced or followed.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    refuse_link(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         # mkstemp creates the file 0600; give it the mode an ordinary open() would have.

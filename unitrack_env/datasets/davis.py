@@ -18,7 +18,7 @@ from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.limits import check_image_header
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
-from unitrack_env.io import atomic_write_bytes
+from unitrack_env.io import atomic_write_bytes, path_inside
 
 DAVIS_VOID_LABEL: int = 255
 """Annotation label of void pixels."""
@@ -198,7 +198,10 @@ class DAVISDataset(SequenceDataset[VOSSequence]):
                     f"split list missing (splits found: {', '.join(present) or 'none'}; "
                     "split=None reads every sequence)",
                 )
-            names = [s.strip() for s in split_file.read_text().splitlines() if s.strip()]
+            lines = split_file.read_text().splitlines()
+            # a name, not a path: each must stay inside the frame folder (and the results')
+            names = [s.strip() for number, s in enumerate(lines, start=1) if s.strip()
+                     and path_inside(self.image_dir, s.strip(), split_file, line=number)]
         if not names:
             raise DataFormatError(self.image_dir, "no sequences")
         self.sequence_names: list[str] = names

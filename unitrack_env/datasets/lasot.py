@@ -14,6 +14,7 @@ from unitrack_env.datasets.sot import (
     read_image_size,
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.io import path_inside
 
 
 class LaSOTDataset:
@@ -84,7 +85,9 @@ class GOT10kDataset:
             raise DataFormatError(self.split_dir, "GOT-10k split folder missing")
         listing = self.split_dir / "list.txt"
         if listing.is_file():
-            names = [s.strip() for s in listing.read_text().splitlines() if s.strip()]
+            lines = listing.read_text().splitlines()
+            names = [s.strip() for number, s in enumerate(lines, start=1)
+                     if s.strip() and path_inside(self.split_dir, s.strip(), listing, line=number)]
         else:
             names = sorted(p.name for p in self.split_dir.iterdir()
                            if (p / "groundtruth.txt").is_file())

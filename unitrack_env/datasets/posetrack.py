@@ -20,6 +20,7 @@ from unitrack_env.datasets.posetrack_records import (
     PoseTrackVideo,
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.io import path_inside
 
 __all__ = ["PoseTrackDataset", "PoseTrackSequence", "images_from_files", "locate_data_folder"]
 
@@ -131,7 +132,8 @@ class PoseTrackDataset:
         if annotation.is_file():
             video = read_posetrack_json(annotation)
             images = tuple(video.images)
-            paths = tuple(self._frame_path(annotation, name, image) for image in images)
+            paths = tuple(self._frame_path(annotation, name, image, k)
+                          for k, image in enumerate(images))
             _warn_other_video(annotation, name, paths, self.image_dir / name)
         else:
             video, annotation = None, None
@@ -149,8 +151,9 @@ class PoseTrackDataset:
             size = read_image_size(paths[0])
         return PoseTrackSequence(name, self.split, images, paths, video, size, annotation)
 
-    def _frame_path(self, annotation: Path, name: str, image: PoseTrackImage) -> Path:
-        path = self.data_dir / image.file_name
+    def _frame_path(self, annotation: Path, name: str, image: PoseTrackImage, k: int) -> Path:
+        path = path_inside(self.data_dir, image.file_name, annotation,
+                           field=f"images[{k}].file_name")
         if path.is_file():
             return path
         fallback = self.image_dir / name / Path(image.file_name).name

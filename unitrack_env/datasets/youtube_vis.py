@@ -18,6 +18,7 @@ import numpy as np
 from unitrack_env.datasets.limits import check_id, check_image_size, check_track_total
 from unitrack_env.datasets.rle import check_rle
 from unitrack_env.errors import DataFormatError
+from unitrack_env.io import path_inside
 
 #: Splits of the 2019 release.
 SPLITS = ("train", "valid", "test")
@@ -319,6 +320,10 @@ class YouTubeVISDataset:
             self.root / f"{split}.json"
         self.image_root = self.root / split / IMAGE_FOLDER
         self.data = parse_vis_json(self.annotation_path)
+        for i, video in enumerate(self.data.videos):  # frames are read from inside the root
+            for j, name in enumerate(video.file_names):
+                path_inside(self.image_root, name, self.annotation_path,
+                            field=f"videos[{i}].file_names[{j}]")
         self.detections = detections
         self.sequence_names = [v.name for v in self.data.videos]
         self._detections: dict[int, list[VisTrack]] | None = None
