@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from unitrack_env.io import atomic_write_text
+from unitrack_env.io import LinkRefused, atomic_write_text, path_inside, refuse_link
 
 try:  # POSIX; elsewhere the lock relies on the recorded pid alone
     import fcntl
@@ -38,7 +38,8 @@ class OutputInUse(RuntimeError):
         self.folder, self.holder = Path(folder), holder
         who = holder.describe() if holder is not None else "another process (unknown)"
         super().__init__(f"{folder} is in use by another run: {who}; wait for it to finish, "
-                         "or choose another --out")
+                         f"or choose another --out (if no run is writing there, delete its "
+                         f"lock file {Path(folder) / LOCK})")
 
     def __reduce__(self) -> tuple[Any, ...]:
         return (type(self), (self.folder, self.holder))
@@ -87,7 +88,25 @@ class Holder:
             return False
         except PermissionError:
             pass  # another user's live process
-        return not (self.started and _process_start(self.pid) not in ("", self.started))
+        if self.started:  # a recycled pid has another start time
+            return _process_start(self.pid) in ("", self.started)
+        return _runs_command(self.pid, self.command) is not False
+
+
+def _runs_command(pid: int, command: str) -> bool | None:
+    """Whether process ``pid`` may run the program of ``command`` (None: cannot tell).
+
+    A lock without a start time (older, or hand-made) whose pid now belongs to an unrelated
+    process is stale: a process that is no Python interpreter and whose first arguments do
+    not name the program the lock names (``unitrack``) cannot be a run of ours.
+    """
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[:2]
+    except OSError:
+        return None
+    names = {Path(a.decode("utf-8", "replace")).name for a in argv if a}
+    return command.split(" ", 1)[0] in names or any(
+        n.startswith(("python", "pypy")) for n in names)
 
 
 def _process_start(pid: int) -> str:
@@ -111,7 +130,13 @@ class FolderLock:
         """Take the lock; return the dead holder it took over, if any (else None)."""
         self.folder.mkdir(parents=True, exist_ok=True)
         for _ in range(5):
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:  # never through a link: the lock's JSON would land in the linked file
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0),
+                             0o644)
+            except OSError as exc:
+                if self.path.is_symlink():
+                    raise LinkRefused(self.path) from exc
+                raise
             try:
                 if not self._flock(fd):
                     raise OutputInUse(self.folder, Holder.parse(_read_fd(fd)))
@@ -232,11 +257,16 @@ class Manifest:
             return cls(Path(folder))
         try:
             data = json.loads(path.read_text())
-            if data.get("written_by") == "unitrack-env":
-                return cls(Path(folder), set(map(str, data["files"])),
-                           set(map(str, data["playing"])), True)
+            ours = data.get("written_by") == "unitrack-env"
+            files, playing = list(data["files"]), list(data["playing"])
         except (OSError, ValueError, TypeError, AttributeError, KeyError):
-            pass
+            ours = False
+        if ours:  # its entries are data: each must name a file inside the folder
+            for key, entries, inside in (("files", files, folder),
+                                         ("playing", playing, Path(folder) / "sequences")):
+                for k, entry in enumerate(entries):
+                    path_inside(inside, entry, path, field=f"{key}[{k}]")
+            return cls(Path(folder), set(files), set(playing), True)
         raise ValueError(f"{path} is not a manifest of unitrack-env (another tool's file, or "
                          "damaged), so it cannot say which files runs of ours wrote; move it "
                          "away or choose another --out")
@@ -315,12 +345,28 @@ def settle(manifest: Manifest, sequence: str, names: Iterable[str]) -> None:
     manifest.save()
 
 
+#: The files a run writes, by sub-folder ("": the folder itself): all ``--overwrite`` deletes.
+WRITTEN = {"": ("run.json", "metrics.json"), "data": (".txt", ".json", ".png", ".mat"),
+           "sequences": (".json",), "events": (".csv.gz",)}
+
+
+def written_by_runs(out: Path, path: Path) -> bool:
+    """Whether ``path`` is of a kind a run writes, where it writes it, in the real ``out``."""
+    parts = Path(os.path.relpath(path, out)).parts
+    kinds = WRITTEN.get(parts[0] if len(parts) > 1 else "", ())
+    real = os.path.realpath(out)
+    return (".." not in parts and parts[-1].endswith(kinds)
+            and os.path.realpath(path.parent).startswith(real.rstrip(os.sep) + os.sep)
+            if len(parts) > 1 else parts[0] in kinds)
+
+
 def clear_ours(manifest: Manifest, names: Iterable[str]) -> list[str]:
-    """Delete every file of ours (``--overwrite``); return the other files, which are kept."""
+    """Delete the listed files that :func:`written_by_runs` (``--overwrite``); return the rest."""
     out = manifest.folder
     for path in owned_files(manifest, names):
-        with contextlib.suppress(FileNotFoundError):
-            path.unlink()
+        if written_by_runs(out, path):
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
     for sub in ("data", "sequences", "events"):
         for root, _, _ in sorted(os.walk(out / sub), key=lambda item: -len(item[0])):
             with contextlib.suppress(OSError):
@@ -372,6 +418,8 @@ def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: boo
 
     every = list(every)
     try:
+        for name in (MANIFEST, "run.json", "metrics.json", "data", "sequences", "events"):
+            refuse_link(out / name)  # a link where a run writes (a folder, too) is refused
         manifest = Manifest.load(out)  # a foreign manifest.json: ValueError, a clear refusal
         listed = {manifest.folder / rel for rel in manifest.files}
         unlisted = [n for n in every if _record(out, n).is_file() and _record(out, n) not in listed]

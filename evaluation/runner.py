@@ -184,8 +184,15 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
                     "combined": scores.combined, "combined_covers": scores.coverage_json()}
     else:
         payload["note"] = "this split has no ground truth; results were written, not scored"
-    atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
-                                                       allow_nan=False))
+    try:
+        atomic_write_text(out / "metrics.json", json.dumps(json_safe(payload), indent=2,
+                                                           allow_nan=False))
+    except OSError as exc:  # a full disk: one sentence, and the results stay
+        raise OutputError(exc.errno, f"cannot write {out / 'metrics.json'}: "
+                                     f"{exc.strerror or exc}; the results of the "
+                                     f"{len(records)} finished sequence(s) are kept in "
+                                     f"{out / 'data'}: free space and run the same command "
+                                     "again to score them") from exc
     if scores is not None:  # per-frame error events beside the results (never fails the run)
         from .events import write_run_events
 
