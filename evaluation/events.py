@@ -5,6 +5,7 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import warnings
@@ -16,6 +17,7 @@ import pandas as pd
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.datasets.mots_format import CLASS_IDS
+from unitrack_env.io import atomic_write_bytes, path_inside
 from unitrack_env.metrics.events_mot import (
     EVENT_COLUMNS,
     ID_COLUMNS,
@@ -50,11 +52,18 @@ def run_benchmark(run: str | os.PathLike) -> Benchmark:
 
 
 def run_sequences(run: str | os.PathLike) -> list[str]:
-    """The scored sequences of a run (``metrics.json``'s per-sequence rows)."""
+    """The scored sequences of a run (``metrics.json``'s per-sequence rows).
+
+    Each name becomes a file name (``events/<name>.csv.gz``) and a data set's folder: one
+    that is absolute or climbs out with ``..`` is refused (DataFormatError naming it).
+    """
     path = Path(run) / "metrics.json"
     if not path.is_file():
         raise FileNotFoundError(f"{path}: the run has no metrics (not finished or not scored)")
-    return list(json.loads(path.read_text(encoding="utf-8")).get("per_sequence", {}))
+    names = list(json.loads(path.read_text(encoding="utf-8")).get("per_sequence", {}))
+    for name in names:
+        path_inside(Path(run) / EVENTS_DIR, name, path, field=f"per_sequence[{name!r}]")
+    return names
 
 
 def sequence_events(bench: Benchmark, folder: str | os.PathLike, sequence: str) -> EventRows:
@@ -148,13 +157,12 @@ def write_sequence_events(run: str | os.PathLike, bench: Benchmark, sequence: st
     """Compute and write ``<run>/events/<sequence>.csv.gz`` (atomically); return its path."""
     df = to_frame(sequence_events(bench, Path(run) / "data", sequence))
     path = events_path(run, sequence)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
+    buffer = io.BytesIO()
     # mtime 0: the same events give the same bytes, so scoring a stored run again (a
     # committed scorecard) leaves its files untouched
-    df.to_csv(tmp, index=False, compression={"method": "gzip", "mtime": 0},
+    df.to_csv(buffer, index=False, compression={"method": "gzip", "mtime": 0},
               float_format="%.4f")
-    os.replace(tmp, path)
+    atomic_write_bytes(path, buffer.getvalue())  # a new temporary file, never via a link
     return path
 
 

@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
+from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
+
 from ..compare import COMPARE_TASKS
-from ..events import load_events, run_benchmark
+from ..events import load_events, run_benchmark, run_sequences
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, render_picture, sample
 
@@ -175,7 +176,7 @@ def scorecard_section(folder: Path, out: Path) -> str:
     for ext in ("svg", "png"):
         src = folder / f"scorecard.{ext}"
         if src.is_file():
-            shutil.copyfile(src, out / src.name)
+            atomic_write_bytes(out / src.name, src.read_bytes())
             radar = f'<p><img src="{src.name}" alt="radar chart" style="max-width:600px"></p>'
             break
     return ('<h2 id="scorecard">Scorecard</h2>' + table(headers, rows, table_id="metrics-table")
@@ -207,7 +208,13 @@ def _legend() -> str:
 
 def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
                  resamples: int = 500) -> Path:
-    """Write ``out/index.html`` for run folders (or one scorecard folder); return its path."""
+    """Write ``out/index.html`` for run folders (or one scorecard folder); return its path.
+
+    Raises:
+        FileExistsError: ``out`` holds an ``index.html`` (or radar chart) that is not an
+            earlier report's; nothing of the user's is replaced.
+    """
+    check_report_folder(out)
     out.mkdir(parents=True, exist_ok=True)
     if len(runs) == 1 and (runs[0] / "scorecard.json").is_file():
         body = [f"<h1>Scorecard report: {esc(runs[0].name)}</h1>",
@@ -220,6 +227,7 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
             raise FileNotFoundError(f"{metrics_path}: not a finished run of `unitrack evaluate`")
         spec = json.loads((run / "run.json").read_text(encoding="utf-8"))
         label = f"{run.name} ({spec.get('agent', '?')})"
+        run_sequences(run)  # its sequence names are checked before any is used as a path
         loaded.append((label, run, run_benchmark(run),
                        json.loads(metrics_path.read_text(encoding="utf-8"))))
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
@@ -241,11 +249,27 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
     return _write(out, "unitrack report", body)
 
 
+#: What an ``index.html`` of ours holds near its top (pages before it: their title).
+OURS = ("<meta name=\"generator\" content=\"unitrack-env\">", "<title>unitrack ")
+
+
+def check_report_folder(out: Path) -> None:
+    """Refuse a report folder whose page or radar chart a report of ours did not write."""
+    index = out / "index.html"
+    for path in (index, out / "scorecard.svg", out / "scorecard.png"):
+        refuse_link(path)
+    head = index.read_text(encoding="utf-8", errors="replace")[:4000] if index.is_file() else ""
+    theirs = [p.name for p in (index, out / "scorecard.svg", out / "scorecard.png")
+              if p.exists() and not any(mark in head for mark in OURS)]
+    if theirs:
+        raise FileExistsError(f"{out} holds {', '.join(theirs)}, which no report of ours wrote "
+                              "(the report would replace it); it is kept: choose another "
+                              "--out, or move it away")
+
+
 def _write(out: Path, title: str, body: list[str]) -> Path:
     index = out / "index.html"
-    tmp = index.with_suffix(".html.tmp")
-    tmp.write_text(page(title, body), encoding="utf-8")
-    tmp.replace(index)
+    atomic_write_text(index, page(title, body))  # a new file renamed in place, never via a link
     return index
 
 

@@ -55,6 +55,7 @@ def page(title: str, body: Iterable[str]) -> str:
     """A whole HTML document with the inline CSS and JS."""
     return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<meta name=\"viewport\" content=\"width=device-width\">"
+            f"<meta name=\"generator\" content=\"unitrack-env\">"
             f"<title>{esc(title)}</title><style>{CSS}</style></head><body>\n"
             + "\n".join(body) + f"\n<script>{JS}</script></body></html>\n")
 

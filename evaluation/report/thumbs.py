@@ -8,11 +8,14 @@ drawn once and reused when the report is rebuilt.
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 from PIL import Image, ImageDraw
+
+from unitrack_env.io import atomic_write_bytes, refuse_link
 
 GT_COLOUR = (0, 220, 0)
 TRACK_COLOUR = (255, 0, 0)
@@ -103,11 +106,13 @@ def render_picture(frame_path: Path, frame_events: pd.DataFrame, out: Path, name
         small = img.crop(crop)
         small = small.resize((THUMB_WIDTH, max(1, round(small.height * THUMB_WIDTH
                                                          / small.width))))
-        out.mkdir(parents=True, exist_ok=True)
-        small.save(thumb, quality=90)
+        refuse_link(out)  # pictures go in a folder of the report's, never via a link
         if img.width > FULL_WIDTH:
             img = img.resize((FULL_WIDTH, round(img.height * FULL_WIDTH / img.width)))
-        img.save(full, quality=80)
+        for picture, path, quality in ((small, thumb, 90), (img, full, 80)):
+            data = io.BytesIO()
+            picture.save(data, format="JPEG", quality=quality)
+            atomic_write_bytes(path, data.getvalue())
     return f"{out.name}/{thumb.name}", f"{out.name}/{full.name}"
 
 
