@@ -164,4 +164,9 @@ def run_cache_command(args: argparse.Namespace, console: Console) -> int:
         entries, size = cache.clear()
         console.print(f"removed {entries} entries ({format_size(size)}) from {cache.root}",
                       highlight=False)
+        if cache.kept:  # what the cache did not write is not its to delete
+            shown = ", ".join(os.path.relpath(p, cache.root) for p in cache.kept[:5])
+            more = f" and {len(cache.kept) - 5} more" if len(cache.kept) > 5 else ""
+            console.print(f"kept {len(cache.kept)} file(s) in {cache.root} that the cache did "
+                          f"not write: {shown}{more}", highlight=False)
     return 0

@@ -111,7 +111,8 @@ def _as_float32(array: np.ndarray) -> torch.Tensor:
 def _subdirs(folder: Path) -> list[Path]:
     try:
         with os.scandir(folder) as items:
-            return sorted(Path(i.path) for i in items if i.is_dir() and not i.name.startswith("."))
+            return sorted(Path(i.path) for i in items  # a link is not the cache's: not followed
+                          if i.is_dir(follow_symlinks=False) and not i.name.startswith("."))
     except (FileNotFoundError, NotADirectoryError):
         return []
 

@@ -11,7 +11,6 @@ import contextlib
 import json
 import os
 import re
-import shutil
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -44,6 +43,54 @@ the cap (so that a full cache does not evict on every write)."""
 
 STALE_TEMP_SECONDS: float = 3600.0
 """Temporary files older than this are leftovers of killed writers; eviction removes them."""
+
+#: Names of what the cache writes: it deletes nothing else (``clear``, ``prune``).
+_NAMESPACE = re.compile(r"[A-Za-z0-9._-]+-\d+x\d+-[a-z]+\d*")
+_SHARD = re.compile(r"[0-9a-f]{2}")
+_ENTRY = re.compile(r"[0-9a-f]{4,128}" + re.escape(_ENTRY_SUFFIX))
+_TEMPORARY = re.compile(r"\..+\.[A-Za-z0-9_]+\.tmp")
+_RUN_RECORD = re.compile(r"\d{13}-\d+-[0-9a-f]{6}\.json")
+_LAYOUT = re.compile(r"v\d+")
+_TAG_MARK = "created by unitrack-env (feature cache)"
+
+
+def _layout_file(parts: tuple[str, ...]) -> bool:
+    """Whether ``<layout>/<parts>`` is named as the cache names its files."""
+    if len(parts) == 3:
+        return bool(_NAMESPACE.fullmatch(parts[0]) and _SHARD.fullmatch(parts[1]) and (
+            _TEMPORARY.fullmatch(parts[2])
+            or (_ENTRY.fullmatch(parts[2]) and parts[2].startswith(parts[1]))))
+    return len(parts) == 2 and bool(_NAMESPACE.fullmatch(parts[0])) and (
+        parts[1] == "model.json" or bool(_TEMPORARY.fullmatch(parts[1])))
+
+
+def _run_file(parts: tuple[str, ...]) -> bool:
+    return len(parts) == 1 and bool(_RUN_RECORD.fullmatch(parts[0])
+                                    or _TEMPORARY.fullmatch(parts[0]))
+
+
+def _remove_named(top: Path, ours: Any) -> list[Path]:
+    """Delete the files under ``top`` that ``ours(parts)`` names, then empty folders.
+
+    Links are never followed nor deleted; returns what was kept (not the cache's).
+    """
+    kept: list[Path] = []
+    if top.is_symlink() or not top.is_dir():
+        return [top] if top.is_symlink() else []
+    for folder, dirs, files in os.walk(top, topdown=False):
+        rel = Path(folder).relative_to(top).parts
+        kept += [Path(folder) / d for d in dirs if (Path(folder) / d).is_symlink()]
+        for name in files:
+            path = Path(folder) / name
+            if path.is_symlink() or not ours((*rel, name)):
+                kept.append(path)
+                continue
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+        with contextlib.suppress(OSError):
+            Path(folder).rmdir()  # only an empty folder goes
+    return kept
+
 
 _CACHEDIR_TAG = (
     "Signature: 8a477f597d28d172789f06886806bc55\n"
@@ -91,6 +138,8 @@ class CacheFolder:
             raise ValueError(f"cache dtype must be a float type, got {self.dtype}")
         self.stats = CacheStats()
         self._namespaces: set[str] = set()
+        self.kept: list[Path] = []
+        """Files the last :meth:`clear` left because the cache did not write them."""
 
     # -- paths
     @property
@@ -184,22 +233,41 @@ class CacheFolder:
         """Every entry (and, optionally, removal of stale temporary files)."""
         found: list[_Entry] = []
         stale_before = time.time() - STALE_TEMP_SECONDS
+        if self.entries_dir.is_symlink():  # not a folder of the cache's: never followed
+            return found
         for folder in _subdirs(self.entries_dir):
             for shard in _subdirs(folder):
                 with contextlib.suppress(FileNotFoundError), os.scandir(shard) as items:
                     for item in items:
+                        parts = (folder.name, shard.name, item.name)
                         try:
-                            info = item.stat()
+                            info = item.stat(follow_symlinks=False)
                         except FileNotFoundError:
                             continue
+                        if item.is_symlink() or not _layout_file(parts):
+                            continue  # not named as the cache names its files: not its
                         if item.name.startswith("."):
                             if remove_stale and info.st_mtime < stale_before:
                                 with contextlib.suppress(OSError):
                                     os.unlink(item.path)
                             continue
-                        if item.name.endswith(_ENTRY_SUFFIX):
-                            found.append(_Entry(Path(item.path), info.st_size, info.st_mtime_ns))
+                        found.append(_Entry(Path(item.path), info.st_size, info.st_mtime_ns))
         return found
+
+    def is_cache(self) -> bool:
+        """Whether the folder holds the ``CACHEDIR.TAG`` a cache of ours writes first."""
+        tag = self.root / "CACHEDIR.TAG"
+        try:
+            with open(tag, encoding="utf-8", errors="replace") as handle:
+                return not tag.is_symlink() and _TAG_MARK in handle.read(1000)
+        except OSError:
+            return False
+
+    def _refuse_foreign(self) -> None:
+        if not self.is_cache():
+            raise ValueError(f"{self.root} is not a feature cache of unitrack-env (it has no "
+                             "CACHEDIR.TAG written by one), so nothing was removed; give "
+                             "--dir the cache's own folder (`unitrack cache info` names it)")
 
     def _evict_locked(self, target: int) -> tuple[int, int]:
         """Remove least recently used entries until at most ``target`` bytes remain."""
@@ -243,7 +311,7 @@ class CacheFolder:
                 with contextlib.suppress(FileNotFoundError):
                     temp += sum(1 for p in os.listdir(shard) if p.startswith("."))
         total = sum(e.size for e in entries)
-        if self.root.is_dir():
+        if self.is_cache():  # (another folder gets no usage.json nor lock file)
             with contextlib.suppress(OSError), self._lock():
                 self._write_usage_locked(*self._count_locked())
         return CacheUsage(self.root, len(entries), total,
@@ -258,6 +326,7 @@ class CacheFolder:
         limit = self.max_size if max_size is None else parse_size(max_size)
         if not self.root.is_dir():
             return 0, 0
+        self._refuse_foreign()
         before = self.stats.copy()
         with self._lock():
             total, entries = self._evict_locked(limit)
@@ -266,16 +335,20 @@ class CacheFolder:
         return after.evicted, after.evicted_bytes
 
     def clear(self) -> tuple[int, int]:
-        """Remove every entry and the run statistics. Returns (entries, bytes) removed."""
+        """Remove every entry and the run statistics. Returns (entries, bytes) removed.
+
+        Only files named as the cache names them go, in its layouts (``v2``, older ``v1``)
+        and ``runs``; :attr:`kept` lists the others. A folder without the cache's
+        ``CACHEDIR.TAG`` is refused (ValueError) and left as it is.
+        """
         if not self.root.is_dir():
             return 0, 0
+        self._refuse_foreign()
         with self._lock():
             entries = self._scan()
-            for name in (self.entries_dir, self.root / "runs"):
-                shutil.rmtree(name, ignore_errors=True)
-            for old in self.root.glob("v*"):  # layouts of older versions
-                if old.is_dir() and re.fullmatch(r"v\d+", old.name):
-                    shutil.rmtree(old, ignore_errors=True)
+            layouts = [p for p in sorted(self.root.iterdir()) if _LAYOUT.fullmatch(p.name)]
+            self.kept = [path for top in layouts for path in _remove_named(top, _layout_file)]
+            self.kept += _remove_named(self.root / "runs", _run_file)
             self._write_usage_locked(0, 0)
         self._namespaces.clear()
         return len(entries), sum(e.size for e in entries)
