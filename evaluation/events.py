@@ -62,7 +62,7 @@ def run_sequences(run: str | os.PathLike) -> list[str]:
         raise FileNotFoundError(f"{path}: the run has no metrics (not finished or not scored)")
     names = list(json.loads(path.read_text(encoding="utf-8")).get("per_sequence", {}))
     for name in names:
-        path_inside(Path(run) / EVENTS_DIR, name, path, field=f"per_sequence[{name!r}]")
+        path_inside(Path(run) / EVENTS_DIR, name, path, field="per_sequence")
     return names
 
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
 from .compare import (
@@ -222,6 +223,6 @@ def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
     lines += ["", "Delete-a-block jackknife over frames (blocks of a fifth of each sequence, "
               "t 95% intervals); see docs/report.md."]
     paths = [Path(out) / "scorecard_ci.md", Path(out) / "scorecard_ci.json"]
-    paths[0].write_text("\n".join(lines) + "\n", encoding="utf-8")
-    paths[1].write_text(json.dumps(payload, indent=2), encoding="utf-8")
+    atomic_write_text(paths[0], "\n".join(lines) + "\n")  # never through a link
+    atomic_write_text(paths[1], json.dumps(payload, indent=2))
     return paths

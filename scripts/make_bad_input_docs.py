@@ -95,6 +95,10 @@ def row_key(case: object) -> list[str]:
     return [f"`{case.id}`", _cell(case.what), kind, expected.replace("|", "\\|")]
 
 
+#: Sections after this line are written by hand (hostile folders, ...): kept when regenerated.
+HAND_WRITTEN = "<!-- Written by hand below: scripts/make_bad_input_docs.py keeps it. -->"
+
+
 def render(results: dict[str, object]) -> str:
     """The page for ``results`` (``{case id: Outcome}``)."""
     cases = load_cases()
@@ -118,7 +122,9 @@ def render(results: dict[str, object]) -> str:
             cells = [*row_key(case), before.get(case.id, "new"), outcome.verdict,
                      _cell(outcome.message)]
             lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    text = PAGE.read_text() if PAGE.is_file() else ""
+    tail = "\n" + text[text.index(HAND_WRITTEN):] if HAND_WRITTEN in text else ""
+    return "\n".join(lines) + "\n" + tail
 
 
 def parse_rows(text: str) -> dict[str, list[str]]:

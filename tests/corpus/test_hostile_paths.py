@@ -272,7 +272,7 @@ def test_metrics_sequence_outside_the_run_is_refused(run_copy: Path, where: str,
             "report": ("report", run_copy, "--out", run_copy.parent / "report")}[command]
     code, printed = quiet(*argv)
     assert code == 2, printed
-    assert "metrics.json, field 'per_sequence[" in printed and repr(key) in printed
+    assert "metrics.json, field 'per_sequence': " in printed and repr(key) in printed
     unchanged(secret)
     assert sorted(elsewhere.iterdir()) == sorted(secret)
     assert not (elsewhere / "seq.csv.gz").exists()
