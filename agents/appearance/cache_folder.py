@@ -255,11 +255,22 @@ class CacheFolder:
         return found
 
     def is_cache(self) -> bool:
-        """Whether the folder holds the ``CACHEDIR.TAG`` a cache of ours writes first."""
+        """Whether the folder holds the ``CACHEDIR.TAG`` a cache of ours writes first.
+
+        A folder holding only what a cache writes before its first entry (run records,
+        ``usage.json``, the lock), or nothing, counts too.
+        """
         tag = self.root / "CACHEDIR.TAG"
         try:
             with open(tag, encoding="utf-8", errors="replace") as handle:
                 return not tag.is_symlink() and _TAG_MARK in handle.read(1000)
+        except OSError:
+            pass
+        try:
+            runs = self.root / "runs"
+            records = os.listdir(runs) if runs.is_dir() and not runs.is_symlink() else []
+            return set(os.listdir(self.root)) <= {"runs", "usage.json", ".lock"} and all(
+                _run_file((name,)) for name in records)
         except OSError:
             return False
 
