@@ -427,7 +427,8 @@ def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: boo
         if overwrite and (kept := clear_ours(manifest, every)):
             warnings.warn(kept_message(out, kept), UserWarning, stacklevel=3)
     except OSError as exc:
-        raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
+        raise OutputError(exc.errno, f"cannot write to {exc.filename or out}: "
+                                     f"{exc.strerror or exc}") from exc
     blocked = in_the_way(manifest, names, every)
     if blocked:
         raise OutputError(in_the_way_message(out, blocked))

@@ -105,7 +105,8 @@ def save_episode(out: Path, env: gym.Env, record: SequenceRecord,
                           json.dumps(record.to_json(), indent=2))
     except OSError as exc:
         raise OutputError(exc.errno, f"cannot write the results of '{record.sequence}' to "
-                                     f"{out}: {exc.strerror or exc}") from exc
+                                     f"{exc.filename or out}: {exc.strerror or exc}; finished "
+                                     "sequences are kept") from exc
 
 
 def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int,
@@ -150,7 +151,8 @@ def _prepare_out(out: Path, spec: RunSpec, overwrite: bool, manifest: Manifest) 
         manifest.add(run_file)
         atomic_write_text(run_file, json.dumps(spec.to_json(), indent=2))
     except OSError as exc:
-        raise OutputError(exc.errno, f"cannot write to {out}: {exc.strerror or exc}") from exc
+        raise OutputError(exc.errno, f"cannot write to {exc.filename or out}: "
+                                     f"{exc.strerror or exc}") from exc
 
 
 def _sequence_lengths(bench: Benchmark, todo: list[str]

@@ -413,3 +413,44 @@ def test_disk_full_while_metrics_are_written(run_copy: Path, monkeypatch: pytest
     assert f"cannot write {run_copy / 'metrics.json'}: No space left on device" in printed
     assert "finished sequence(s) are kept" in printed
     assert results.read_bytes() == before  # the finished results stay (played again, same)
+
+
+def test_disk_full_names_the_file_an_atomic_write_was_writing(tmp_path: Path,
+                                                              monkeypatch: pytest.MonkeyPatch):
+    """ENOSPC while writing: the error names the file; the old file and no temporary stay."""
+    import errno
+
+    from unitrack_env import io as unitrack_io
+
+    target = tmp_path / "metrics.json"
+    target.write_text("old\n")
+
+    class Full(io.BytesIO):
+        def write(self, data):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def fdopen(fd, *args, **kwargs):
+        os.close(fd)
+        return Full()
+
+    monkeypatch.setattr(unitrack_io.os, "fdopen", fdopen)
+    with pytest.raises(OSError) as caught:
+        unitrack_io.atomic_write_text(target, "new\n")
+    assert caught.value.errno == errno.ENOSPC and caught.value.filename == str(target)
+    assert target.read_text() == "old\n" and sorted(tmp_path.iterdir()) == [target]
+
+
+def test_disk_full_while_a_result_is_written(run_copy: Path, monkeypatch: pytest.MonkeyPatch):
+    """ENOSPC on a result file: one sentence naming the file (as atomic writes name it)."""
+    import errno
+
+    from unitrack_env.benchmarks import motchallenge
+
+    def full(path, text):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(motchallenge, "atomic_write_text", full)
+    code, printed = _evaluate(run_copy, "--overwrite")
+    assert code == 2, printed
+    assert (f"cannot write the results of '{MOT_SEQ}' to {run_copy / 'data' / MOT_SEQ}.txt: "
+            "No space left on device; finished sequences are kept") in printed
