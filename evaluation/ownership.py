@@ -138,6 +138,8 @@ class FolderLock:
                     raise LinkRefused(self.path) from exc
                 raise
             try:
+                if os.fstat(fd).st_nlink > 1:  # the lock's JSON would land in another name's file
+                    raise LinkRefused(self.path, "a hard link (the file has other names)")
                 if not self._flock(fd):
                     raise OutputInUse(self.folder, Holder.parse(_read_fd(fd)))
                 if not _same_file(fd, self.path):
@@ -224,7 +226,7 @@ def remove_temporaries(folder: Path, below: Iterable[str] = ("data", "sequences"
     Other subfolders are left alone (a scorecard's cells have locks of their own).
     """
     found = [p for p in _files(folder, recursive=False) if TEMPORARY.match(p.name)]
-    for sub in below:
+    for sub in (s for s in below if not (folder / s).is_symlink()):  # never through a link
         found += [p for p in _files(folder / sub) if TEMPORARY.match(p.name)]
     for path in found:
         with contextlib.suppress(OSError):

@@ -19,9 +19,9 @@ from unitrack_env.errors import DataFormatError
 class LinkRefused(OSError):
     """A symbolic link where a file is to be written: writes never go through links."""
 
-    def __init__(self, path: str | os.PathLike) -> None:
-        self.path = Path(path)
-        super().__init__(errno.ELOOP, f"{self.path} is a symbolic link; unitrack-env never "
+    def __init__(self, path: str | os.PathLike, what: str = "a symbolic link") -> None:
+        self.path, self.what = Path(path), what
+        super().__init__(errno.ELOOP, f"{self.path} is {what}; unitrack-env never "
                                       "writes through a link (it would change the file it "
                                       "points to): remove the link, or choose another folder")
 
@@ -29,7 +29,7 @@ class LinkRefused(OSError):
         return str(self.strerror)
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (type(self), (self.path,))
+        return (type(self), (self.path, self.what))
 
 
 def refuse_link(path: str | os.PathLike) -> None:

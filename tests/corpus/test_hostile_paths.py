@@ -218,6 +218,29 @@ def test_lock_file_link_is_refused(run_copy: Path):
     unchanged(secret)
 
 
+def test_lock_file_hard_link_is_refused(run_copy: Path):
+    """.unitrack.lock a hard link to a user file: O_NOFOLLOW cannot see it, the link count can."""
+    secret = victims(run_copy.parent / "secret", 1)
+    (path,) = secret
+    os.link(path, run_copy / ".unitrack.lock")
+    code, printed = _evaluate(run_copy)
+    assert code == 2, printed
+    assert ".unitrack.lock is a hard link (the file has other names)" in printed
+    unchanged(secret)
+
+
+def test_temporaries_in_a_linked_folder_are_not_removed(run_copy: Path):
+    """A run removes stale temporaries of its own folders, never through a linked data/."""
+    folder = run_copy.parent / "secret"
+    victim = folder / ".notes.txt.abcd1234.tmp"
+    write(victim, "the user's own file\n")
+    shutil.rmtree(run_copy / "data")
+    (run_copy / "data").symlink_to(folder)
+    code, printed = _evaluate(run_copy, "--overwrite")
+    assert code == 2 and f"{run_copy / 'data'} is a symbolic link" in printed, printed
+    assert victim.read_text() == "the user's own file\n"
+
+
 @pytest.mark.parametrize("name", ["metrics.json", "data"])
 def test_link_where_a_run_writes_is_refused(run_copy: Path, name: str):
     secret_dir = run_copy.parent / "secret"
