@@ -17,7 +17,7 @@ from unitrack_env.errors import DataFormatError
 
 
 class LinkRefused(OSError):
-    """A symbolic link where a file is to be written: writes never go through links."""
+    """A link (symbolic, or a lock file's hard link) where a file is to be written: refused."""
 
     def __init__(self, path: str | os.PathLike, what: str = "a symbolic link") -> None:
         self.path, self.what = Path(path), what
