@@ -179,7 +179,7 @@ class Associator(Generic[P]):
         first = now.frame == 1 and cfg.confirm_on_first_frame
         new_tracks = []
         for j in remaining:
-            if now.scores[j] >= cfg.new_track_score:
+            if now.scores[j] >= cfg.new_track_raw_score:
                 track = self._new_track(int(j), now, first)
                 now.matched[int(j)] = track
                 new_tracks.append(track)
