@@ -1,7 +1,21 @@
 """The UniTrack pose-propagation head (``unitrack-pose``): belief maps propagated like masks.
 
-UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E.
-More in docs/module-notes.md.
+UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E. Per video:
+
+1. Each frame is resized to ``input_size`` (the paper's 320 x 320; None: native) and goes
+   once through the backbone.
+2. At reset each of the ``J`` joints becomes a Gaussian belief map on the feature grid with
+   ``sigma = max(eta * s_body, 0.5)`` feature pixels (``eta = 0.01``, ``s_body`` the larger
+   side of the joints' box; the floor is half a cell, as sharp as the grid allows).
+3. Later frames: the ``J`` maps are propagated together by
+   :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`.
+4. Decoding: the argmax of each map refined by a soft-argmax over its
+   ``(2 refine_radius + 1)^2`` neighbourhood (sub-cell positions, not pulled by far-away
+   secondary modes as a global soft-argmax would); a map whose peak is below ``min_peak``
+   keeps the joint's previous position.
+
+Keypoints are ``(x, y)`` 0-based pixels with integer centres; feature cell ``j`` of ``n``
+cells over ``N`` pixels is centred at ``(j + 0.5) * N / n - 0.5`` (``align_corners=False``).
 """
 
 from __future__ import annotations

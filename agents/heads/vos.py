@@ -1,6 +1,17 @@
 """The UniTrack VOS head: mask propagation with the shared appearance model (``unitrack-vos``).
 
-More in docs/module-notes.md.
+Per video (paper section 2.3, appendix B.2; ``OFFICIAL-CODE-FACTS.md``, "Mask and pose
+propagation"): at reset the first frame's labels (0 background, ``k`` object ``k``, 255 void,
+counted as background) become one-hot channels downsampled bilinearly to the feature grid;
+they and the first frame's features start the memory bank of
+:class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`. The first step
+answers the first frame with the given labels. Every later frame: one backbone pass at full
+resolution, propagation of the soft labels (first frame + 5 latest, radius 12 cells at
+stride 8, i.e. 96 pixels at any stride, top-10, temperature 0.05), bilinear upsampling to
+the frame, argmax. The propagation's options (shared with ``unitrack-pose``) include
+``propagation_precision="bf16"``: measured the same J&F and PCK on the fixtures, refused
+before the first frame on a CPU without native bfloat16 (docs/design-decisions.md, "Label
+propagation: precision").
 """
 
 from __future__ import annotations

@@ -18,8 +18,8 @@ from unitrack_env.agents.primitives.box_propagation import (
     BoxPropagationConfig,
     BoxPropagator,
     BoxState,
+    XCorrHead,
 )
-from unitrack_env.agents.primitives.box_response import XCorrHead
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
 from unitrack_env.evaluation.scorecard_plan import ModelSpec
 
