@@ -87,37 +87,40 @@ PRESETS: Mapping[str, Mapping[str, TaskValues]] = MappingProxyType(
 class UniTrackConfig(AppearanceSpec):
     """Options of the ``unitrack`` agent: ``name: type = default`` [paper value].
 
-    None in a ``*`` row: the preset's value on the task (``PRESETS``; MOT / MOTS / VIS+pose).
+    ``*``: None means the preset's value on the task (:data:`PRESETS`), written
+    MOT / MOTS / VIS / PoseTrack; the default preset departs from the paper on MOT only.
 
     Appearance: weights="imagenet-lite0", arch, layer, remap="auto", device="cpu",
     runtime, stride, num_threads (torch threads while acting): see :class:`AppearanceSpec`.
 
     ``task: str | None = None``  mot / mots / vis / posetrack; None: the environment's.
-    ``preset: str = "default"``  "default" (paper + 5 MOT departures) or "paper" [paper].
+    ``preset: str = "default"``  "default" (paper + 5 MOT departures) or "paper".
     ``similarity: str | callable = "rsm"`` [rsm]; "cf", "gf", "gpf" or ``(tracks, dets)``.
     ``input_size = (1088, 608)``  (width, height) of the letterboxed input [1088 x 608].
     ``roi_size = (10, 4)``, ``roi_sampling_ratio = 2``  RoIAlign grid and samples [same].
     ``pixel_origin: float = 1.0``  coordinate of the first pixel of boxes [MOTChallenge 1].
     ``feature_cache = True``  user cache folder, a folder, or False; ``feature_cache_size``.
     ``mask_box = "mad"`` [mad] or "tight"; ``min_keypoint_score = 0.0`` [0]: poses to masks.
-    ``max_mask_area: int | None`` *  location features per mask [None / 200 / 1000 / 200].
+    ``max_mask_area: int | None`` *  features per mask [- / 200 / 1000 / 200].
     ``category_gating: bool | None`` *  match within a class only [off / off / on / off].
     ``use_motion: bool = True``  fuse Kalman motion [True; False: paper's "w/o motion"].
     ``appearance_weight = 0.99``  lambda in lambda C_a + (1 - lambda) C_m [0.99].
-    ``gate: bool | None`` *  Mahalanobis gate [on / off / off]; ``gate_threshold = 9.4877``.
+    ``gate: bool | None`` *  Mahalanobis gate [on / off / off / off];
+    ``gate_threshold = 9.4877``  its chi-square 0.95 limit [9.4877].
     ``appearance_threshold = 0.7``  stage-1 fused-cost limit [code 0.7].
     ``reid_threshold: float | None = None``  stricter limit for lost tracks; None: as above.
-    ``ambiguity_margin: float | None`` *  ratio test of stage 1 [0; default MOT 0.05].
-    ``appearance_momentum: float | None`` *  track memory average [0; default MOT 0.95].
-    ``iou_threshold = 0.5``  stage-2 IoU [0.5]; ``iou_stage_includes_lost`` * [off; MOT on].
-    ``confirm_iou_threshold: float | None`` *  [0.8 / 0.8 / 0.4; default MOT 0.5].
+    ``ambiguity_margin: float | None`` *  stage-1 ratio test [0; default on MOT 0.05].
+    ``appearance_momentum: float | None`` *  track memory average [0; default on MOT 0.95].
+    ``iou_threshold = 0.5``  stage-2 IoU [0.5];
+    ``iou_stage_includes_lost: bool | None`` *  [off; default on MOT on].
+    ``confirm_iou_threshold: float | None`` *  [0.8 / 0.8 / 0.4 / 0.4; default on MOT 0.5].
     ``new_track_score = 0.5``  least score that starts a track, on 0..1 of the declared
     score range (``info["detection_scores"]``) [code 0.5].
     ``confirm_on_first_frame = True`` [code]; ``lost_seconds = 1.0`` [paper 1 s].
-    ``duplicate_iou: float | None`` *  active/lost duplicates [0.85 / 0.85 / 0.8].
+    ``duplicate_iou: float | None`` *  active/lost duplicates [0.85 / 0.85 / 0.8 / 0.8].
     ``freeze_lost_height_velocity = True`` [code]; ``kalman = KalmanConfig()`` [DeepSORT].
     ``report_filtered_box: bool | None`` *  Kalman box, not detection [on; default MOT off].
-    ``output_filter: bool | None`` *  area > 200 and w/h <= 1.6 [on / off / off].
+    ``output_filter: bool | None`` *  area > 200, w/h <= 1.6 [on / off / off / off].
 
     Which detections the agent sees is the environment's business (its ``min_score``).
     """
