@@ -1,6 +1,13 @@
 """Agents by reference: ``module:Class``, ``path/to/file.py:Class`` and installed plug-ins.
 
-More in docs/module-notes.md.
+Besides a registered name, an agent is named by ``"package.module:ClassName"`` (imported as
+``python -m`` would: the current folder first), ``"path/to/file.py:ClassName"`` (loaded as a
+module, keyed by path and content so an edited file loads anew), or a name an installed
+distribution publishes in the ``unitrack_env.agents`` entry-point group
+(``[project.entry-points."unitrack_env.agents"] my-tracker = "my_package.tracker:MyTracker"``).
+:func:`agent_reference` turns a class back into such a string; the runner stores it in
+``run.json`` so that workers and resumed runs rebuild the same class without the user's
+registry state.
 """
 
 from __future__ import annotations

@@ -137,6 +137,23 @@ def check_options(cls: type, kwargs: Mapping[str, Any], *, agent: str | None = N
                 f"{kind} '{label}' option '{key}' must be {_type_name(options[key])}, "
                 f"got {value!r} ({type(value).__name__})"
             )
+    _check_values(cls, kwargs, label, kind)
+
+
+def _check_values(cls: type, kwargs: Mapping[str, Any], label: str, kind: str) -> None:
+    """Build the agent's ``config_class`` from its options: its checks of the values run now.
+
+    So a value out of range (``duplicate_iou=1.5``) stops the run before anything is built or
+    played, with the config's own message; the agent builds the same config again.
+    """
+    config = getattr(cls, "config_class", None)
+    if config is None or not dataclasses.is_dataclass(config):
+        return
+    names = {item.name for item in dataclasses.fields(config) if item.init}
+    try:
+        config(**{key: value for key, value in kwargs.items() if key in names})
+    except (ValueError, TypeError) as exc:
+        raise AgentOptionError(f"{kind} '{label}': {exc}") from None
 
 
 def parse_options(cls: type, items: Sequence[str], *, agent: str | None = None,

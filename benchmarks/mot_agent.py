@@ -338,15 +338,15 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
             variants += [("preset=paper w/o motion",
                           {"preset": "paper", "use_motion": False})]
             if grid:  # docs/design-decisions.md: appearance memory x ambiguity margin
-                variants += [(f"momentum={m} margin={d}", {"association": {
-                    "appearance_momentum": m, "ambiguity_margin": d}})
+                variants += [(f"momentum={m} margin={d}", {
+                    "appearance_momentum": m, "ambiguity_margin": d})
                     for m, d in GRID]
             if weights == "random":
                 variants = [(n, o) for n, o in variants if "w/o motion" in n]
             for name, options in variants:
                 config = UniTrackConfig(**{**kwargs, **options})
                 m, diags = _replay_scores(recordings,
-                                          config.association_config("mot", declared),
+                                          config.resolve("mot").association(declared),
                                           config.similarity)
                 tag = "" if weights == "imagenet-lite0" else f" [{weights}]"
                 rows.append((label, f"unitrack {name}{tag}", m))

@@ -10,7 +10,7 @@ Parts:
   first frame above a floor) against the one it replaced (``LabelPropagator(reference=True)``:
   keys gathered at every step, plain top-k), side by side and interleaved, on features of
   the real DAVIS frames at 854x480 (default model, computed once): milliseconds per step
-  and per stage (``torch.profiler`` labels of ``agents.primitives.label_search.stage``:
+  and per stage (``torch.profiler`` labels of ``agents.primitives.label_propagation.stage``:
   normalize, gather, affinity, top-k, labels, weights, memory; "matmul" is the time in
   ``aten::mm``/``aten::bmm`` inside them, the floor of any float32 formulation that computes
   the same affinities), and the largest label difference over the recurrent run.
@@ -61,10 +61,10 @@ from unitrack_env.agents.heads.vos import VOID_LABEL, labels_to_onehot
 from unitrack_env.agents.primitives import label_propagation
 from unitrack_env.agents.primitives.label_propagation import (
     CANDIDATE_FACTOR,
+    STAGE_PREFIX,
     LabelPropagationConfig,
     LabelPropagator,
 )
-from unitrack_env.agents.primitives.label_search import STAGE_PREFIX
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import PEAK_RSS_GIB, Timed, timed_acts  # noqa: E402  (a sibling file of this script)

@@ -42,10 +42,10 @@ import torch
 from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.agents.primitives.label_propagation import (
     LabelPropagationConfig,
+    WindowSearch,
+    kth_best,
     normalize_features,
 )
-from unitrack_env.agents.primitives.label_search import kth_best
-from unitrack_env.agents.primitives.label_windows import WindowSearch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from propagation import davis_features  # noqa: E402  (a sibling script)

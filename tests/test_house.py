@@ -1,7 +1,9 @@
 """House rules a maintainer can live with (issue 14), checked on every library file.
 
-* no library module over :data:`MAX_FILE_LINES` lines and no function over
-  :data:`MAX_FUNCTION_LINES` (``end_lineno - lineno + 1``, decorators excluded);
+* no library module over :data:`MAX_FILE_LINES` lines, unless it holds one concept that a
+  split would cut into halves importing each other (:data:`ONE_CONCEPT`, each with its
+  reason and its own cap), and no function over :data:`MAX_FUNCTION_LINES`
+  (``end_lineno - lineno + 1``, decorators excluded);
 * no block of :data:`MIN_BLOCK` or more lines repeated, with the same shape (names, strings and
   numbers aside), between two environments or between two heads: sibling modules that share
   logic share one piece of code;
@@ -26,6 +28,17 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("unitrack_env", "agents", "evaluation")
 MAX_FILE_LINES = 450
 MAX_FUNCTION_LINES = 60
+#: Modules allowed past :data:`MAX_FILE_LINES` because they hold one concept (issue 37: they
+#: were split only to meet the cap, and the halves imported each other): path -> (cap, why).
+#: The cap is the module's size when merged plus some room, so growth is still a decision.
+ONE_CONCEPT: dict[str, tuple[int, str]] = {
+    "agents/primitives/label_propagation.py": (
+        1100, "label propagation: the config, the propagator and the k-NN searches it runs "
+              "(window ring, tiled reference, first-frame floor) share one memory layout"),
+    "agents/primitives/box_propagation.py": (
+        550, "box propagation: the propagator, its config and the crops, windows, XCorr/DCF "
+             "heads and peak it drives (the heads take the propagator's config)"),
+}
 MIN_BLOCK = 6
 #: Sibling groups whose modules must not repeat each other.
 SIBLINGS = ("unitrack_env/envs", "agents/heads")
@@ -112,10 +125,22 @@ def repeated_blocks(paths: list[Path]) -> list[str]:
     return found
 
 
+def file_cap(path: Path) -> int:
+    """The line cap of a library file: :data:`MAX_FILE_LINES`, or its :data:`ONE_CONCEPT` cap."""
+    return ONE_CONCEPT.get(path.relative_to(REPO).as_posix(), (MAX_FILE_LINES, ""))[0]
+
+
 def test_no_library_file_is_too_long():
-    too_long = [f"{path.relative_to(REPO)} ({n} lines)" for path in library_files()
-                if (n := len(path.read_text().splitlines())) > MAX_FILE_LINES]
-    assert not too_long, f"split these modules (> {MAX_FILE_LINES} lines): {too_long}"
+    too_long = [f"{path.relative_to(REPO)} ({n} lines > {file_cap(path)})"
+                for path in library_files()
+                if (n := len(path.read_text().splitlines())) > file_cap(path)]
+    assert not too_long, f"split these modules, or merge what imports each other: {too_long}"
+
+
+def test_one_concept_modules_exist_and_need_their_allowance():
+    for name, (cap, reason) in ONE_CONCEPT.items():
+        lines = len((REPO / name).read_text().splitlines())
+        assert MAX_FILE_LINES < lines <= cap, (name, lines, reason)
 
 
 def test_no_function_is_too_long():

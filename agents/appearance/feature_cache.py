@@ -1,6 +1,30 @@
 """A content-addressed, size-bounded on-disk cache of frame feature maps, on by default.
 
-More in docs/module-notes.md.
+Comparing heads or options on the same frames should not recompute the backbone. An entry
+is addressed by what determines the features, never by where the frame came from: the
+model identity (:attr:`ModelIdentity.key`), the network input ``H x W`` and on-disk dtype,
+and a full hash of the decoded frame (SHA-256 of its bytes, shape, dtype and transform tag;
+128 bits kept). Identical frames share one entry across sequences, MOT17's detector
+variants, data sets and tasks. Layout under the root: ``CACHEDIR.TAG``, ``.lock``,
+``usage.json``, ``v2/<model key>-<H>x<W>-<dtype>/{model.json, <ab>/<content>.npy}`` and
+``runs/*.json`` (hit statistics of recent processes).
+
+* On by default: ``feature_cache=True`` is ``$UNITRACK_FEATURE_CACHE``, else
+  ``$UNITRACK_CACHE/features``, else the user cache folder
+  (``~/.cache/unitrack-env/features``); ``UNITRACK_FEATURE_CACHE=off`` or
+  ``feature_cache=False`` turn it off.
+* Bounded: the cap (10 GiB, ``$UNITRACK_FEATURE_CACHE_MAX`` or ``max_size=``) is enforced on
+  every write by evicting the least recently used entries down to ``EVICT_TO`` of it.
+* Safe with many writers: entries are written to a temporary file and renamed; accounting
+  and eviction run under an exclusive lock on ``.lock``. A corrupt entry is reported once
+  (:class:`FeatureCacheWarning`), recomputed and replaced; an unwritable cache is reported
+  once and the features are used uncached.
+* Same values warm or cold: entries are float16 and served as float32 on a hit and a miss
+  alike, so results do not depend on the cache's state.
+
+Siblings: settings in ``.cache_config``, keys in ``.cache_keys``, hit statistics in
+``.cache_runs`` (``unitrack cache info``), the entry format and lock in ``.cache_files``,
+layout and eviction in ``.cache_folder``, :class:`CachedAppearanceModel` in ``.cached_model``.
 """
 
 from __future__ import annotations

@@ -1,8 +1,13 @@
 """The shared appearance model (UniTrack level 1): images in, stride-8 feature maps out.
 
-:class:`AppearanceModel` wraps one network with what the heads need: input normalisation,
-batched inference, thread and device settings, the JDE letterbox for MOT, and a
-:class:`ModelIdentity` that keys on-disk feature caches. More in docs/module-notes.md.
+UniTrack uses one appearance model ``phi`` for every task. :class:`AppearanceModel` wraps
+one network with what the heads need: input normalisation, batched inference under
+``torch.inference_mode()``, thread and device settings, the JDE letterbox for MOT (the whole
+frame to 1088 x 608), and a :class:`ModelIdentity` (architecture, layer, weights digest,
+runtime) that keys on-disk feature caches. The network runs in eager torch (the reference,
+the only runtime on CUDA) or exported to ONNX and compiled for the CPU (``runtime=``:
+:mod:`~unitrack_env.agents.appearance.runtime`). Weights are resolved by
+:func:`~unitrack_env.agents.appearance.weights.load_weights`.
 """
 
 from __future__ import annotations
@@ -89,10 +94,10 @@ class AppearanceModel:
     pixels per feature cell (heads read it here), ``runtime`` the concrete runtime.
 
     Example:
-        >>> model = AppearanceModel()            # EfficientNet-Lite0, ImageNet, offline
-        >>> frame = np.zeros((480, 640, 3), np.uint8)
+        >>> model = AppearanceModel(runtime="torch")  # EfficientNet-Lite0, ImageNet, offline
+        >>> frame = np.zeros((120, 160, 3), np.uint8)
         >>> model.features(frame).shape
-        torch.Size([1, 112, 60, 80])
+        torch.Size([1, 112, 15, 20])
     """
 
     def __init__(

@@ -4,11 +4,19 @@ The architecture is Dosovitskiy et al., "An Image is Worth 16x16 Words" (ICLR 20
 parameter layout that DINO, DINOv2, MAE and timm publish (``cls_token``, ``pos_embed``,
 ``patch_embed.proj``, ``blocks.<i>.{norm1, attn.qkv, attn.proj, ls1.gamma, norm2, mlp.fc1,
 mlp.fc2, ls2.gamma}``, ``norm``), with DINOv2's layer scale (``ls1``/``ls2``, ones when a
-checkpoint has none) and register tokens (Darcet et al., "Vision Transformers Need
-Registers", ICLR 2024: ``register_tokens`` inserted after the class token, after the position
-embedding is added).
+checkpoint has none) and register tokens (Darcet et al., ICLR 2024: inserted after the
+class token, after the position embedding is added).
 
-More in docs/module-notes.md.
+As a backbone: the image is cut into patches (zero-padded: ``ceil(H / s) x ceil(W / s)``
+tokens), the position embedding is interpolated bicubically to the token grid (as DINO
+does), and the patch tokens of ``layer="block<k>"`` (1-based; default the last), through the
+final ``norm``, become a ``(B, dim, h, w)`` map. Its stride is the patch size unless
+``stride`` asks otherwise: ``"overlap"`` runs the patch embedding with that stride (denser
+tokens, attention cost grows with their square), ``"upsample"`` resizes the map bilinearly
+(cheap, no new detail); costs in ``docs/evaluate-your-representation.md``. Attention is
+``scaled_dot_product_attention`` (fused; the ``N x N`` matrix is never held whole). For
+export, :meth:`VisionTransformer.frozen_positions` makes the resized position embedding a
+constant: left as a bicubic resize, OpenVINO constant-folded it for minutes per input size.
 """
 
 from __future__ import annotations

@@ -1,6 +1,19 @@
 """How the published ViT checkpoints store their encoder: the key rules of their remaps.
 
-More in docs/module-notes.md.
+:data:`VIT_REMAP_FIELDS` holds each family's :class:`KeyRemap` fields (``DEFAULT_REMAPS``
+builds remaps from them, so ``remap="auto"`` or ``"dino"`` work as for ResNets);
+:func:`apply_key_rules` drops the keys that are not the encoder and renames the rest.
+
+* DINO: released backbones are plain state dicts; training checkpoints wrap ``teacher`` /
+  ``student`` (the teacher is evaluated) with ``backbone.`` (``module.backbone.``) before
+  the encoder and a projection ``head.`` beside it.
+* DINOv2: plain state dicts with ``ls1.gamma`` / ``ls2.gamma``, a ``mask_token`` (unused)
+  and, for ``_reg4`` models, ``register_tokens``; training checkpoints wrap ``teacher``
+  with ``backbone.`` beside ``dino_head.`` / ``ibot_head.``.
+* MAE: ``{"model": ...}``; pre-training files hold the decoder (``decoder_*``, its
+  ``mask_token``); fine-tuned ones with global pooling have ``fc_norm`` (renamed to the final
+  norm) and a ``head``.
+* timm: a plain state dict with a classifier ``head.``.
 """
 
 from __future__ import annotations

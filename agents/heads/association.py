@@ -43,6 +43,7 @@ from ..primitives.adapters import (
     reset_task,
 )
 from ..primitives.association import Associator
+from ..primitives.association_config import AssociationConfig
 from ..primitives.category_gating import CategoryGatedAssociator
 from ..primitives.mask_features import LocalMask, mask_to_box, pose_to_mask
 from ..primitives.similarity import SIMILARITIES, ObjectFeatures
@@ -69,7 +70,8 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
 
     ``options`` are :class:`UniTrackConfig` fields; ``max_tracks`` (None: the reset info's
     ``capacities``) sizes box and pose actions; a shared ``appearance_model`` overrides the
-    appearance options. The episode state lives in ``associator``.
+    appearance options. ``settings`` is the config resolved on the task being played; the
+    episode state lives in ``associator``.
     """
 
     config_class = UniTrackConfig
@@ -81,14 +83,11 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         appearance_model: AppearanceModel | None = None,
         **options: Any,
     ) -> None:
-        try:
-            self.config = UniTrackConfig(**options)
-        except TypeError as exc:
-            valid = ", ".join(sorted(UniTrackConfig.__dataclass_fields__))
-            raise TypeError(f"unitrack: {exc}; valid options: {valid}") from None
+        self.config = UniTrackConfig.from_options(self.name, options)
         cfg = self.config
-        for task in TASKS:  # fail now, not at the first observation, on a bad option
-            cfg.settings(task)
+        #: The config resolved on each task it may play, once (:meth:`UniTrackConfig.resolve`).
+        self.configs = {task: cfg.resolve(task) for task in ((cfg.task,) if cfg.task else TASKS)}
+        self._engines: dict[tuple[str, ScoreRange | None], AssociationConfig] = {}
         self._max_tracks = None if max_tracks is None else int(max_tracks)
         if callable(cfg.similarity):
             self._similarity: Callable[..., Any] = cfg.similarity
@@ -121,14 +120,19 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         return self.adapter.max_tracks
 
     def _start(self, task: str, capacities: Mapping[str, int], frame_rate: float) -> None:
-        """Resolve ``task``'s settings and adapter; build its association engine."""
-        self.settings = self.config.settings(task, self.score_range)
+        """Take ``task``'s resolved config and adapter; build its association engine."""
+        if task not in self.configs:
+            raise ValueError(f"unknown task {task!r}; valid tasks: {', '.join(self.configs)}")
+        self.settings: UniTrackConfig = self.configs[task]
+        key = (task, self.score_range)
+        if key not in self._engines:
+            self._engines[key] = self.settings.association(self.score_range)
         if self._max_tracks is not None:
             capacities = {**capacities, "max_tracks": self._max_tracks}
         self.adapter: ObservationAdapter = adapter_for(task, capacities)
         engine = CategoryGatedAssociator if self.settings.category_gating else Associator
         self.associator: Associator[Any] | CategoryGatedAssociator[Any] = engine(
-            self._similarity, self.settings.association, frame_rate)
+            self._similarity, self._engines[key], frame_rate)
 
     # ------------------------------------------------------------------ episode
     def reset(self, observation: Any, info: dict[str, Any]) -> None:
@@ -152,7 +156,7 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         with torch_threads(self.config.num_threads):
             self._check_format(observation)
             detections = self.adapter.detections(observation)
-            kind = self.settings.observation
+            kind = self.adapter.kind
             if kind == "boxes":
                 return self._act_boxes(observation["frame"], detections)
             if kind == "poses":
@@ -220,7 +224,7 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
     def _parse_masks(self, index: np.ndarray, masks: Sequence[LocalMask], scores: np.ndarray,
                      classes: np.ndarray | None) -> _Parsed:
         kept = [masks[i] for i in index]
-        if self.config.mask_box == "mad":
+        if self.settings.mask_box == "mad":
             boxes = [mask_to_box(m) for m in kept]
         else:
             boxes = [m.tight_box() for m in kept]
@@ -237,7 +241,7 @@ class UniTrackAgent(Agent, name="unitrack", tasks=TASKS):
         masks: list[LocalMask] = []
         keep = self._usable(scores) & np.all(np.isfinite(keypoints), axis=(1, 2))
         for i in range(len(keypoints)):
-            mask = pose_to_mask(keypoints[i], min_score=self.config.min_keypoint_score) \
+            mask = pose_to_mask(keypoints[i], min_score=self.settings.min_keypoint_score) \
                 if keep[i] else None
             masks.append(mask if mask is not None else LocalMask(np.zeros((0, 0), bool)))
             keep[i] = mask is not None

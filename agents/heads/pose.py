@@ -1,12 +1,25 @@
 """The UniTrack pose-propagation head (``unitrack-pose``): belief maps propagated like masks.
 
-UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E.
-More in docs/module-notes.md.
+UniTrack paper, section 2.3 and appendix B.2; JHMDB table of appendix E. Per video:
+
+1. Each frame is resized to ``input_size`` (the paper's 320 x 320; None: native) and goes
+   once through the backbone.
+2. At reset each of the ``J`` joints becomes a Gaussian belief map on the feature grid with
+   ``sigma = max(eta * s_body, 0.5)`` feature pixels (``eta = 0.01``, ``s_body`` the larger
+   side of the joints' box; the floor is half a cell, as sharp as the grid allows).
+3. Later frames: the ``J`` maps are propagated together by
+   :class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`.
+4. Decoding: the argmax of each map refined by a soft-argmax over its
+   ``(2 refine_radius + 1)^2`` neighbourhood (sub-cell positions, not pulled by far-away
+   secondary modes as a global soft-argmax would); a map whose peak is below ``min_peak``
+   keeps the joint's previous position.
+
+Keypoints are ``(x, y)`` 0-based pixels with integer centres; feature cell ``j`` of ``n``
+cells over ``N`` pixels is centred at ``(j + 0.5) * N / n - 0.5`` (``align_corners=False``).
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,10 +29,9 @@ import torch
 
 from ..appearance.cached_model import with_cache
 from ..appearance.model import AppearanceModel, torch_threads
-from ..appearance.spec import AppearanceSpec
 from ..base import Agent
 from ..primitives.label_propagation import LabelPropagator
-from .vos import make_propagation_config
+from .vos import PropagationHeadConfig
 
 POSE_INPUT_SIZE: tuple[int, int] = (320, 320)
 """(width, height) frames are resized to (appendix B.2 table, "Pose: 320 x 320")."""
@@ -38,17 +50,14 @@ MIN_PEAK: float = 1e-3
 
 
 @dataclass(frozen=True)
-class UniTrackPoseConfig(AppearanceSpec):
-    """Options of the ``unitrack-pose`` agent (appearance fields from :class:`AppearanceSpec`).
+class UniTrackPoseConfig(PropagationHeadConfig):
+    """Options of ``unitrack-pose``: :class:`PropagationHeadConfig`'s and the belief maps'.
 
-    Attributes:
-        input_size: ``(width, height)`` the frames are resized to (None: native size).
-        sigma_eta: ``eta`` of ``sigma = max(eta * s_body, min_sigma)``.
-        min_sigma: Least sigma (feature pixels).
-        refine_radius: Soft-argmax neighbourhood half-side (0: plain argmax).
-        min_peak: Peak below which a joint keeps its previous position.
-        propagation: :class:`LabelPropagationConfig` fields to override.
-        feature_cache: The on-disk feature cache, float32 (as ``unitrack-vos``'s).
+    ``input_size = (320, 320)`` [appendix B.2] frames resized to (width, height), None: native;
+    ``sigma_eta = 0.01`` [0.01] and ``min_sigma = 0.5`` [0.5] in
+    ``sigma = max(eta * s_body, min_sigma)`` (feature pixels); ``refine_radius = 1``
+    soft-argmax half-side (0: plain argmax); ``min_peak = 1e-3``: a joint whose map peaks
+    below keeps its previous position.
     """
 
     input_size: tuple[int, int] | None = POSE_INPUT_SIZE
@@ -56,8 +65,6 @@ class UniTrackPoseConfig(AppearanceSpec):
     min_sigma: float = MIN_SIGMA
     refine_radius: int = REFINE_RADIUS
     min_peak: float = MIN_PEAK
-    propagation: dict[str, Any] | None = None
-    feature_cache: str | os.PathLike[str] | bool | None = True
 
 
 def belief_maps(points: np.ndarray, shape: tuple[int, int], sigma: float) -> torch.Tensor:
@@ -111,8 +118,7 @@ class UniTrackPoseAgent(Agent, name="unitrack-pose", tasks=("pose-prop",)):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config, self.model = UniTrackPoseConfig.configure(self.name, options, appearance_model)
-        propagation = make_propagation_config(self.config.propagation, self.model.stride)
-        self.propagator = LabelPropagator(propagation)
+        self.propagator = LabelPropagator(self.config.propagation_config(self.model.stride))
         self.sigma = self.config.min_sigma
         self._pose: np.ndarray | None = None
         self._first_answer: np.ndarray | None = None

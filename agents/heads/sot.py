@@ -14,7 +14,7 @@ Boxes come and go in the environment's OTB convention: ``(x, y, w, h)`` with 1-b
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -35,20 +35,28 @@ OTB_PIXEL_ORIGIN: float = 1.0
 
 
 @dataclass(frozen=True)
-class UniTrackSOTConfig(AppearanceSpec):
-    """Options of the ``unitrack-xcorr`` / ``unitrack-dcf`` agents.
+class UniTrackSOTConfig(AppearanceSpec, BoxPropagationConfig):
+    """Options of ``unitrack-xcorr`` / ``unitrack-dcf``, flat: ``name = default`` [paper].
 
-    The appearance model's fields (``weights``, ``arch``, ``layer``, ``remap``, ``device``,
-    ``num_threads``, ``runtime``) come from :class:`AppearanceSpec`.
-
-    Attributes:
-        pixel_origin: Coordinate of the first pixel in the boxes (OTB: 1).
-        propagation: Fields of :class:`BoxPropagationConfig` to override (crop_size,
-            context, scale_step, dcf_lambda, ...; ``method`` is set by the agent).
+    Appearance: weights, arch, layer, remap, device, runtime, stride, num_threads
+    (:class:`AppearanceSpec`). Propagation (:class:`BoxPropagationConfig`, appendix B.1):
+    ``crop_size = 520`` [520], ``context = 4.5`` [4.5], ``num_scales = 3`` [3],
+    ``scale_step = 1.0275``, ``scale_penalty = 0.985``, ``min_size_factor = 0.2``,
+    ``max_size_factor = 5.0``, ``feature_window = True`` [Hann], ``template_window = 1.5``
+    (DCF's training window in target sizes; None: the crop's), ``template_size = 14``
+    [XCorr 14 x 14], ``dcf_lambda = 1e-4``, ``dcf_interp = 0.01``, ``dcf_sigma_factor =
+    0.1``, ``subpixel = True``. ``pixel_origin = 1.0``: the first pixel of boxes [OTB 1].
+    The method is the agent's (``unitrack-xcorr`` or ``unitrack-dcf``), not an option.
     """
 
+    method: str = field(default="dcf", init=False)
     pixel_origin: float = OTB_PIXEL_ORIGIN
-    propagation: dict[str, Any] | None = None
+
+    def propagation_config(self, method: str) -> BoxPropagationConfig:
+        """The propagator's :class:`BoxPropagationConfig` for ``method``."""
+        return BoxPropagationConfig(method=method, **{
+            f.name: getattr(self, f.name) for f in fields(BoxPropagationConfig)
+            if f.name != "method"})
 
 
 class _UniTrackSOTAgent(Agent):
@@ -61,15 +69,9 @@ class _UniTrackSOTAgent(Agent):
     def __init__(self, *, appearance_model: AppearanceModel | None = None,
                  **options: Any) -> None:
         self.config = UniTrackSOTConfig.from_options(self.name, options)
-        overrides = dict(self.config.propagation or {})
-        overrides["method"] = self.method
-        try:
-            box_config = replace(BoxPropagationConfig(), **overrides)
-        except TypeError as exc:
-            valid = ", ".join(f.name for f in fields(BoxPropagationConfig))
-            raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
         self.model = build_model(self.config, appearance_model)
-        self.propagator = BoxPropagator(self.model.features, box_config,
+        self.propagator = BoxPropagator(self.model.features,
+                                        self.config.propagation_config(self.method),
                                         stride=self.model.stride)
         self._first_answer: np.ndarray | None = None
 

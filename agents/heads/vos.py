@@ -1,6 +1,18 @@
 """The UniTrack VOS head: mask propagation with the shared appearance model (``unitrack-vos``).
 
-More in docs/module-notes.md.
+Per video (paper section 2.3, appendix B.2; ``OFFICIAL-CODE-FACTS.md``, "Mask and pose
+propagation"): at reset the first frame's labels (0 background, ``k`` object ``k``, 255 void,
+counted as background) become one-hot channels downsampled bilinearly to the feature grid;
+they and the first frame's features start the memory bank of
+:class:`~unitrack_env.agents.primitives.label_propagation.LabelPropagator`. The first step
+answers the first frame with the given labels. Every later frame: one backbone pass at full
+resolution, propagation of the soft labels (first frame + 5 latest, radius 12 cells at
+stride 8, i.e. 96 pixels at any stride, top-10, temperature 0.05), bilinear upsampling to
+the frame, argmax. The propagation's options are flat fields of
+:class:`PropagationHeadConfig` (shared with ``unitrack-pose``), among them
+``propagation_precision="bf16"``: measured the same J&F and PCK on the fixtures, refused
+before the first frame on a CPU without native bfloat16 (docs/design-decisions.md, "Label
+propagation: precision").
 """
 
 from __future__ import annotations
@@ -24,34 +36,37 @@ VOID_LABEL: int = 255
 
 
 @dataclass(frozen=True)
-class UniTrackVOSConfig(AppearanceSpec):
-    """Options of the ``unitrack-vos`` agent (appearance fields from :class:`AppearanceSpec`).
+class PropagationHeadConfig(AppearanceSpec, LabelPropagationConfig):
+    """Options of a label-propagation head, flat: ``name = default`` [paper value].
 
-    Attributes:
-        propagation: :class:`LabelPropagationConfig` fields to override.
-        antialias: Antialias the downsampling of the first frame's labels to the feature grid.
-        feature_cache: The on-disk feature cache (True: the default folder; a folder; False),
-            float32 entries: the same features, read instead of computed.
+    Appearance: weights, arch, layer, remap, device, runtime, stride, num_threads
+    (:class:`AppearanceSpec`). Propagation (:class:`LabelPropagationConfig`, table B.2):
+    ``memory_size = 6`` [first frame + 5], ``radius = 12.0`` [12 cells at stride 8],
+    ``first_frame_radius = None`` [no limit], ``radius_stride = 8``, ``topk = 10`` [10],
+    ``temperature = 0.05`` [0.05], ``normalize = True`` [cosine], ``tile_size = 8``,
+    ``max_affinity_elements`` (speed and memory only), ``propagation_precision =
+    "float32"`` [exact] or ``"bf16"``. ``feature_cache = True``: the on-disk feature cache
+    (the default folder; a folder; False), float32 entries, read instead of computed.
     """
 
-    propagation: dict[str, Any] | None = None
-    antialias: bool = True
     feature_cache: str | os.PathLike[str] | bool | None = True
 
     def propagation_config(self, stride: int | None = None) -> LabelPropagationConfig:
-        """The :class:`LabelPropagationConfig` these options describe (for ``stride``)."""
-        return make_propagation_config(self.propagation, stride)
-
-
-def make_propagation_config(options: dict[str, Any] | None,
-                            stride: int | None = None) -> LabelPropagationConfig:
-    """A :class:`LabelPropagationConfig` from overrides, radii rescaled to ``stride`` if given."""
-    try:
-        config = LabelPropagationConfig(**(options or {}))
+        """The propagator's :class:`LabelPropagationConfig`, radii rescaled to ``stride``."""
+        config = LabelPropagationConfig(**{f.name: getattr(self, f.name)
+                                           for f in fields(LabelPropagationConfig)})
         return config if stride is None else config.for_stride(stride)
-    except TypeError as exc:
-        valid = ", ".join(f.name for f in fields(LabelPropagationConfig))
-        raise TypeError(f"bad propagation option ({exc}); valid: {valid}") from None
+
+
+@dataclass(frozen=True)
+class UniTrackVOSConfig(PropagationHeadConfig):
+    """Options of ``unitrack-vos``: :class:`PropagationHeadConfig`'s and ``antialias``.
+
+    ``antialias = True``: antialias the downsampling of the first frame's labels to the
+    feature grid.
+    """
+
+    antialias: bool = True
 
 
 def build_model(config: AppearanceSpec, model: AppearanceModel | None) -> AppearanceModel:

@@ -1,6 +1,13 @@
 """What a track remembers of its appearance: the last observation, or a moving average.
 
-More in docs/module-notes.md.
+The paper and the authors' code compare a track by its *last* matched observation
+(``curr_feat``): one wrong match replaces its appearance by another object's, and the track
+follows that object from then on (on the synthetic MOT16 set, most appearance-only errors).
+JDE, whose association UniTrack's MOT head follows, keeps a moving average instead
+(``smooth_feat``, momentum 0.9). :func:`remember` averages UniTrack's payloads, *sets* of
+location features, location by location (a box's 10 x 4 grid has the same 40 locations in
+every frame), L2-normalised before and after; payloads of different shapes (masks of
+different sizes) cannot be averaged so, and the newest is kept, as in the paper.
 """
 
 from __future__ import annotations

@@ -3,7 +3,30 @@
 :class:`Associator` implements Algorithm 1 of the UniTrack paper (appendix C.1, JDE's
 association). Per detection it gets a box (Kalman filter, IoU stages) and an opaque
 *payload* compared by an injected ``similarity(tracks, detections) -> (n, m)``; the
-appearance cost is ``1 - similarity``. More in docs/module-notes.md.
+appearance cost is ``1 - similarity`` (for RSM the paper's ``1 - (cos_fwd + cos_bwd) / 2``).
+One :meth:`Associator.step` per frame:
+
+1. Predict every live track (lost ones with their height velocity frozen).
+2. Stage 1, appearance: confirmed and lost tracks against all detections, cost
+   ``lambda C_a + (1 - lambda) Mahalanobis^2`` with gated pairs at ``inf``, accepted below
+   ``appearance_threshold``; without motion (the paper's "w/o motion") ``C_a`` alone, ungated.
+3. Stage 2, IoU: the remaining *confirmed* tracks against the remaining detections,
+   accepted at ``IoU > iou_threshold`` (with and without motion, as the authors' code).
+4. Tentative tracks (born last frame): confirmed at ``IoU > confirm_iou_threshold``, else
+   removed.
+5. Unmatched confirmed tracks become lost; lost ones older than
+   ``round(lost_seconds * frame_rate)`` frames are removed.
+6. Each remaining detection with ``score >= new_track_raw_score`` starts a tentative track
+   (confirmed at once on an episode's first frame, as in the code).
+7. An active and a lost track with ``IoU > duplicate_iou`` are one object: the younger goes.
+
+The output is the confirmed tracks matched this frame (optionally the MOT output filter).
+Tracks keep their last payload unless ``appearance_momentum`` asks for an average
+(:mod:`~unitrack_env.agents.primitives.appearance_memory`). Where the engine departs from
+the letter of Algorithm 1 it follows the authors' code: gated pairs are excluded *before*
+the Hungarian step (so an impossible pair cannot block a valid one) and lost tracks skip the
+IoU stage. One deliberate difference from the code: ids are assigned at confirmation, so
+reported ids are consecutive.
 """
 
 from __future__ import annotations
@@ -179,7 +202,7 @@ class Associator(Generic[P]):
         first = now.frame == 1 and cfg.confirm_on_first_frame
         new_tracks = []
         for j in remaining:
-            if now.scores[j] >= cfg.new_track_score:
+            if now.scores[j] >= cfg.new_track_raw_score:
                 track = self._new_track(int(j), now, first)
                 now.matched[int(j)] = track
                 new_tracks.append(track)

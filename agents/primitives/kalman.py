@@ -1,8 +1,12 @@
 """Constant-velocity Kalman filter for box tracks (the motion cue of association).
 
-DeepSORT's filter, as in JDE and UniTrack (appendix C.1): state
+DeepSORT's filter (Wojke et al., ICIP 2017), as in JDE and UniTrack (appendix C.1): state
 ``(u, v, a, h, du, dv, da, dh)`` (centre, aspect ``w / h``, height and their per-frame
-velocities); measurements ``(u, v, a, h)``. More in docs/module-notes.md.
+velocities); measurements ``(u, v, a, h)``. The paper's text writes ``gamma = h / w``, but the
+filter it cites and the authors' code use ``w / h``, for which the aspect's absolute noise
+levels are calibrated, so ``w / h`` it is. Position and velocity stds are proportional to the
+box height (1/20, 1/160), the aspect's are fixed (:class:`KalmanConfig`). Every method is
+batched over tracks (``mean`` ``(n, 8)``, ``covariance`` ``(n, 8, 8)``), in float64.
 """
 
 from __future__ import annotations

@@ -1,6 +1,14 @@
 """Object features and Kalman boxes of mask and pose observations (UniTrack appendix C).
 
-More in docs/module-notes.md.
+Association compares *sets* of location features: a box gives a fixed RoIAlign grid, a mask
+the feature-map cells it covers, a pose is first drawn as a mask. The conversions, free of
+any environment: :class:`LocalMask` (a mask as its tight crop plus offset, not a full-frame
+array per person); :func:`mask_to_box` (appendix C.1: centre = mean in-mask pixel, half
+extent = 2 x mean absolute deviation); :func:`pose_to_mask` (appendix C.2: limbs of width
+``max(body size / 20, 8)`` plus the filled torso); :func:`mask_grid` /
+:func:`mask_location_features` (the in-mask cells of a stride-8 map, capped at ``max_area``
+by rescaling: the authors' ``max_mask_area``, 200 MOTS, 1000 VIS). Pixel ``(r, c)`` covers
+``[c, c + 1) x [r, r + 1)``, so a tight box is pycocotools' ``toBbox``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,12 @@
 """RoIAlign in pure, vectorised torch (no torchvision).
 
-More in docs/module-notes.md.
+RoIAlign (He et al., Mask R-CNN, ICCV 2017) pools a fixed grid of features from any box by
+averaging bilinear samples in each bin, with torchvision's semantics exactly: ``aligned=True``
+shifts box coordinates by -0.5 (pixel centres on integers; ``False``: no shift, boxes at
+least 1 x 1); each bin averages ``sampling_ratio`` squared samples (adaptive
+``ceil(box / output)`` when not positive); a sample more than one pixel outside the map
+contributes 0 but counts, samples in ``[-1, 0)`` are clamped. UniTrack pools each detection
+box from the stride-8 map into a tall 10 x 4 grid: 40 location features per box.
 """
 
 from __future__ import annotations

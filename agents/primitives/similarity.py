@@ -2,8 +2,12 @@
 
 Every object is a *set* of ``(s_i, C)`` location features (40 for a box pooled to 10 x 4,
 the covered cells for a mask). Metrics return an ``(N, M)`` float64 similarity (higher =
-more alike); features are L2-normalised first by default, as UniTrack does.
-More in docs/module-notes.md.
+more alike; the cost is ``1 - similarity``) and empty arrays for empty inputs; features are
+L2-normalised first by default, as UniTrack does. :data:`SIMILARITIES` maps the names to
+the functions (an unknown name's KeyError lists the valid ones): ``"rsm"`` the
+Reconstruction Similarity Metric (section 2.4, :func:`rsm`); the baselines of appendix D,
+``"cf"`` centre feature, ``"gf"`` global feature (equal sizes only), ``"gpf"``
+global-pooled feature.
 """
 
 from __future__ import annotations

@@ -99,7 +99,7 @@ def test_tentative_track_needs_overlap_and_is_removed_when_unmatched() -> None:
 
 
 def test_new_track_score_threshold() -> None:
-    assoc = Associator(dot_similarity, AssociationConfig(new_track_score=0.5))
+    assoc = Associator(dot_similarity, AssociationConfig(new_track_raw_score=0.5))
     assert step(assoc, [box(0), box(200)], [RED, GREEN], scores=[0.49, 0.5]) == {1: 1}
 
 
@@ -287,10 +287,13 @@ def test_appearance_keeps_ids_where_iou_only_swaps(use_motion: bool) -> None:
 def test_reported_box_is_the_detection_by_default_in_mot_but_filtered_in_the_paper() -> None:
     from dataclasses import replace
 
+    from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
+
     paper = Associator(dot_similarity)
     assert paper.config.report_filtered_box  # authors' code: the Kalman state
     unfiltered = {"output_min_area": None, "output_max_aspect": None}
-    mot = Associator(dot_similarity, replace(AssociationConfig.mot(), **unfiltered))
+    mot = Associator(dot_similarity,
+                     replace(UniTrackConfig().resolve("mot").association(), **unfiltered))
     for x in (0.0, 3.0, 7.0, 8.0):  # uneven motion: the filter lags the detections
         det = [box(x)]
         out_paper = paper.step(np.array(det), np.ones(1), [RED])

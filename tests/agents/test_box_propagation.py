@@ -12,8 +12,6 @@ from unitrack_env.agents.primitives.box_propagation import (
     BoxPropagationConfig,
     BoxPropagator,
     BoxState,
-)
-from unitrack_env.agents.primitives.box_response import (
     DCFHead,
     XCorrHead,
     crop_windows,

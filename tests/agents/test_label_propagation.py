@@ -14,11 +14,13 @@ from unitrack_env.agents.primitives.label_propagation import (
     LabelPropagationConfig,
     LabelPropagator,
     cpu_flags,
+    grouped_topk,
+    merge_topk,
     normalize_features,
     propagate_dense,
+    search_above,
+    search_dense,
 )
-from unitrack_env.agents.primitives.label_search import merge_topk, search_above, search_dense
-from unitrack_env.agents.primitives.label_windows import grouped_topk
 
 
 def random_video(frames: int, c: int = 8, h: int = 13, w: int = 21, k: int = 3, seed: int = 0):

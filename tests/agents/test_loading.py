@@ -189,6 +189,17 @@ def test_options_of_config_dataclass_agents():
     check_options(agent_class("iou"), {"min_hits": 3, "iou_threshold": 1})  # int is a float
 
 
+def test_option_values_are_checked_by_the_config_before_anything_is_built():
+    # The config's own checks run in check_options (the runner's one check before a run),
+    # not first in a worker building the agent.
+    with pytest.raises(AgentOptionError, match=r"'unitrack': UniTrackConfig.duplicate_iou must "
+                                               r"be in \[0, 1\], got 1.5"):
+        check_options(agent_class("unitrack"), {"duplicate_iou": 1.5, "max_tracks": 5})
+    with pytest.raises(AgentOptionError, match="'unitrack-vos': memory_size must be >= 1"):
+        check_options(agent_class("unitrack-vos"), {"memory_size": 0})
+    check_options(agent_class("unitrack"), {"preset": "paper", "gate": False})
+
+
 def test_cli_values_are_parsed_by_type():
     unitrack = agent_class("unitrack")
     parsed = parse_options(unitrack, ["weights=moco.pth", "input_size=(320, 192)",

@@ -20,7 +20,7 @@ from unitrack_env.agents.primitives import label_propagation
 GOLDENS = Path(__file__).resolve().parents[1] / "goldens"
 ONE = {"num_threads": 1}
 #: Fast SOT settings: half-size crops (the paper's 520 costs 4 backbone passes per frame).
-FAST_SOT = {**ONE, "propagation": {"crop_size": 256}}
+FAST_SOT = {**ONE, "crop_size": 256}
 #: Per-head metric tolerances, derived from the spread measured across CPU kernels, thread
 #: counts and 1e-5 feature noise by scripts/measure_golden_spread.py (docs/regression-tests.md,
 #: "Tolerances across machines"): twice the largest measured change, and at least one frame's
@@ -62,14 +62,18 @@ def test_registered_with_their_tasks():
     assert agent_class("unitrack-vos").tasks == ("vos",)
     assert agent_class("unitrack-pose").tasks == ("pose-prop",)
     with pytest.raises(TypeError, match="valid options"):
-        make_agent("unitrack-vos", radius=3)
-    with pytest.raises(TypeError, match="valid"):
-        make_agent("unitrack-dcf", propagation={"lamda": 1.0})
+        make_agent("unitrack-vos", radius_px=3)
+    with pytest.raises(TypeError, match="valid options"):  # flat options, no dict
+        make_agent("unitrack-dcf", propagation={"dcf_lambda": 1.0})
+    with pytest.raises(TypeError, match="valid options"):  # the method is the agent's
+        make_agent("unitrack-xcorr", method="dcf")
+    with pytest.raises(ValueError, match="memory_size must be >= 1"):
+        make_agent("unitrack-vos", memory_size=0)
 
 
 @pytest.mark.parametrize("head", ["unitrack-vos", "unitrack-pose"])
 def test_bf16_precision_is_an_option_refused_without_native_bf16(model, monkeypatch, head):
-    bf16 = {"propagation": {"propagation_precision": "bf16"}}
+    bf16 = {"propagation_precision": "bf16"}
     monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx512f", "avx512_bf16"})
     assert make_agent(head, appearance_model=model, **bf16).propagator.bf16
     monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx512f", "avx2"})

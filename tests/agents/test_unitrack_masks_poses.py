@@ -21,7 +21,6 @@ from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.agents.baselines.iou import IoUAgent
 from unitrack_env.agents.heads.association import UniTrackAgent
-from unitrack_env.agents.heads.unitrack_config import TASK_DEFAULTS
 from unitrack_env.agents.primitives.adapters import detect_task
 from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.category_gating import CategoryGatedAssociator
@@ -259,9 +258,8 @@ def test_task_detection_and_defaults(model: AppearanceModel) -> None:
     assert agent.associator.max_lost_frames == 6
     agent.reset({"keypoints": None}, {})
     assert agent.task == "posetrack" and agent.max_tracks == 100
-    assert agent.config.settings("vis").max_mask_area == TASK_DEFAULTS["vis"].max_mask_area == 1000
-    fixed = make_agent("unitrack", appearance_model=model, task="mots",
-                       association={"duplicate_iou": 0.5})
+    assert agent.configs["vis"].max_mask_area == 1000 and agent.config.max_mask_area is None
+    fixed = make_agent("unitrack", appearance_model=model, task="mots", duplicate_iou=0.5)
     assert fixed.associator.config.duplicate_iou == 0.5
     assert fixed.associator.config.gate_threshold is None
     with pytest.raises(ValueError, match="valid tasks"):

@@ -85,11 +85,11 @@ def test_new_track_score_is_on_the_declared_score_range(model: AppearanceModel) 
     for declared, score, starts in ((mot15, 40.0, False), (mot15, 60.0, True),
                                     (None, 0.6, True), (None, 0.4, False)):
         agent.reset(None, {"frame_rate": 10.0, "detection_scores": declared})
-        assert agent.associator.config.new_track_score == (50.0 if declared else 0.5)
+        assert agent.associator.config.new_track_raw_score == (50.0 if declared else 0.5)
         agent.act(observation(frame, person, [score]))
         assert (len(agent.associator.tracks) == 1) == starts, (declared, score)
-    with pytest.raises(ValueError, match="agent option"):
-        UniTrackAgent(appearance_model=model, association={"new_track_score": 50})
+    with pytest.raises(TypeError, match="valid options"):  # one option, one meaning
+        UniTrackAgent(appearance_model=model, new_track_raw_score=50)
 
 
 def test_options_are_validated(model: AppearanceModel) -> None:
@@ -97,10 +97,12 @@ def test_options_are_validated(model: AppearanceModel) -> None:
         UniTrackAgent(appearance_model=model, similarity="nope")
     with pytest.raises(TypeError, match="valid options"):
         UniTrackAgent(appearance_model=model, simlarity="rsm")
-    agent = UniTrackAgent(appearance_model=model, association={"appearance_weight": 0.98})
+    agent = UniTrackAgent(appearance_model=model, appearance_weight=0.98)
     assert agent.associator.config.appearance_weight == 0.98
-    with pytest.raises(TypeError, match="valid fields"):
-        UniTrackAgent(appearance_model=model, association={"lamda": 0.98})
+    with pytest.raises(TypeError, match="valid options"):
+        UniTrackAgent(appearance_model=model, association={"appearance_weight": 0.98})
+    with pytest.raises(ValueError, match=r"UniTrackConfig.duplicate_iou must be in \[0, 1\]"):
+        UniTrackAgent(appearance_model=model, duplicate_iou=1.5)
 
 
 @pytest.mark.parametrize("similarity", ["cf", "gf", "gpf"])
@@ -267,23 +269,26 @@ def test_mot_defaults_are_the_paper_plus_documented_departures() -> None:
     from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
     from unitrack_env.agents.primitives.association_config import AssociationConfig
 
-    paper = UniTrackConfig(preset="paper").association_config("mot")
-    default = UniTrackConfig().association_config("mot")
+    paper = UniTrackConfig.paper().resolve("mot").association()
+    default = UniTrackConfig().resolve("mot").association()
     filt = {"output_min_area": 200.0, "output_max_aspect": 1.6}
-    assert paper == AssociationConfig(**filt) == AssociationConfig.paper("mot")
+    assert paper == AssociationConfig(**filt) == UniTrackConfig(preset="paper", task="mot"
+                                                                ).resolve().association()
     departures = {"report_filtered_box": False, "ambiguity_margin": 0.05,
                   "appearance_momentum": 0.95, "confirm_iou_threshold": 0.5,
                   "iou_stage_includes_lost": True}
-    assert default == replace(paper, **departures) == AssociationConfig.mot()
-    # Explicit fields still override, with or without the paper's setting.
-    assert UniTrackConfig(preset="paper", association={"ambiguity_margin": 0.2}
-                          ).association_config("mot").ambiguity_margin == 0.2
-    assert not UniTrackConfig(preset="paper", output_filter=False
-                              ).association_config("mot").output_min_area
+    assert default == replace(paper, **departures)
+    # Explicit options still override, with or without the paper's setting.
+    assert UniTrackConfig.paper(ambiguity_margin=0.2).resolve("mot").association(
+    ).ambiguity_margin == 0.2
+    assert not UniTrackConfig.paper(output_filter=False).resolve("mot").association(
+    ).output_min_area
+    assert UniTrackConfig(gate=False).resolve("mot").association().gate_threshold is None
+    assert UniTrackConfig(gate=True, gate_threshold=5.0).resolve("mots").association(
+    ).gate_threshold == 5.0
     # The other association tasks keep their defaults (their goldens are unchanged).
     for task in ("mots", "vis", "posetrack"):
-        assert UniTrackConfig().association_config(task) == \
-            UniTrackConfig(preset="paper").association_config(task) == \
-            AssociationConfig.paper(task)
+        assert UniTrackConfig().resolve(task).association() == \
+            UniTrackConfig.paper().resolve(task).association()
     with pytest.raises(ValueError, match="preset must be one of default, paper"):
         UniTrackConfig(preset="papers")

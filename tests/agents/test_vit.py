@@ -13,13 +13,13 @@ import torch
 from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.appearance.vit import VIT_SPECS, VisionTransformer, infer_vit_arch
 from unitrack_env.agents.base import make_agent
-from unitrack_env.agents.heads.vos import make_propagation_config
+from unitrack_env.agents.heads.vos import UniTrackVOSConfig
 from unitrack_env.agents.primitives.box_propagation import (
     BoxPropagationConfig,
     BoxPropagator,
     BoxState,
+    XCorrHead,
 )
-from unitrack_env.agents.primitives.box_response import XCorrHead
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
 from unitrack_env.evaluation.scorecard_plan import ModelSpec
 
@@ -227,7 +227,7 @@ def test_heads_keep_their_reach_in_pixels_at_another_stride() -> None:
     assert s14.radius == pytest.approx(12 * 8 / 14) and s14.first_frame_radius is None
     assert s14.for_stride(14) is s14 and s14.for_stride(8).radius == pytest.approx(12)
     assert LabelPropagationConfig(radius_stride=None).for_stride(14).radius == 12
-    assert make_propagation_config({"radius": 6}, 16).radius == 3
+    assert UniTrackVOSConfig(radius=6).propagation_config(16).radius == 3
     head = XCorrHead(BoxPropagationConfig(method="xcorr"))
     for size, side in ((65, 14), (38, 8), (33, 7)):  # strides 8, 14, 16 of a 520 crop
         head.init(torch.zeros(1, 4, size, size))

@@ -34,7 +34,7 @@ def test_other_modules_of_the_package_count_one_import_away_and_are_not_followed
 
 def test_a_baseline_counts_only_what_it_imports():
     code = _names(agent_code("unitrack_env.agents.baselines.iou:IoUAgent"))
-    assert "baselines/iou.py" in code and "primitives/overlap_tracker.py" in code
+    assert "baselines/iou.py" in code and "primitives/overlap.py" in code
     assert not any(name.startswith("appearance/") for name in code)
 
 

@@ -122,7 +122,7 @@ def test_numbers_and_names_are_checked_by_the_parser(argv, message, tmp_path, ca
 def test_bf16_propagation_is_refused_before_the_first_frame(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(label_propagation, "cpu_flags", lambda: {"avx2"})
     assert main(["evaluate", "--env", "UniTrack/DAVIS-v0", "--agent", "unitrack-vos",
-                 "--agent-arg", "propagation={'propagation_precision': 'bf16'}",
+                 "--agent-arg", "propagation_precision=bf16",
                  "--agent-arg", "feature_cache=False",
                  "--out", str(tmp_path / "out"), "--quiet"]) != 0
     err = capsys.readouterr().err
