@@ -242,8 +242,13 @@ def test_score_folder_api_refuses_missing_results(one_missing):
         bench.score_folder(data, ["SYN-02"], allow_missing=True)
 
 
-def test_a_run_folder_given_as_results_points_to_its_data(one_missing, capsys):
-    data, _ = one_missing
-    assert main(["score", "--env", ENV, "--results", str(data.parent)]) == 2
-    assert f"result files are in {data}" in capsys.readouterr().err
+@pytest.mark.parametrize("form", [["--env", ENV], ["--benchmark", "MOT16", "--gt", "{gt}"]])
+def test_a_run_folder_given_as_results_points_to_its_data(one_missing, form, capsys):
+    data, _ = one_missing  # issue 42: the --gt form said "no result file ... --allow-missing"
+    argv = ["score", *[a.format(gt=_gt()) for a in form], "--results", str(data.parent)]
+    for extra in ([], ["--allow-missing"]):
+        assert main([*argv, *extra]) == 2
+        err = capsys.readouterr().err
+        assert f"is the folder of a run; its result files are in {data}" in err
+        assert "no result file" not in err and "nothing to score" not in err
 
