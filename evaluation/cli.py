@@ -59,7 +59,10 @@ EXAMPLES = {
 
 
 def _console(stderr: bool = False) -> Console:
-    return Console(stderr=stderr, highlight=False, soft_wrap=stderr)
+    console = Console(stderr=stderr, highlight=False, soft_wrap=stderr)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = 100_000  # a file or a pipe gets every column and unbroken lines
+    return console
 
 
 def _check_env_id(env_id: str) -> str:

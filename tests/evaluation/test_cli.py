@@ -63,6 +63,17 @@ def test_formats_and_a_table_that_fits_80_columns(tmp_path, capsys):
     assert dropped and dropped[-1] == "ML" and "HOTA" not in dropped
 
 
+def test_output_to_a_file_or_pipe_keeps_every_column(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("COLUMNS", raising=False)  # issue 42: a pipe got 80 columns, 6 dropped
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    header = next(line for line in out.splitlines() if "HOTA" in line)
+    for column in ("AssA", "MOTP", "CLR_FP", "CLR_FN", "MT", "ML", "FPS"):
+        assert f" {column} " in header
+    assert "do not fit" not in out
+
+
 def test_render_writes_h264(tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     from unitrack_env.evaluation.video import video_codec
