@@ -36,6 +36,8 @@ def test_help_is_plain_text_and_documents_every_option():
             if not isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
                 assert action.help, f"{name} {action.option_strings} has no help"
     assert "examples:" in commands["evaluate"].format_help()
+    for name, command in commands.items():  # issue 42: compare --help showed "95%%"
+        assert "%%" not in command.format_help(), name
 
 
 def test_formats_and_a_table_that_fits_80_columns(tmp_path, capsys):
