@@ -36,6 +36,15 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
     assert commands[1] in ci
 
 
+def test_readme_says_to_activate_the_venv_before_its_first_bare_command():
+    readme = (REPO / "README.md").read_text()  # issue 42: copied as printed: not found
+    first_bare = min(readme.index(f"\n{word} ") for word in ("unitrack", "python")
+                     if f"\n{word} " in readme)
+    assert "source .venv/bin/activate" in readme[:first_bare]
+    setup = readme.split("## Set up", 1)[1].split("\n## ", 1)[0]
+    assert re.search(r"\d+ s on a quiet\s+2-core machine", setup)  # how long the tests take
+
+
 def _anchor(heading: str) -> str:
     """GitHub's anchor of a markdown heading: lower case, punctuation dropped, spaces to -."""
     return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
