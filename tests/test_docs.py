@@ -24,6 +24,8 @@ def test_env_pages_match_docstrings():
         page = REPO / "docs" / "envs" / name
         assert page.is_file(), f"{page} missing: run python scripts/make_env_docs.py"
         assert page.read_text() == text, f"{page} is stale: run python scripts/make_env_docs.py"
+        assert not re.search(r":[a-z]+:`", text), f"{page} shows Sphinx markup"  # issue 42
+    assert module.plain_markdown(":class:`~a.b.Image` and :mod:`a.b`") == "`Image` and `a.b`"
 
 
 def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
