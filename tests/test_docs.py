@@ -47,6 +47,14 @@ def test_readme_says_to_activate_the_venv_before_its_first_bare_command():
     assert re.search(r"\d+ s on a quiet\s+2-core machine", setup)  # how long the tests take
 
 
+def test_writing_an_agent_describes_the_observation_and_links_the_env_pages():
+    text = (REPO / "docs" / "writing-an-agent.md").read_text()  # issue 42
+    assert 'observation["frame"]' in text and "uint8 RGB" in text and "(H, W, 3)" in text
+    assert "`max_tracks` is" in text
+    linked = set(re.findall(r"\]\(envs/([\w-]+\.md)\)", text))
+    assert linked == {p.name for p in (REPO / "docs" / "envs").glob("*.md")}
+
+
 def _anchor(heading: str) -> str:
     """GitHub's anchor of a markdown heading: lower case, punctuation dropped, spaces to -."""
     return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
