@@ -199,13 +199,24 @@ PAGE_RUNS = (("mot-a", "UniTrack/MOT16-v0", "iou", {}),
              ("vos", "UniTrack/DAVIS-v0", "repeat-mask", {}))
 
 
-def _shoot(browser: Browser, shots: Path, name: str) -> Path:
+def _shoot(browser: Browser, shots: Path | None, name: str) -> None:
+    """With ``UNITRACK_REPORT_SHOTS`` set, keep a compact screenshot there (docs/images)."""
+    if shots is None:
+        return
     path = shots / f"{name}.png"
+    browser.js("document.querySelectorAll('img').forEach(i => {i.loading = 'eager'}); "
+               + LOADED_IMAGES)  # lazy thumbnails below the fold load too
     browser.screenshot(path)
-    return path
+    shot = Image.open(path).convert("RGB")
+    rows = np.nonzero((np.asarray(shot.convert("L")) < 250).any(axis=1))[0]
+    bottom = int(rows.max()) + 16 if len(rows) else shot.height
+    shot = shot.crop((0, 0, shot.width, min(shot.height, bottom)))
+    shot = shot.resize((shot.width * 3 // 4, shot.height * 3 // 4), Image.LANCZOS)
+    shot.quantize(256).save(path, optimize=True)
 
 
-def _event_page(browser: Browser, index: Path, link: str, shots: Path, name: str) -> dict:
+def _event_page(browser: Browser, index: Path, link: str, shots: Path | None,
+                name: str) -> dict:
     """Open a sequence page from the index, then its first event page; what each shows."""
     from unitrack_env.evaluation.report.thumbs import GT_COLOUR, TRACK_COLOUR
 
@@ -246,7 +257,8 @@ def test_report_pages_in_chromium(tmp_path: Path) -> None:
             env_kwargs={"decode_frames": False})
     index = build_report([runs / name for name, *_ in PAGE_RUNS], tmp_path / "report",
                          thumbnails=6, resamples=100)
-    shots = Path(os.environ.get("UNITRACK_REPORT_SHOTS") or tmp_path)
+    shots = Path(os.environ["UNITRACK_REPORT_SHOTS"]) if os.environ.get(
+        "UNITRACK_REPORT_SHOTS") else None
     browser = Browser(tmp_path / "profile")
     try:
         browser.open(index.resolve().as_uri())
