@@ -14,10 +14,20 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 from PIL import Image
 
-from .thumbs import FULL_WIDTH, NO_ID, THUMB_WIDTH, draw_event, draw_labels, miss_bursts, sample
+from .thumbs import (
+    FULL_WIDTH,
+    NO_ID,
+    THUMB_WIDTH,
+    draw_event,
+    draw_labels,
+    miss_bursts,
+    overlay_masks,
+    sample,
+)
 
 #: A per-frame score below this is a failure worth a picture (IoU or J; the OTB success
 #: threshold most often quoted is 0.5).
@@ -113,9 +123,41 @@ def choose(events: pd.DataFrame, limit: int) -> list[Item]:
     return items
 
 
+#: Per frame (1-based): the ground-truth and result masks, ``{id: (H, W) bool}`` each.
+Masks = Callable[[int], "tuple[dict[int, np.ndarray], dict[int, np.ndarray]]"]
+
+
+def mask_tables(bench: Any, run: Path, sequence: str, info: Any) -> Masks | None:
+    """The masks of each frame when the run's results are mask tables (MOTS), else None."""
+    ground_truth = getattr(bench.dataset, "ground_truth", None)
+    if not callable(ground_truth) or not hasattr(info, "height"):
+        return None
+    try:
+        results = bench.read(run / "data", sequence)
+        gt = ground_truth(sequence)
+    except (OSError, ValueError):
+        return None
+    if gt is None or not all(hasattr(t, "decode") and hasattr(t, "rows") for t in (gt, results)):
+        return None
+    first = int(getattr(info, "first_frame", 1))
+
+    def at(frame: int) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+        out = []
+        for table in (gt, results):
+            idx = table.rows(first + frame - 1)
+            masks = table.decode(idx, info.height, info.width) if len(idx) else []
+            out.append({int(table.ids[i]): m for i, m in zip(idx, masks, strict=True)})
+        return out[0], out[1]
+    return at
+
+
 def drawer(bench: Any, run: Path, sequence: str, events: pd.DataFrame, item: Item,
-           files: Callable[[int], Path | None], loaded: Any) -> Drawer:
-    """How to draw ``item``'s frames: label maps for an object, else the events' boxes."""
+           files: Callable[[int], Path | None], loaded: Any, masks: Masks | None = None
+           ) -> Drawer:
+    """How to draw ``item``'s frames.
+
+    Label maps for an object (VOS), else the events' boxes, over the masks of mask tables.
+    """
     by_frame = {int(f): g for f, g in events.groupby("frame")}
     read_result = getattr(bench, "read_frame", None)
     if item.obj is not None and callable(read_result) and hasattr(loaded, "read_annotation"):
@@ -133,8 +175,12 @@ def drawer(bench: Any, run: Path, sequence: str, events: pd.DataFrame, item: Ite
         if path is None or not path.is_file():
             return None
         with Image.open(path) as image:
-            return draw_event(image, by_frame.get(frame, events.iloc[:0]), item.gt_id,
-                              item.track_id, item.prev_track_id)
+            picture = image.convert("RGB")
+        if masks is not None:
+            picture = overlay_masks(picture, *masks(frame), item.gt_id, item.track_id,
+                                    item.prev_track_id)
+        return draw_event(picture, by_frame.get(frame, events.iloc[:0]), item.gt_id,
+                          item.track_id, item.prev_track_id)
     return boxes
 
 
@@ -181,12 +227,13 @@ def event_pictures(bench: Any, run: Path, sequence: str, events: pd.DataFrame, f
     except (OSError, ValueError, KeyError, AttributeError):  # data moved or not ours to read
         return []
     rate = getattr(loaded, "frame_rate", 0) or 0
+    masks = mask_tables(bench, run, sequence, loaded)
     pictures = []
     for item in items:
         name = f"{item.kind}-f{item.frame:06d}-" + (
             f"o{item.obj}" if item.obj is not None else f"g{item.gt_id}")
-        picture = write_files(drawer(bench, run, sequence, events, item, files, loaded),
-                              item, folder, name)
+        picture = write_files(drawer(bench, run, sequence, events, item, files, loaded,
+                                     masks), item, folder, name)
         if picture is not None:
             seconds = (item.frame - 1) / float(rate) if rate else None
             pictures.append(replace(picture, seconds=seconds))

@@ -168,6 +168,30 @@ def _mask_box(mask: np.ndarray) -> tuple[float, float, float, float] | None:
             float(ys.max() - ys.min() + 1))
 
 
+def overlay_masks(image: Image.Image, gt: dict[int, np.ndarray], tracks: dict[int, np.ndarray],
+                  gt_id: int | None, track_id: int | None,
+                  prev_track_id: int | None) -> Image.Image:
+    """Masks under the boxes (MOTS).
+
+    The event's tracks are filled in their colour and its ground truth outlined green; the
+    other masks are faded.
+    """
+    canvas = np.asarray(image.convert("RGB"), dtype=np.float32).copy()
+    thin, thick = max(1, round(image.width / 700)), max(2, round(image.width / 250))
+    for ident, mask in tracks.items():
+        colour = {track_id: TRACK_COLOUR, prev_track_id: PREVIOUS_COLOUR}.get(ident)
+        alpha = 0.2 if colour is None else 0.45
+        if mask.shape == canvas.shape[:2]:
+            canvas[mask] = (1 - alpha) * canvas[mask] + alpha * np.asarray(
+                colour or OTHER_COLOUR, np.float32)
+    for ident, mask in gt.items():
+        if mask.shape == canvas.shape[:2]:
+            edge = _outline(mask, thick if ident == gt_id else thin)
+            canvas[edge] = (GT_COLOUR if ident == gt_id
+                            else 0.5 * canvas[edge] + 0.5 * np.asarray(GT_COLOUR))
+    return Image.fromarray(canvas.clip(0, 255).astype(np.uint8))
+
+
 def draw_labels(image: Image.Image, gt: np.ndarray, result: np.ndarray,
                 obj: int) -> tuple[Image.Image, tuple]:
     """A frame with label maps (VOS); also the crop around object ``obj``.

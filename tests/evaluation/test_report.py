@@ -132,3 +132,17 @@ def test_miss_bursts_and_sampling() -> None:
     fn = pd.DataFrame({"gt_id": [1, 1, 1, 2, 1], "frame": [3, 4, 5, 4, 9]})
     assert sorted(miss_bursts(fn)) == [(1, 3, 3), (1, 9, 1), (2, 4, 1)]
     assert sample(list(range(10)), 3) == [0, 3, 6] and sample([1], 5) == [1]
+
+
+def test_masks_are_drawn_under_the_boxes() -> None:
+    from PIL import Image
+
+    from unitrack_env.evaluation.report.thumbs import GT_COLOUR, overlay_masks
+
+    frame = Image.new("RGB", (200, 100), (40, 40, 40))
+    mine, other = np.zeros((100, 200), bool), np.zeros((100, 200), bool)
+    mine[20:60, 20:60], other[20:60, 120:160] = True, True
+    rgb = np.asarray(overlay_masks(frame, {9: mine}, {4: mine, 7: other}, 9, 4, None), int)
+    assert rgb[40, 40, 0] > 120 and rgb[40, 40, 1] < 60  # the event's track: filled red
+    assert rgb[40, 140].max() - rgb[40, 140].min() < 10 < rgb[40, 140, 0] - 40  # grey, faded
+    assert tuple(rgb[20, 40]) == GT_COLOUR and tuple(rgb[40, 40]) != GT_COLOUR  # outline
