@@ -17,7 +17,7 @@ import abc
 import importlib
 from typing import Any, ClassVar
 
-from .loading import entry_point_agents, is_reference, load_reference
+from .loading import did_you_mean, entry_point_agents, is_reference, load_reference
 
 #: Registered agent classes by name (built-ins appear once their module is imported).
 AGENTS: dict[str, type[Agent]] = {}
@@ -122,7 +122,8 @@ def agent_class(spec: str | type) -> type[Agent]:
         return AGENTS[spec]
     except KeyError:
         raise KeyError(
-            f"unknown agent '{spec}'; available: {', '.join(available_agents())} (or name "
+            f"unknown agent '{spec}'; {did_you_mean(spec, available_agents())}"
+            f"available: {', '.join(available_agents())} (or name "
             "one by reference: 'package.module:ClassName' or 'path/to/file.py:ClassName')"
         ) from None
 

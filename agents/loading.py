@@ -12,6 +12,7 @@ registry state.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import importlib
 import importlib.machinery
@@ -106,6 +107,15 @@ def _import_module(name: str) -> Any:
         ) from None
 
 
+def did_you_mean(name: str, choices: list[str]) -> str:
+    """``"did you mean X? "`` for the choices closest to ``name`` (case aside), else ``""``."""
+    lowered: dict[str, str] = {}
+    for choice in choices:
+        lowered.setdefault(choice.lower(), choice)
+    close = difflib.get_close_matches(name.lower(), list(lowered), n=3, cutoff=0.6)
+    return f"did you mean {' or '.join(lowered[c] for c in close)}? " if close else ""
+
+
 def _is_file(target: str) -> bool:
     return target.endswith(".py") or "/" in target or "\\" in target
 
@@ -132,7 +142,11 @@ def load_reference(spec: str) -> type:
         try:
             obj = getattr(obj, part)
         except AttributeError:
-            raise ImportError(f"agent '{spec}': {target} has no attribute '{attribute}'") from None
+            classes = [n for n, v in vars(obj).items() if isinstance(v, type)
+                       and getattr(v, "__module__", None) == getattr(obj, "__name__", None)]
+            hint = did_you_mean(part, classes).rstrip()
+            raise ImportError(f"agent '{spec}': {target} has no attribute '{attribute}'"
+                              + (f"; {hint}" if hint else "")) from None
     if not isinstance(obj, type):
         raise ImportError(f"agent '{spec}' is not a class but {type(obj).__name__}")
     return obj

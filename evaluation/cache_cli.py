@@ -16,10 +16,12 @@ The folder is ``--dir``, else ``$UNITRACK_FEATURE_CACHE``, else the user cache f
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import json
 import math
 import os
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +51,48 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     sub.add_parser("clear", parents=[common], help="remove every entry and statistic")
     parser.set_defaults(func=run_cache_command)
     return parser
+
+
+@contextlib.contextmanager
+def feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
+        Callable[[], str | None]]:
+    """Count the feature-cache hits of a run, for agents that have a feature cache option.
+
+    Yields a function that returns the summary once the run is over (None without a cache:
+    other agents do not pay for importing the appearance stack). A run that stored features
+    adds a line with the cache's folder, its size and how to trim it.
+    """
+    from unitrack_env.agents.base import agent_class
+    from unitrack_env.agents.options import agent_options
+
+    if "feature_cache" not in agent_options(agent_class(agent)):
+        yield lambda: None
+        return
+    from unitrack_env.agents.appearance.cache_runs import track_cache_run
+
+    folder = agent_kwargs.get("feature_cache")
+    root = Path(folder).expanduser() if isinstance(folder, (str, os.PathLike)) else None
+    with track_cache_run(root) as cache_run:
+        yield lambda: _run_summary(cache_run, root)
+
+
+def _run_summary(cache_run: Any, root: Path | None) -> str | None:
+    from unitrack_env.agents.appearance.cache_config import default_cache_dir, format_size
+    from unitrack_env.agents.appearance.feature_cache import FeatureCache
+
+    stats = cache_run.stats()
+    folder = root or default_cache_dir()
+    if stats is None or folder is None:
+        return None
+    if not stats.stored:
+        return stats.summary()
+    cache = FeatureCache(folder)
+    usage = cache.usage()
+    where = f" --dir {folder}" if root else ""
+    return (f"{stats.summary()}\nfeature cache: {folder} now holds {format_size(usage.bytes)} "
+            f"in {usage.entries} entries (cap {format_size(cache.max_size)}); "
+            f"`unitrack cache info{where}` shows them, "
+            f"`unitrack cache prune{where} --max-size 2GiB` trims them")
 
 
 def _cache(args: argparse.Namespace) -> Any:

@@ -8,12 +8,11 @@ traceback. Finished sequences are always kept: run the same command again to res
 from __future__ import annotations
 
 import argparse
-import contextlib
 import difflib
 import os
 import sys
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -59,7 +58,10 @@ EXAMPLES = {
 
 
 def _console(stderr: bool = False) -> Console:
-    return Console(stderr=stderr, highlight=False, soft_wrap=stderr)
+    console = Console(stderr=stderr, highlight=False, soft_wrap=stderr)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = 100_000  # a file or a pipe gets every column and unbroken lines
+    return console
 
 
 def _check_env_id(env_id: str) -> str:
@@ -103,28 +105,6 @@ def _agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return parse_options(agent_class(args.agent), args.agent_arg or [], agent=args.agent)
 
 
-@contextlib.contextmanager
-def _feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
-        Callable[[], str | None]]:
-    """Count the feature-cache hits of a run, for agents that have a feature cache option.
-
-    Yields a function that returns the summary line once the run is over (None without a
-    cache: other agents do not pay for importing the appearance stack).
-    """
-    from unitrack_env.agents.base import agent_class
-    from unitrack_env.agents.options import agent_options
-
-    if "feature_cache" not in agent_options(agent_class(agent)):
-        yield lambda: None
-        return
-    from unitrack_env.agents.appearance.cache_runs import track_cache_run
-
-    folder = agent_kwargs.get("feature_cache")
-    root = folder if isinstance(folder, (str, os.PathLike)) else None
-    with track_cache_run(root) as cache_run:
-        yield cache_run.summary
-
-
 def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
                    task: str, fmt: str, fps: dict | None = None, coverage: str = "") -> None:
     from .tables import metrics_csv, metrics_json, metrics_table
@@ -154,7 +134,9 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
 
     env_kwargs = _env_kwargs(args)
     agent_kwargs = _agent_kwargs(args)
-    with _feature_cache_report(args.agent, agent_kwargs) as cache_summary:
+    from .cache_cli import feature_cache_report
+
+    with feature_cache_report(args.agent, agent_kwargs) as cache_summary:
         report = run(args.env, args.agent, out=args.out, env_kwargs=env_kwargs,
                      agent_kwargs=agent_kwargs,
                      sequences=args.sequences,

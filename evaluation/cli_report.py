@@ -36,7 +36,8 @@ TABLE_COLUMNS = ("sequence", "frame", "type", "object", "gt_id", "track_id", "pr
 def add_parsers(sub: Any) -> None:
     """Register ``events``, ``compare`` and ``report`` on the ``unitrack`` subparsers."""
     def command(name: str, help_text: str) -> argparse.ArgumentParser:
-        return sub.add_parser(name, help=help_text, description=help_text,
+        # help (in `unitrack --help`) is %-formatted by argparse, the description is not
+        return sub.add_parser(name, help=help_text, description=help_text.replace("%%", "%"),
                               epilog=EXAMPLES[name],
                               formatter_class=argparse.RawDescriptionHelpFormatter)
 
@@ -94,6 +95,10 @@ def _cmd_events(args: argparse.Namespace, console: Console) -> int:
         return 0
     from rich.table import Table
 
+    if args.type is None:  # thousands of lines help nobody: the counts, and how to list
+        _events_summary(console, event_counts(df), len(df))
+        return 0
+
     cols = [c for c in TABLE_COLUMNS if c in df and df[c].notna().any()]
     table = Table(*cols, title=f"{len(df)} events")
     for row in df[cols].itertuples(index=False):
@@ -101,6 +106,21 @@ def _cmd_events(args: argparse.Namespace, console: Console) -> int:
                         for v in row))
     console.print(table)
     return 0
+
+
+def _events_summary(console: Console, counts: dict[str, dict[str, int]], total: int) -> None:
+    from rich.table import Table
+
+    kinds = list(dict.fromkeys(kind for row in counts.values() for kind in row))
+    table = Table("sequence", title=f"{total} events", title_justify="left")
+    for kind in kinds:
+        table.add_column(kind, justify="right")
+    for sequence, row in counts.items():
+        table.add_row(sequence, *(str(row.get(kind, 0)) for kind in kinds))
+    console.print(table)
+    example = next((k for k in ("idsw", "fn", "frame") if k in kinds), kinds[0] if kinds else "")
+    console.print(f"--type TYPE lists the events of one type (e.g. --type {example}); "
+                  "--format csv lists every event with every column", markup=False)
 
 
 def _missing(value: Any) -> bool:

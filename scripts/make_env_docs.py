@@ -9,12 +9,20 @@ from __future__ import annotations
 import argparse
 import importlib
 import inspect
+import re
 import sys
 from pathlib import Path
 
 import unitrack_env
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "envs"
+#: A Sphinx cross-reference in a docstring (``:class:`~pkg.Name```, ``:meth:`name```, ...).
+SPHINX_ROLE = re.compile(r":(?:class|data|func|meth|mod|attr|obj|exc):`(~?)([^`]+)`")
+
+
+def plain_markdown(text: str) -> str:
+    """Sphinx roles as Markdown code, e.g. ``:class:`~a.B``` -> `` `B` ``."""
+    return SPHINX_ROLE.sub(lambda m: f"`{m[2].rsplit('.', 1)[-1] if m[1] else m[2]}`", text)
 
 
 def pages() -> dict[str, str]:
@@ -32,7 +40,8 @@ def pages() -> dict[str, str]:
         header = f"# {summary.strip()}\n\nIds: " + ", ".join(f"`{i}`" for i in ids) + "\n"
         note = (f"\n<!-- generated from {module_name}.{class_name} by "
                 "scripts/make_env_docs.py; edit the docstring, not this file -->\n")
-        out[f"{task}.md"] = header + note + body.rstrip() + "\n" + _score_table(ids)
+        out[f"{task}.md"] = (header + note + plain_markdown(body.rstrip()) + "\n"
+                             + _score_table(ids))
     return out
 
 

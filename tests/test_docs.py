@@ -24,6 +24,8 @@ def test_env_pages_match_docstrings():
         page = REPO / "docs" / "envs" / name
         assert page.is_file(), f"{page} missing: run python scripts/make_env_docs.py"
         assert page.read_text() == text, f"{page} is stale: run python scripts/make_env_docs.py"
+        assert not re.search(r":[a-z]+:`", text), f"{page} shows Sphinx markup"  # issue 42
+    assert module.plain_markdown(":class:`~a.b.Image` and :mod:`a.b`") == "`Image` and `a.b`"
 
 
 def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
@@ -34,6 +36,23 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one():
     assert len(commands) == 2
     ci = (REPO / ".ci" / "run").read_text()
     assert commands[1] in ci
+
+
+def test_readme_says_to_activate_the_venv_before_its_first_bare_command():
+    readme = (REPO / "README.md").read_text()  # issue 42: copied as printed: not found
+    first_bare = min(readme.index(f"\n{word} ") for word in ("unitrack", "python")
+                     if f"\n{word} " in readme)
+    assert "source .venv/bin/activate" in readme[:first_bare]
+    setup = readme.split("## Set up", 1)[1].split("\n## ", 1)[0]
+    assert re.search(r"\d+ s on a quiet\s+2-core machine", setup)  # how long the tests take
+
+
+def test_writing_an_agent_describes_the_observation_and_links_the_env_pages():
+    text = (REPO / "docs" / "writing-an-agent.md").read_text()  # issue 42
+    assert 'observation["frame"]' in text and "uint8 RGB" in text and "(H, W, 3)" in text
+    assert "`max_tracks` is" in text
+    linked = set(re.findall(r"\]\(envs/([\w-]+\.md)\)", text))
+    assert linked == {p.name for p in (REPO / "docs" / "envs").glob("*.md")}
 
 
 def _anchor(heading: str) -> str:

@@ -125,8 +125,10 @@ def test_plain_pip_install_refuses_before_the_first_frame(outsider):
 
 def test_readme_install_then_quickstart_pytest_and_cli(outsider):
     project, env = outsider["project"], outsider["env"]
-    _run(["bash", str(REPO / "scripts" / "setup.sh")], REPO,
-         env | {"UNITRACK_VENV": str(outsider["venv"]), "UNITRACK_WHEEL": str(outsider["wheel"])})
+    setup = _run(["bash", str(REPO / "scripts" / "setup.sh")], REPO,
+                 env | {"UNITRACK_VENV": str(outsider["venv"]),
+                        "UNITRACK_WHEEL": str(outsider["wheel"])})
+    assert "ERROR" not in setup.stderr and "conflicts" not in setup.stderr  # issue 42
     readme = (REPO / "README.md").read_text()
     quickstart = re.findall(r"```python\n(.*?)```", readme, re.S)[0]
     (project / "quickstart.py").write_text(quickstart)

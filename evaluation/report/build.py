@@ -1,9 +1,10 @@
 """Build the static HTML report of run folders (``unitrack report``), without replaying agents.
 
 ``index.html`` holds the sortable metrics table, the paired comparison of the first two runs,
-and per run and sequence an event timeline with thumbnails of ID switches and bursts of
-misses (linked to the frame and to a ``unitrack render`` clip when one is in the run folder).
-A scorecard folder gives its table and radar chart.
+and per run and sequence an event timeline with thumbnails of its events (ID switches, bursts
+of misses or of failed frames; linked to the event's page and to a ``unitrack render`` clip
+when one is in the run folder). Each sequence has its own page and each pictured event one
+(pages.py). A scorecard folder gives its table and radar chart.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
 from ..compare import COMPARE_TASKS
 from ..events import load_events, run_benchmark, run_sequences
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
-from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, render_picture, sample
+from .pages import event_pages, figure, legend, sequence_page
+from .pictures import choose, event_pictures
 
 #: Count metrics (shown as integers, not percent).
 COUNTS = {"IDSW", "CLR_FP", "CLR_FN", "MT", "ML", "Frag", "IDs", "CLR_TP"}
@@ -29,18 +31,13 @@ COUNTS = {"IDSW", "CLR_FP", "CLR_FN", "MT", "ML", "Frag", "IDs", "CLR_TP"}
 VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1"),
                  "vis": ("iou", "IoU of tp tracks")}
 
-#: Event lanes of the timeline of tasks with counted events, and what a count is; their
-#: thumbnails are not drawn yet (masks, poses), only box MOT's.
+#: Event lanes of the timeline of tasks with counted events, and what a count is.
 LANES = {"mots": (None, "masks"), "posetrack": (("fn", "fp", "idsw"), "joints"),
          "vis": (("fn", "fp"), "track-frames")}
 
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "x"
-
-
-def _rgb(colour: tuple[int, int, int]) -> str:
-    return "rgb({},{},{})".format(*colour)
 
 
 def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
@@ -95,66 +92,41 @@ def _clip(run: Path, sequence: str) -> Path | None:
     return clips[0] if clips else None
 
 
-def _mot_pictures(run: Path, bench: Any, seq: str, events: pd.DataFrame, out: Path,
-                  folder: str, limit: int) -> list[str]:
-    from unitrack_env.datasets.motchallenge import read_seqinfo
-
-    info = read_seqinfo(bench.dataset.split_dir / seq)
-    clip = _clip(run, seq)
-    by_frame = {int(f): g for f, g in events.groupby("frame")}
-    items = []
-    for row in sample(list(events[events["type"] == "idsw"].itertuples()), limit):
-        items.append(("idsw", int(row.frame), int(row.gt_id), int(row.track_id),
-                      int(row.prev_track_id),
-                      f"switch, frame {int(row.frame)}: gt {int(row.gt_id)} "
-                      f"track {int(row.prev_track_id)} → {int(row.track_id)}"))
-    bursts = miss_bursts(events[events["type"] == "fn"])
-    for gt_id, start, length in sample(sorted(bursts, key=lambda b: (b[1], b[0])), limit):
-        items.append(("miss", start, gt_id, None, None,
-                      f"miss, frames {start}-{start + length - 1}: gt {gt_id}"))
-    figures = []
-    for kind, frame, gt_id, track, prev, caption in items:
-        path = info.frame_path(frame)
-        if not path.is_file():
-            continue
-        name = f"{kind}-f{frame:06d}-g{gt_id}"
-        thumb, full = render_picture(path, by_frame.get(frame, events.iloc[:0]), out / folder,
-                                     name, gt_id=gt_id, track_id=track, prev_track_id=prev)
-        link = ""
-        if clip is not None:
-            t = (frame - 1) / max(1.0, float(info.frame_rate))
-            link = f' · <a href="{esc(clip.resolve().as_uri())}#t={t:.2f}">clip</a>'
-        figures.append(f'<figure><a href="{esc(full)}"><img loading="lazy" class="thumb '
-                       f'{kind}" data-kind="{kind}" data-frame="{frame}" src="{esc(thumb)}" '
-                       f'alt="{esc(caption)}"></a><figcaption>{esc(caption)}{link}'
-                       "</figcaption></figure>")
-    return figures
-
-
-def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
-                     events: pd.DataFrame, out: Path, limit: int) -> str:
-    """A run's sequence: its event timeline and (MOT) event thumbnails."""
-    frames = bench.sequence_length(seq)
-    head = f'<h3 id="{_slug(label)}-{_slug(seq)}">{esc(label)} · {esc(seq)} ({frames} frames)</h3>'
+def _timeline(bench: Any, events: pd.DataFrame, frames: int) -> str:
+    """A sequence's timeline: event lanes (counted events) or its per-frame value."""
     if bench.task == "mot":
-        figures = _mot_pictures(run, bench, seq, events, out, f"img{index}-{_slug(seq)}", limit)
-        shown = (f"<p>{len(figures)} pictures (at most {limit} ID switches and {limit} bursts "
-                 "of misses, sampled evenly over the sequence).</p>") if figures else \
-            "<p>No ID switch or miss to picture (or the frames are not on this machine).</p>"
-        return (f'<section class="sequence" data-sequence="{esc(seq)}">{head}'
-                + mot_timeline(events, frames) + shown
-                + '<div class="thumbs">' + "".join(figures) + "</div></section>")
+        return mot_timeline(events, frames)
     body = ""
     if bench.task in LANES:
         kinds, unit = LANES[bench.task]
-        body = (mot_timeline(events, frames, kinds=kinds) + f"<p>Counts are {unit}; no "
-                "thumbnails for this task yet (only box MOT's are drawn).</p>")
+        body = mot_timeline(events, frames, kinds=kinds) + f"<p>Counts are {unit}.</p>"
     column, name = VALUE_COLUMNS.get(bench.task, (None, None))
     if column is not None and column in events:
         rows = events[events["type"] == "tp"] if bench.task == "vis" else events
         body += value_timeline(rows[column], rows["frame"], name, frames)
-    body = body or "<p>No per-frame events.</p>"
-    return f'<section class="sequence" data-sequence="{esc(seq)}">{head}{body}</section>'
+    return body or "<p>No per-frame events.</p>"
+
+
+def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
+                     events: pd.DataFrame, out: Path, limit: int) -> str:
+    """A run's sequence on the index (timeline, thumbnails) and its own page and event pages."""
+    frames = bench.sequence_length(seq)
+    title = f"{label} · {seq} ({frames} frames)"
+    timeline = _timeline(bench, events, frames)
+    pictures = event_pictures(bench, run, seq, events, out / f"img{index}-{_slug(seq)}", limit)
+    clip = _clip(run, seq)
+    figures = [figure(p, clip) for p in pictures]
+    name = sequence_page(out, f"seq{index}-{_slug(seq)}.html", title, timeline, figures,
+                         choose(events, len(events)), pictures,
+                         f"unitrack events {run} --sequence {seq} --format csv")
+    event_pages(out, pictures, name, title)
+    shown = (f"<p>{len(figures)} pictures (at most {limit} of each kind of event, sampled "
+             "evenly over the sequence); every event on the sequence's page.</p>" if figures
+             else "<p>No event to picture (or the frames are not on this machine).</p>")
+    return (f'<section class="sequence" data-sequence="{esc(seq)}">'
+            f'<h3 id="{_slug(label)}-{_slug(seq)}"><a class="sequence-link" '
+            f'href="{esc(name)}">{esc(title)}</a></h3>' + timeline + shown
+            + '<div class="thumbs">' + "".join(figures) + "</div></section>")
 
 
 def scorecard_section(folder: Path, out: Path) -> str:
@@ -199,13 +171,6 @@ def _card_intervals(folder: Path) -> str:
                     table_id="ci-table"))
 
 
-def _legend() -> str:
-    return ('<p class="legend">Boxes:<span style="background:' + _rgb(GT_COLOUR)
-            + '"></span>ground truth<span style="background:' + _rgb(TRACK_COLOUR)
-            + '"></span>track matched at the event<span style="background:'
-            + _rgb(PREVIOUS_COLOUR) + '"></span>track matched before the switch</p>')
-
-
 def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
                  resamples: int = 500) -> Path:
     """Write ``out/index.html`` for run folders (or one scorecard folder); return its path.
@@ -238,7 +203,8 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
         body.append(compare_section(runs[0], runs[1], resamples) if common else
                     '<h2 id="compare">Comparison</h2><p class="note">The first two runs share '
                     "no scored sequence: nothing to compare.</p>")
-    body.append('<h2 id="events">Error events</h2>' + _legend())
+    body.append('<h2 id="events">Error events</h2><p>Each sequence\'s title opens its page: '
+                'timeline, pictures and the list of its events.</p>' + legend())
     for i, (label, run, bench, metrics) in enumerate(loaded):
         names = list(metrics.get("per_sequence", {}))
         events = load_events(run) if names else pd.DataFrame(columns=["sequence", "frame",
@@ -259,8 +225,9 @@ def check_report_folder(out: Path) -> None:
     for path in (index, out / "scorecard.svg", out / "scorecard.png"):
         refuse_link(path)
     head = index.read_text(encoding="utf-8", errors="replace")[:4000] if index.is_file() else ""
-    theirs = [p.name for p in (index, out / "scorecard.svg", out / "scorecard.png")
-              if p.exists() and not any(mark in head for mark in OURS)]
+    written = [index, out / "scorecard.svg", out / "scorecard.png",  # and the pages' files:
+               *sorted(out.glob("seq*-*.html")), *sorted(out.glob("img*-*"))]
+    theirs = [p.name for p in written if p.exists() and not any(mark in head for mark in OURS)]
     if theirs:
         raise FileExistsError(f"{out} holds {', '.join(theirs)}, which no report of ours wrote "
                               "(the report would replace it); it is kept: choose another "

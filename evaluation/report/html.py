@@ -27,6 +27,7 @@ height:.8em;margin:0 .3em 0 1em;vertical-align:middle}
 .thumbs{display:flex;flex-wrap:wrap;gap:6px}.thumbs figure{margin:0;width:220px;
 font-size:12px}.thumbs img{width:220px;display:block;border:1px solid #999}
 svg.timeline{display:block;margin:.3em 0}svg text{font:11px sans-serif}
+svg.forest text{font:13px sans-serif}
 """
 
 JS = """
@@ -142,20 +143,52 @@ def _axis(num_frames: int, left: int, width: int, y: int) -> str:
     return "".join(ticks)
 
 
-def forest(rows: dict, metrics: Sequence[str], width: int = 420) -> str:
-    """An SVG of each metric's combined difference with its interval (percent points)."""
+def _ticks(half: float) -> list[float]:
+    """Round tick values in percent points covering [-half, +half] (half in fractions)."""
+    span = 100 * half
+    step = 10 ** math.floor(math.log10(max(span, 1e-6)))
+    for factor in (1, 2, 5, 10):
+        if span / (step * factor) <= 4:
+            step *= factor
+            break
+    count = int(span // step)
+    return [i * step for i in range(-count, count + 1)]
+
+
+def forest(rows: dict, metrics: Sequence[str], width: int = 760) -> str:
+    """An SVG of each metric's combined difference A - B with its 95% interval.
+
+    One row per metric with its numbers beside it, a zero line, an axis labelled in percent
+    points; rows whose interval excludes 0 in red.
+    """
     spans = [abs(v) for m in metrics for v in (rows[m].low, rows[m].high, rows[m].diff)]
     half = max(1e-3, max(spans, default=0.01)) * 1.1
-    line_h, left = 22, 60
-    height = line_h * len(metrics) + 20
-    x = lambda v: left + (v + half) / (2 * half) * (width - left - 10)  # noqa: E731
-    parts = [f'<svg width="{width}" height="{height}" role="img" aria-label="differences">',
-             f'<line x1="{x(0):.1f}" x2="{x(0):.1f}" y1="0" y2="{height - 16}" stroke="#999"/>']
+    line_h, left, right, top = 28, 70, 190, 22
+    plot_bottom = top + line_h * len(metrics)
+    height = plot_bottom + 44
+    x = lambda v: left + (v + half) / (2 * half) * (width - left - right)  # noqa: E731
+    parts = [f'<svg class="forest" width="{width}" height="{height}" role="img" '
+             'aria-label="differences A - B with 95% intervals">',
+             f'<text x="{left}" y="14" font-weight="bold">A - B, combined (95% interval)</text>']
+    for tick in _ticks(half):
+        tx = x(tick / 100)
+        zero = abs(tick) < 1e-9
+        parts.append(f'<line x1="{tx:.1f}" x2="{tx:.1f}" y1="{top}" y2="{plot_bottom}" '
+                     f'stroke="{"#333" if zero else "#e3e3e3"}" '
+                     f'stroke-width="{2 if zero else 1}"/>'
+                     f'<text x="{tx:.1f}" y="{plot_bottom + 14}" text-anchor="middle">'
+                     f"{'0' if zero else f'{tick:+g}'}</text>")
+    parts.append(f'<text x="{x(0):.1f}" y="{plot_bottom + 30}" text-anchor="middle">'
+                 "A - B in percent points (0: no difference; right: A higher)</text>")
     for i, m in enumerate(metrics):
-        d, y = rows[m], 12 + i * line_h
-        parts.append(f'<text x="0" y="{y + 4}">{esc(m)}</text><line x1="{x(d.low):.1f}" '
-                     f'x2="{x(d.high):.1f}" y1="{y}" y2="{y}" stroke="#333" stroke-width="2"/>'
-                     f'<circle cx="{x(d.diff):.1f}" cy="{y}" r="4" fill="#c0392b"/>')
-    parts.append(f'<text x="{left}" y="{height - 2}">{-100 * half:+.1f}</text>'
-                 f'<text x="{width - 50}" y="{height - 2}">{100 * half:+.1f}</text></svg>')
+        d, y = rows[m], top + line_h * i + line_h / 2
+        ink = "#c0392b" if d.significant else "#555"
+        parts.append(f'<g class="forest-row" data-metric="{esc(m)}">'
+                     f'<text x="0" y="{y + 4:.1f}" font-weight="bold">{esc(m)}</text>'
+                     f'<line x1="{x(d.low):.1f}" x2="{x(d.high):.1f}" y1="{y:.1f}" '
+                     f'y2="{y:.1f}" stroke="{ink}" stroke-width="3"/>'
+                     f'<circle cx="{x(d.diff):.1f}" cy="{y:.1f}" r="5" fill="{ink}"/>'
+                     f'<text x="{width - right + 12}" y="{y + 4:.1f}">{100 * d.diff:+.1f} '
+                     f"[{100 * d.low:+.1f}, {100 * d.high:+.1f}]</text></g>")
+    parts.append("</svg>")
     return "".join(parts)

@@ -149,6 +149,22 @@ def test_unknown_name_lists_the_known_ones():
         agent_class("no-such-agent")
 
 
+@pytest.mark.parametrize(("name", "hint"), [("unitrak", "did you mean unitrack"),
+                                            ("IoU", "did you mean iou?")])
+def test_a_mistyped_name_gets_the_closest_ones(name, hint):
+    with pytest.raises(KeyError, match=hint):  # issue 42: only the list, as for env ids
+        agent_class(name)
+
+
+def test_a_mistyped_class_gets_the_classes_of_its_file(tmp_path):
+    path = tmp_path / "mytracker.py"
+    path.write_text(TRACKER.replace("FileTracker", "GreedyIoU"))
+    with pytest.raises(ImportError, match="no attribute 'GreedyIou'; did you mean GreedyIoU"):
+        agent_class(f"{path}:GreedyIou")
+    with pytest.raises(ImportError, match="no attribute 'Zzz'$"):  # nothing close: no hint
+        agent_class(f"{path}:Zzz")
+
+
 def test_interactive_classes_are_not_portable():
     namespace: dict = {}
     exec(TRACKER.replace("FileTracker", "ExecTracker"), namespace)

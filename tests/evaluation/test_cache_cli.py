@@ -65,3 +65,27 @@ def test_dir_option_and_a_cache_turned_off(tmp_path: Path, monkeypatch, capsys) 
     assert "1 entries" in capsys.readouterr().out
     assert main(["cache", "prune", "--dir", str(other), "--max-size", "lots"]) == 2
     assert "not a size" in capsys.readouterr().err
+
+
+def test_a_run_that_stored_features_says_where_they_are_and_how_much(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from unitrack_env.evaluation.cache_cli import feature_cache_report
+
+    root = tmp_path / "features"  # issue 42: the cache grew by 883 MiB without a word
+    monkeypatch.setenv("UNITRACK_FEATURE_CACHE", str(root))
+    lines = []
+    for frames in ((0, 1, 2), (0, 1)):  # the second run computes nothing: no place line
+        with feature_cache_report("unitrack", {}) as summary:
+            cached = CachedAppearanceModel(AppearanceModel("random", seed=0), True)
+            for value in frames:
+                cached.features(np.full((32, 48, 3), value, np.uint8))
+            cached.flush_stats()
+        lines.append(summary().splitlines())
+    assert lines[0][0].startswith("feature cache: 0/3 frames read from the cache")
+    assert lines[0][1].startswith(f"feature cache: {root} now holds ")
+    assert "in 3 entries (cap 10.0 GiB)" in lines[0][1]
+    assert "`unitrack cache prune --max-size 2GiB` trims them" in lines[0][1]
+    assert lines[1] == ["feature cache: 2/2 frames read from the cache (100%), 0 computed"]
+    with feature_cache_report("iou", {}) as summary:
+        pass
+    assert summary() is None

@@ -36,6 +36,8 @@ def test_help_is_plain_text_and_documents_every_option():
             if not isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
                 assert action.help, f"{name} {action.option_strings} has no help"
     assert "examples:" in commands["evaluate"].format_help()
+    for name, command in commands.items():  # issue 42: compare --help showed "95%%"
+        assert "%%" not in command.format_help(), name
 
 
 def test_formats_and_a_table_that_fits_80_columns(tmp_path, capsys):
@@ -61,6 +63,17 @@ def test_formats_and_a_table_that_fits_80_columns(tmp_path, capsys):
     assert "…" not in text and "a-rather-long-sequence-name-01" in text
     assert max(len(line) for line in text.splitlines()) <= 80
     assert dropped and dropped[-1] == "ML" and "HOTA" not in dropped
+
+
+def test_output_to_a_file_or_pipe_keeps_every_column(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("COLUMNS", raising=False)  # issue 42: a pipe got 80 columns, 6 dropped
+    assert main(["evaluate", "--env", ENV, "--agent", "iou", "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    header = next(line for line in out.splitlines() if "HOTA" in line)
+    for column in ("AssA", "MOTP", "CLR_FP", "CLR_FN", "MT", "ML", "FPS"):
+        assert f" {column} " in header
+    assert "do not fit" not in out
 
 
 def test_render_writes_h264(tmp_path):
@@ -242,8 +255,13 @@ def test_score_folder_api_refuses_missing_results(one_missing):
         bench.score_folder(data, ["SYN-02"], allow_missing=True)
 
 
-def test_a_run_folder_given_as_results_points_to_its_data(one_missing, capsys):
-    data, _ = one_missing
-    assert main(["score", "--env", ENV, "--results", str(data.parent)]) == 2
-    assert f"result files are in {data}" in capsys.readouterr().err
+@pytest.mark.parametrize("form", [["--env", ENV], ["--benchmark", "MOT16", "--gt", "{gt}"]])
+def test_a_run_folder_given_as_results_points_to_its_data(one_missing, form, capsys):
+    data, _ = one_missing  # issue 42: the --gt form said "no result file ... --allow-missing"
+    argv = ["score", *[a.format(gt=_gt()) for a in form], "--results", str(data.parent)]
+    for extra in ([], ["--allow-missing"]):
+        assert main([*argv, *extra]) == 2
+        err = capsys.readouterr().err
+        assert f"is the folder of a run; its result files are in {data}" in err
+        assert "no result file" not in err and "nothing to score" not in err
 

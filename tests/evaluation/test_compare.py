@@ -169,6 +169,8 @@ def test_compare_command(two_runs, capsys, tmp_path) -> None:
     for metric in ("HOTA", "IDF1", "MOTA", "DetA", "AssA"):
         assert f"COMBINED           {metric}" in out
     assert "95% interval" in out and "paired block jackknife (frames)" in out
+    assert "(too little data)" in out and "(too\n" not in out  # issue 42: cut at 80 columns
+    assert all(line.count("[") == line.count("]") for line in out.splitlines())
     assert main(["compare", str(a), str(b), "--interval", "percentile", "--resamples", "50"]) == 0
     assert "paired block bootstrap (frames), 50 resamples" in capsys.readouterr().out
     assert main(["compare", str(a), str(b), "--resamples", "50", "--format", "json"]) == 0

@@ -82,6 +82,12 @@ def test_events_command(iou_run: Path, capsys) -> None:
     assert len(lines) - 1 == sum(int(m["IDSW"]) for m in metrics.values())
     assert main(["events", str(iou_run), "--sequence", "SYN-01", "--type", "fn"]) == 0
     assert "SYN-01" in capsys.readouterr().out
+    assert main(["events", str(iou_run)]) == 0  # issue 42: no --type printed every event
+    out = capsys.readouterr().out
+    counts = event_counts(load_events(iou_run))
+    assert f"{sum(sum(c.values()) for c in counts.values())} events" in out
+    assert len(out.splitlines()) < 10 + len(counts) and "--type TYPE lists" in out
+    assert all(f"SYN-0{i}" in out for i in (1, 2)) and " idsw " in out
     assert main(["events", str(iou_run), "--sequence", "NOPE"]) == 2
     assert "sequence 'NOPE' is not scored" in capsys.readouterr().err
     assert main(["events", str(iou_run.parent / "missing")]) == 2

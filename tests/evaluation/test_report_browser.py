@@ -171,3 +171,110 @@ def test_report_in_chromium(tmp_path: Path) -> None:
     assert colour_pixels(picture, TRACK_COLOUR) > 50, "no track box on the thumbnail"
     assert ascending == sorted(ascending) and descending == sorted(ascending, reverse=True)
     assert ascending != descending
+
+
+def label_patch(path: Path, colour: tuple[int, int, int], side: int = 5,
+                tolerance: int = 60) -> bool:
+    """Whether an image holds a solid ``side`` x ``side`` block of ``colour``: an id's label
+    patch (box lines are at most 3 pixels wide, so only a label fills such a block)."""
+    rgb = np.asarray(Image.open(path).convert("RGB"), dtype=np.int32)
+    hit = (np.abs(rgb - np.array(colour)).max(axis=2) <= tolerance).astype(np.int32)
+    sums = np.pad(hit, ((1, 0), (1, 0))).cumsum(0).cumsum(1)
+    block = (sums[side:, side:] - sums[:-side, side:] - sums[side:, :-side]
+             + sums[:-side, :-side])
+    return bool((block == side * side).any())
+
+
+LOADED_IMAGES = ("Promise.all(Array.from(document.images).map(i => i.complete ? 0 : "
+                 "new Promise(ok => {i.onload = i.onerror = ok}))).then(() => "
+                 "Array.from(document.images).map(i => ({src: i.getAttribute('src'), "
+                 "w: i.naturalWidth, cls: i.closest('figure') ? "
+                 "i.closest('figure').className : '', id: i.id})))")
+
+#: The runs of the page test: a box MOT pair, a MOTS, a SOT and a VOS run (synthetic data).
+PAGE_RUNS = (("mot-a", "UniTrack/MOT16-v0", "iou", {}),
+             ("mot-b", "UniTrack/MOT16-v0", "iou", {"iou_threshold": 0.7}),
+             ("mots", "UniTrack/MOTS-v0", "iou", {}),
+             ("sot", "UniTrack/OTB-v0", "repeat-box", {}),
+             ("vos", "UniTrack/DAVIS-v0", "repeat-mask", {}))
+
+
+def _shoot(browser: Browser, shots: Path | None, name: str) -> None:
+    """With ``UNITRACK_REPORT_SHOTS`` set, keep a compact screenshot there (docs/images)."""
+    if shots is None:
+        return
+    path = shots / f"{name}.png"
+    browser.js("document.querySelectorAll('img').forEach(i => {i.loading = 'eager'}); "
+               + LOADED_IMAGES)  # lazy thumbnails below the fold load too
+    browser.screenshot(path)
+    shot = Image.open(path).convert("RGB")
+    rows = np.nonzero((np.asarray(shot.convert("L")) < 250).any(axis=1))[0]
+    bottom = int(rows.max()) + 16 if len(rows) else shot.height
+    shot = shot.crop((0, 0, shot.width, min(shot.height, bottom)))
+    shot = shot.resize((shot.width * 3 // 4, shot.height * 3 // 4), Image.LANCZOS)
+    shot.quantize(256).save(path, optimize=True)
+
+
+def _event_page(browser: Browser, index: Path, link: str, shots: Path | None,
+                name: str) -> dict:
+    """Open a sequence page from the index, then its first event page; what each shows."""
+    from unitrack_env.evaluation.report.thumbs import GT_COLOUR, TRACK_COLOUR
+
+    browser.open((index.parent / link).resolve().as_uri())
+    _shoot(browser, shots, f"{name}-sequence")
+    sequence = browser.js("({h1: document.querySelector('h1').textContent, "
+                          "thumbs: document.querySelectorAll('img.thumb').length, "
+                          "listed: document.querySelectorAll('#event-list-table tbody tr')"
+                          ".length, legend: document.querySelector('.legend').textContent, "
+                          "event: (document.querySelector('.thumbs a') || {}).href})")
+    assert sequence["thumbs"] > 0 and sequence["listed"] > 0, f"{name}: {sequence}"
+    assert "other tracks (grey)" in sequence["legend"]
+    browser.open(sequence["event"])
+    images = browser.js(LOADED_IMAGES)
+    _shoot(browser, shots, f"{name}-event")
+    nav = browser.js("Array.from(document.querySelectorAll('nav a')).map(a => a.className)")
+    assert "sequence-page" in nav, f"{name}: the event page does not link its sequence"
+    shown = {i["cls"] or i["id"]: i for i in images}
+    assert shown["full"]["w"] > 0, f"{name}: the event's frame did not load"
+    assert {"prev", "next"} & set(shown) and all(i["w"] > 0 for i in images), images
+    event_dir = Path(sequence["event"].removeprefix("file://")).parent
+    full = event_dir / shown["full"]["src"]
+    assert label_patch(full, TRACK_COLOUR) or label_patch(full, GT_COLOUR), \
+        f"{name}: no id label drawn on {full.name}"
+    return sequence
+
+
+@pytest.mark.slow
+def test_report_pages_in_chromium(tmp_path: Path) -> None:
+    """Index -> sequence page -> event page for box MOT, MOTS, SOT and VOS runs (issue 42).
+
+    ``UNITRACK_REPORT_SHOTS=docs/images`` keeps the screenshots there (docs/report.md).
+    """
+    chromium()
+    runs = tmp_path / "runs"
+    for name, env_id, agent, options in PAGE_RUNS:
+        run(env_id, agent, out=runs / name, progress=False, agent_kwargs=options,
+            env_kwargs={"decode_frames": False})
+    index = build_report([runs / name for name, *_ in PAGE_RUNS], tmp_path / "report",
+                         thumbnails=6, resamples=100)
+    shots = Path(os.environ["UNITRACK_REPORT_SHOTS"]) if os.environ.get(
+        "UNITRACK_REPORT_SHOTS") else None
+    browser = Browser(tmp_path / "profile")
+    try:
+        browser.open(index.resolve().as_uri())
+        links = browser.js("Array.from(document.querySelectorAll('a.sequence-link'))"
+                           ".map(a => [a.getAttribute('href'), a.textContent])")
+        browser.js("document.getElementById('compare').scrollIntoView()")
+        _shoot(browser, shots, "report-compare")
+        rows = browser.js("Array.from(document.querySelectorAll('svg.forest .forest-row'))"
+                          ".map(g => g.dataset.metric)")
+        axis = browser.js("document.querySelector('svg.forest').textContent")
+        seen = {}
+        for name, *_ in PAGE_RUNS[:1] + PAGE_RUNS[2:]:
+            link = next(href for href, text in links if text.startswith(f"{name} ("))
+            seen[name] = _event_page(browser, index, link, shots, f"report-{name}")
+    finally:
+        browser.close()
+    assert sorted(rows) == ["AssA", "DetA", "HOTA", "IDF1", "MOTA"], rows  # a row each
+    assert "A - B in percent points (0: no difference" in axis
+    assert all(seen[name]["h1"].startswith(f"{name} (") for name in seen)

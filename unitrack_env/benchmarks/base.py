@@ -158,9 +158,7 @@ class Benchmark(ABC):
         if not folder.is_dir():
             raise DataFormatError(folder, "is a file; the results are a folder of result files"
                                   if folder.is_file() else "results folder not found")
-        if (folder / "run.json").is_file() and (folder / "data").is_dir():
-            raise DataFormatError(folder, "is the folder of a run; its result files are in "
-                                  f"{folder / 'data'}")
+        refuse_run_folder(folder)
         names = self.scorable() if sequences is None else list(dict.fromkeys(sequences))
         missing = [name for name in names if not self.has_results(folder, name)]
         if missing and (not allow_missing or len(missing) == len(names)):
@@ -174,6 +172,17 @@ class Benchmark(ABC):
     @abstractmethod
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score the result files of ``sequences`` (all present) with the official metrics."""
+
+
+def refuse_run_folder(folder: str | os.PathLike) -> None:
+    """Raise DataFormatError if ``folder`` is a run folder given where its ``data/`` belongs.
+
+    Every form of ``unitrack score`` asks this one question before looking for result files.
+    """
+    folder = Path(folder)
+    if (folder / "run.json").is_file() and (folder / "data").is_dir():
+        raise DataFormatError(folder, "is the folder of a run; its result files are in "
+                              f"{folder / 'data'}")
 
 
 class MissingResults(DataFormatError):

@@ -12,6 +12,7 @@ from unitrack_env.benchmarks.base import (
     MissingResults,
     data_root,
     one_of,
+    refuse_run_folder,
     rounded_digest,
 )
 from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
@@ -118,6 +119,7 @@ def score_split_folder(gt: str | os.PathLike, results: str | os.PathLike, benchm
     from unitrack_env.metrics.motchallenge import score_folder
 
     gt, results = Path(gt), Path(results)
+    refuse_run_folder(results)
     split = (sorted(d.name for d in gt.iterdir() if (d / "gt" / "gt.txt").is_file())
              if gt.is_dir() else [])
     if not split or not results.is_dir():  # score_folder names what is wrong
