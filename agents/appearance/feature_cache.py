@@ -31,6 +31,8 @@ from .cache_files import (
     _atomic_write,
     _load_entry,
     _to_stored,
+    all_finite,
+    key_digest,
 )
 from .cache_folder import CacheFolder
 from .cache_keys import CacheKey
@@ -98,12 +100,13 @@ class FeatureCache(CacheFolder):
     def _read(
         self, key: CacheKey, expected_shape: tuple[int, ...] | None
     ) -> tuple[np.ndarray | None, bool]:
-        """(array or None, whether a stored file was corrupt)."""
+        """(array or None, whether a stored file was swapped, damaged or not finite)."""
         path = self.path(key)
-        array, problem = _load_entry(path, self.dtype, expected_shape)
+        digest = key_digest(self.namespace(key), key.content)
+        array, problem = _load_entry(path, self.dtype, expected_shape, digest)
         if problem:
             self._warn(str(path), f"{path}: corrupt feature-cache entry ({problem}); "
-                                  "recomputing it")
+                                  "not used: recomputing and replacing it")
             return None, True
         if array is not None:
             self._namespaces.add(path.parents[1].name)
@@ -130,9 +133,12 @@ class FeatureCache(CacheFolder):
         """Store ``array`` (atomically, within the cap); return the stored-dtype values.
 
         Without ``replace`` an entry a concurrent writer stored first is kept. A failed write is
-        reported once and the values are returned uncached.
+        reported once and the values are returned uncached, as are values that are not all
+        finite (an entry never holds NaN or infinity).
         """
         stored = _to_stored(array, self.dtype)
+        if not all_finite(stored):
+            return stored
         try:
             self._store(key, stored, replace, model_info)
         except FileNotFoundError:
