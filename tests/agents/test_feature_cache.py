@@ -635,3 +635,15 @@ def test_an_injected_model_without_identity_runs_uncached() -> None:
 
     plain = Plain()
     assert make_agent("unitrack", appearance_model=plain).model is plain
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_all_finite_finds_any_nan_or_infinity(dtype: type) -> None:
+    from unitrack_env.agents.appearance.cache_files import all_finite
+
+    values = np.full((3, 5), np.finfo(dtype).max, dtype)  # a float32 sum overflows: still finite
+    assert all_finite(values) and all_finite(values[:0])
+    for bad in (np.nan, np.inf, -np.inf):
+        changed = values.copy()
+        changed[2, 4] = bad
+        assert not all_finite(changed), bad
