@@ -181,6 +181,8 @@ def _parse_entry(buffer: bytearray, key: bytes) -> np.ndarray:
     start = head.tell()
     nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     expected = start + nbytes + _TRAILER.size
+    if len(buffer) == start + nbytes:
+        raise _BadEntry("a plain .npy without the entry trailer (not written by this cache)")
     if len(buffer) != expected:
         raise _BadEntry(f"{len(buffer)} bytes, expected {expected} (truncated or padded)")
     magic, stored_key, count, crc = _TRAILER.unpack_from(buffer, start + nbytes)

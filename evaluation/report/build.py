@@ -18,6 +18,7 @@ import pandas as pd
 
 from ..compare import COMPARE_TASKS
 from ..events import load_events, run_benchmark
+from ..integrity import DifferentData, check_current
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, render_picture, sample
 
@@ -207,7 +208,11 @@ def _legend() -> str:
 
 def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
                  resamples: int = 500) -> Path:
-    """Write ``out/index.html`` for run folders (or one scorecard folder); return its path."""
+    """Write ``out/index.html`` for run folders (or one scorecard folder); return its path.
+
+    A run whose result or data files changed after scoring is refused (StaleRun); two runs
+    scored against different data get a note instead of a comparison.
+    """
     out.mkdir(parents=True, exist_ok=True)
     if len(runs) == 1 and (runs[0] / "scorecard.json").is_file():
         body = [f"<h1>Scorecard report: {esc(runs[0].name)}</h1>",
@@ -220,16 +225,22 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
             raise FileNotFoundError(f"{metrics_path}: not a finished run of `unitrack evaluate`")
         spec = json.loads((run / "run.json").read_text(encoding="utf-8"))
         label = f"{run.name} ({spec.get('agent', '?')})"
-        loaded.append((label, run, run_benchmark(run),
-                       json.loads(metrics_path.read_text(encoding="utf-8"))))
+        metrics = json.loads(metrics_path.read_text(encoding="utf-8"))
+        bench = run_benchmark(run)
+        check_current(run, bench, list(metrics.get("per_sequence", {})))  # else: StaleRun
+        loaded.append((label, run, bench, metrics))
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
             metrics_section(loaded)]
     if len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task in COMPARE_TASKS:
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
-        body.append(compare_section(runs[0], runs[1], resamples) if common else
-                    '<h2 id="compare">Comparison</h2><p class="note">The first two runs share '
-                    "no scored sequence: nothing to compare.</p>")
+        try:
+            body.append(compare_section(runs[0], runs[1], resamples) if common else
+                        '<h2 id="compare">Comparison</h2><p class="note">The first two runs '
+                        "share no scored sequence: nothing to compare.</p>")
+        except DifferentData as exc:
+            body.append(f'<h2 id="compare">Comparison</h2><p class="note">Not compared: '
+                        f"{esc(str(exc))}</p>")
     body.append('<h2 id="events">Error events</h2>' + _legend())
     for i, (label, run, bench, metrics) in enumerate(loaded):
         names = list(metrics.get("per_sequence", {}))
