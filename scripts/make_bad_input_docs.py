@@ -25,6 +25,8 @@ REPO = Path(__file__).resolve().parents[1]
 CORPUS = REPO / "tests" / "corpus"
 PAGE = REPO / "docs" / "bad-inputs.md"
 VERDICTS = ("clear", "unclear", "crash", "silent")
+#: Hand-written sections after this line are kept when the page is regenerated.
+KEEP_MARKER = "<!-- hand-written sections below are kept by scripts/make_bad_input_docs.py -->"
 
 HEADER = """# Bad inputs: what each one gets
 
@@ -135,7 +137,9 @@ def main() -> int:
     """Run the corpus and write the page."""
     argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     results = run_all()
-    PAGE.write_text(render(results))
+    old = PAGE.read_text() if PAGE.is_file() else ""
+    kept = old[old.find(KEEP_MARKER):] if KEEP_MARKER in old else ""
+    PAGE.write_text(render(results) + ("\n" + kept if kept else ""))
     counts = collections.Counter(o.verdict for o in results.values())
     print(f"wrote {PAGE.relative_to(REPO)}: {len(results)} cases, {dict(counts)}")
     return 0
