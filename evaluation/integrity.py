@@ -56,7 +56,23 @@ def data_fingerprint(dataset: Any, sequence: str, run: str | os.PathLike) -> str
         return ""
     names = getattr(dataset, "sequence_names", None) or [sequence]
     files = outside(sequence_files(root, sequence, names), Path(run))
-    return files_fingerprint(files, root)
+    runs: dict[Path, bool] = {}
+    return files_fingerprint([f for f in files if not _in_a_run(f, root, runs)], root)
+
+
+def _in_a_run(path: Path, root: Path, runs: dict[Path, bool]) -> bool:
+    """Whether ``path`` lies in a run folder (one with a ``run.json``) inside ``root``.
+
+    Runs written inside the data folder (``--out`` inside ``--root``) are not data.
+    """
+    for parent in path.parents:
+        if parent == root or len(parent.parts) <= len(root.parts):
+            return False
+        if parent not in runs:
+            runs[parent] = (parent / "run.json").is_file()
+        if runs[parent]:
+            return True
+    return False
 
 
 def _record(run: Path, sequence: str) -> SequenceRecord | None:

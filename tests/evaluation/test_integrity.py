@@ -77,3 +77,12 @@ def test_an_older_record_without_a_fingerprint_is_still_paired_by_todays_data(
     (other / "data" / "SYN-01.txt").write_text("")
     with pytest.raises(StaleRun, match="result files of SYN-01 were changed"):
         check_pair(out, bench, other, other_bench, ["SYN-01"])
+
+
+def test_runs_written_inside_the_data_folder_are_not_data(tmp_path: Path) -> None:
+    root = _copy_data(tmp_path / "data")
+    first, second = root / "runs" / "first", root / "runs" / "second"
+    for out in (first, second):  # the second run's files name SYN-01 too
+        run(ENV, "iou", out=out, progress=False, sequences=["SYN-01"],
+            env_kwargs={"root": str(root), "decode_frames": False})
+    check_pair(first, run_benchmark(first), second, run_benchmark(second), ["SYN-01"])
