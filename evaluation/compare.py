@@ -280,6 +280,9 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
                  method: str = "jackknife") -> Comparison:
     """Compare two run folders on the sequences both scored (see the module docstring).
 
+    Both runs' result files must still match their records and their data must be the same
+    (:func:`~.integrity.check_pair`: StaleRun / DifferentData otherwise).
+
     Box MOT recomputes its metrics from per-frame statistics; SOT, VOS and JHMDB runs compare
     their per-frame metrics (:func:`~.intervals.compare_frames`, jackknife only).
     """
@@ -288,6 +291,9 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
     common = [s for s in seq_a if s in seq_b]
     if not common:
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
+    from .integrity import check_pair
+
+    check_pair(run_a, run_benchmark(run_a), run_b, run_benchmark(run_b), common)
     if task == "mot":
         stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
         rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,

@@ -33,6 +33,9 @@ class SequenceRecord:
     code: dict[str, str] | None = None
     """The agent's code when it was played: ``{file: content digest}``
     (:func:`~unitrack_env.evaluation.agent_code.code_manifest`); None in older records."""
+    data: str = ""
+    """Fingerprint of the sequence's data files when it was played (ground truth and
+    annotations by content, frames by name and size; :mod:`.integrity`); "" in older records."""
 
     @property
     def fps(self) -> float:

@@ -5,10 +5,12 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import gzip
 import io
 import json
 import os
 import warnings
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,7 @@ import pandas as pd
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.datasets.mots_format import CLASS_IDS
+from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_bytes, path_inside
 from unitrack_env.metrics.events_mot import (
     EVENT_COLUMNS,
@@ -201,8 +204,7 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
         if not path.is_file():
             bench = bench or run_benchmark(run)
             write_sequence_events(run, bench, name)
-        parts.append(pd.read_csv(path, dtype={"sequence": str, "type": str},
-                                 keep_default_na=True))
+        parts.append(read_events_file(run, path))
     df = (pd.concat(parts, ignore_index=True) if parts
           else pd.DataFrame(columns=list(EVENT_COLUMNS)))
     df = df.reindex(columns=list(EVENT_COLUMNS))  # files written before a column existed
@@ -210,6 +212,24 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
         df[col] = df[col].astype("Int64")
     if type is not None:
         df = df[df["type"] == type].reset_index(drop=True)
+    return df
+
+
+def read_events_file(run: str | os.PathLike, path: Path) -> pd.DataFrame:
+    """One stored event table; a damaged file is a DataFormatError naming it and the cure."""
+    try:
+        df = pd.read_csv(path, dtype={"sequence": str, "type": str}, keep_default_na=True)
+        for col in ID_COLUMNS:
+            if col in df:
+                df[col].astype("Int64")
+    except (EOFError, OSError, ValueError, TypeError, zlib.error) as exc:
+        what = ("truncated gzip data" if isinstance(exc, EOFError) else
+                "not gzip data" if isinstance(exc, gzip.BadGzipFile) else
+                "empty" if isinstance(exc, pd.errors.EmptyDataError) else
+                f"not an event table: {type(exc).__name__}")
+        raise DataFormatError(path, f"damaged events file ({what}); delete it and run "
+                                    f"`unitrack events {run}` to rebuild it from the run's "
+                                    "result files") from exc
     return df
 
 

@@ -140,9 +140,12 @@ class RunIdentity:
         return hashlib.blake2b(f"{self.digest}:{files_fingerprint(inputs, root)}".encode(),
                                digest_size=16).hexdigest()
 
-    def stamp(self, inputs: Iterable[Path], root: Path | None = None) -> Stamp:
-        """What a sequence's record keeps of this identity and its input files."""
-        return Stamp(self.sequence_fingerprint(inputs, root), self.code)
+    def stamp(self, inputs: Iterable[Path], root: Path | None = None, data: str = "") -> Stamp:
+        """What a sequence's record keeps of this identity and its input files.
+
+        ``data``: the fingerprint of its data files alone (:func:`.integrity.data_fingerprint`).
+        """
+        return Stamp(self.sequence_fingerprint(inputs, root), self.code, data)
 
 
 @dataclass(frozen=True)
@@ -151,10 +154,13 @@ class Stamp:
 
     inputs: str
     code: dict[str, str] = field(default_factory=dict, compare=False)
+    data: str = field(default="", compare=False)
 
     def apply(self, record: Any) -> None:
         """Stamp a freshly played :class:`~.episode.SequenceRecord`."""
         record.inputs, record.code = self.inputs, dict(self.code)
+        if self.data:
+            record.data = self.data
 
 
 def _located_anywhere(paths: Iterable[Path]) -> str:

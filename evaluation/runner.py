@@ -26,6 +26,7 @@ from unitrack_env.metrics.report import ScoreReport
 
 from .episode import SequenceRecord, recorded_results
 from .identity import RunIdentity, Stamp, result_digest
+from .integrity import data_fingerprint
 from .ownership import Manifest, hold_folder, outside, own_folder, settle
 from .restamp import restamp_record
 from .resume import check_run_json, record_path, stale_reason
@@ -269,7 +270,8 @@ def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, ou
     """The run, once ``out`` is locked: claim the folder, fingerprint the inputs, play."""
     base = env.unwrapped
     identity = RunIdentity.of(spec)
-    stamps = {n: identity.stamp(outside(base.sequence_inputs(n), out), base.inputs_root())
+    stamps = {n: identity.stamp(outside(base.sequence_inputs(n), out), base.inputs_root(),
+                                data_fingerprint(getattr(base, "dataset", None), n, out))
               for n in names}
     manifest = own_folder(out, base.sequence_names, names, options.overwrite)
     _prepare_out(out, spec, options.overwrite, manifest)

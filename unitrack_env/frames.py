@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import check_image_size, header_size
+from unitrack_env.datasets.limits import check_image_size, check_measured_image, header_size
 from unitrack_env.errors import DataFormatError
 
 #: OpenCV >= 4.11 decodes straight to RGB, which saves a full-frame colour conversion.
@@ -27,16 +27,18 @@ _TAIL_BYTES = 64
 
 
 def check_complete(path: str | Path) -> None:
-    """Refuse a JPEG or PNG file that is truncated, not an image, or a decompression bomb.
+    """Refuse a frame that is truncated, not an image, or a decompression bomb.
 
     libjpeg decodes a truncated JPEG silently, so the tail is checked (JPEG ``FF D9``, PNG
     ``IEND``). The format comes from the first bytes, not the name, like OpenCV; the header
     size is checked against :data:`~unitrack_env.datasets.limits.MAX_IMAGE_PIXELS` before
-    decoding. Other suffixes are not checked. Raises DataFormatError.
+    decoding. Other suffixes get their size from the header too (TIFF, BMP, WebP, GIF, PNM),
+    or are refused. Raises DataFormatError.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".jpg", ".jpeg", ".png"):
+        check_measured_image(path)  # TIFF, BMP, WebP, ...: the size from the header, or refused
         return
     try:
         with path.open("rb") as handle:

@@ -1,6 +1,6 @@
 """The feature-cache folder: where entries live, the size accounting and LRU eviction.
 
-Entries live under ``<root>/v2/<model key>-<H>x<W>-<dtype>/<ab>/``, are stored atomically
+Entries live under ``<root>/v3/<model key>-<H>x<W>-<dtype>/<ab>/``, are stored atomically
 under the inter-process lock with ``usage.json`` kept exact, and the least recently used
 go when the total exceeds the cap.
 """
@@ -29,13 +29,16 @@ from .cache_files import (
     _atomic_write,
     _Entry,
     _subdirs,
+    _write_entry,
     file_lock,
+    key_digest,
 )
 from .cache_keys import CacheKey
 from .cache_runs import CacheStats
 
-LAYOUT_VERSION: int = 2
-"""Version of the on-disk layout (the ``v2`` folder); bumped when keys or formats change."""
+LAYOUT_VERSION: int = 3
+"""Version of the on-disk layout (the ``v3`` folder); bumped when keys or formats change
+(3: entries carry a trailer with their key's digest and a checksum)."""
 
 EVICT_TO: float = 0.9
 """Eviction removes least recently used entries until the total is at most this fraction of
@@ -144,7 +147,7 @@ class CacheFolder:
     # -- paths
     @property
     def entries_dir(self) -> Path:
-        """Folder of the entry folders (``<root>/v2``)."""
+        """Folder of the entry folders (``<root>/v3``)."""
         return self.root / f"v{LAYOUT_VERSION}"
 
     def namespace(self, key: CacheKey) -> str:
@@ -186,7 +189,7 @@ class CacheFolder:
         tmp = Path(tmp_name)
         try:
             with os.fdopen(fd, "wb") as handle:
-                np.save(handle, stored)
+                _write_entry(handle, stored, key_digest(namespace, key.content))
                 size = handle.tell()
             with self._lock():
                 try:

@@ -294,6 +294,28 @@ def _prefix_hint(state: Mapping[str, Any], model_state: Mapping[str, Any]) -> st
             "save the backbone's own state_dict (or strip the prefix) and load that file.")
 
 
+def check_values(state: Mapping[str, torch.Tensor], keys: Iterable[str],
+                 path: str | os.PathLike[str] | None = None) -> None:
+    """Refuse tensors holding NaN or infinity, and weights that are all zero.
+
+    ``keys``: the tensors to be loaded. CheckpointError names the offending tensors (the first
+    :data:`MAX_KEYS_IN_MESSAGE` and their count); a checkpoint that passes is loaded exactly.
+    """
+    floats = [k for k in keys if state[k].is_floating_point()]
+    bad = [k for k in floats if not bool(torch.isfinite(state[k]).all())]
+    if bad:
+        raise CheckpointError(
+            path, f"{len(bad)} of {len(floats)} tensors hold NaN or infinite values: "
+                  f"{_abbrev(bad)}. The file is damaged or its training diverged; load "
+                  "another checkpoint")
+    weights = [k for k in floats if state[k].ndim >= 2]  # kernels, matrices, embeddings
+    if weights and not any(bool(state[k].any()) for k in weights):
+        raise CheckpointError(
+            path, f"every weight tensor is zero ({len(weights)} tensors: {_abbrev(weights)}): "
+                  "not a trained model (an empty or wiped file?); load another checkpoint, "
+                  "or weights='random' for the random-weights baseline")
+
+
 def load_state_into(
     module: nn.Module,
     state: Mapping[str, torch.Tensor],
@@ -308,7 +330,8 @@ def load_state_into(
 
     A missing, mismatched or unexpected key under ``required_prefixes`` makes the load
     incomplete: CheckpointError naming the file and keys, nothing modified, unless
-    ``allow_partial``.
+    ``allow_partial``. Tensors with NaN/infinity, or all-zero weights, are refused
+    (:func:`check_values`).
     """
     model_state = module.state_dict()
     report = compare_state_dicts(
@@ -335,6 +358,7 @@ def load_state_into(
             + f". {report.summary()}.{_prefix_hint(state, model_state)} Pick the right "
             "architecture/remap, or pass allow_partial=True to load only the matching keys.",
         )
+    check_values(state, report.matched, path)
     new_state = dict(model_state)
     for key in report.matched:
         new_state[key] = state[key].to(dtype=model_state[key].dtype)

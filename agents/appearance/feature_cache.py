@@ -6,7 +6,7 @@ model identity (:attr:`ModelIdentity.key`), the network input ``H x W`` and on-d
 and a full hash of the decoded frame (SHA-256 of its bytes, shape, dtype and transform tag;
 128 bits kept). Identical frames share one entry across sequences, MOT17's detector
 variants, data sets and tasks. Layout under the root: ``CACHEDIR.TAG``, ``.lock``,
-``usage.json``, ``v2/<model key>-<H>x<W>-<dtype>/{model.json, <ab>/<content>.npy}`` and
+``usage.json``, ``v3/<model key>-<H>x<W>-<dtype>/{model.json, <ab>/<content>.npy}`` and
 ``runs/*.json`` (hit statistics of recent processes).
 
 * On by default: ``feature_cache=True`` is ``$UNITRACK_FEATURE_CACHE``, else
@@ -16,9 +16,15 @@ variants, data sets and tasks. Layout under the root: ``CACHEDIR.TAG``, ``.lock`
 * Bounded: the cap (10 GiB, ``$UNITRACK_FEATURE_CACHE_MAX`` or ``max_size=``) is enforced on
   every write by evicting the least recently used entries down to ``EVICT_TO`` of it.
 * Safe with many writers: entries are written to a temporary file and renamed; accounting
-  and eviction run under an exclusive lock on ``.lock``. A corrupt entry is reported once
-  (:class:`FeatureCacheWarning`), recomputed and replaced; an unwritable cache is reported
+  and eviction run under an exclusive lock on ``.lock``. An unwritable cache is reported
   once and the features are used uncached.
+* Checked on read: after the array (a plain ``.npy``) an entry has a 36-byte trailer (a magic
+  string, the digest of its key, the array's byte count, the CRC-32 of its bytes). An entry
+  swapped with another key's, damaged, cut short, without a trailer, of the wrong dtype or
+  shape, or holding NaN/infinity is never served: one :class:`FeatureCacheWarning` names the
+  file, and it is recomputed and replaced. Non-finite features are not stored. Layout ``v3``
+  introduced the trailer; ``v2`` entries are not read (misses) and ``unitrack cache clear``
+  removes them. The checks' cost per hit: ``python benchmarks/feature_cache.py --parts entry``.
 * Same values warm or cold: entries are float16 and served as float32 on a hit and a miss
   alike, so results do not depend on the cache's state.
 
@@ -55,6 +61,8 @@ from .cache_files import (
     _atomic_write,
     _load_entry,
     _to_stored,
+    all_finite,
+    key_digest,
 )
 from .cache_folder import CacheFolder
 from .cache_keys import CacheKey
@@ -122,12 +130,13 @@ class FeatureCache(CacheFolder):
     def _read(
         self, key: CacheKey, expected_shape: tuple[int, ...] | None
     ) -> tuple[np.ndarray | None, bool]:
-        """(array or None, whether a stored file was corrupt)."""
+        """(array or None, whether a stored file was swapped, damaged or not finite)."""
         path = self.path(key)
-        array, problem = _load_entry(path, self.dtype, expected_shape)
+        digest = key_digest(self.namespace(key), key.content)
+        array, problem = _load_entry(path, self.dtype, expected_shape, digest)
         if problem:
             self._warn(str(path), f"{path}: corrupt feature-cache entry ({problem}); "
-                                  "recomputing it")
+                                  "not used: recomputing and replacing it")
             return None, True
         if array is not None:
             self._namespaces.add(path.parents[1].name)
@@ -154,9 +163,12 @@ class FeatureCache(CacheFolder):
         """Store ``array`` (atomically, within the cap); return the stored-dtype values.
 
         Without ``replace`` an entry a concurrent writer stored first is kept. A failed write is
-        reported once and the values are returned uncached.
+        reported once and the values are returned uncached, as are values that are not all
+        finite (an entry never holds NaN or infinity).
         """
         stored = _to_stored(array, self.dtype)
+        if not all_finite(stored):
+            return stored
         try:
             self._store(key, stored, replace, model_info)
         except FileNotFoundError:

@@ -20,6 +20,7 @@ from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
 
 from ..compare import COMPARE_TASKS
 from ..events import load_events, run_benchmark, run_sequences
+from ..integrity import DifferentData, check_current
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .pages import event_pages, figure, legend, sequence_page
 from .pictures import choose, event_pictures
@@ -178,6 +179,8 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
     Raises:
         FileExistsError: ``out`` holds an ``index.html`` (or radar chart) that is not an
             earlier report's; nothing of the user's is replaced.
+        StaleRun: a run's result or data files changed after scoring. Two runs scored
+            against different data get a note instead of a comparison.
     """
     check_report_folder(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -193,16 +196,22 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
         spec = json.loads((run / "run.json").read_text(encoding="utf-8"))
         label = f"{run.name} ({spec.get('agent', '?')})"
         run_sequences(run)  # its sequence names are checked before any is used as a path
-        loaded.append((label, run, run_benchmark(run),
-                       json.loads(metrics_path.read_text(encoding="utf-8"))))
+        metrics = json.loads(metrics_path.read_text(encoding="utf-8"))
+        bench = run_benchmark(run)
+        check_current(run, bench, list(metrics.get("per_sequence", {})))  # else: StaleRun
+        loaded.append((label, run, bench, metrics))
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
             metrics_section(loaded)]
     if len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task in COMPARE_TASKS:
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
-        body.append(compare_section(runs[0], runs[1], resamples) if common else
-                    '<h2 id="compare">Comparison</h2><p class="note">The first two runs share '
-                    "no scored sequence: nothing to compare.</p>")
+        try:
+            body.append(compare_section(runs[0], runs[1], resamples) if common else
+                        '<h2 id="compare">Comparison</h2><p class="note">The first two runs '
+                        "share no scored sequence: nothing to compare.</p>")
+        except DifferentData as exc:
+            body.append(f'<h2 id="compare">Comparison</h2><p class="note">Not compared: '
+                        f"{esc(str(exc))}</p>")
     body.append('<h2 id="events">Error events</h2><p>Each sequence\'s title opens its page: '
                 'timeline, pictures and the list of its events.</p>' + legend())
     for i, (label, run, bench, metrics) in enumerate(loaded):

@@ -65,7 +65,7 @@ def test_miss_then_hit(tmp_path: Path) -> None:
     torch.testing.assert_close(first, second)  # same values warm or cold
     np.testing.assert_allclose(first.numpy(), _features(), rtol=1e-3, atol=1e-3)  # float16
     path = cache.path(KEY)
-    assert path == (tmp_path / "v2" / "abc123-16x24-float16" / KEY.content[:2]
+    assert path == (tmp_path / "v3" / "abc123-16x24-float16" / KEY.content[:2]
                     / f"{KEY.content}.npy")
     assert np.load(path).dtype == np.float16
     assert [p.name for p in path.parent.iterdir()] == [path.name]  # no temp files left
@@ -145,6 +145,62 @@ def test_corrupt_entries_are_reported_once_and_recomputed(tmp_path: Path, damage
     assert (cache.usage().entries, cache.usage().bytes) == (1, path.stat().st_size)
     usage = json.loads((tmp_path / "usage.json").read_text())
     assert (usage["entries"], usage["bytes"]) == (1, path.stat().st_size)
+
+
+@pytest.mark.parametrize("damage", ["swap", "bitflip", "nan", "old-format", "trailer"])
+def test_swapped_damaged_and_nan_entries_are_never_served(tmp_path: Path, damage: str) -> None:
+    cache = FeatureCache(tmp_path)
+    compute = Counter(_features())
+    cache.get_or_compute(KEY, compute, expected_shape=SHAPE)
+    other = _key(7)
+    cache.get_or_compute(other, Counter(_features(1)), expected_shape=SHAPE)
+    path = cache.path(KEY)
+    data = bytearray(path.read_bytes())
+    if damage == "swap":  # a valid entry of the right shape, but of another key
+        shutil.copyfile(cache.path(other), path)
+    elif damage == "bitflip":
+        data[len(data) // 2] ^= 0x01
+        path.write_bytes(bytes(data))
+    elif damage == "nan":  # NaN values in a well-formed entry (written through the format)
+        from unitrack_env.agents.appearance.cache_files import _write_entry, key_digest
+
+        with open(path, "wb") as handle:
+            _write_entry(handle, np.full(SHAPE, np.nan, np.float16),
+                         key_digest(cache.namespace(KEY), KEY.content))
+    elif damage == "old-format":  # a plain .npy (the layout before entries had a trailer)
+        np.save(path, np.full(SHAPE, np.nan, np.float16))
+    else:
+        path.write_bytes(bytes(data[:-4]) + b"\0\0\0\0")
+    with pytest.warns(FeatureCacheWarning) as caught:
+        again = cache.get_or_compute(KEY, compute, expected_shape=SHAPE)
+    assert len(caught) == 1 and str(path) in str(caught[0].message), caught
+    assert "not used" in str(caught[0].message)
+    assert compute.calls == 2 and cache.stats.corrupt == 1
+    np.testing.assert_allclose(again.numpy(), _features(), rtol=1e-3, atol=1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # replaced: the next read is a plain hit
+        assert FeatureCache(tmp_path).get(KEY, SHAPE) is not None
+
+
+def test_entries_of_the_previous_layout_are_misses(tmp_path: Path) -> None:
+    cache = FeatureCache(tmp_path)
+    old = tmp_path / "v2" / cache.namespace(KEY) / KEY.content[:2] / f"{KEY.content}.npy"
+    old.parent.mkdir(parents=True)
+    np.save(old, _features().astype(np.float16))
+    compute = Counter(_features(3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = cache.get_or_compute(KEY, compute, expected_shape=SHAPE)
+    assert compute.calls == 1 and cache.stats.misses == 1
+    np.testing.assert_allclose(out.numpy(), _features(3), rtol=1e-3, atol=1e-3)
+
+
+def test_non_finite_features_are_returned_but_not_stored(tmp_path: Path) -> None:
+    cache = FeatureCache(tmp_path)
+    values = _features()
+    values[0, 0, 0] = np.inf
+    out = cache.get_or_compute(KEY, Counter(values), expected_shape=SHAPE)
+    assert torch.isinf(out[0, 0, 0]) and not cache.path(KEY).exists()
 
 
 def test_interrupted_writes_leave_no_entry(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -445,7 +501,7 @@ def test_cached_model_runs_the_backbone_only_on_misses(tmp_path: Path) -> None:
     torch.testing.assert_close(both[:2], first)
     single = cached.features(frames[2])
     assert batches == [2, 1] and single.shape == (1, 256, 3, 4)
-    folder = tmp_path / "v2" / f"{model.identity.key()}-24x32-float16"
+    folder = tmp_path / "v3" / f"{model.identity.key()}-24x32-float16"
     assert len(_entries(folder)) == 3
     assert json.loads((folder / "model.json").read_text())["model"]["arch"] == "resnet18"
     # Another model (different weights) does not see these entries.
@@ -579,3 +635,15 @@ def test_an_injected_model_without_identity_runs_uncached() -> None:
 
     plain = Plain()
     assert make_agent("unitrack", appearance_model=plain).model is plain
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_all_finite_finds_any_nan_or_infinity(dtype: type) -> None:
+    from unitrack_env.agents.appearance.cache_files import all_finite
+
+    values = np.full((3, 5), np.finfo(dtype).max, dtype)  # a float32 sum overflows: still finite
+    assert all_finite(values) and all_finite(values[:0])
+    for bad in (np.nan, np.inf, -np.inf):
+        changed = values.copy()
+        changed[2, 4] = bad
+        assert not all_finite(changed), bad

@@ -123,3 +123,33 @@ def test_truncated_vit_is_refused(tmp_path: Path) -> None:
     torch.save(state, path)
     with pytest.raises(CheckpointError, match=r"blocks\.11\.mlp\.fc2\.weight"):
         AppearanceModel(path, arch=S16, layer="block1")  # strict whatever the layer
+
+
+@pytest.mark.parametrize("fill", ["nan", "inf", "zero"])
+def test_nan_or_zero_vit_weights_are_refused_naming_the_tensors(tmp_path: Path,
+                                                                fill: str) -> None:
+    state = official_state(S16, 6)
+    value = {"nan": float("nan"), "inf": float("inf"), "zero": 0.0}[fill]
+    state = {k: torch.full_like(v, value) for k, v in state.items()}
+    path = tmp_path / f"{fill}.pth"
+    torch.save(state, path)
+    with pytest.raises(CheckpointError) as info:
+        AppearanceModel(path, arch=S16, layer="block12")
+    text = str(info.value)
+    assert str(path) in text and "cls_token" in text and "more)" in text, text
+    assert ("NaN or infinite" if fill != "zero" else "every weight tensor is zero") in text
+
+
+def test_one_nan_tensor_is_named_and_a_clean_file_still_loads_exactly(tmp_path: Path) -> None:
+    state = official_state(S16, 7)
+    clean = tmp_path / "clean.pth"
+    torch.save(state, clean)
+    model = AppearanceModel(clean, arch=S16, layer="block12")
+    loaded = model.module.state_dict()
+    assert all(torch.equal(loaded[k], v) for k, v in state.items() if k in loaded)
+    state["blocks.3.attn.qkv.weight"][0, 0] = float("nan")
+    broken = tmp_path / "one-nan.pth"
+    torch.save(state, broken)
+    with pytest.raises(CheckpointError, match=r"1 of \d+ tensors hold NaN or infinite values: "
+                                              r"blocks\.3\.attn\.qkv\.weight\."):
+        AppearanceModel(broken, arch=S16, layer="block12")

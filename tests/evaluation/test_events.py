@@ -143,3 +143,21 @@ def test_sot_and_vos_events_give_back_the_official_means(tmp_path: Path) -> None
     for seq, frames in load_events(vos).groupby("sequence"):
         j_mean = frames.groupby("object")["j"].mean().mean()
         assert j_mean == pytest.approx(metrics[seq]["J-Mean"], abs=1e-3), seq
+
+
+@pytest.mark.parametrize("damage", ["truncated", "not-gzip", "empty"])
+def test_a_damaged_events_file_is_named_with_the_cure(iou_run: Path, tmp_path: Path,
+                                                      damage: str) -> None:
+    from unitrack_env.errors import DataFormatError
+
+    copy = tmp_path / "run"
+    shutil.copytree(iou_run, copy)
+    path = events_path(copy, "SYN-01")
+    data = path.read_bytes()
+    path.write_bytes({"truncated": data[: len(data) // 2], "not-gzip": b"frame,type\n1,fp\n",
+                      "empty": b""}[damage])
+    with pytest.raises(DataFormatError) as info:
+        load_events(copy)
+    text = str(info.value)
+    assert text.startswith(f"{path}: damaged events file (") and "unitrack events" in text
+    assert "\n" not in text

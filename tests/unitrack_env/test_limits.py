@@ -145,3 +145,77 @@ def test_action_ids_beyond_int64_are_out_of_range_and_object_ints_still_work():
     assert checked_ids(np.array([3, 4], dtype=object), 2).tolist() == [3, 4]
     with pytest.raises(InvalidActionError, match="above"):
         checked_ids(np.array([3, 2**40], dtype=object), 2)
+
+
+def _tiff_header(width: int, height: int, order: str = "II", kind: int = 4) -> bytes:
+    """A classic TIFF whose first directory states ``width`` x ``height`` (no pixels)."""
+    end = "<" if order == "II" else ">"
+    fmt = "HH" if kind == 3 else "I"
+    entries = b"".join(struct.pack(f"{end}HHI", tag, kind, 1)
+                       + struct.pack(f"{end}{fmt}", value, *([0] if kind == 3 else []))
+                       for tag, value in ((256, width), (257, height)))
+    magic = b"II*\x00" if order == "II" else b"MM\x00*"
+    return magic + struct.pack(f"{end}I", 8) + struct.pack(f"{end}H", 2) + entries + b"\0" * 4
+
+
+@pytest.mark.parametrize("ext,params", [(".tif", []), (".bmp", []), (".webp", []),
+                                        (".webp", [cv2.IMWRITE_WEBP_QUALITY, 101]),
+                                        (".ppm", []), (".pgm", [])])
+def test_other_formats_are_measured_from_their_headers(tmp_path: Path, ext, params):
+    channels = 1 if ext == ".pgm" else 3
+    image = np.random.default_rng(0).integers(0, 255, (37, 53, channels), dtype=np.uint8)
+    path = tmp_path / f"frame{ext}"
+    assert cv2.imwrite(str(path), image, params)
+    assert image_size(path)[1] == (53, 37)
+    check_complete(path)  # accepted: measured, small
+    assert read_rgb(path).shape[:2] == (37, 53)
+
+
+@pytest.mark.parametrize("order,kind", [("II", 4), ("MM", 4), ("II", 3)])
+def test_a_tiff_bomb_is_refused_before_decoding(tmp_path: Path, order: str, kind: int):
+    path = tmp_path / "000001.tif"
+    path.write_bytes(_tiff_header(20000, 20000, order, kind))
+    assert image_size(path) == ("TIFF", (20000, 20000))
+    with pytest.raises(DataFormatError, match=r"header says 20000x20000 pixels.*refused before "
+                                              "decoding"):
+        read_rgb(path)
+
+
+def test_frames_in_a_format_without_a_measurable_header_are_refused(tmp_path: Path):
+    path = tmp_path / "000001.jp2"
+    path.write_bytes(b"\x00\x00\x00\x0cjP  \r\n\x87\n" + b"\0" * 64)  # JPEG 2000 signature
+    with pytest.raises(DataFormatError, match="not an image format whose size can be checked "
+                                              "before decoding"):
+        read_rgb(path)
+
+
+def test_annotation_files_over_their_byte_limit_are_refused_before_reading(tmp_path: Path,
+                                                                          monkeypatch):
+    import unitrack_env.datasets.motchallenge_tables as tables
+    import unitrack_env.datasets.posetrack_json as pj
+    from unitrack_env.datasets.motchallenge_tables import parse_table
+    from unitrack_env.datasets.posetrack_json import read_posetrack_json
+
+    monkeypatch.setattr(tables, "MAX_TEXT_BYTES", 1000)
+    big = tmp_path / "gt.txt"
+    big.write_text("1,1,0,0,10,10,1,1,1\n" * 100)  # 2,000 bytes
+    with pytest.raises(DataFormatError, match=r"gt.txt: 2,000 bytes, more than the 1,000 bytes "
+                                              "a MOTChallenge table may hold"):
+        parse_table(big, 9, tuple("abcdefghi"))
+    monkeypatch.setattr(pj, "MAX_VIDEO_JSON_BYTES", 100)
+    video = tmp_path / "video.json"
+    video.write_text('{"images": [], "annotations": [], "pad": "' + "x" * 200 + '"}')
+    with pytest.raises(DataFormatError, match="video.json: 2.. bytes, more than"):
+        read_posetrack_json(video)
+
+
+def test_deep_json_is_one_error_naming_the_file(tmp_path: Path):
+    from unitrack_env.datasets.posetrack_json import read_posetrack_json
+    from unitrack_env.datasets.youtube_vis import parse_vis_json
+
+    path = tmp_path / "deep.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    for reader in (read_posetrack_json, parse_vis_json):
+        with pytest.raises(DataFormatError) as info:
+            reader(path)
+        assert str(info.value).startswith(f"{path}: JSON nested") and "\n" not in str(info.value)

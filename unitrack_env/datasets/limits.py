@@ -5,6 +5,9 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import json
+import os
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -24,13 +27,24 @@ MAX_TRACKS = 10_000
 #: at megabytes, where a ``seqLength`` of 10**11 asked for 745 GiB.
 MAX_FRAMES = 1_000_000
 
+#: Largest annotation text file (MOT/MOTS ground truth, detections and results, box files):
+#: 256 MiB. Checked with ``stat`` (and a bounded read) before the file is read whole.
+MAX_TEXT_BYTES = 256 * 2**20
+#: Largest JSON file of one video (PoseTrack ground truth, detections, results): 64 MiB.
+MAX_VIDEO_JSON_BYTES = 64 * 2**20
+#: Largest JSON file of a whole split (YouTube-VIS): 1 GiB.
+MAX_SPLIT_JSON_BYTES = 2**30
+
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _JPEG_MAGIC = b"\xff\xd8"  # start of image (SOI)
 #: JPEG start-of-frame markers (SOF0..SOF15 but DHT C4, JPG C8 and DAC CC) hold the size.
 _SOF_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 #: Other formats recognised from their first bytes, to name what a mis-named file really is.
 _OTHER_MAGIC = ((b"GIF8", "GIF"), (b"BM", "BMP"), (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"),
-                (b"RIFF", "WebP/RIFF"))
+                (b"II+\x00", "BigTIFF"), (b"MM\x00+", "BigTIFF"), (b"RIFF", "WebP/RIFF"),
+                *((f"P{i}".encode(), "PNM") for i in range(1, 7)))
+#: Formats whose header size :func:`header_size` reads; frames in other formats are refused.
+MEASURED_FORMATS = ("PNG", "JPEG", "TIFF", "BigTIFF", "BMP", "GIF", "WebP/RIFF", "PNM")
 
 
 def image_format(head: bytes) -> str | None:
@@ -71,6 +85,60 @@ def _jpeg_size(handle: Any) -> tuple[int, int] | None:
         handle.seek(length - 2, 1)
 
 
+def _tiff_size(handle: Any, big: bool) -> tuple[int, int] | None:
+    """ImageWidth (256) and ImageLength (257) of a TIFF's first image file directory."""
+    handle.seek(0)
+    head = handle.read(16)
+    order = "little" if head[:2] == b"II" else "big"
+    offset = int.from_bytes(head[8:16] if big else head[4:8], order)
+    handle.seek(offset)
+    count_bytes, entry, value_at = (8, 20, 12) if big else (2, 12, 8)
+    count = int.from_bytes(handle.read(count_bytes), order)
+    table = handle.read(min(count, 4096) * entry)
+    found: dict[int, int] = {}
+    for i in range(len(table) // entry):
+        item = table[i * entry:(i + 1) * entry]
+        tag, kind = int.from_bytes(item[0:2], order), int.from_bytes(item[2:4], order)
+        if tag in (256, 257):  # SHORT (3) values sit first in the field, LONG (4) fill it
+            width = 2 if kind == 3 else 8 if kind == 16 else 4
+            found[tag] = int.from_bytes(item[value_at:value_at + width], order)
+    return (found[256], found[257]) if len(found) == 2 else None
+
+
+def _other_size(kind: str, handle: Any) -> tuple[int, int] | None:
+    """``(width, height)`` from the header of a BMP, GIF, WebP, PNM or TIFF file."""
+    if kind in ("TIFF", "BigTIFF"):
+        return _tiff_size(handle, kind == "BigTIFF")
+    handle.seek(0)
+    head = handle.read(64)
+    if kind == "BMP" and len(head) >= 26:
+        if int.from_bytes(head[14:18], "little") == 12:  # OS/2 core header
+            return int.from_bytes(head[18:20], "little"), int.from_bytes(head[20:22], "little")
+        return (abs(int.from_bytes(head[18:22], "little", signed=True)),
+                abs(int.from_bytes(head[22:26], "little", signed=True)))
+    if kind == "GIF" and len(head) >= 10:
+        return int.from_bytes(head[6:8], "little"), int.from_bytes(head[8:10], "little")
+    if kind == "WebP/RIFF" and head[8:12] == b"WEBP" and len(head) >= 30:
+        chunk = head[12:16]
+        if chunk == b"VP8X":
+            return (int.from_bytes(head[24:27], "little") + 1,
+                    int.from_bytes(head[27:30], "little") + 1)
+        if chunk == b"VP8L":
+            bits = int.from_bytes(head[21:25], "little")
+            return (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+        if chunk == b"VP8 ":
+            return (int.from_bytes(head[26:28], "little") & 0x3FFF,
+                    int.from_bytes(head[28:30], "little") & 0x3FFF)
+        return None
+    if kind == "PNM":
+        handle.seek(2)
+        text = b" ".join(line.split(b"#")[0] for line in handle.read(1024).splitlines())
+        numbers = text.split()
+        if len(numbers) >= 2 and numbers[0].isdigit() and numbers[1].isdigit():
+            return int(numbers[0]), int(numbers[1])
+    return None
+
+
 def header_size(handle: BinaryIO) -> tuple[str | None, tuple[int, int] | None]:
     """:func:`image_size` of an open binary file (read from its start; position moves)."""
     handle.seek(0)
@@ -79,13 +147,16 @@ def header_size(handle: BinaryIO) -> tuple[str | None, tuple[int, int] | None]:
         return kind, _png_size(handle)
     if kind == "JPEG":
         return kind, _jpeg_size(handle)
+    if kind is not None:
+        return kind, _other_size(kind, handle)
     return kind, None
 
 
 def image_size(path: str | Path) -> tuple[str | None, tuple[int, int] | None]:
-    """The format and ``(width, height)`` a PNG or JPEG file's header states, not decoding.
+    """The format and ``(width, height)`` an image file's header states, not decoding.
 
-    Returns ``(format, None)`` when the format is not PNG/JPEG or its header is unreadable.
+    Formats: :data:`MEASURED_FORMATS`. Returns ``(format, None)`` for another format or an
+    unreadable header.
 
     Raises:
         DataFormatError: the file is missing or unreadable.
@@ -120,9 +191,68 @@ def check_image_size(path: str | Path, size: tuple[int, int] | None, *,
 
 
 def check_image_header(path: str | Path) -> None:
-    """Refuse a PNG or JPEG whose header states an image too large to decode."""
+    """Refuse an image whose header states an image too large to decode."""
     _, size = image_size(path)
     check_image_size(path, size)
+
+
+def check_measured_image(path: str | Path) -> None:
+    """Refuse an image whose size cannot be read from its header, or is too large.
+
+    For frames in formats other than PNG and JPEG (TIFF, BMP, WebP, GIF, PNM): OpenCV would
+    decode anything it knows, a 20000 x 20000 TIFF included, before a size could be checked.
+    """
+    kind, size = image_size(path)
+    if kind not in MEASURED_FORMATS:
+        formats = ", ".join(f.split("/")[0] for f in MEASURED_FORMATS)
+        raise DataFormatError(
+            path, f"not an image format whose size can be checked before decoding "
+                  f"({kind or 'unknown first bytes'}); frames must be {formats}: convert it "
+                  "to PNG or JPEG")
+    if size is None:
+        raise DataFormatError(path, f"{kind} header without a readable width and height "
+                                    "(corrupt?); refused before decoding")
+    check_image_size(path, size)
+
+
+def read_limited(path: str | Path, limit: int, what: str) -> bytes:
+    """The bytes of ``path`` if it holds at most ``limit`` (checked before it is read whole).
+
+    The size is taken with ``stat`` and at most ``limit + 1`` bytes are read (so a file that
+    grows, or a device, is refused too). Raises DataFormatError (also when missing).
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            size = os.fstat(handle.fileno()).st_size
+            data = handle.read(limit + 1) if size <= limit else b""
+    except FileNotFoundError:
+        raise DataFormatError(path, "missing") from None
+    except OSError as exc:
+        raise DataFormatError(path, f"unreadable ({exc})") from None
+    if size > limit or len(data) > limit:
+        shown = f"{size:,} bytes" if size > limit else f"more than {limit:,} bytes"
+        cap = f"{limit / 2**20:,.0f} MiB" if limit >= 2**20 else f"{limit:,} bytes"
+        raise DataFormatError(
+            path, f"{shown}, more than the {cap} a {what} may hold "
+                  "(unitrack_env.datasets.limits); refused before reading it: split it")
+    return data
+
+
+def load_json_limited(path: str | Path, limit: int, what: str) -> Any:
+    """:func:`read_limited`, then :func:`json.loads` with the nesting depth bounded.
+
+    JSON nested deeper than the parser's recursion limit (about 1,000 levels) is refused
+    naming the file. Errors other than size and depth (not UTF-8, not JSON) propagate as
+    ``UnicodeDecodeError`` / ``json.JSONDecodeError`` for the caller to name.
+    """
+    data = read_limited(path, limit, what)
+    try:
+        return json.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise DataFormatError(
+            path, f"JSON nested more than about {sys.getrecursionlimit():,} levels deep; no "
+                  f"{what} nests past a few levels: not an annotation file") from None
 
 
 def check_id(value: Any, path: str | Path, *, field: str, line: int | None = None,

@@ -13,9 +13,11 @@ import numpy as np
 
 from unitrack_env.datasets.limits import (
     MAX_FRAMES,
+    MAX_TEXT_BYTES,
     MAX_TRACKS,
     check_track_count,
     check_track_total,
+    read_limited,
 )
 from unitrack_env.errors import DataFormatError
 
@@ -64,12 +66,7 @@ def parse_table(
 
 def _read_text(path: Path, official: bool) -> str:
     """The file's UTF-8 text; a BOM is skipped, or refused in an ``official`` file."""
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataFormatError(path, "missing") from None
-    except OSError as exc:
-        raise DataFormatError(path, f"unreadable ({exc})") from None
+    raw = read_limited(path, MAX_TEXT_BYTES, "MOTChallenge table")
     if raw.startswith(b"\xef\xbb\xbf"):
         if official:
             raise DataFormatError(

@@ -16,7 +16,13 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import MAX_FRAMES, check_image_header, check_track_total
+from unitrack_env.datasets.limits import (
+    MAX_FRAMES,
+    MAX_TEXT_BYTES,
+    check_image_header,
+    check_track_total,
+    read_limited,
+)
 from unitrack_env.datasets.rle import check_rle, decode_masks, encode_masks
 from unitrack_env.errors import DataFormatError
 
@@ -163,11 +169,11 @@ def parse_instances_txt(
 
 def _read_text(path: Path) -> str:
     """A MOTS txt file's text; a missing or unreadable file is a :class:`DataFormatError`."""
+    if not path.exists():
+        raise DataFormatError(path, "file not found")
     try:
-        return path.read_text(encoding="ascii")
-    except FileNotFoundError:
-        raise DataFormatError(path, "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
+        return read_limited(path, MAX_TEXT_BYTES, "MOTS txt file").decode("ascii")
+    except UnicodeDecodeError as exc:
         raise DataFormatError(path, f"cannot read MOTS txt file ({exc})") from None
 
 

@@ -14,7 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.datasets.limits import check_id, check_track_total
+from unitrack_env.datasets.limits import (
+    MAX_VIDEO_JSON_BYTES,
+    check_id,
+    check_track_total,
+    load_json_limited,
+)
 from unitrack_env.datasets.posetrack_records import (
     FRAMES_PER_VIDEO,
     IMAGE_ID_BASE,
@@ -221,10 +226,8 @@ def read_posetrack_json(path: str | os.PathLike) -> PoseTrackVideo:
     """Read one PoseTrack 2018 sequence file (ground truth, results or detections)."""
     path = Path(path)
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataFormatError(path, "missing") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        data = load_json_limited(path, MAX_VIDEO_JSON_BYTES, "PoseTrack file")
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise DataFormatError(path, f"not readable JSON ({err})") from err
     return parse_posetrack(data, path)
 

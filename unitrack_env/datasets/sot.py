@@ -13,7 +13,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from unitrack_env.datasets.limits import check_image_size, image_size
+from unitrack_env.datasets.limits import (
+    MAX_TEXT_BYTES,
+    check_image_size,
+    check_measured_image,
+    image_size,
+    read_limited,
+)
 from unitrack_env.errors import DataFormatError
 
 IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".bmp")
@@ -69,13 +75,15 @@ class SOTSequence:
 def read_image_size(path: str | Path) -> tuple[int, int]:
     """Return ``(width, height)`` of an image file.
 
-    PNG and JPEG are measured from the header (a decompression bomb is refused); other
-    formats are decoded. A missing, too large or undecodable file raises DataFormatError.
+    Measured from the header (a decompression bomb is refused); a format whose header gives
+    no size is refused before decoding. A missing, too large or undecodable file raises
+    DataFormatError.
     """
     _, size = image_size(path)
     if size is not None and min(size) > 0:
         check_image_size(path, size)
         return size
+    check_measured_image(path)
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise DataFormatError(path, "missing or not a readable image")
@@ -90,8 +98,8 @@ def read_box_file(path: str | Path, *, allow_nan: bool = True) -> np.ndarray:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as err:
+        text = read_limited(path, MAX_TEXT_BYTES, "box file").decode("utf-8-sig")
+    except UnicodeDecodeError as err:
         raise DataFormatError(path, f"cannot read box file ({err})") from err
     rows: list[list[float]] = []
     blank_at: int | None = None

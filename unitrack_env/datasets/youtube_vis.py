@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -15,7 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from unitrack_env.datasets.limits import check_id, check_image_size, check_track_total
+from unitrack_env.datasets.limits import (
+    MAX_SPLIT_JSON_BYTES,
+    check_id,
+    check_image_size,
+    check_track_total,
+    load_json_limited,
+)
 from unitrack_env.datasets.rle import check_rle
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import path_inside
@@ -154,10 +161,15 @@ def _id(entry: dict, key: str, path: Path, where: str) -> int:
 
 
 def _load_json(path: Path, text: str | None) -> Any:
+    if text is None and not path.exists():
+        raise DataFormatError(path, "file not found")
     try:
-        return json.loads(path.read_text(encoding="utf-8") if text is None else text)
-    except FileNotFoundError:
-        raise DataFormatError(path, "file not found") from None
+        if text is None:
+            return load_json_limited(path, MAX_SPLIT_JSON_BYTES, "YouTube-VIS file")
+        return json.loads(text)
+    except RecursionError:
+        raise DataFormatError(path, "JSON nested too deep (more than about "
+                                    f"{sys.getrecursionlimit():,} levels)") from None
     except json.JSONDecodeError as exc:
         raise DataFormatError(path, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
     except (OSError, UnicodeDecodeError) as exc:
