@@ -17,13 +17,12 @@ import numpy as np
 from scipy.stats import norm as NORMAL
 from scipy.stats import t as STUDENT
 
-from unitrack_env.metrics.events_mot import preprocessed_frames, read_gt_rows
+from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.metrics.mot_stats import (
     MOT_STAT_METRICS,
     MotStats,
     add_sums,
     metrics_from_sums,
-    mot_stats,
     weighted_sums,
 )
 
@@ -261,18 +260,16 @@ def _diffs(point_a: dict, point_b: dict, boot_a: dict, boot_b: dict,
 
 
 def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStats]:
-    """Per-sequence statistics of a MOT run folder, from its result files and ground truth."""
+    """Per-sequence statistics of a run folder, from its result files and ground truth.
+
+    For a benchmark whose ``intervals`` are ``"stats"`` (box MOT):
+    :meth:`~unitrack_env.benchmarks.base.Benchmark.frame_stats`.
+    """
     bench = run_benchmark(run)
-    if bench.task != "mot":
-        raise ValueError(f"{run}: `compare` supports box MOT runs; this run's task is "
-                         f"'{bench.task}'")
-    out = {}
-    for name in sequences:
-        frames = preprocessed_frames(read_gt_rows(bench.dataset.split_dir / name),
-                                     bench.read(Path(run) / "data", name),
-                                     bench.sequence_length(name), bench.name)
-        out[name] = mot_stats(frames)
-    return out
+    if bench.intervals != "stats":
+        raise ValueError(f"{run}: the {bench.task} benchmark {bench.name} has no per-frame "
+                         "statistics to recompute its metrics from")
+    return {name: bench.frame_stats(Path(run) / "data", name) for name in sequences}
 
 
 def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
@@ -280,15 +277,17 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
                  method: str = "jackknife") -> Comparison:
     """Compare two run folders on the sequences both scored (see the module docstring).
 
-    Box MOT recomputes its metrics from per-frame statistics; SOT, VOS and JHMDB runs compare
-    their per-frame metrics (:func:`~.intervals.compare_frames`, jackknife only).
+    The runs' benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the
+    metrics from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) compares per-frame
+    metrics (:func:`~.intervals.compare_frames`, jackknife only); otherwise it refuses.
     """
-    task = _common_task(run_a, run_b)
+    bench = _common_benchmark(run_a, run_b)
     seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
     common = [s for s in seq_a if s in seq_b]
     if not common:
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
-    if task == "mot":
+    pooled = bench.intervals == "frames"
+    if not pooled:
         stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
         rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
                                      level=level, block=block, method=method)
@@ -299,12 +298,12 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
         if level not in ("frames", "sequences"):
             raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
         if method != "jackknife":
-            raise ValueError(f"--interval {method} is for box MOT runs; {task} runs are "
+            raise ValueError(f"--interval {method} is for box MOT runs; {bench.task} runs are "
                              "compared with the block jackknife")
-        rows, frames, blocks = compare_frames(run_a, run_b, task, common, level=level,
+        rows, frames, blocks = compare_frames(run_a, run_b, bench, common, level=level,
                                               block=block)
-    notes = few_data_notes(frames, blocks, level, pooled=task != "mot")
-    for name in unreliable_rows(frames, blocks, pooled=task != "mot"):
+    notes = few_data_notes(frames, blocks, level, pooled=pooled)
+    for name in unreliable_rows(frames, blocks, pooled=pooled):
         for d in rows[name].values():
             d.reliable = False
     skipped = sorted(set(seq_a) ^ set(seq_b))
@@ -314,19 +313,21 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
                       method)
 
 
-#: Tasks ``compare`` supports: box MOT and the tasks whose metrics are means over frames.
-COMPARE_TASKS: tuple[str, ...] = ("mot", "sot", "vos", "pose-prop")
+def comparable(bench: Benchmark) -> bool:
+    """Whether ``compare`` can compare runs of ``bench`` (its ``intervals`` are stated)."""
+    return bench.intervals in ("stats", "frames")
 
 
-def _common_task(run_a: str | os.PathLike, run_b: str | os.PathLike) -> str:
-    tasks = [run_benchmark(r).task for r in (run_a, run_b)]
+def _common_benchmark(run_a: str | os.PathLike, run_b: str | os.PathLike) -> Benchmark:
+    benches = [run_benchmark(r) for r in (run_a, run_b)]
+    tasks = [b.task for b in benches]
     if tasks[0] != tasks[1]:
         raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
                          "compare two runs of the same task")
-    if tasks[0] not in COMPARE_TASKS:
-        raise ValueError(f"{run_a}: `compare` supports {', '.join(COMPARE_TASKS)} runs; this "
-                         f"run's task is '{tasks[0]}'")
-    return tasks[0]
+    if not comparable(benches[0]):
+        raise ValueError(f"{run_a}: `compare` cannot compare {tasks[0]} runs: "
+                         f"{benches[0].no_intervals}")
+    return benches[0]
 
 
 def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:

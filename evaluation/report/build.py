@@ -16,23 +16,13 @@ from typing import Any
 
 import pandas as pd
 
-from ..compare import COMPARE_TASKS
+from ..compare import comparable
 from ..events import load_events, run_benchmark
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, render_picture, sample
 
 #: Count metrics (shown as integers, not percent).
 COUNTS = {"IDSW", "CLR_FP", "CLR_FN", "MT", "ML", "Frag", "IDs", "CLR_TP"}
-
-#: Per-frame value shown on the timeline of a non-MOT task.
-VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1"),
-                 "vis": ("iou", "IoU of tp tracks")}
-
-#: Event lanes of the timeline of tasks with counted events, and what a count is; their
-#: thumbnails are not drawn yet (masks, poses), only box MOT's.
-LANES = {"mots": (None, "masks"), "posetrack": (("fn", "fp", "idsw"), "joints"),
-         "vis": (("fn", "fp"), "track-frames")}
-
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "x"
@@ -63,7 +53,7 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
 
 
 def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
-    """The paired comparison of two runs (box MOT, SOT, VOS, JHMDB) with 95% intervals."""
+    """The paired comparison of two runs (whose benchmark states intervals) with 95% intervals."""
     from ..compare import compare_runs
 
     comp = compare_runs(run_a, run_b, resamples=resamples)
@@ -94,11 +84,9 @@ def _clip(run: Path, sequence: str) -> Path | None:
     return clips[0] if clips else None
 
 
-def _mot_pictures(run: Path, bench: Any, seq: str, events: pd.DataFrame, out: Path,
-                  folder: str, limit: int) -> list[str]:
-    from unitrack_env.datasets.motchallenge import read_seqinfo
-
-    info = read_seqinfo(bench.dataset.split_dir / seq)
+def _pictures(run: Path, bench: Any, seq: str, events: pd.DataFrame, out: Path,
+              folder: str, limit: int) -> list[str]:
+    """Thumbnails of ID switches and bursts of misses, on the benchmark's frame images."""
     clip = _clip(run, seq)
     by_frame = {int(f): g for f, g in events.groupby("frame")}
     items = []
@@ -113,15 +101,15 @@ def _mot_pictures(run: Path, bench: Any, seq: str, events: pd.DataFrame, out: Pa
                       f"miss, frames {start}-{start + length - 1}: gt {gt_id}"))
     figures = []
     for kind, frame, gt_id, track, prev, caption in items:
-        path = info.frame_path(frame)
-        if not path.is_file():
+        path = bench.frame_image(seq, frame)
+        if path is None or not path.is_file():
             continue
         name = f"{kind}-f{frame:06d}-g{gt_id}"
         thumb, full = render_picture(path, by_frame.get(frame, events.iloc[:0]), out / folder,
                                      name, gt_id=gt_id, track_id=track, prev_track_id=prev)
         link = ""
         if clip is not None:
-            t = (frame - 1) / max(1.0, float(info.frame_rate))
+            t = (frame - 1) / max(1.0, bench.frame_rate(seq))
             link = f' · <a href="{esc(clip.resolve().as_uri())}#t={t:.2f}">clip</a>'
         figures.append(f'<figure><a href="{esc(full)}"><img loading="lazy" class="thumb '
                        f'{kind}" data-kind="{kind}" data-frame="{frame}" src="{esc(thumb)}" '
@@ -132,25 +120,25 @@ def _mot_pictures(run: Path, bench: Any, seq: str, events: pd.DataFrame, out: Pa
 
 def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
                      events: pd.DataFrame, out: Path, limit: int) -> str:
-    """A run's sequence: its event timeline and (MOT) event thumbnails."""
+    """A run's sequence: its event timeline, drawn as its benchmark's ``report_view`` says."""
     frames = bench.sequence_length(seq)
     head = f'<h3 id="{_slug(label)}-{_slug(seq)}">{esc(label)} · {esc(seq)} ({frames} frames)</h3>'
-    if bench.task == "mot":
-        figures = _mot_pictures(run, bench, seq, events, out, f"img{index}-{_slug(seq)}", limit)
+    view = bench.report_view
+    if view.thumbnails:
+        figures = _pictures(run, bench, seq, events, out, f"img{index}-{_slug(seq)}", limit)
         shown = (f"<p>{len(figures)} pictures (at most {limit} ID switches and {limit} bursts "
                  "of misses, sampled evenly over the sequence).</p>") if figures else \
             "<p>No ID switch or miss to picture (or the frames are not on this machine).</p>"
         return (f'<section class="sequence" data-sequence="{esc(seq)}">{head}'
-                + mot_timeline(events, frames) + shown
+                + mot_timeline(events, frames, kinds=view.lanes) + shown
                 + '<div class="thumbs">' + "".join(figures) + "</div></section>")
     body = ""
-    if bench.task in LANES:
-        kinds, unit = LANES[bench.task]
-        body = (mot_timeline(events, frames, kinds=kinds) + f"<p>Counts are {unit}; no "
-                "thumbnails for this task yet (only box MOT's are drawn).</p>")
-    column, name = VALUE_COLUMNS.get(bench.task, (None, None))
+    if view.lanes:
+        body = (mot_timeline(events, frames, kinds=view.lanes) + f"<p>Counts are {view.unit}; "
+                "no thumbnails for this task yet (only box MOT's are drawn).</p>")
+    column, name = view.value or (None, None)
     if column is not None and column in events:
-        rows = events[events["type"] == "tp"] if bench.task == "vis" else events
+        rows = events[events["type"] == view.value_type] if view.value_type else events
         body += value_timeline(rows[column], rows["frame"], name, frames)
     body = body or "<p>No per-frame events.</p>"
     return f'<section class="sequence" data-sequence="{esc(seq)}">{head}{body}</section>'
@@ -225,7 +213,8 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
             metrics_section(loaded)]
-    if len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task in COMPARE_TASKS:
+    if (len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task
+            and comparable(loaded[0][2])):
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
         body.append(compare_section(runs[0], runs[1], resamples) if common else
                     '<h2 id="compare">Comparison</h2><p class="note">The first two runs share '

@@ -5,16 +5,29 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
+from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
-from unitrack_env.metrics.sot import aggregate_sot, evaluate_sot_sequence
+from unitrack_env.metrics.sot import (
+    aggregate_sot,
+    center_error_per_frame,
+    evaluate_sot_sequence,
+    overlap_per_frame,
+    repair_predictions,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Folder of the OTB data under ``$UNITRACK_DATA``.
 BENCHMARK_FOLDER = "OTB"
@@ -42,6 +55,18 @@ class OTBBenchmark(Benchmark):
 
     task = "sot"
     columns = ("AUC", "Precision@20px", "AverageOverlap")
+    report_view = ReportView(value=("iou", "IoU"))
+    intervals = "frames"  # success AUC and precision are means over frames
+    frame_metrics = MappingProxyType({
+        "AUC": lambda d: np.mean(d["iou"].to_numpy()[:, None] > np.linspace(0, 1, 21)[None, :],
+                                 axis=1),
+        "Precision@20px": lambda d: (d["center_error"] <= 20).to_numpy(float)})
+    scorecard = ScorecardColumn(
+        "SOT", ("UniTrack/OTB-v0",),
+        (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
+         Head("unitrack-dcf", "DCF", ("AUC", "Precision@20px"))),
+        Head("repeat-box", "repeat-box", ("AUC", "Precision@20px"), appearance=False),
+        ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02)
 
     @classmethod
     def build(cls, root: str | os.PathLike | None = None) -> OTBBenchmark:
@@ -110,3 +135,19 @@ class OTBBenchmark(Benchmark):
             scores[COMBINED] = aggregate_sot(list(scores.values()))
             combined = scores[COMBINED].as_dict()
         return ScoreReport(BENCHMARK, per_sequence, combined, scores)
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """One ``"frame"`` event per frame: its IoU, centre error, true and tracked box."""
+        gt = self.load(sequence).boxes
+        pred = repair_predictions(self.read(folder, sequence), gt, init_from_gt=True)
+        iou, err = overlap_per_frame(pred, gt), center_error_per_frame(pred, gt)
+        rows = EventRows(sequence)
+        for t in range(len(gt)):
+            rows.add(t + 1, "frame", iou=float(iou[t]), center_error=float(err[t]),
+                     **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
+                     **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
+        return rows
+
+    def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
+        """1 per sequence: OTB's combined scores are means of the sequences' scores."""
+        return dict.fromkeys(sequences, 1.0)
