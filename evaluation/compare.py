@@ -2,7 +2,7 @@
 
 The default is a paired delete-a-block jackknife (the same block of consecutive frames left
 out of both runs) with a t interval; a block bootstrap is kept for comparison (coverage in
-docs/report.md). Frame-scored tasks go through :func:`.intervals.compare_frames`.
+docs/report.md). Two run folders are compared by :func:`.intervals.compare_runs`.
 More in docs/module-notes.md.
 """
 
@@ -17,7 +17,6 @@ import numpy as np
 from scipy.stats import norm as NORMAL
 from scipy.stats import t as STUDENT
 
-from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.metrics.mot_stats import (
     MOT_STAT_METRICS,
     MotStats,
@@ -26,7 +25,7 @@ from unitrack_env.metrics.mot_stats import (
     weighted_sums,
 )
 
-from .events import run_benchmark, run_sequences
+from .events import run_benchmark
 
 #: Row name of the combined comparison.
 COMBINED: str = "COMBINED"
@@ -270,64 +269,6 @@ def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStat
         raise ValueError(f"{run}: the {bench.task} benchmark {bench.name} has no per-frame "
                          "statistics to recompute its metrics from")
     return {name: bench.frame_stats(Path(run) / "data", name) for name in sequences}
-
-
-def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
-                 seed: int = 0, level: str = "frames", block: int | None = None,
-                 method: str = "jackknife") -> Comparison:
-    """Compare two run folders on the sequences both scored (see the module docstring).
-
-    The runs' benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the
-    metrics from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) compares per-frame
-    metrics (:func:`~.intervals.compare_frames`, jackknife only); otherwise it refuses.
-    """
-    bench = _common_benchmark(run_a, run_b)
-    seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
-    common = [s for s in seq_a if s in seq_b]
-    if not common:
-        raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
-    pooled = bench.intervals == "frames"
-    if not pooled:
-        stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
-        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
-                                     level=level, block=block, method=method)
-        frames = {s: stats_a[s].num_frames for s in common}
-    else:
-        from .intervals import compare_frames
-
-        if level not in ("frames", "sequences"):
-            raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
-        if method != "jackknife":
-            raise ValueError(f"--interval {method} is for box MOT runs; {bench.task} runs are "
-                             "compared with the block jackknife")
-        rows, frames, blocks = compare_frames(run_a, run_b, bench, common, level=level,
-                                              block=block)
-    notes = few_data_notes(frames, blocks, level, pooled=pooled)
-    for name in unreliable_rows(frames, blocks, pooled=pooled):
-        for d in rows[name].values():
-            d.reliable = False
-    skipped = sorted(set(seq_a) ^ set(seq_b))
-    if skipped:
-        notes.append(f"not in both runs, left out: {', '.join(skipped)}")
-    return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes,
-                      method)
-
-
-def comparable(bench: Benchmark) -> bool:
-    """Whether ``compare`` can compare runs of ``bench`` (its ``intervals`` are stated)."""
-    return bench.intervals in ("stats", "frames")
-
-
-def _common_benchmark(run_a: str | os.PathLike, run_b: str | os.PathLike) -> Benchmark:
-    benches = [run_benchmark(r) for r in (run_a, run_b)]
-    tasks = [b.task for b in benches]
-    if tasks[0] != tasks[1]:
-        raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
-                         "compare two runs of the same task")
-    if not comparable(benches[0]):
-        raise ValueError(f"{run_a}: `compare` cannot compare {tasks[0]} runs: "
-                         f"{benches[0].no_intervals}")
-    return benches[0]
 
 
 def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:

@@ -5,7 +5,7 @@ run's benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes t
 from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) takes the per-frame values of its
 ``frame_metrics`` from the events (means over frames), sequences combined as the official
 score combines them (its ``combine_weights``); other tasks (MOTS, PoseTrack, VIS) get none.
-:func:`compare_frames` serves ``unitrack compare`` for frame-scored tasks.
+:func:`compare_runs` serves ``unitrack compare`` (and the report's comparison).
 """
 
 from __future__ import annotations
@@ -23,12 +23,16 @@ from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted
 
 from .compare import (
     COMBINED,
+    Comparison,
     MetricDiff,
     block_length,
+    compare_stats,
+    few_data_notes,
     frame_block_length,
     jackknife_interval,
     jackknife_weights,
     run_stats,
+    unreliable_rows,
 )
 from .events import load_events, run_benchmark, run_sequences
 
@@ -148,6 +152,62 @@ def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, bench: Be
             low, high = jackknife_interval(a - b, reps_a - reps_b)
             rows.setdefault(name, {})[metric] = MetricDiff(a, b, a - b, low, high)
     return rows, frames, blocks
+
+
+def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
+                 seed: int = 0, level: str = "frames", block: int | None = None,
+                 method: str = "jackknife") -> Comparison:
+    """Compare two run folders on the sequences both scored (see the module docstring).
+
+    The runs' benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the
+    metrics from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) compares per-frame
+    metrics (:func:`~.intervals.compare_frames`, jackknife only); otherwise it refuses.
+    """
+    bench = _common_benchmark(run_a, run_b)
+    seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
+    common = [s for s in seq_a if s in seq_b]
+    if not common:
+        raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
+    pooled = bench.intervals == "frames"
+    if not pooled:
+        stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
+        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
+                                     level=level, block=block, method=method)
+        frames = {s: stats_a[s].num_frames for s in common}
+    else:
+        if level not in ("frames", "sequences"):
+            raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
+        if method != "jackknife":
+            raise ValueError(f"--interval {method} is for box MOT runs; {bench.task} runs are "
+                             "compared with the block jackknife")
+        rows, frames, blocks = compare_frames(run_a, run_b, bench, common, level=level,
+                                              block=block)
+    notes = few_data_notes(frames, blocks, level, pooled=pooled)
+    for name in unreliable_rows(frames, blocks, pooled=pooled):
+        for d in rows[name].values():
+            d.reliable = False
+    skipped = sorted(set(seq_a) ^ set(seq_b))
+    if skipped:
+        notes.append(f"not in both runs, left out: {', '.join(skipped)}")
+    return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes,
+                      method)
+
+
+def comparable(bench: Benchmark) -> bool:
+    """Whether ``compare`` can compare runs of ``bench`` (its ``intervals`` are stated)."""
+    return bench.intervals in ("stats", "frames")
+
+
+def _common_benchmark(run_a: str | os.PathLike, run_b: str | os.PathLike) -> Benchmark:
+    benches = [run_benchmark(r) for r in (run_a, run_b)]
+    tasks = [b.task for b in benches]
+    if tasks[0] != tasks[1]:
+        raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
+                         "compare two runs of the same task")
+    if not comparable(benches[0]):
+        raise ValueError(f"{run_a}: `compare` cannot compare {tasks[0]} runs: "
+                         f"{benches[0].no_intervals}")
+    return benches[0]
 
 
 def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,

@@ -16,8 +16,8 @@ from typing import Any
 
 import pandas as pd
 
-from ..compare import comparable
 from ..events import load_events, run_benchmark
+from ..intervals import comparable, compare_runs
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .thumbs import GT_COLOUR, PREVIOUS_COLOUR, TRACK_COLOUR, miss_bursts, render_picture, sample
 
@@ -54,8 +54,6 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
 
 def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
     """The paired comparison of two runs (whose benchmark states intervals) with 95% intervals."""
-    from ..compare import compare_runs
-
     comp = compare_runs(run_a, run_b, resamples=resamples)
     rows = []
     for seq, row in comp.rows.items():
