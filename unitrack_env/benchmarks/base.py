@@ -185,14 +185,12 @@ class Benchmark(ABC):
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score the result files of ``sequences`` (all present) with the official metrics."""
 
+    @abstractmethod
     def score_sequence(self, sequence: str, results: Any) -> dict[str, float]:
-        """The official metrics of one sequence's results (the env's ``info["metrics"]``).
+        """The official metrics of one sequence's results.
 
-        Default: NotImplementedError; the environment of a benchmark without it overrides
-        ``episode_metrics`` (as DAVIS, JHMDB and PoseTrack do).
+        The environment's default ``episode_metrics`` puts them in ``info["metrics"]``.
         """
-        raise NotImplementedError(f"{type(self).__name__} scores folders only; its "
-                                  "environment overrides episode_metrics()")
 
     # ---- what evaluation asks besides scoring; each default: the task has none ----------
 

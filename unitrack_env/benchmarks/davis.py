@@ -119,6 +119,12 @@ class DAVISBenchmark(Benchmark):
             digest.update(np.ascontiguousarray(labels).tobytes())
         return digest.hexdigest()
 
+    def score_sequence(self, sequence: str, results: list[np.ndarray]) -> dict[str, float]:
+        """The DAVIS summary of one sequence's label maps (first and last frame not scored)."""
+        loaded = self.load(sequence)
+        return dict(evaluate_vos_sequence(loaded.read_annotations(), list(results),
+                                          loaded.object_ids, sequence_name=sequence).summary)
+
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<seq>/<frame>.png`` results with the DAVIS-2017 protocol.
 

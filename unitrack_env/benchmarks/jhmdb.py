@@ -104,6 +104,10 @@ class JHMDBBenchmark(Benchmark):
         """PCK counts of predicted joints against ground truth (same frames)."""
         return pck_counts(predictions, ground_truth, self.thresholds, method=self.normaliser)
 
+    def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
+        """PCK at every threshold of one video's joints (frame 1 not scored)."""
+        return self.counts(results, self.ground_truth(sequence)[: len(results)]).as_dict()
+
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<name>/joint_positions.mat`` files (each covering its video)."""
         per_sequence: dict[str, dict[str, float]] = {}

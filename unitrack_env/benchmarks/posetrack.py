@@ -88,6 +88,13 @@ class PoseTrackBenchmark(Benchmark):
                 digest.update(np.round(row, 3).tobytes())
         return digest.hexdigest()
 
+    def score_sequence(self, sequence: str, results: PoseTrackVideo) -> dict[str, float]:
+        """Poseval's metrics of one sequence's tracked poses."""
+        from unitrack_env.metrics.posetrack import evaluate_video, summarise
+
+        gt = read_posetrack_json(self.dataset.annotation_dir / f"{sequence}.json")
+        return summarise([evaluate_video(gt, results, drop_last_frame=self.drop_last_frame)])
+
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
         # Imported here: the metrics pull in scipy.optimize (0.5 s), which planning a run
