@@ -105,8 +105,8 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
                 type: str | None = None) -> pd.DataFrame:  # noqa: A002 - the CLI's name
     """The error events of a run folder as a DataFrame, optionally one sequence or ``type``.
 
-    Events missing from the folder (an older run) are computed from the result files and the
-    ground truth, and written for next time.
+    Events missing from the folder (not written when the run was scored: the runner warned)
+    are computed from the result files and the ground truth, and written for next time.
     """
     names = run_sequences(run)
     if sequence is not None:
@@ -125,7 +125,6 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
                                  keep_default_na=True))
     df = (pd.concat(parts, ignore_index=True) if parts
           else pd.DataFrame(columns=list(EVENT_COLUMNS)))
-    df = df.reindex(columns=list(EVENT_COLUMNS))  # files written before a column existed
     for col in ID_COLUMNS:
         df[col] = df[col].astype("Int64")
     if type is not None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import re
 import shutil
 import tempfile
 import time
@@ -273,9 +272,6 @@ class CacheFolder:
             entries = self._scan()
             for name in (self.entries_dir, self.root / "runs"):
                 shutil.rmtree(name, ignore_errors=True)
-            for old in self.root.glob("v*"):  # layouts of older versions
-                if old.is_dir() and re.fullmatch(r"v\d+", old.name):
-                    shutil.rmtree(old, ignore_errors=True)
             self._write_usage_locked(0, 0)
         self._namespaces.clear()
         return len(entries), sum(e.size for e in entries)
