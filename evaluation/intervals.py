@@ -161,7 +161,8 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
 
     The runs' benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the
     metrics from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) compares per-frame
-    metrics (:func:`~.intervals.compare_frames`, jackknife only); otherwise it refuses.
+    metrics (:func:`compare_frames`, jackknife only); otherwise it refuses with the
+    benchmark's ``no_intervals``.
     """
     bench = _common_benchmark(run_a, run_b)
     seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)

@@ -169,3 +169,12 @@ def test_report_shows_timelines_of_the_new_tasks(runs: dict[str, Path], tmp_path
             section = page.split(f'data-sequence="{seq}">', 2)[-1].split("</section>")[0]
             assert '<svg class="timeline"' in section and "no thumbnails" in section, seq
     assert 'class="ev-idsw"' in page and "IoU of tp tracks" in page
+
+
+def test_compare_refuses_a_task_whose_metrics_are_not_frame_means(runs) -> None:
+    from unitrack_env.evaluation.intervals import compare_runs
+
+    for name, reason in (("MOTS", "not recomputed"), ("PoseTrack", "per-joint"),
+                         ("VIS", "whole tracks")):
+        with pytest.raises(ValueError, match=f"cannot compare .* runs: .*{reason}"):
+            compare_runs(runs[name], runs[name])
