@@ -12,6 +12,7 @@ included.
 from __future__ import annotations
 
 import ast
+import functools
 import os
 from pathlib import Path
 
@@ -76,6 +77,7 @@ def imported(module: str, path: Path, tree: ast.AST, known: set[str]) -> set[str
     return out
 
 
+@functools.cache  # parsed once for the tests below
 def module_graph() -> dict[str, set[str]]:
     """``{module: modules it imports}`` of the whole library."""
     modules = library_modules()
