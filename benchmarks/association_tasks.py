@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -30,14 +29,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
+from _timing import Timed, timed_acts  # a sibling file (the script's folder)
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import MOT_INPUT_SIZE, AppearanceModel
 from unitrack_env.agents.primitives.similarity import rsm
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import Timed, timed_acts  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"

@@ -41,6 +41,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
+from _mot_replay import diagnose, record, replay, score  # a sibling file (the script's folder)
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
@@ -53,9 +54,6 @@ from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motch
 from unitrack_env.evaluation.runner import run
 from unitrack_env.frames import read_rgb
 from unitrack_env.score_range import ScoreRange
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _mot_replay import diagnose, record, replay, score  # noqa: E402  (benchmark helper)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = (REPO / ".." / "shared" / "data").resolve()

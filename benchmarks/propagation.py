@@ -51,6 +51,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import torch.nn.functional as F
+from _timing import PEAK_RSS_GIB, Timed, timed_acts  # a sibling file (the script's folder)
 from torch.profiler import ProfilerActivity, profile
 
 import unitrack_env  # noqa: F401
@@ -65,9 +66,6 @@ from unitrack_env.agents.primitives.label_propagation import (
     LabelPropagationConfig,
     LabelPropagator,
 )
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import PEAK_RSS_GIB, Timed, timed_acts  # noqa: E402  (a sibling file of this script)
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 

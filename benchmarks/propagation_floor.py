@@ -33,11 +33,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
-from pathlib import Path
 
 import torch
+from propagation import davis_features  # a sibling file (the script's folder)
 
 from unitrack_env.agents.appearance import AppearanceModel
 from unitrack_env.agents.primitives.label_propagation import (
@@ -46,9 +45,6 @@ from unitrack_env.agents.primitives.label_propagation import (
     kth_best,
     normalize_features,
 )
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from propagation import davis_features  # noqa: E402  (a sibling script)
 
 
 def floors(feats: list[torch.Tensor], config: LabelPropagationConfig

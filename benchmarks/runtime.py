@@ -48,6 +48,7 @@ import cv2
 import gymnasium as gym
 import numpy as np
 import torch
+from _timing import PEAK_RSS_GIB  # a sibling file (the script's folder)
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
@@ -55,9 +56,6 @@ from unitrack_env.agents.appearance import AppearanceModel, letterbox
 from unitrack_env.agents.appearance.runtime import available_runtimes
 from unitrack_env.agents.primitives import label_propagation as current_lp
 from unitrack_env.agents.primitives.label_propagation import normalize_features
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import PEAK_RSS_GIB  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / ".." / "shared" / "data"

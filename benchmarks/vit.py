@@ -25,7 +25,6 @@ picks a subset (the default leaves out ``vit-b8``: minutes per frame on a CPU).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -33,13 +32,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from _timing import PEAK_RSS_GIB, timed_acts  # a sibling file (the script's folder)
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents.appearance.model import AppearanceModel
 from unitrack_env.agents.base import make_agent
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import PEAK_RSS_GIB, timed_acts  # noqa: E402  (a sibling file of this script)
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / ".." / "shared" / "data"

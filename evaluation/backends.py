@@ -21,6 +21,7 @@ Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]
 def pool_backend(workers: int = 1) -> Iterator[Runner]:
     """Local worker processes (``workers`` <= 1: in this process)."""
     from .pool import SupervisedPool
+    from .workers import init_worker
 
     workers = max(1, int(workers))
     threads = max(1, (os.cpu_count() or 1) // workers)
@@ -36,7 +37,7 @@ def pool_backend(workers: int = 1) -> Iterator[Runner]:
         yield run_here
         return
 
-    with SupervisedPool(workers, threads) as pool:
+    with SupervisedPool(workers, threads, init=init_worker) as pool:
         def run_pool(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
             yield from pool.run(_call, items, lambda item: (fn, item, threads))
 

@@ -106,16 +106,16 @@ def _agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
-                   task: str, fmt: str, fps: dict | None = None, coverage: str = "") -> None:
+                   columns: tuple, fmt: str, fps: dict | None = None, coverage: str = "") -> None:
     from .tables import metrics_csv, metrics_json, metrics_table
 
     if fmt == "json":
         console.print(metrics_json(per_sequence, combined), markup=False, soft_wrap=True)
     elif fmt == "csv":
-        console.print(metrics_csv(per_sequence, combined, task), markup=False, end="",
+        console.print(metrics_csv(per_sequence, combined, columns), markup=False, end="",
                       soft_wrap=True)
     else:
-        table, dropped = metrics_table(per_sequence, combined, title, fps, task,
+        table, dropped = metrics_table(per_sequence, combined, title, fps, columns,
                                        width=console.width, coverage=coverage)
         console.print(table)
         if dropped:
@@ -128,7 +128,7 @@ def _defined(value: Any) -> bool:
 
 
 def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
-    import unitrack_env
+    from unitrack_env.benchmarks import benchmark_class
 
     from .runner import run
 
@@ -160,7 +160,7 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
     else:
         fps = {name: record.fps for name, record in report.records.items()}
         _print_metrics(console, report.scores.per_sequence, report.scores.combined,
-                       f"{args.agent} on {args.env}", unitrack_env.task_of(args.env),
+                       f"{args.agent} on {args.env}", benchmark_class(args.env).columns,
                        args.format, fps, coverage=report.scores.coverage)
         undefined = sorted(name for name, values in report.scores.per_sequence.items()
                            if any(not _defined(v) for v in values.values()))
@@ -182,7 +182,6 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
     import json
 
     if args.env:
-        import unitrack_env
         from unitrack_env.benchmarks import benchmark_for
 
         env_kwargs = _env_kwargs(args)
@@ -190,17 +189,17 @@ def _cmd_score(args: argparse.Namespace, console: Console) -> int:
         chosen = env_kwargs.get("sequences")  # --env-arg sequences=...: those with gt
         report = bench.score_folder(Path(args.results), args.sequences or (
             bench.scorable(chosen) if chosen else None), allow_missing=args.allow_missing)
-        task = unitrack_env.task_of(args.env)
+        columns = bench.columns
     elif args.benchmark and args.gt:
-        from unitrack_env.benchmarks.motchallenge import score_split_folder
+        from unitrack_env.benchmarks.motchallenge import MOTChallengeBenchmark, score_split_folder
 
         report = score_split_folder(args.gt, args.results, args.benchmark, args.sequences,
                                     allow_missing=args.allow_missing)
-        task = "mot"
+        columns = MOTChallengeBenchmark.columns
     else:
         raise ValueError("score needs --env ID [--root DIR] [--split S], or (MOTChallenge) "
                          "--benchmark MOT17 --gt DIR")
-    _print_metrics(console, report.per_sequence, report.combined, str(args.results), task,
+    _print_metrics(console, report.per_sequence, report.combined, str(args.results), columns,
                    args.format, coverage=report.coverage)
     if report.missing:
         _console(stderr=True).print(f"(--allow-missing: COMBINED covers {report.coverage}; "

@@ -151,7 +151,7 @@ def comparison_lines(comp: Any) -> list[str]:
 
 
 def _cmd_compare(args: argparse.Namespace, console: Console) -> int:
-    from .compare import compare_runs
+    from .intervals import compare_runs
 
     comp = compare_runs(args.runs[0], args.runs[1], resamples=args.resamples, seed=args.seed,
                         level=args.level, block=args.block, method=args.interval)

@@ -2,7 +2,7 @@
 
 The default is a paired delete-a-block jackknife (the same block of consecutive frames left
 out of both runs) with a t interval; a block bootstrap is kept for comparison (coverage in
-docs/report.md). Frame-scored tasks go through :func:`.intervals.compare_frames`.
+docs/report.md). Two run folders are compared by :func:`.intervals.compare_runs`.
 More in docs/module-notes.md.
 """
 
@@ -17,17 +17,15 @@ import numpy as np
 from scipy.stats import norm as NORMAL
 from scipy.stats import t as STUDENT
 
-from unitrack_env.metrics.events_mot import preprocessed_frames, read_gt_rows
 from unitrack_env.metrics.mot_stats import (
     MOT_STAT_METRICS,
     MotStats,
     add_sums,
     metrics_from_sums,
-    mot_stats,
     weighted_sums,
 )
 
-from .events import run_benchmark, run_sequences
+from .events import run_benchmark
 
 #: Row name of the combined comparison.
 COMBINED: str = "COMBINED"
@@ -261,78 +259,16 @@ def _diffs(point_a: dict, point_b: dict, boot_a: dict, boot_b: dict,
 
 
 def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStats]:
-    """Per-sequence statistics of a MOT run folder, from its result files and ground truth."""
-    bench = run_benchmark(run)
-    if bench.task != "mot":
-        raise ValueError(f"{run}: `compare` supports box MOT runs; this run's task is "
-                         f"'{bench.task}'")
-    out = {}
-    for name in sequences:
-        frames = preprocessed_frames(read_gt_rows(bench.dataset.split_dir / name),
-                                     bench.read(Path(run) / "data", name),
-                                     bench.sequence_length(name), bench.name)
-        out[name] = mot_stats(frames)
-    return out
+    """Per-sequence statistics of a run folder, from its result files and ground truth.
 
-
-def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
-                 seed: int = 0, level: str = "frames", block: int | None = None,
-                 method: str = "jackknife") -> Comparison:
-    """Compare two run folders on the sequences both scored (see the module docstring).
-
-    Both runs' result files must still match their records and their data must be the same
-    (:func:`~.integrity.check_pair`: StaleRun / DifferentData otherwise).
-
-    Box MOT recomputes its metrics from per-frame statistics; SOT, VOS and JHMDB runs compare
-    their per-frame metrics (:func:`~.intervals.compare_frames`, jackknife only).
+    For a benchmark whose ``intervals`` are ``"stats"`` (box MOT):
+    :meth:`~unitrack_env.benchmarks.base.Benchmark.frame_stats`.
     """
-    task = _common_task(run_a, run_b)
-    seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
-    common = [s for s in seq_a if s in seq_b]
-    if not common:
-        raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
-    from .integrity import check_pair
-
-    check_pair(run_a, run_benchmark(run_a), run_b, run_benchmark(run_b), common)
-    if task == "mot":
-        stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
-        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
-                                     level=level, block=block, method=method)
-        frames = {s: stats_a[s].num_frames for s in common}
-    else:
-        from .intervals import compare_frames
-
-        if level not in ("frames", "sequences"):
-            raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
-        if method != "jackknife":
-            raise ValueError(f"--interval {method} is for box MOT runs; {task} runs are "
-                             "compared with the block jackknife")
-        rows, frames, blocks = compare_frames(run_a, run_b, task, common, level=level,
-                                              block=block)
-    notes = few_data_notes(frames, blocks, level, pooled=task != "mot")
-    for name in unreliable_rows(frames, blocks, pooled=task != "mot"):
-        for d in rows[name].values():
-            d.reliable = False
-    skipped = sorted(set(seq_a) ^ set(seq_b))
-    if skipped:
-        notes.append(f"not in both runs, left out: {', '.join(skipped)}")
-    return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes,
-                      method)
-
-
-#: Tasks ``compare`` supports: box MOT and the tasks whose metrics are means over frames.
-COMPARE_TASKS: tuple[str, ...] = ("mot", "sot", "vos", "pose-prop")
-
-
-def _common_task(run_a: str | os.PathLike, run_b: str | os.PathLike) -> str:
-    tasks = [run_benchmark(r).task for r in (run_a, run_b)]
-    if tasks[0] != tasks[1]:
-        raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
-                         "compare two runs of the same task")
-    if tasks[0] not in COMPARE_TASKS:
-        raise ValueError(f"{run_a}: `compare` supports {', '.join(COMPARE_TASKS)} runs; this "
-                         f"run's task is '{tasks[0]}'")
-    return tasks[0]
+    bench = run_benchmark(run)
+    if bench.intervals != "stats":
+        raise ValueError(f"{run}: the {bench.task} benchmark {bench.name} has no per-frame "
+                         "statistics to recompute its metrics from")
+    return {name: bench.frame_stats(Path(run) / "data", name) for name in sequences}
 
 
 def _block_count(frames: dict[str, int], blocks: dict[str, int]) -> dict[str, int]:

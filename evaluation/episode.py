@@ -5,15 +5,20 @@ The runner, video rendering and the regression helpers all play through :func:`p
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
 from unitrack_env.benchmarks.base import Benchmark
+from unitrack_env.io import atomic_write_text
 from unitrack_env.provenance import recording_runtimes
+
+from .identity import result_digest
 
 
 @dataclass
@@ -32,7 +37,8 @@ class SequenceRecord:
     appearance-free agent, None in records written before it was kept."""
     code: dict[str, str] | None = None
     """The agent's code when it was played: ``{file: content digest}``
-    (:func:`~unitrack_env.evaluation.agent_code.code_manifest`); None in older records."""
+    (:func:`~unitrack_env.evaluation.agent_code.code_manifest`); None until the run's stamp
+    is applied."""
     data: str = ""
     """Fingerprint of the sequence's data files when it was played (ground truth and
     annotations by content, frames by name and size; :mod:`.integrity`); "" in older records."""
@@ -51,6 +57,25 @@ class SequenceRecord:
         """Read a stored record (unknown keys ignored)."""
         names = cls.__dataclass_fields__
         return cls(**{key: value for key, value in data.items() if key in names})
+
+
+class OutputError(OSError):
+    """The output folder cannot be written (read-only, full, failing disk)."""
+
+
+def save_episode(out: Path, env: gym.Env, record: SequenceRecord,
+                 benchmark: Benchmark) -> None:
+    """Write the finished episode's results, then its record (the record marks it done)."""
+    base = env.unwrapped
+    try:
+        benchmark.write(out / "data", record.sequence, recorded_results(env))
+        record.results = result_digest(out / "data", record.sequence, base.sequence_names)
+        atomic_write_text(out / "sequences" / f"{record.sequence}.json",
+                          json.dumps(record.to_json(), indent=2))
+    except OSError as exc:
+        raise OutputError(exc.errno, f"cannot write the results of '{record.sequence}' to "
+                                     f"{exc.filename or out}: {exc.strerror or exc}; finished "
+                                     "sequences are kept") from exc
 
 
 def recorded_results(env: gym.Env) -> Any:

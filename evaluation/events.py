@@ -12,29 +12,17 @@ import os
 import warnings
 import zlib
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
-from unitrack_env.datasets.mots_format import CLASS_IDS
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_bytes, path_inside
-from unitrack_env.metrics.events_mot import (
-    EVENT_COLUMNS,
-    ID_COLUMNS,
-    EventRows,
-    mot_sequence_events,
-    mots_sequence_events,
-    read_gt_rows,
-)
+from unitrack_env.metrics.events_mot import EVENT_COLUMNS, ID_COLUMNS, EventRows
 
 #: Sub-folder of a run folder holding the event tables.
 EVENTS_DIR: str = "events"
-
-#: Tasks whose events are computed.
-EVENT_TASKS: tuple[str, ...] = ("mot", "mots", "posetrack", "vis", "sot", "vos", "pose-prop")
 
 
 def events_path(run: str | os.PathLike, sequence: str) -> Path:
@@ -70,81 +58,15 @@ def run_sequences(run: str | os.PathLike) -> list[str]:
 
 
 def sequence_events(bench: Benchmark, folder: str | os.PathLike, sequence: str) -> EventRows:
-    """Events of one sequence's result files in ``folder`` (the run's ``data/``)."""
-    if bench.task == "mot":
-        seq_dir = bench.dataset.split_dir / sequence
-        return mot_sequence_events(sequence, read_gt_rows(seq_dir), bench.read(folder, sequence),
-                                   bench.sequence_length(sequence), bench.name)
-    if bench.task == "mots":
-        info = bench.dataset.info(sequence)
-        return mots_sequence_events(sequence, bench.dataset.ground_truth(sequence),
-                                    bench.read(folder, sequence), first_frame=info.first_frame,
-                                    num_frames=info.length,
-                                    class_id=CLASS_IDS[bench.object_class])
-    if bench.task == "posetrack":
-        return _posetrack_events(bench, folder, sequence)
-    if bench.task == "vis":
-        from unitrack_env.metrics.events_vis import vis_sequence_events
+    """Events of one sequence's result files in ``folder`` (the run's ``data/``).
 
-        return vis_sequence_events(sequence, bench.dataset.data, bench.read(folder, sequence),
-                                   bench.dataset.video(sequence))
-    if bench.task == "sot":
-        return _sot_events(bench, folder, sequence)
-    if bench.task == "vos":
-        return _vos_events(bench, folder, sequence)
-    if bench.task == "pose-prop":
-        return _pose_events(bench, folder, sequence)
-    raise ValueError(f"no per-frame events for task '{bench.task}' (events exist for "
-                     f"{', '.join(EVENT_TASKS)})")
-
-
-def _posetrack_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
-    from unitrack_env.datasets.posetrack_json import read_posetrack_json
-    from unitrack_env.metrics.events_pose import posetrack_sequence_events
-
-    gt = read_posetrack_json(bench.dataset.annotation_dir / f"{sequence}.json")
-    return posetrack_sequence_events(sequence, gt, bench.read(folder, sequence),
-                                     drop_last_frame=bench.drop_last_frame)
-
-
-def _sot_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
-    from unitrack_env.metrics.sot import (
-        center_error_per_frame,
-        overlap_per_frame,
-        repair_predictions,
-    )
-
-    gt = bench.load(sequence).boxes
-    pred = repair_predictions(bench.read(folder, sequence), gt, init_from_gt=True)
-    iou, err = overlap_per_frame(pred, gt), center_error_per_frame(pred, gt)
-    rows = EventRows(sequence)
-    for t in range(len(gt)):
-        rows.add(t + 1, "frame", iou=float(iou[t]), center_error=float(err[t]),
-                 **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
-                 **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
-    return rows
-
-
-def _vos_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
-    from unitrack_env.metrics.vos import frame_scores
-
-    seq = bench.load(sequence)
-    gt = seq.read_annotations()
-    rows = EventRows(sequence)
-    for t in range(1, seq.num_frames - 1):  # DAVIS scores all but the first and last frame
-        j, f = frame_scores(gt[t], bench.read_frame(folder, seq, t), seq.object_ids)
-        for k, obj in enumerate(seq.object_ids):
-            rows.add(t + 1, "frame", object=int(obj), j=float(j[k]), f=float(f[k]))
-    return rows
-
-
-def _pose_events(bench: Any, folder: str | os.PathLike, sequence: str) -> EventRows:
-    from unitrack_env.metrics.pose import frame_pck
-
-    pred, gt = bench.read(folder, sequence), bench.ground_truth(sequence)
-    rows = EventRows(sequence)
-    for t in range(1, min(len(pred), len(gt))):  # frame 1 is given, and not scored
-        rows.add(t + 1, "frame", pck=frame_pck(pred[t], gt[t], method=bench.normaliser))
+    The benchmark computes them (:meth:`~unitrack_env.benchmarks.base.Benchmark.sequence_events`);
+    a ValueError when its task has none.
+    """
+    rows = bench.sequence_events(folder, sequence)
+    if rows is None:
+        raise ValueError(f"no per-frame events for task '{bench.task}' ({type(bench).__name__} "
+                         "defines no sequence_events)")
     return rows
 
 
@@ -156,9 +78,14 @@ def to_frame(rows: EventRows) -> pd.DataFrame:
     return df
 
 
-def write_sequence_events(run: str | os.PathLike, bench: Benchmark, sequence: str) -> Path:
-    """Compute and write ``<run>/events/<sequence>.csv.gz`` (atomically); return its path."""
-    df = to_frame(sequence_events(bench, Path(run) / "data", sequence))
+def write_sequence_events(run: str | os.PathLike, bench: Benchmark, sequence: str,
+                          rows: EventRows | None = None) -> Path:
+    """Write ``<run>/events/<sequence>.csv.gz`` atomically (``rows``, else computed).
+
+    Returns its path.
+    """
+    df = to_frame(rows if rows is not None else
+                  sequence_events(bench, Path(run) / "data", sequence))
     path = events_path(run, sequence)
     buffer = io.BytesIO()
     # mtime 0: the same events give the same bytes, so scoring a stored run again (a
@@ -173,13 +100,14 @@ def write_run_events(out: str | os.PathLike, bench: Benchmark, sequences: list[s
     """The runner's hook: write the events of every scored sequence of a finished run.
 
     Never fails the run: a sequence whose events cannot be computed gets a warning (the
-    results and metrics are already written).
+    results and metrics are already written). A task without events writes nothing.
     """
-    if bench.task not in EVENT_TASKS:
-        return
     for name in sequences:
         try:
-            write_sequence_events(out, bench, name)
+            rows = bench.sequence_events(Path(out) / "data", name)
+            if rows is None:
+                return
+            write_sequence_events(out, bench, name, rows)
         except Exception as exc:  # noqa: BLE001 - events are extra; the scores stand
             warnings.warn(f"events of {name} were not written: {exc}", stacklevel=2)
 
@@ -188,8 +116,8 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
                 type: str | None = None) -> pd.DataFrame:  # noqa: A002 - the CLI's name
     """The error events of a run folder as a DataFrame, optionally one sequence or ``type``.
 
-    Events missing from the folder (an older run) are computed from the result files and the
-    ground truth, and written for next time.
+    Events missing from the folder (not written when the run was scored: the runner warned)
+    are computed from the result files and the ground truth, and written for next time.
     """
     names = run_sequences(run)
     if sequence is not None:
@@ -207,7 +135,6 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
         parts.append(read_events_file(run, path))
     df = (pd.concat(parts, ignore_index=True) if parts
           else pd.DataFrame(columns=list(EVENT_COLUMNS)))
-    df = df.reindex(columns=list(EVENT_COLUMNS))  # files written before a column existed
     for col in ID_COLUMNS:
         df[col] = df[col].astype("Int64")
     if type is not None:

@@ -1,10 +1,11 @@
 """95% intervals of one run's combined metrics, and of every scorecard cell (``--ci``).
 
-:mod:`~unitrack_env.evaluation.compare`'s delete-a-block jackknife with a t interval. Box MOT
-recomputes its metrics from :mod:`unitrack_env.metrics.mot_stats`; SOT, VOS and JHMDB use
-their per-frame events (means over frames), sequences combined as the official scores combine
-them (:func:`combine_weights`). MOTS, PoseTrack and VIS get no interval.
-:func:`compare_frames` serves ``unitrack compare`` for frame-scored tasks.
+:mod:`~unitrack_env.evaluation.compare`'s delete-a-block jackknife with a t interval. The
+run's benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the metrics
+from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) takes the per-frame values of its
+``frame_metrics`` from the events (means over frames), sequences combined as the official
+score combines them (its ``combine_weights``); other tasks (MOTS, PoseTrack, VIS) get none.
+:func:`compare_runs` serves ``unitrack compare`` (and the report's comparison).
 """
 
 from __future__ import annotations
@@ -17,29 +18,25 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
 from .compare import (
     COMBINED,
+    Comparison,
     MetricDiff,
     block_length,
+    compare_stats,
+    few_data_notes,
     frame_block_length,
     jackknife_interval,
     jackknife_weights,
     run_stats,
+    unreliable_rows,
 )
 from .events import load_events, run_benchmark, run_sequences
-
-#: Per-frame value of each interval metric of a frame-scored task.
-FRAME_METRICS: dict[str, dict[str, Any]] = {
-    "sot": {"AUC": lambda d: np.mean(d["iou"].to_numpy()[:, None]
-                                     > np.linspace(0, 1, 21)[None, :], axis=1),
-            "Precision@20px": lambda d: (d["center_error"] <= 20).to_numpy(float)},
-    "vos": {"J-Mean": lambda d: d["j"].to_numpy(), "F-Mean": lambda d: d["f"].to_numpy(),
-            "J&F-Mean": lambda d: (d["j"].to_numpy() + d["f"].to_numpy()) / 2},
-    "pose-prop": {"PCK@0.1": lambda d: d["pck"].to_numpy()},
-}
+from .integrity import check_pair
 
 
 def _mot_intervals(run: Path) -> dict[str, tuple[float, float]]:
@@ -55,19 +52,19 @@ def _mot_intervals(run: Path) -> dict[str, tuple[float, float]]:
     return {m: jackknife_interval(float(values[m][0]), samples[m]) for m in values}
 
 
-def frame_values(run: str | os.PathLike, task: str,
+def frame_values(events: pd.DataFrame, bench: Benchmark,
                  sequences: list[str] | None = None) -> dict[str, dict[str, pd.Series]]:
-    """``{sequence: {metric: per-frame values}}`` of a frame-scored run, from its events.
+    """``{sequence: {metric: per-frame values}}`` of a frame-scored run's ``"frame"`` events.
 
-    One value per frame (the mean over a frame's objects), indexed by frame number.
+    One value per frame (the mean over a frame's objects) of each of the benchmark's
+    ``frame_metrics``, indexed by frame number.
     """
-    events = load_events(run, type="frame")
     out = {}
     for name, seq in events.groupby("sequence", sort=False):
         if sequences is None or name in sequences:
             out[str(name)] = {
                 metric: pd.Series(per_frame(seq), index=seq["frame"].to_numpy())
-                .groupby(level=0).mean() for metric, per_frame in FRAME_METRICS[task].items()}
+                .groupby(level=0).mean() for metric, per_frame in bench.frame_metrics.items()}
     return out
 
 
@@ -106,22 +103,12 @@ def frame_replicates(values: dict[str, np.ndarray], blocks: dict[str, int],
     return out
 
 
-def combine_weights(run: str | os.PathLike, task: str,
-                    sequences: list[str]) -> dict[str, float] | None:
-    """Each sequence's weight in the official combined score (None: frames pooled)."""
-    if task == "sot":
-        return dict.fromkeys(sequences, 1.0)
-    if task == "vos":
-        objects = load_events(run, type="frame").groupby("sequence")["object"].nunique()
-        return {name: float(objects.get(name, 1)) for name in sequences}
-    return None
-
-
-def _frame_intervals(run: Path, task: str) -> dict[str, tuple[float, float]]:
-    by_seq = frame_values(run, task)
-    weights = combine_weights(run, task, list(by_seq))
+def _frame_intervals(run: Path, bench: Benchmark) -> dict[str, tuple[float, float]]:
+    events = load_events(run, type="frame")
+    by_seq = frame_values(events, bench)
+    weights = bench.combine_weights(events, list(by_seq))
     out = {}
-    for metric in FRAME_METRICS[task]:
+    for metric in bench.frame_metrics:
         values = {name: v[metric].to_numpy() for name, v in by_seq.items()}
         if any(np.isfinite(v).any() for v in values.values()):
             point, reps = frame_replicates(
@@ -131,31 +118,33 @@ def _frame_intervals(run: Path, task: str) -> dict[str, tuple[float, float]]:
     return out
 
 
-def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, task: str,
+def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, bench: Benchmark,
                    sequences: list[str], *, level: str = "frames", block: int | None = None
                    ) -> tuple[dict[str, dict[str, MetricDiff]], dict[str, int], dict[str, int]]:
     """Paired jackknife rows of two frame-scored runs: ``(rows, frames, block lengths)``.
 
-    Both runs' metrics are the means of the per-frame values of :data:`FRAME_METRICS`
-    (recomputed from the events) over the frames both runs scored, combined as the official
-    score combines sequences (:func:`combine_weights`).
+    Both runs' metrics are the means of the per-frame values of the benchmark's
+    ``frame_metrics`` (recomputed from the events) over the frames both runs scored, combined
+    as the official score combines sequences (its ``combine_weights``).
     """
-    va, vb = frame_values(run_a, task, sequences), frame_values(run_b, task, sequences)
+    events_a = load_events(run_a, type="frame")
+    va = frame_values(events_a, bench, sequences)
+    vb = frame_values(load_events(run_b, type="frame"), bench, sequences)
     for run, values in ((run_a, va), (run_b, vb)):
         missing = [name for name in sequences if name not in values]
         if missing:
             raise ValueError(f"{run}: no per-frame events for {', '.join(missing)}")
-    weights = combine_weights(run_a, task, sequences)
+    weights = bench.combine_weights(events_a, sequences)
     frames, blocks, rows = {}, {}, {}
     pairs = {}
     for name in sequences:
-        index = va[name][next(iter(FRAME_METRICS[task]))].index.intersection(
-            vb[name][next(iter(FRAME_METRICS[task]))].index)
+        first = next(iter(bench.frame_metrics))
+        index = va[name][first].index.intersection(vb[name][first].index)
         frames[name] = len(index)
         blocks[name] = frame_block_length(len(index)) if block is None else max(
             1, min(int(block), len(index)))
         pairs[name] = index
-    for metric in FRAME_METRICS[task]:
+    for metric in bench.frame_metrics:
         ra = frame_replicates({n: va[n][metric].loc[i].to_numpy() for n, i in pairs.items()},
                               blocks, level, weights)
         rb = frame_replicates({n: vb[n][metric].loc[i].to_numpy() for n, i in pairs.items()},
@@ -167,6 +156,66 @@ def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, task: str
     return rows, frames, blocks
 
 
+def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
+                 seed: int = 0, level: str = "frames", block: int | None = None,
+                 method: str = "jackknife") -> Comparison:
+    """Compare two run folders on the sequences both scored (see the module docstring).
+
+    The runs' benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the
+    metrics from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) compares per-frame
+    metrics (:func:`compare_frames`, jackknife only); otherwise it refuses with the
+    benchmark's ``no_intervals``. Both runs' result files must still match their records and
+    their data must be the same (:func:`~.integrity.check_pair`: StaleRun / DifferentData
+    otherwise).
+    """
+    bench = _common_benchmark(run_a, run_b)
+    seq_a, seq_b = run_sequences(run_a), run_sequences(run_b)
+    common = [s for s in seq_a if s in seq_b]
+    if not common:
+        raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
+    check_pair(run_a, run_benchmark(run_a), run_b, bench, common)
+    pooled = bench.intervals == "frames"
+    if not pooled:
+        stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
+        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
+                                     level=level, block=block, method=method)
+        frames = {s: stats_a[s].num_frames for s in common}
+    else:
+        if level not in ("frames", "sequences"):
+            raise ValueError(f"level must be 'frames' or 'sequences', got {level!r}")
+        if method != "jackknife":
+            raise ValueError(f"--interval {method} is for box MOT runs; {bench.task} runs are "
+                             "compared with the block jackknife")
+        rows, frames, blocks = compare_frames(run_a, run_b, bench, common, level=level,
+                                              block=block)
+    notes = few_data_notes(frames, blocks, level, pooled=pooled)
+    for name in unreliable_rows(frames, blocks, pooled=pooled):
+        for d in rows[name].values():
+            d.reliable = False
+    skipped = sorted(set(seq_a) ^ set(seq_b))
+    if skipped:
+        notes.append(f"not in both runs, left out: {', '.join(skipped)}")
+    return Comparison(str(run_a), str(run_b), rows, frames, blocks, resamples, level, notes,
+                      method)
+
+
+def comparable(bench: Benchmark) -> bool:
+    """Whether ``compare`` can compare runs of ``bench`` (its ``intervals`` are stated)."""
+    return bench.intervals in ("stats", "frames")
+
+
+def _common_benchmark(run_a: str | os.PathLike, run_b: str | os.PathLike) -> Benchmark:
+    benches = [run_benchmark(r) for r in (run_a, run_b)]
+    tasks = [b.task for b in benches]
+    if tasks[0] != tasks[1]:
+        raise ValueError(f"{run_a} is a {tasks[0]} run and {run_b} a {tasks[1]} run: "
+                         "compare two runs of the same task")
+    if not comparable(benches[0]):
+        raise ValueError(f"{run_a}: `compare` cannot compare {tasks[0]} runs: "
+                         f"{benches[0].no_intervals}")
+    return benches[0]
+
+
 def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
                   seed: int = 0) -> dict[str, tuple[float, float]]:
     """``{metric: (low, high)}``: 95% intervals of a run folder's combined metrics.
@@ -175,11 +224,11 @@ def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
     """
     del resamples, seed
     run = Path(run)
-    task = run_benchmark(run).task
-    if task == "mot":
+    bench = run_benchmark(run)
+    if bench.intervals == "stats":
         return _mot_intervals(run)
-    if task in FRAME_METRICS:
-        return _frame_intervals(run, task)
+    if bench.intervals == "frames":
+        return _frame_intervals(run, bench)
     return {}
 
 

@@ -206,7 +206,7 @@ def hold_folder(folder: str | os.PathLike, what: str) -> Iterator[FolderLock]:
     try:
         previous = lock.acquire()
     except OSError as exc:
-        from .runner import OutputError
+        from .episode import OutputError
 
         raise OutputError(exc.errno, f"cannot write to {folder}: {exc.strerror or exc}") from exc
     try:
@@ -416,7 +416,7 @@ def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: boo
     Unlisted runs of ours are adopted when their records verify. Files no run of ours wrote
     are never deleted (a warning names them) nor overwritten (OutputError).
     """
-    from .runner import OutputError
+    from .episode import OutputError
 
     every = list(every)
     try:

@@ -55,11 +55,13 @@ def describe_exit(exitcode: int | None) -> str:
             "library called exit)")
 
 
-def _worker_main(conn: Connection, parent: int, threads: int) -> None:
-    """A worker: run tasks from the pipe until told to stop; a heartbeat after each step."""
-    from .workers import init_worker
+def _worker_main(conn: Connection, parent: int, threads: int,
+                 init: Callable[[int, int], None]) -> None:
+    """A worker: ``init(parent, threads)``, then run tasks from the pipe until told to stop.
 
-    init_worker(parent, threads)
+    A heartbeat goes back after each step.
+    """
+    init(parent, threads)
     while True:
         try:
             task = conn.recv()
@@ -95,10 +97,16 @@ class _Worker:
 
 
 class SupervisedPool:
-    """``workers`` spawned processes; :meth:`run` yields ``(item, result or exception)``."""
+    """``workers`` spawned processes; :meth:`run` yields ``(item, result or exception)``.
 
-    def __init__(self, workers: int, threads: int, step_timeout: float | None = None) -> None:
-        self.size, self.threads = max(1, workers), threads
+    Each process first calls ``init(parent pid, threads)``
+    (:func:`~unitrack_env.evaluation.workers.init_worker`; passed in, so that this module does
+    not import the one that uses it).
+    """
+
+    def __init__(self, workers: int, threads: int, step_timeout: float | None = None, *,
+                 init: Callable[[int, int], None]) -> None:
+        self.size, self.threads, self.init = max(1, workers), threads, init
         self.step_timeout = limit(step_timeout)
         self.context = get_context("spawn")
         self.workers: list[_Worker] = []
@@ -106,7 +114,7 @@ class SupervisedPool:
     def _spawn(self) -> _Worker:
         mine, theirs = self.context.Pipe()
         process = self.context.Process(target=_worker_main, name="unitrack-worker",
-                                       args=(theirs, os.getpid(), self.threads))
+                                       args=(theirs, os.getpid(), self.threads, self.init))
         process.start()
         theirs.close()
         worker = _Worker(process, mine)

@@ -7,8 +7,7 @@ keeps such sequences instead: a record is re-stamped only after it is shown that
 all that changed, that is, that the record's fingerprint is rebuilt exactly from its stored
 code manifest with today's data, options and environment; its result files must still hold
 their recorded digest. The changed files are reported for every sequence kept, so the claim
-is yours and visible. Records written before records kept the agent's code cannot be checked
-and are played again.
+is yours and visible.
 """
 
 from __future__ import annotations
@@ -50,7 +49,7 @@ def restamp_record(out: Path, spec: Any, base: Any, sequence: str, inputs: Itera
     if record.inputs == now.inputs:
         return []  # nothing to re-stamp
     if not isinstance(record.code, dict):
-        return "its record predates code manifests, so a code-only change cannot be shown"
+        return "its record holds no code manifest, so a code-only change cannot be shown"
     then = RunIdentity.of(spec, code=record.code).sequence_fingerprint(inputs,
                                                                        base.inputs_root())
     if then != record.inputs:

@@ -24,8 +24,8 @@ from unitrack_env.benchmarks.base import Benchmark, select_sequences
 from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
-from .episode import SequenceRecord, recorded_results
-from .identity import RunIdentity, Stamp, result_digest
+from .episode import OutputError, SequenceRecord
+from .identity import RunIdentity, Stamp
 from .integrity import data_fingerprint
 from .ownership import Manifest, hold_folder, outside, own_folder, settle
 from .restamp import restamp_record
@@ -62,10 +62,6 @@ class RunFailed(RuntimeError):
         return (type(self), (self.failures, self.out))
 
 
-class OutputError(OSError):
-    """The output folder cannot be written (read-only, full, failing disk)."""
-
-
 @dataclass
 class RunReport:
     """The outcome of :func:`run`."""
@@ -93,21 +89,6 @@ def json_safe(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
-
-
-def save_episode(out: Path, env: gym.Env, record: SequenceRecord,
-                 benchmark: Benchmark) -> None:
-    """Write the finished episode's results, then its record (the record marks it done)."""
-    base = env.unwrapped
-    try:
-        benchmark.write(out / "data", record.sequence, recorded_results(env))
-        record.results = result_digest(out / "data", record.sequence, base.sequence_names)
-        atomic_write_text(out / "sequences" / f"{record.sequence}.json",
-                          json.dumps(record.to_json(), indent=2))
-    except OSError as exc:
-        raise OutputError(exc.errno, f"cannot write the results of '{record.sequence}' to "
-                                     f"{exc.filename or out}: {exc.strerror or exc}; finished "
-                                     "sequences are kept") from exc
 
 
 def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int,

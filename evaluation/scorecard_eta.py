@@ -24,20 +24,20 @@ from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-#: Network input per frame of each task's appearance head, (images, height, width): SOT feeds
-#: three 520 x 520 scale crops; VOS the DAVIS 480p frame; MOT, MOTS, PoseTrack and VIS the
-#: 1088 x 608 letterbox; pose propagation the JHMDB 320 x 240 frame.
-INPUT_SIZES: dict[str, tuple[int, int, int]] = {
-    "sot": (3, 520, 520), "vos": (1, 480, 854), "mot": (1, 608, 1088), "mots": (1, 608, 1088),
-    "posetrack": (1, 608, 1088), "vis": (1, 608, 1088), "pose-prop": (1, 240, 320),
-}
+from .scorecard_plan import TASKS
+
+#: Network input per frame of a task whose benchmark declares no scorecard column (each
+#: column states its own ``input_size``: SOT feeds three 520 x 520 scale crops; VOS the
+#: DAVIS 480p frame; MOT, MOTS, PoseTrack and VIS the 1088 x 608 letterbox; pose propagation
+#: the JHMDB 320 x 240 frame).
 DEFAULT_INPUT: tuple[int, int, int] = (1, 512, 512)
 
 #: Backbone seconds per frame = megapixels x (PIXEL_SECONDS + GFLOP per megapixel x
 #: GFLOP_SECONDS): OpenVINO, 1 worker of 2 cores, fitted to the fixture scorecard's SOT cells
 #: (EfficientNet-Lite0, 24 GFLOP/MP: 0.25 s/MP; ResNet-18 layer3, 105 GFLOP/MP: 0.65 s/MP).
 #: Eager torch is about TORCH_FACTOR times slower. Per frame besides the backbone (decoding,
-#: the head itself; label propagation dominates VOS and pose propagation): HEAD_SECONDS.
+#: the head itself; label propagation dominates VOS and pose propagation): the column's
+#: ``head_seconds``, else ASSOCIATION_SECONDS.
 #: Threads of the calibration, and how a cell's time grows with fewer: (2 / threads) ** 0.75
 #: (the synthetic scorecard's cells took 1.6-1.7x longer on 1 thread of 2 workers).
 CALIBRATION_THREADS: int = 2
@@ -45,7 +45,6 @@ THREAD_SCALING: float = 0.75
 PIXEL_SECONDS: float = 0.13
 GFLOP_SECONDS: float = 0.005
 LITE0_GFLOP_PER_MP: float = 24.3
-HEAD_SECONDS: dict[str, float] = {"sot": 0.02, "vos": 0.6, "pose-prop": 0.15}
 ASSOCIATION_SECONDS: float = 0.05
 BASELINE_SECONDS: float = 0.01
 TORCH_FACTOR: float = 4.0
@@ -61,12 +60,17 @@ SETUP_SECONDS: float = 3.0
 SYNTHETIC_FRAME_SECONDS: float = 0.01
 
 
+def input_size(task: str) -> tuple[int, int, int]:
+    """``(images, height, width)`` per frame of ``task``'s appearance head (its column's)."""
+    return TASKS[task].input_size if task in TASKS else DEFAULT_INPUT
+
+
 def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool = False,
               gflop_per_mp: float = LITE0_GFLOP_PER_MP) -> float:
     """Estimated seconds of one cell: ``frames`` frames of ``task``'s head.
 
     Args:
-        task: The task name (a key of :data:`INPUT_SIZES`).
+        task: The task name (a key of :data:`~.scorecard_plan.TASKS`).
         frames: Frames of the sequence.
         appearance: Whether the head runs the appearance model (baselines do not).
         torch_runtime: The backbone runs in eager torch (slower).
@@ -75,11 +79,12 @@ def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool =
     """
     if not appearance:
         return BASELINE_CELL_SECONDS + frames * BASELINE_SECONDS
-    images, height, width = INPUT_SIZES.get(task, DEFAULT_INPUT)
+    images, height, width = input_size(task)
     megapixels = images * height * width / 1e6
     backbone = megapixels * (PIXEL_SECONDS + gflop_per_mp * GFLOP_SECONDS)
     backbone *= TORCH_FACTOR if torch_runtime else 1.0
-    head = HEAD_SECONDS.get(task, ASSOCIATION_SECONDS)
+    seconds = TASKS[task].head_seconds if task in TASKS else None
+    head = ASSOCIATION_SECONDS if seconds is None else seconds
     return CELL_SECONDS + frames * (backbone + head)
 
 
@@ -94,10 +99,10 @@ def setup_seconds(synthetic_frames: int = 0) -> float:
 
 def megapixel_gflops(module: Any, layers: tuple[str, ...], tasks: Sequence[str],
                      ) -> dict[str, float]:
-    """A network's GFLOP per megapixel of each task's input (:data:`INPUT_SIZES`)."""
+    """A network's GFLOP per megapixel of each task's input (:func:`input_size`)."""
     from unitrack_env.agents.appearance.architectures import network_gflops
 
-    sizes = [INPUT_SIZES.get(task, DEFAULT_INPUT)[1:] for task in tasks]
+    sizes = [input_size(task)[1:] for task in tasks]
     flops = network_gflops(module, layers, sizes)
     return {task: g / (h * w / 1e6) for task, g, (h, w) in zip(tasks, flops, sizes, strict=True)}
 

@@ -18,7 +18,7 @@ import math
 import re
 from collections.abc import Sequence
 
-from .scorecard_eta import DEFAULT_INPUT, INPUT_SIZES, LITE0_GFLOP_PER_MP
+from .scorecard_eta import LITE0_GFLOP_PER_MP, input_size
 
 REFERENCE_SIZE: int = 224
 """Input side at which the counts are taken (``network_gflops``'s)."""
@@ -112,7 +112,7 @@ def estimated_megapixel_gflops(weights: str, arch: str | None, layer: str | None
     pixels, pixels2 = macs
     out = {}
     for task in tasks:
-        height, width = INPUT_SIZES.get(task, DEFAULT_INPUT)[1:]
+        height, width = input_size(task)[1:]
         scale = height * width / REFERENCE_SIZE**2
         out[task] = 2e-9 * (pixels * scale + pixels2 * scale * scale) / (height * width / 1e6)
     return out

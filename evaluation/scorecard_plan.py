@@ -5,7 +5,8 @@ from each task's benchmark (:func:`unitrack_env.benchmarks.benchmark_for`: no en
 is made, no agent or torch imported). With ``generate=False`` the embedded synthetic data
 sets are counted from their writers' specs
 (:func:`unitrack_env.datasets.synthetic.cache.annotated_frames`), neither generated nor
-read: the scorecard's first ETA comes from that plan, at once.
+read: the scorecard's first ETA comes from that plan, at once. The tasks, their heads and
+metrics are those the registered benchmarks declare (:data:`TASKS`).
 """
 
 from __future__ import annotations
@@ -13,76 +14,64 @@ from __future__ import annotations
 import contextlib
 import inspect
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import unitrack_env
 from unitrack_env.benchmarks import benchmark_class, benchmark_for
+from unitrack_env.benchmarks.views import ScorecardColumn
 from unitrack_env.datasets.synthetic.cache import SpecsOnly, annotated_frames, specs_only
-from unitrack_env.registration import variant
+from unitrack_env.registration import variant, variants
 
 
 @dataclass(frozen=True)
-class Head:
-    """One head (or baseline) of a task and the metrics the scorecard reports for it."""
+class Task(ScorecardColumn):
+    """A task of the scorecard: its benchmark's ``scorecard`` column, under the task's name."""
 
-    agent: str
-    label: str
-    metrics: tuple[str, ...]
-    appearance: bool = True
-    association: bool = False
+    name: str = ""
 
 
-@dataclass(frozen=True)
-class Task:
-    """A task of the scorecard: its environments (first with data wins), heads and axis."""
+class _Tasks(Mapping[str, Task]):
+    """The scorecard's tasks, in column order, read from the registration table.
 
-    name: str
-    title: str
-    env_ids: tuple[str, ...]
-    heads: tuple[Head, ...]
-    baseline: Head
-    axis: tuple[str, str]  # (head label, metric) drawn on the radar chart
-    lower_is_better: frozenset[str] = frozenset()
+    Every registered benchmark that declares a ``scorecard`` column, rows registered at run
+    time included.
+    """
+
+    _rows: tuple = ()
+    _cached: dict[str, Task] = {}
+
+    def _table(self) -> dict[str, Task]:
+        rows = variants()
+        if rows != self._rows:
+            self._rows, self._cached = rows, self._read(rows)
+        return self._cached
+
+    @staticmethod
+    def _read(rows: tuple) -> dict[str, Task]:
+        found: dict[str, Task] = {}
+        for row in rows:
+            cls = benchmark_class(row) if row.scoring else None
+            if cls is not None and cls.scorecard is not None and cls.task not in found:
+                column = cls.scorecard
+                found[cls.task] = Task(**{f.name: getattr(column, f.name)
+                                          for f in fields(column)}, name=cls.task)
+        return dict(sorted(found.items(), key=lambda item: item[1].order))
+
+    def __getitem__(self, name: str) -> Task:
+        return self._table()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._table())
+
+    def __len__(self) -> int:
+        return len(self._table())
 
 
-def _assoc(metrics: tuple[str, ...]) -> Head:
-    return Head("unitrack", "UniTrack", metrics, association=True)
-
-
-def _iou(metrics: tuple[str, ...]) -> Head:
-    return Head("iou", "IoU baseline", metrics, appearance=False)
-
-
-#: The tasks in the paper's Table 2 order, then the appendix tasks.
-TASKS: dict[str, Task] = {task.name: task for task in (
-    Task("sot", "SOT", ("UniTrack/OTB-v0",),
-         (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
-          Head("unitrack-dcf", "DCF", ("AUC", "Precision@20px"))),
-         Head("repeat-box", "repeat-box", ("AUC", "Precision@20px"), appearance=False),
-         ("XCorr", "AUC")),
-    Task("vos", "VOS", ("UniTrack/DAVIS-v0",),
-         (Head("unitrack-vos", "UniTrack", ("J-Mean", "J&F-Mean", "F-Mean")),),
-         Head("repeat-mask", "repeat-mask", ("J-Mean", "J&F-Mean", "F-Mean"), appearance=False),
-         ("UniTrack", "J-Mean")),
-    Task("mot", "MOT", ("UniTrack/MOT16-v0", "UniTrack/MOT17-v0", "UniTrack/MOT20-v0",
-                        "UniTrack/MOT15-v0"),
-         (_assoc(("IDF1", "HOTA", "MOTA", "IDSW")),), _iou(("IDF1", "HOTA", "MOTA", "IDSW")),
-         ("UniTrack", "IDF1"), frozenset({"IDSW"})),
-    Task("mots", "MOTS", ("UniTrack/MOTS-v0",), (_assoc(("IDF1", "HOTA", "sMOTSA")),),
-         _iou(("IDF1", "HOTA", "sMOTSA")), ("UniTrack", "IDF1")),
-    Task("posetrack", "PoseTrack", ("UniTrack/PoseTrack-v0",),
-         (_assoc(("IDF1", "MOTA", "IDSW")),), _iou(("IDF1", "MOTA", "IDSW")),
-         ("UniTrack", "IDF1"), frozenset({"IDSW"})),
-    Task("pose-prop", "Pose prop.", ("UniTrack/JHMDB-v0",),
-         (Head("unitrack-pose", "UniTrack", ("PCK@0.1", "PCK@0.2")),),
-         Head("repeat-pose", "repeat-pose", ("PCK@0.1", "PCK@0.2"), appearance=False),
-         ("UniTrack", "PCK@0.1")),
-    Task("vis", "VIS", ("UniTrack/VIS-v0",), (_assoc(("AP", "AP50")),), _iou(("AP", "AP50")),
-         ("UniTrack", "AP")),
-)}
+#: The tasks in the paper's Table 2 order, then the appendix tasks (and a user's own).
+TASKS: Mapping[str, Task] = _Tasks()
 #: Row label of the appearance-free baselines.
 BASELINE = "baseline (no appearance)"
 

@@ -28,7 +28,7 @@ def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Pa
 
     A step longer than ``step_timeout`` fails its sequence (:mod:`.watchdog`).
     """
-    from .runner import save_episode
+    from .episode import save_episode
 
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}

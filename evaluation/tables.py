@@ -10,7 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 from rich.table import Table
 
@@ -24,12 +24,9 @@ _COLUMN_OVERHEAD = 3
 Rows = Mapping[str, Mapping[str, float]]
 
 
-def table_columns(task: str, rows: list[Mapping[str, float]]) -> list[str]:
-    """The task's columns that occur in ``rows`` (or the first metrics, for unknown tasks)."""
-    from unitrack_env.benchmarks import task_columns
-
+def table_columns(columns: Sequence[str], rows: list[Mapping[str, float]]) -> list[str]:
+    """The benchmark's ``columns`` that occur in ``rows`` (none given: the first metrics)."""
     present = {name for row in rows for name in row}
-    columns = task_columns(task)
     if columns:
         return [name for name in columns if name in present]
     seen: list[str] = []
@@ -76,23 +73,24 @@ def metrics_table(
     combined: Mapping[str, float] | None,
     title: str,
     fps: Mapping[str, float] | None = None,
-    task: str = "mot",
+    columns: Sequence[str] = (),
     width: int | None = None,
     coverage: str = "",
 ) -> tuple[Table, list[str]]:
     """A rich table: one row per sequence plus COMBINED; returns (table, dropped columns).
 
-    With ``width`` (the terminal's), columns that would not fit are dropped, least
-    important first. ``coverage`` (``"7 of 7 sequences"``) labels the combined row.
+    ``columns``: the benchmark's, most important first. With ``width`` (the terminal's),
+    columns that would not fit are dropped, least important first. ``coverage``
+    (``"7 of 7 sequences"``) labels the combined row.
     """
     label = f"COMBINED ({coverage})" if coverage else "COMBINED"
     rows = _all_rows(per_sequence, combined, label)
-    columns = table_columns(task, list(rows.values()))
+    shown = table_columns(columns, list(rows.values()))
     cells = {name: max((len(format_cell(name, r.get(name))) for r in rows.values()), default=1)
-             for name in columns}
+             for name in shown}
     label_width = max((len(name) for name in rows), default=8)
     extra = 8 + _COLUMN_OVERHEAD if fps is not None else 0
-    kept, dropped = _fit(columns, label_width, extra, width, cells)
+    kept, dropped = _fit(shown, label_width, extra, width, cells)
     table = Table(title=title, title_justify="left")
     table.add_column("sequence", no_wrap=True, min_width=min(label_width, 40))
     for name in kept:
@@ -115,10 +113,11 @@ def metrics_json(per_sequence: Rows, combined: Mapping[str, float] | None) -> st
                                  "combined": dict(combined or {})}), indent=2)
 
 
-def metrics_csv(per_sequence: Rows, combined: Mapping[str, float] | None, task: str) -> str:
+def metrics_csv(per_sequence: Rows, combined: Mapping[str, float] | None,
+                columns: Sequence[str] = ()) -> str:
     """The metrics as CSV: a ``sequence`` column, then every metric (raw values)."""
     rows = _all_rows(per_sequence, combined)
-    names = table_columns(task, list(rows.values()))
+    names = table_columns(columns, list(rows.values()))
     names += sorted({key for row in rows.values() for key in row} - set(names))
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")

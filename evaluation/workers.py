@@ -74,8 +74,7 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
     """
     from unitrack_env.agents.base import close_agent
 
-    from .episode import play_episode
-    from .runner import OutputError, save_episode
+    from .episode import OutputError, play_episode, save_episode
 
     env = agent = None
     try:
@@ -145,7 +144,8 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], stamps: dict[str, Any
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     threads = max(1, (os.cpu_count() or 1) // workers)
-    with SupervisedPool(min(workers, len(todo)), threads, step_timeout) as pool:
+    with SupervisedPool(min(workers, len(todo)), threads, step_timeout,
+                        init=init_worker) as pool:
         played = pool.run(_play_one, todo, lambda s: (spec, str(out), s, stamps[s]),
                           on_beat=lambda s, frames: bar.advance(frames))
         for name, outcome in played:

@@ -136,7 +136,7 @@ def test_adding_a_task_quotes_the_mean_error_its_commands_print(tmp_path, monkey
     sequence, error, shown = sentence.groups()
     with contextlib.ExitStack() as stack:
         stack.callback(lambda: [sys.modules.pop(m) for m in list(sys.modules)
-                                if m.split(".")[0] == "point_task"])
+                                if m.split(".")[0] == "centroid_task"])
         stack.callback(gym.registry.pop, doc.ENV_ID, None)
         monkeypatch.setattr(doc.registration, "_ADDED", [])
         folder = tmp_path / "project"
@@ -145,10 +145,10 @@ def test_adding_a_task_quotes_the_mean_error_its_commands_print(tmp_path, monkey
             (folder / name).write_text(doc.doc_files()[name])
         monkeypatch.chdir(folder)
         monkeypatch.syspath_prepend(str(folder))
-        make, evaluate, _ = doc.doc_commands()
-        doc.run_command(make, monkeypatch)
+        commands = doc.doc_commands()
+        doc.run_command(commands["data"], monkeypatch)
         capsys.readouterr()
-        doc.run_command(evaluate, monkeypatch, "--format", "json")
+        doc.run_command(commands["evaluate"], monkeypatch, "--format", "json")
         value = json.loads(capsys.readouterr().out)["per_sequence"][sequence]["MeanError"]
     assert f"{value:.{len(error.split('.')[1])}f}" == error
     assert f"{100 * value:.1f}" == shown  # the table's percent rule

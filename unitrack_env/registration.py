@@ -7,6 +7,7 @@ name, entry point, default arguments, data folder and ``scoring`` (the ``module:
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,13 +34,20 @@ class Variant:
     scoring: str = ""
 
     @property
+    def scoring_class(self) -> type | None:
+        """The class ``scoring`` names, imported (None: the row names none).
+
+        :func:`unitrack_env.benchmarks.benchmark_class` checks that it is a Benchmark.
+        """
+        if not self.scoring:
+            return None
+        module, _, name = self.scoring.partition(":")
+        return getattr(importlib.import_module(module), name, None)
+
+    @property
     def task(self) -> str:
         """The task family, stated by the id's benchmark ("" for a row without one)."""
-        if not self.scoring:
-            return ""
-        from unitrack_env.benchmarks import benchmark_class
-
-        return benchmark_class(self).task
+        return getattr(self.scoring_class, "task", "")
 
     @property
     def env_id(self) -> str:

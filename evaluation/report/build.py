@@ -18,24 +18,15 @@ import pandas as pd
 
 from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
 
-from ..compare import COMPARE_TASKS
 from ..events import load_events, run_benchmark, run_sequences
 from ..integrity import DifferentData, check_current
+from ..intervals import comparable, compare_runs
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .pages import event_pages, figure, legend, sequence_page
 from .pictures import choose, event_pictures
 
 #: Count metrics (shown as integers, not percent).
 COUNTS = {"IDSW", "CLR_FP", "CLR_FN", "MT", "ML", "Frag", "IDs", "CLR_TP"}
-
-#: Per-frame value shown on the timeline of a non-MOT task.
-VALUE_COLUMNS = {"sot": ("iou", "IoU"), "vos": ("j", "J"), "pose-prop": ("pck", "PCK@0.1"),
-                 "vis": ("iou", "IoU of tp tracks")}
-
-#: Event lanes of the timeline of tasks with counted events, and what a count is.
-LANES = {"mots": (None, "masks"), "posetrack": (("fn", "fp", "idsw"), "joints"),
-         "vis": (("fn", "fp"), "track-frames")}
-
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "x"
@@ -62,9 +53,7 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
 
 
 def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
-    """The paired comparison of two runs (box MOT, SOT, VOS, JHMDB) with 95% intervals."""
-    from ..compare import compare_runs
-
+    """The paired comparison of two runs (whose benchmark states intervals) with 95% intervals."""
     comp = compare_runs(run_a, run_b, resamples=resamples)
     rows = []
     for seq, row in comp.rows.items():
@@ -94,16 +83,16 @@ def _clip(run: Path, sequence: str) -> Path | None:
 
 
 def _timeline(bench: Any, events: pd.DataFrame, frames: int) -> str:
-    """A sequence's timeline: event lanes (counted events) or its per-frame value."""
-    if bench.task == "mot":
-        return mot_timeline(events, frames)
+    """A sequence's timeline, drawn as its benchmark's ``report_view`` says."""
+    view = bench.report_view
+    if view.thumbnails:  # box MOT: the event lanes alone
+        return mot_timeline(events, frames, kinds=view.lanes)
     body = ""
-    if bench.task in LANES:
-        kinds, unit = LANES[bench.task]
-        body = mot_timeline(events, frames, kinds=kinds) + f"<p>Counts are {unit}.</p>"
-    column, name = VALUE_COLUMNS.get(bench.task, (None, None))
+    if view.lanes:
+        body = mot_timeline(events, frames, kinds=view.lanes) + f"<p>Counts are {view.unit}.</p>"
+    column, name = view.value or (None, None)
     if column is not None and column in events:
-        rows = events[events["type"] == "tp"] if bench.task == "vis" else events
+        rows = events[events["type"] == view.value_type] if view.value_type else events
         body += value_timeline(rows[column], rows["frame"], name, frames)
     return body or "<p>No per-frame events.</p>"
 
@@ -203,7 +192,8 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
             metrics_section(loaded)]
-    if len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task in COMPARE_TASKS:
+    if (len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task
+            and comparable(loaded[0][2])):
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
         try:
             body.append(compare_section(runs[0], runs[1], resamples) if common else

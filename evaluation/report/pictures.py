@@ -3,8 +3,8 @@
 The choice asks the events, not the task: ``idsw`` rows give ID-switch pictures, ``fn`` rows
 bursts of misses, per-frame rows with a score below :data:`LOW` (SOT IoU, VOS J) bursts of
 failures. An event's picture is its frame with every box, joint or mask drawn (thumbs.py),
-plus the frames before and after it for the event's page. Frames are found by asking the
-benchmark's data for its files (a sequence's ``frame_path`` or ``frame_paths``).
+plus the frames before and after it for the event's page. Frames are the benchmark's
+``frame_image(sequence, frame)``.
 """
 
 from __future__ import annotations
@@ -68,19 +68,13 @@ class Picture:
     seconds: float | None = None  # the event's time in a clip of the sequence
 
 
-def frame_files(bench: Any, sequence: str) -> tuple[Callable[[int], Path | None], Any]:
-    """``(frame -> image file, the loaded sequence or its info)`` from the benchmark's data."""
+def loaded_sequence(bench: Any, sequence: str) -> Any:
+    """The sequence's info (files numbered from ``first_frame``) or its loaded form."""
     dataset = bench.dataset
-    if callable(getattr(dataset, "info", None)):  # files numbered from first_frame
-        info = dataset.info(sequence)
-    else:
-        loaded = dataset.load(sequence)
-        info = getattr(loaded, "info", None)
-        if info is None:
-            paths = tuple(getattr(loaded, "frame_paths", ()))
-            return (lambda f: paths[f - 1] if 1 <= f <= len(paths) else None), loaded
-    first = int(getattr(info, "first_frame", 1))
-    return (lambda f: info.frame_path(first + f - 1)), info
+    if callable(getattr(dataset, "info", None)):
+        return dataset.info(sequence)
+    loaded = dataset.load(sequence)
+    return getattr(loaded, "info", None) or loaded
 
 
 def _int(value: Any) -> int | None:
@@ -234,10 +228,14 @@ def event_pictures(bench: Any, run: Path, sequence: str, events: pd.DataFrame, f
     if not items:
         return []
     try:
-        files, loaded = frame_files(bench, sequence)
+        loaded = loaded_sequence(bench, sequence)
+        bench.frame_image(sequence, 1)
+        rate = bench.frame_rate(sequence)
     except (OSError, ValueError, KeyError, AttributeError):  # data moved or not ours to read
         return []
-    rate = getattr(loaded, "frame_rate", 0) or 0
+
+    def files(frame: int) -> Path | None:
+        return bench.frame_image(sequence, frame)
     masks = mask_tables(bench, run, sequence, loaded)
     pictures = []
     for item in items:

@@ -13,6 +13,7 @@ import pytest
 
 import unitrack_env
 from unitrack_env.agents.primitives import label_propagation
+from unitrack_env.benchmarks import task_columns
 from unitrack_env.evaluation import doctor
 from unitrack_env.evaluation.cli import build_parser, main
 from unitrack_env.evaluation.tables import metrics_table
@@ -53,8 +54,8 @@ def test_formats_and_a_table_that_fits_80_columns(tmp_path, capsys):
     assert float(rows[2]["HOTA"]) == pytest.approx(data["combined"]["HOTA"])
 
     per_sequence = {"a-rather-long-sequence-name-01": data["per_sequence"]["SYN-01"]}
-    table, dropped = metrics_table(per_sequence, data["combined"], "t", {"x": 1.0}, "mot",
-                                   width=80)
+    table, dropped = metrics_table(per_sequence, data["combined"], "t", {"x": 1.0},
+                                   task_columns("mot"), width=80)
     from rich.console import Console
 
     console = Console(width=80, file=io.StringIO())

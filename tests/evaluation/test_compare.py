@@ -14,10 +14,10 @@ from unitrack_env.evaluation.compare import (
     COMBINED,
     block_length,
     block_weights,
-    compare_runs,
     compare_stats,
     jackknife_weights,
 )
+from unitrack_env.evaluation.intervals import compare_runs
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.events_mot import preprocessed_frames
 from unitrack_env.metrics.mot_stats import mot_stats

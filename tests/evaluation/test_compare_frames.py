@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.compare import COMBINED, compare_runs, jackknife_interval
+from unitrack_env.evaluation.compare import COMBINED, jackknife_interval
 from unitrack_env.evaluation.events import run_benchmark
-from unitrack_env.evaluation.intervals import frame_replicates, run_intervals
+from unitrack_env.evaluation.intervals import compare_runs, frame_replicates, run_intervals
 from unitrack_env.evaluation.runner import run
 
 

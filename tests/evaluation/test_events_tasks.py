@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -172,18 +171,10 @@ def test_report_shows_timelines_of_the_new_tasks(runs: dict[str, Path], tmp_path
     assert 'class="ev-idsw"' in page and "IoU of tp tracks" in page
 
 
-def test_an_events_file_from_before_the_new_columns_still_loads(runs, tmp_path) -> None:
-    import pandas as pd
+def test_compare_refuses_a_task_whose_metrics_are_not_frame_means(runs) -> None:
+    from unitrack_env.evaluation.intervals import compare_runs
 
-    from unitrack_env.evaluation.events import events_path
-
-    old = tmp_path / "old"
-    shutil.copytree(runs["MOTS"], old)
-    seq = next(iter(per_sequence(old)))
-    path = events_path(old, seq)
-    pd.read_csv(path).drop(columns=["joint", "distance", "score", "track_iou"]).to_csv(
-        path, index=False, compression="gzip")
-    df = load_events(old, sequence=seq)
-    assert df["joint"].isna().all() and str(df["joint"].dtype) == "Int64"
-    assert df.drop(columns=["joint"]).equals(
-        load_events(runs["MOTS"], sequence=seq).drop(columns=["joint"]))
+    for name, reason in (("MOTS", "not recomputed"), ("PoseTrack", "per-joint"),
+                         ("VIS", "whole tracks")):
+        with pytest.raises(ValueError, match=f"cannot compare .* runs: .*{reason}"):
+            compare_runs(runs[name], runs[name])

@@ -145,12 +145,12 @@ def test_restamp_keeps_sequences_across_a_code_only_edit_and_checks_it(tmp_path,
     records = {p.name: p.read_text() for p in (out / "sequences").iterdir()}
     agent.write_text(agent.read_text() + "# a comment cannot move a box\n")
     old = json.loads(records["SYN-02.json"])
-    del old["code"]  # as written before records kept the agent's code
+    del old["code"]  # a record that cannot show what code played it
     (out / "sequences" / "SYN-02.json").write_text(json.dumps(old))
     assert main(command + ["--restamp"]) == 0
     printed = capsys.readouterr().out
     assert "re-stamped SYN-01: kept across your edit of my_agent.py" in printed
-    assert "replayed SYN-02:" in printed and "predates code manifests" in printed
+    assert "replayed SYN-02:" in printed and "holds no code manifest" in printed
     assert (out / "sequences" / "SYN-01.json").read_text() != records["SYN-01.json"]
     assert run(ENV, f"{agent}:Mine", out=out, env_kwargs={"root": str(mot16)},
                progress=False).skipped == ["SYN-01", "SYN-02"]  # both stamped for today's code

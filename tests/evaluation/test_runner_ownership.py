@@ -142,17 +142,17 @@ def test_out_inside_root_resumes_instead_of_replaying(tmp_path, where):
 
 
 def test_a_killed_run_leaves_its_claim(tmp_path, monkeypatch):
-    from unitrack_env.evaluation import runner
+    from unitrack_env.evaluation import episode, runner
 
     out = tmp_path / "run"
     calls = []
 
     def crash(out_, env, record, bench):  # the first results are written, then a "kill"
-        bench.write(out_ / "data", record.sequence, runner.recorded_results(env))
+        bench.write(out_ / "data", record.sequence, episode.recorded_results(env))
         calls.append(record.sequence)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(runner, "save_episode", crash)
+    monkeypatch.setattr(episode, "save_episode", crash)
     monkeypatch.setattr(runner, "settle", lambda *args: None)  # killed: no bookkeeping
     with pytest.raises(KeyboardInterrupt):
         run(ENV, "iou", out=out, progress=False)

@@ -33,7 +33,7 @@ def test_synthetic_cells_are_known_before_the_data_are_written(tmp_path, monkeyp
     assert not empty.exists()  # nothing written
     with specs_only(), pytest.raises(SpecsOnly) as asked:
         benchmark_for("UniTrack/DAVIS-v0")
-    assert (asked.value.benchmark, asked.value.kind, asked.value.generated) == \
+    assert (asked.value.benchmark, asked.value.kind.name, asked.value.generated) == \
         ("DAVIS-2017", "davis", False)
     monkeypatch.setenv("UNITRACK_CACHE", session_cache)  # generated once per test session
     cells, _, pending = plan(MODELS, list(TASKS), None)

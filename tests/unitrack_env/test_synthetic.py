@@ -395,7 +395,8 @@ def fake_writer(monkeypatch, tmp_path):
         (root / "train").mkdir()
         (root / "train" / "data.txt").write_text(f"{benchmark} #{len(calls)}")
 
-    monkeypatch.setattr(cache, "WRITERS", MappingProxyType({"motchallenge": writer}))
+    monkeypatch.setattr(cache, "KINDS", MappingProxyType(
+        {"motchallenge": dataclasses.replace(cache.KINDS["motchallenge"], write=writer)}))
     return calls
 
 
@@ -446,7 +447,8 @@ def test_cache_failed_generation_leaves_nothing(monkeypatch, tmp_path):
         (root / "half.txt").write_text("x")
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(cache, "WRITERS", MappingProxyType({"motchallenge": broken}))
+    monkeypatch.setattr(cache, "KINDS", MappingProxyType(
+        {"motchallenge": dataclasses.replace(cache.KINDS["motchallenge"], write=broken)}))
     with pytest.raises(RuntimeError, match="disk full"):
         ensure_synthetic("MOT17")
     parent = tmp_path / "synthetic"
@@ -463,7 +465,8 @@ def test_cache_lost_race_keeps_the_winner(monkeypatch, tmp_path):
         (final / "theirs.txt").write_text("winner")
         (final / cache.MARKER_NAME).write_text("{}")
 
-    monkeypatch.setattr(cache, "WRITERS", MappingProxyType({"motchallenge": racing}))
+    monkeypatch.setattr(cache, "KINDS", MappingProxyType(
+        {"motchallenge": dataclasses.replace(cache.KINDS["motchallenge"], write=racing)}))
     assert ensure_synthetic("MOT17") == final
     assert (final / "theirs.txt").exists() and not (final / "mine.txt").exists()
     assert _leftovers(final.parent) == []

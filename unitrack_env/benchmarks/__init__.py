@@ -7,7 +7,6 @@ table names each id's benchmark class (:attr:`unitrack_env.registration.Variant.
 
 from __future__ import annotations
 
-import importlib
 import inspect
 from typing import Any
 
@@ -17,20 +16,15 @@ from unitrack_env.registration import Variant, variant, variants
 __all__ = ["Benchmark", "benchmark_class", "benchmark_for", "task_columns"]
 
 
-def _load(reference: str) -> type[Benchmark]:
-    module, _, name = reference.partition(":")
-    cls = getattr(importlib.import_module(module), name, None)
-    if not (isinstance(cls, type) and issubclass(cls, Benchmark)):
-        raise TypeError(f"scoring={reference!r} does not name a Benchmark subclass")
-    return cls
-
-
 def benchmark_class(env_id: str | Variant) -> type[Benchmark]:
     """The benchmark class that a registered id (or its row) names."""
     row = env_id if isinstance(env_id, Variant) else variant(env_id)
     if not row.scoring:
         raise ValueError(f"'{row.env_id}' names no benchmark (its row has no scoring=)")
-    return _load(row.scoring)
+    cls = row.scoring_class
+    if not (isinstance(cls, type) and issubclass(cls, Benchmark)):
+        raise TypeError(f"scoring={row.scoring!r} does not name a Benchmark subclass")
+    return cls
 
 
 def benchmark_for(env_id: str | Variant, **env_kwargs: Any) -> Benchmark:

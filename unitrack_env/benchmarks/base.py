@@ -11,15 +11,23 @@ from __future__ import annotations
 import hashlib
 import os
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, ClassVar, TypeVar
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
 
+from unitrack_env.benchmarks.views import ReportView, ScorecardColumn
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.roots import resolve_root
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from unitrack_env.metrics.events_mot import EventRows
+    from unitrack_env.metrics.mot_stats import MotStats
 
 
 def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
@@ -77,7 +85,9 @@ class Benchmark(ABC):
 
     Subclasses set :attr:`task` and :attr:`columns` and implement the abstract methods.
     :meth:`build` is the task's one builder, used by its environment and by
-    :func:`unitrack_env.benchmarks.benchmark_for`.
+    :func:`unitrack_env.benchmarks.benchmark_for`. Everything else evaluation asks per task
+    (error events, intervals, the report's drawing, the scorecard column) is a hook below
+    whose default states that the task has none; evaluation never tests a task's name.
     """
 
     #: The task family (``"mot"``, ``"vos"``, ...), as in the registration table.
@@ -172,6 +182,74 @@ class Benchmark(ABC):
     @abstractmethod
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score the result files of ``sequences`` (all present) with the official metrics."""
+
+    @abstractmethod
+    def score_sequence(self, sequence: str, results: Any) -> dict[str, float]:
+        """The official metrics of one sequence's results.
+
+        The environment's default ``episode_metrics`` puts them in ``info["metrics"]``.
+        """
+
+    # ---- what evaluation asks besides scoring; each default: the task has none ----------
+
+    #: How ``unitrack report`` draws one sequence (default: no per-frame events shown).
+    report_view: ClassVar[ReportView] = ReportView()
+    #: The task's column of ``unitrack scorecard`` (None: not on the scorecard).
+    scorecard: ClassVar[ScorecardColumn | None] = None
+    #: How ``compare`` and ``scorecard --ci`` get intervals: ``"stats"`` (metrics recomputed
+    #: from per-frame statistics, :meth:`frame_stats`), ``"frames"`` (metrics that are means
+    #: over frames, :attr:`frame_metrics`) or ``""`` (none: :attr:`no_intervals` says why).
+    intervals: ClassVar[str] = ""
+    #: Why the task's metrics get no interval (``compare``'s refusal).
+    no_intervals: ClassVar[str] = "its metrics are not means over frames"
+    #: With ``intervals="frames"``: each interval metric's per-frame values, computed from
+    #: the ``"frame"`` events of one sequence (a DataFrame of :meth:`sequence_events` rows).
+    frame_metrics: ClassVar[Mapping[str, Callable[[pd.DataFrame], np.ndarray]]] = \
+        MappingProxyType({})
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows | None:
+        """The error events of one sequence's result files in ``folder``.
+
+        Default None: the task has no per-frame events (``unitrack events`` says so).
+        """
+        return None
+
+    def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
+        """With ``intervals="stats"``: one sequence's per-frame statistics of its results."""
+        raise NotImplementedError(f"{type(self).__name__} has no per-frame statistics")
+
+    def combine_weights(self, events: pd.DataFrame,
+                        sequences: list[str]) -> dict[str, float] | None:
+        """Each sequence's weight in the official combined score.
+
+        ``events``: the run's ``"frame"`` events. Default None: all frames pooled.
+        """
+        return None
+
+    def frame_image(self, sequence: str, frame: int) -> Path | None:
+        """The image file of 1-based ``frame`` (the report's pictures).
+
+        Default: the dataset's ``info(sequence).frame_path`` (files numbered from its
+        ``first_frame``), else the loaded sequence's ``info`` or ``frame_paths``; None when
+        the dataset says neither or ``frame`` is out of range.
+        """
+        dataset = self.dataset
+        if callable(getattr(dataset, "info", None)):
+            info = dataset.info(sequence)
+        else:
+            loaded = dataset.load(sequence)
+            info = getattr(loaded, "info", None)
+            if info is None:
+                paths = tuple(getattr(loaded, "frame_paths", ()))
+                return Path(paths[frame - 1]) if 1 <= frame <= len(paths) else None
+        return info.frame_path(int(getattr(info, "first_frame", 1)) + frame - 1)
+
+    def frame_rate(self, sequence: str) -> float:
+        """Frames per second of ``sequence`` (a clip's time of a frame).
+
+        Default: the loaded sequence's ``frame_rate``, else 30.
+        """
+        return float(getattr(self.dataset.load(sequence), "frame_rate", 0) or 30.0)
 
 
 def refuse_run_folder(folder: str | os.PathLike) -> None:

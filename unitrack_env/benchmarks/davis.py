@@ -5,10 +5,13 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root
+from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.davis import (
     DAVISDataset,
     VOSSequence,
@@ -16,8 +19,19 @@ from unitrack_env.datasets.davis import (
     write_davis_result,
 )
 from unitrack_env.errors import DataFormatError
+from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
-from unitrack_env.metrics.vos import VOSScores, aggregate_vos, evaluate_vos_sequence
+from unitrack_env.metrics.vos import (
+    VOSScores,
+    aggregate_vos,
+    evaluate_vos_sequence,
+    frame_scores,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+_VOS_METRICS = ("J-Mean", "J&F-Mean", "F-Mean")
 
 #: Folder of the DAVIS data under ``$UNITRACK_DATA``.
 BENCHMARK_FOLDER = "DAVIS"
@@ -34,6 +48,15 @@ class DAVISBenchmark(Benchmark):
 
     task = "vos"
     columns = ("J&F-Mean", "J-Mean", "F-Mean", "J-Recall", "F-Recall", "J-Decay", "F-Decay")
+    report_view = ReportView(value=("j", "J"))
+    intervals = "frames"  # J and F means are means over frames and objects
+    frame_metrics = MappingProxyType({
+        "J-Mean": lambda d: d["j"].to_numpy(), "F-Mean": lambda d: d["f"].to_numpy(),
+        "J&F-Mean": lambda d: (d["j"].to_numpy() + d["f"].to_numpy()) / 2})
+    scorecard = ScorecardColumn(
+        "VOS", ("UniTrack/DAVIS-v0",), (Head("unitrack-vos", "UniTrack", _VOS_METRICS),),
+        Head("repeat-mask", "repeat-mask", _VOS_METRICS, appearance=False),
+        ("UniTrack", "J-Mean"), order=2, input_size=(1, 480, 854), head_seconds=0.6)
 
     @classmethod
     def build(cls, root: str | os.PathLike | None = None, split: str | None = "val",
@@ -96,6 +119,12 @@ class DAVISBenchmark(Benchmark):
             digest.update(np.ascontiguousarray(labels).tobytes())
         return digest.hexdigest()
 
+    def score_sequence(self, sequence: str, results: list[np.ndarray]) -> dict[str, float]:
+        """The DAVIS summary of one sequence's label maps (first and last frame not scored)."""
+        loaded = self.load(sequence)
+        return dict(evaluate_vos_sequence(loaded.read_annotations(), list(results),
+                                          loaded.object_ids, sequence_name=sequence).summary)
+
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<seq>/<frame>.png`` results with the DAVIS-2017 protocol.
 
@@ -118,3 +147,19 @@ class DAVISBenchmark(Benchmark):
             scores[COMBINED] = aggregate_vos(list(scores.values()))
             combined = dict(scores[COMBINED].summary)
         return ScoreReport(BENCHMARK, per_sequence, combined, scores)
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """One ``"frame"`` event per scored frame and object: its J and F."""
+        seq = self.load(sequence)
+        gt = seq.read_annotations()
+        rows = EventRows(sequence)
+        for t in range(1, seq.num_frames - 1):  # DAVIS scores all but the first and last frame
+            j, f = frame_scores(gt[t], self.read_frame(folder, seq, t), seq.object_ids)
+            for k, obj in enumerate(seq.object_ids):
+                rows.add(t + 1, "frame", object=int(obj), j=float(j[k]), f=float(f[k]))
+        return rows
+
+    def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
+        """Each sequence's objects: DAVIS averages over the objects of all sequences."""
+        objects = events.groupby("sequence")["object"].nunique()
+        return {name: float(objects.get(name, 1)) for name in sequences}

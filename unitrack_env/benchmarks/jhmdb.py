@@ -4,14 +4,23 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
+from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.jhmdb import JHMDBDataset, read_joint_positions
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_bytes
-from unitrack_env.metrics.pose import NORMALISERS, PAPER_PCK_THRESHOLDS, PCKCounts, pck_counts
+from unitrack_env.metrics.events_mot import EventRows
+from unitrack_env.metrics.pose import (
+    NORMALISERS,
+    PAPER_PCK_THRESHOLDS,
+    PCKCounts,
+    frame_pck,
+    pck_counts,
+)
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: Name of a sequence's ground-truth and result file.
@@ -34,6 +43,14 @@ class JHMDBBenchmark(Benchmark):
 
     task = "pose-prop"
     columns = ("PCK@0.1", "PCK@0.2")
+    report_view = ReportView(value=("pck", "PCK@0.1"))
+    intervals = "frames"  # PCK pools the joints of every frame (frames pooled to combine)
+    frame_metrics = MappingProxyType({"PCK@0.1": lambda d: d["pck"].to_numpy()})
+    scorecard = ScorecardColumn(
+        "Pose prop.", ("UniTrack/JHMDB-v0",),
+        (Head("unitrack-pose", "UniTrack", ("PCK@0.1", "PCK@0.2")),),
+        Head("repeat-pose", "repeat-pose", ("PCK@0.1", "PCK@0.2"), appearance=False),
+        ("UniTrack", "PCK@0.1"), order=6, input_size=(1, 240, 320), head_seconds=0.15)
 
     def __init__(self, dataset: JHMDBDataset, normaliser: str = "box_diagonal",
                  thresholds: tuple[float, ...] = PAPER_PCK_THRESHOLDS, *,
@@ -87,6 +104,10 @@ class JHMDBBenchmark(Benchmark):
         """PCK counts of predicted joints against ground truth (same frames)."""
         return pck_counts(predictions, ground_truth, self.thresholds, method=self.normaliser)
 
+    def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
+        """PCK at every threshold of one video's joints (frame 1 not scored)."""
+        return self.counts(results, self.ground_truth(sequence)[: len(results)]).as_dict()
+
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<name>/joint_positions.mat`` files (each covering its video)."""
         per_sequence: dict[str, dict[str, float]] = {}
@@ -104,3 +125,11 @@ class JHMDBBenchmark(Benchmark):
         combined = pooled.as_dict() if pooled is not None else {}
         return ScoreReport("JHMDB", per_sequence, combined,
                            scores={**per_sequence, COMBINED: combined})
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """One ``"frame"`` event per scored frame: its PCK at 0.1."""
+        pred, gt = self.read(folder, sequence), self.ground_truth(sequence)
+        rows = EventRows(sequence)
+        for t in range(1, min(len(pred), len(gt))):  # frame 1 is given, and not scored
+            rows.add(t + 1, "frame", pck=frame_pck(pred[t], gt[t], method=self.normaliser))
+        return rows

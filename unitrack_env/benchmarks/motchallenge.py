@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,9 +16,26 @@ from unitrack_env.benchmarks.base import (
     refuse_run_folder,
     rounded_digest,
 )
+from unitrack_env.benchmarks.views import (
+    ALL_LANES,
+    LETTERBOX,
+    ReportView,
+    ScorecardColumn,
+    association_head,
+    iou_baseline,
+)
 from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
 from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.events_mot import (
+    EventRows,
+    mot_sequence_events,
+    preprocessed_frames,
+    read_gt_rows,
+)
 from unitrack_env.metrics.report import ScoreReport
+
+if TYPE_CHECKING:
+    from unitrack_env.metrics.mot_stats import MotStats
 
 #: printf formats of the result columns (MOTChallenge files use 2 decimals; keep 3).
 RESULT_FORMAT = ("%d", "%d", "%.3f", "%.3f", "%.3f", "%.3f", "%g", "%d", "%d", "%d")
@@ -51,6 +69,14 @@ class MOTChallengeBenchmark(Benchmark):
     task = "mot"
     columns = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA", "MOTP", "CLR_FP", "CLR_FN",
                "MT", "ML")
+    report_view = ReportView(lanes=ALL_LANES, thumbnails=True)
+    intervals = "stats"  # CLEAR and identity sums per frame: metrics recomputed exactly
+    scorecard = ScorecardColumn(
+        "MOT", ("UniTrack/MOT16-v0", "UniTrack/MOT17-v0", "UniTrack/MOT20-v0",
+                "UniTrack/MOT15-v0"),
+        (association_head(("IDF1", "HOTA", "MOTA", "IDSW")),),
+        iou_baseline(("IDF1", "HOTA", "MOTA", "IDSW")), ("UniTrack", "IDF1"),
+        frozenset({"IDSW"}), order=3, input_size=LETTERBOX)
 
     @classmethod
     def build(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
@@ -102,6 +128,28 @@ class MOTChallengeBenchmark(Benchmark):
 
         return score_folder(self.dataset.split_dir, folder, benchmark=self.name,
                             sequences=sequences)
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """Per-frame tp/fn/fp/idsw/frag events of the official CLEAR matching."""
+        return mot_sequence_events(sequence, read_gt_rows(self.dataset.split_dir / sequence),
+                                   self.read(folder, sequence), self.sequence_length(sequence),
+                                   self.name)
+
+    def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
+        """Per-frame CLEAR and identity statistics of the results in ``folder``."""
+        from unitrack_env.metrics.mot_stats import mot_stats
+
+        return mot_stats(preprocessed_frames(read_gt_rows(self.dataset.split_dir / sequence),
+                                             self.read(folder, sequence),
+                                             self.sequence_length(sequence), self.name))
+
+    def frame_image(self, sequence: str, frame: int) -> Path:
+        """``<sequence>/img1/<frame>.jpg`` (as its seqinfo.ini names it)."""
+        return read_seqinfo(self.dataset.split_dir / sequence).frame_path(frame)
+
+    def frame_rate(self, sequence: str) -> float:
+        """The seqinfo.ini's frame rate."""
+        return float(read_seqinfo(self.dataset.split_dir / sequence).frame_rate)
 
 
 def score_split_folder(gt: str | os.PathLike, results: str | os.PathLike, benchmark: str,

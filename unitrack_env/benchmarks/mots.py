@@ -6,6 +6,14 @@ import os
 from pathlib import Path
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, text_digest
+from unitrack_env.benchmarks.views import (
+    ALL_LANES,
+    LETTERBOX,
+    ReportView,
+    ScorecardColumn,
+    association_head,
+    iou_baseline,
+)
 from unitrack_env.datasets.mots import BENCHMARKS, MOTSDataset
 from unitrack_env.datasets.mots_format import (
     CLASS_IDS,
@@ -14,6 +22,7 @@ from unitrack_env.datasets.mots_format import (
     parse_instances_txt,
 )
 from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.events_mot import EventRows, mots_sequence_events
 from unitrack_env.metrics.report import ScoreReport
 
 #: Default split of each benchmark.
@@ -33,6 +42,12 @@ class MOTSBenchmark(Benchmark):
     task = "mots"
     columns = ("HOTA", "sMOTSA", "IDF1", "IDSW", "DetA", "AssA", "MOTSA", "MOTSP", "CLR_FP",
                "CLR_FN")
+    report_view = ReportView(lanes=ALL_LANES, unit="masks")
+    no_intervals = "sMOTSA and HOTA of masks are not recomputed from per-frame statistics here"
+    scorecard = ScorecardColumn(
+        "MOTS", ("UniTrack/MOTS-v0",), (association_head(("IDF1", "HOTA", "sMOTSA")),),
+        iou_baseline(("IDF1", "HOTA", "sMOTSA")), ("UniTrack", "IDF1"), order=4,
+        input_size=LETTERBOX)
 
     def __init__(self, dataset: MOTSDataset, object_class: str = "pedestrian", *,
                  synthetic: bool = False) -> None:
@@ -95,3 +110,11 @@ class MOTSBenchmark(Benchmark):
         from unitrack_env.metrics.mots import score_folder
 
         return score_folder(self.dataset, folder, sequences, object_class=self.object_class)
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """Per-frame tp/fn/fp/idsw/frag events of the official mask matching."""
+        info = self.dataset.info(sequence)
+        return mots_sequence_events(sequence, self.dataset.ground_truth(sequence),
+                                    self.read(folder, sequence), first_frame=info.first_frame,
+                                    num_frames=info.length,
+                                    class_id=CLASS_IDS[self.object_class])

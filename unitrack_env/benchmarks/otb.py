@@ -4,22 +4,59 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
+from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
+from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
+from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
-from unitrack_env.metrics.sot import aggregate_sot, evaluate_sot_sequence
+from unitrack_env.metrics.sot import (
+    aggregate_sot,
+    center_error_per_frame,
+    evaluate_sot_sequence,
+    overlap_per_frame,
+    repair_predictions,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Folder of the OTB data under ``$UNITRACK_DATA``.
 BENCHMARK_FOLDER = "OTB"
 #: Name of the rule set in score reports.
 BENCHMARK = "OTB-2015"
+
+
+@dataclass(frozen=True)
+class SOTFormat:
+    """A data format of single-object tracking: how to read it, where it is, what it is called.
+
+    ``reader(root)`` lists and loads its sequences (a
+    :class:`~unitrack_env.datasets.base.SequenceDataset` of
+    :class:`~unitrack_env.datasets.sot.SOTSequence`); ``folder`` is its folder under
+    ``$UNITRACK_DATA``; ``name`` the rule set score reports name.
+    """
+
+    reader: Callable[[Path], SequenceDataset[SOTSequence]]
+    folder: str
+    name: str
+
+
+#: The data formats :class:`OTBBenchmark` reads (its and ``OTBEnv``'s ``data_format=``). A new
+#: format of the task is one row here (or added by a project at run time) beside its reader;
+#: without ``root=`` and data it plays the task's embedded synthetic data (OTB layout).
+SOT_FORMATS: dict[str, SOTFormat] = {"otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK)}
 
 
 def format_box_value(value: float) -> str:
@@ -42,17 +79,37 @@ class OTBBenchmark(Benchmark):
 
     task = "sot"
     columns = ("AUC", "Precision@20px", "AverageOverlap")
+    report_view = ReportView(value=("iou", "IoU"))
+    intervals = "frames"  # success AUC and precision are means over frames
+    frame_metrics = MappingProxyType({
+        "AUC": lambda d: np.mean(d["iou"].to_numpy()[:, None] > np.linspace(0, 1, 21)[None, :],
+                                 axis=1),
+        "Precision@20px": lambda d: (d["center_error"] <= 20).to_numpy(float)})
+    scorecard = ScorecardColumn(
+        "SOT", ("UniTrack/OTB-v0",),
+        (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
+         Head("unitrack-dcf", "DCF", ("AUC", "Precision@20px"))),
+        Head("repeat-box", "repeat-box", ("AUC", "Precision@20px"), appearance=False),
+        ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02)
+
+    def __init__(self, dataset: SequenceDataset[SOTSequence], *, synthetic: bool = False,
+                 rules: str = BENCHMARK) -> None:
+        super().__init__(dataset, synthetic=synthetic)
+        self.rules = rules
 
     @classmethod
-    def build(cls, root: str | os.PathLike | None = None) -> OTBBenchmark:
-        """The benchmark of ``OTBEnv(root=)``."""
-        path, synthetic = data_root(root, BENCHMARK_FOLDER, "OTB", "otb")
-        return cls(OTBDataset(path), synthetic=synthetic)
+    def build(cls, root: str | os.PathLike | None = None, data_format: str = "otb",
+              ) -> OTBBenchmark:
+        """The benchmark of ``OTBEnv(root=, data_format=)`` (a key of :data:`SOT_FORMATS`)."""
+        chosen = SOT_FORMATS[one_of("data_format", data_format, SOT_FORMATS)]
+        path, synthetic = data_root(root, chosen.folder, "OTB", "otb")
+        reader = OTBDataset if synthetic else chosen.reader  # the task's synthetic data
+        return cls(reader(path), synthetic=synthetic, rules=chosen.name)
 
     @property
     def name(self) -> str:
-        """``"OTB-2015"``."""
-        return BENCHMARK
+        """The format's rule set (``"OTB-2015"``)."""
+        return self.rules
 
     def load(self, name: str) -> SOTSequence:
         """Read a sequence once (the reader's warning about trimmed copies appears once)."""
@@ -109,4 +166,20 @@ class OTBBenchmark(Benchmark):
         if scores:
             scores[COMBINED] = aggregate_sot(list(scores.values()))
             combined = scores[COMBINED].as_dict()
-        return ScoreReport(BENCHMARK, per_sequence, combined, scores)
+        return ScoreReport(self.name, per_sequence, combined, scores)
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """One ``"frame"`` event per frame: its IoU, centre error, true and tracked box."""
+        gt = self.load(sequence).boxes
+        pred = repair_predictions(self.read(folder, sequence), gt, init_from_gt=True)
+        iou, err = overlap_per_frame(pred, gt), center_error_per_frame(pred, gt)
+        rows = EventRows(sequence)
+        for t in range(len(gt)):
+            rows.add(t + 1, "frame", iou=float(iou[t]), center_error=float(err[t]),
+                     **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
+                     **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
+        return rows
+
+    def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
+        """1 per sequence: OTB's combined scores are means of the sequences' scores."""
+        return dict.fromkeys(sequences, 1.0)

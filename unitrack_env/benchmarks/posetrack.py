@@ -9,10 +9,18 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root
+from unitrack_env.benchmarks.views import (
+    LETTERBOX,
+    ReportView,
+    ScorecardColumn,
+    association_head,
+    iou_baseline,
+)
 from unitrack_env.datasets.posetrack import PoseTrackDataset
 from unitrack_env.datasets.posetrack_json import read_posetrack_json, write_posetrack_json
 from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.errors import DataFormatError
+from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.posetrack_frames import POSEVAL_DROPS_LAST_FRAME
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
@@ -30,6 +38,12 @@ class PoseTrackBenchmark(Benchmark):
 
     task = "posetrack"
     columns = ("MOTA", "IDF1", "IDSW", "MOTP", "Precision", "Recall")
+    report_view = ReportView(lanes=("fn", "fp", "idsw"), unit="joints")
+    no_intervals = "poseval's metrics average per-joint scores, not means over frames"
+    scorecard = ScorecardColumn(
+        "PoseTrack", ("UniTrack/PoseTrack-v0",), (association_head(("IDF1", "MOTA", "IDSW")),),
+        iou_baseline(("IDF1", "MOTA", "IDSW")), ("UniTrack", "IDF1"), frozenset({"IDSW"}),
+        order=5, input_size=LETTERBOX)
 
     def __init__(self, dataset: PoseTrackDataset,
                  drop_last_frame: bool = POSEVAL_DROPS_LAST_FRAME, *,
@@ -74,6 +88,13 @@ class PoseTrackBenchmark(Benchmark):
                 digest.update(np.round(row, 3).tobytes())
         return digest.hexdigest()
 
+    def score_sequence(self, sequence: str, results: PoseTrackVideo) -> dict[str, float]:
+        """Poseval's metrics of one sequence's tracked poses."""
+        from unitrack_env.metrics.posetrack import evaluate_video, summarise
+
+        gt = read_posetrack_json(self.dataset.annotation_dir / f"{sequence}.json")
+        return summarise([evaluate_video(gt, results, drop_last_frame=self.drop_last_frame)])
+
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
         # Imported here: the metrics pull in scipy.optimize (0.5 s), which planning a run
@@ -94,3 +115,11 @@ class PoseTrackBenchmark(Benchmark):
         combined = summarise(counts) if counts else {}
         return ScoreReport(BENCHMARK, per_sequence, combined,
                            scores={**per_sequence, COMBINED: combined})
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """Per-frame fn/fp/idsw events of the joints, as poseval matches them."""
+        from unitrack_env.metrics.events_pose import posetrack_sequence_events
+
+        gt = read_posetrack_json(self.dataset.annotation_dir / f"{sequence}.json")
+        return posetrack_sequence_events(sequence, gt, self.read(folder, sequence),
+                                         drop_last_frame=self.drop_last_frame)

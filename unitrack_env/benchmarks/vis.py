@@ -6,6 +6,13 @@ import os
 from pathlib import Path
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, text_digest
+from unitrack_env.benchmarks.views import (
+    LETTERBOX,
+    ReportView,
+    ScorecardColumn,
+    association_head,
+    iou_baseline,
+)
 from unitrack_env.datasets.youtube_vis import (
     VisTrack,
     YouTubeVISDataset,
@@ -14,6 +21,7 @@ from unitrack_env.datasets.youtube_vis import (
 )
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
+from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import ScoreReport
 
 #: Name of the rule set in score reports (and the data folder under ``$UNITRACK_DATA``).
@@ -30,6 +38,12 @@ class VISBenchmark(Benchmark):
 
     task = "vis"
     columns = ("AP", "AP50", "AP75", "AR")
+    report_view = ReportView(lanes=("fn", "fp"), unit="track-frames",
+                             value=("iou", "IoU of tp tracks"), value_type="tp")
+    no_intervals = "track mAP ranks whole tracks; it is not a mean over frames"
+    scorecard = ScorecardColumn(
+        "VIS", ("UniTrack/VIS-v0",), (association_head(("AP", "AP50")),),
+        iou_baseline(("AP", "AP50")), ("UniTrack", "AP"), order=7, input_size=LETTERBOX)
 
     @classmethod
     def build(cls, root: str | os.PathLike | None = None, split: str = "train",
@@ -85,3 +99,10 @@ class VISBenchmark(Benchmark):
         for video in videos:
             results += self.read(folder, video.name)
         return score_videos(self.dataset.data, results, videos, source=Path(folder))
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """Per-frame events of the tracks matched to the video's instances (IoU of tp)."""
+        from unitrack_env.metrics.events_vis import vis_sequence_events
+
+        return vis_sequence_events(sequence, self.dataset.data, self.read(folder, sequence),
+                                   self.dataset.video(sequence))

@@ -11,6 +11,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from typing import Generic, TypeVar
 
+from unitrack_env.errors import UnknownSequenceError
+
 SequenceT = TypeVar("SequenceT")
 
 
@@ -29,3 +31,10 @@ class SequenceDataset(ABC, Generic[SequenceT]):
     @abstractmethod
     def load(self, name: str) -> SequenceT:
         """Read one sequence by name."""
+
+    def resolve(self, name: str) -> str:
+        """The data set's spelling of ``name`` (default: ``name`` itself, if it is one)."""
+        if name not in self.sequence_names:
+            raise UnknownSequenceError(f"no sequence '{name}' in {type(self).__name__}; "
+                                       f"available: {', '.join(self.sequence_names)}")
+        return name

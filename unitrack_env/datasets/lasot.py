@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.sot import (
     SOTSequence,
     numbered_images,
@@ -17,7 +18,7 @@ from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.io import path_inside
 
 
-class LaSOTDataset:
+class LaSOTDataset(SequenceDataset[SOTSequence]):
     """LaSOT: ``<root>/<class>/<class>-<n>/{img/*.jpg, groundtruth.txt, ...}``.
 
     ``absent`` = ``full_occlusion.txt`` OR ``out_of_view.txt`` (pytracking's
@@ -47,9 +48,6 @@ class LaSOTDataset:
         self._dirs = found
         self.sequence_names: list[str] = list(found)
 
-    def __len__(self) -> int:
-        return len(self.sequence_names)
-
     def load(self, name: str) -> SOTSequence:
         """Read one sequence."""
         if name not in self._dirs:
@@ -72,7 +70,7 @@ class LaSOTDataset:
                            absent, "LaSOT")
 
 
-class GOT10kDataset:
+class GOT10kDataset(SequenceDataset[SOTSequence]):
     """GOT-10k: ``<root>/<split>/<seq>/{*.jpg, groundtruth.txt, absence.label}``.
 
     On the test split ``groundtruth.txt`` holds only the first frame's box; the other rows
@@ -94,9 +92,6 @@ class GOT10kDataset:
         if not names:
             raise DataFormatError(self.split_dir, "no <seq>/groundtruth.txt found")
         self.sequence_names: list[str] = names
-
-    def __len__(self) -> int:
-        return len(self.sequence_names)
 
     def load(self, name: str) -> SOTSequence:
         """Read one sequence."""

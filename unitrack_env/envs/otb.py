@@ -11,7 +11,7 @@ from gymnasium import spaces
 from typing_extensions import Unpack
 
 from unitrack_env import spaces as ut_spaces
-from unitrack_env.benchmarks.otb import BENCHMARK, OTBBenchmark, format_box_value
+from unitrack_env.benchmarks.otb import OTBBenchmark, format_box_value
 from unitrack_env.datasets.sot import SOTSequence
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
 from unitrack_env.errors import DataFormatError, InvalidActionError
@@ -136,6 +136,9 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     - ``root``: the OTB folder holding the sequence folders (default: ``$UNITRACK_DATA/OTB``
       if that variable is set, else the synthetic default).
     - ``sequences``: restrict to these sequence names (default: every sequence found).
+    - ``data_format``: the layout of ``root``, a key of
+      :data:`unitrack_env.benchmarks.otb.SOT_FORMATS` (default ``"otb"``; a registered id of
+      another SOT data set passes its own).
     - ``max_frame_size``: bound ``(height, width)`` of the frame space.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).
@@ -151,10 +154,11 @@ class OTBEnv(SequenceEnv[SOTSequence]):
         self,
         root: str | os.PathLike | None = None,
         sequences: list[str] | tuple[str, ...] | None = None,
+        data_format: str = "otb",
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        self.scoring = OTBBenchmark.build(root)
+        self.scoring = OTBBenchmark.build(root, data_format)
         self.dataset = self.scoring.dataset
         if sequences is not None:
             self.sequence_names = [self.dataset.resolve(s) for s in sequences]
@@ -197,7 +201,7 @@ class OTBEnv(SequenceEnv[SOTSequence]):
         self._results = []
         self._scored = None
         return dict(seq_length=sequence.num_frames, frame_rate=30.0,
-                    image_size=(height, width), benchmark=BENCHMARK,
+                    image_size=(height, width), benchmark=self.scoring.name,
                     has_ground_truth=sequence.has_ground_truth, synthetic=self.synthetic)
 
     def _observe(self, t: int) -> dict[str, Any]:

@@ -16,6 +16,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextvars import ContextVar
+from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
@@ -39,37 +40,51 @@ MARKER_NAME = ".unitrack-synthetic-complete"
 #: Temporary folders older than this (seconds) are leftovers of interrupted runs.
 STALE_TEMP_SECONDS = 3600.0
 
-#: Writer of each kind: ``writer(root, benchmark)`` fills ``root``.
-WRITERS: Mapping[str, Callable[[Path, str], None]] = MappingProxyType({
-    "motchallenge": motchallenge.write_motchallenge,
-    "otb": otb.write_otb,
-    "davis": davis.write_davis,
-    "mots": mots_synthetic.write_mots,
-    "youtube_vis": vis_synthetic.write_youtube_vis,
-    "jhmdb": jhmdb_synthetic.write_jhmdb,
-    "posetrack": posetrack_synthetic.write_posetrack,
-})
-#: Benchmarks each kind can generate.
-KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
-    "motchallenge": motchallenge.BENCHMARKS,
-    "otb": otb.BENCHMARKS,
-    "davis": davis.BENCHMARKS,
-    "mots": mots_synthetic.BENCHMARKS,
-    "youtube_vis": vis_synthetic.BENCHMARKS,
-    "jhmdb": ("JHMDB",),
-    "posetrack": posetrack_synthetic.BENCHMARKS,
-})
-#: Each kind's ``annotated_frames(benchmark, split)``: the frames of every annotated sequence
-#: its writer writes, known before writing.
-ANNOTATED_FRAMES: Mapping[str, Callable[[str, str | None], dict[str, int]]] = MappingProxyType({
-    "motchallenge": motchallenge.annotated_frames,
-    "otb": otb.annotated_frames,
-    "davis": davis.annotated_frames,
-    "mots": mots_synthetic.annotated_frames,
-    "youtube_vis": vis_synthetic.annotated_frames,
-    "jhmdb": jhmdb_synthetic.annotated_frames,
-    "posetrack": posetrack_synthetic.annotated_frames,
-})
+
+
+@dataclass(frozen=True)
+class SyntheticKind:
+    """A generator of embedded synthetic data sets.
+
+    ``write(root, benchmark)`` fills ``root``; ``benchmarks`` are those it can generate;
+    ``annotated_frames(benchmark, split)`` gives the frames of every annotated sequence it
+    writes, known before writing. A benchmark passes its kind to
+    :func:`~unitrack_env.benchmarks.base.data_root` (a built-in's by name, a project's own
+    as the object), so a new task's generator is not listed here.
+    """
+
+    name: str
+    write: Callable[[Path, str], None]
+    benchmarks: tuple[str, ...]
+    annotated_frames: Callable[[str, str | None], dict[str, int]]
+
+
+#: The built-in generators, by name.
+KINDS: Mapping[str, SyntheticKind] = MappingProxyType({kind.name: kind for kind in (
+    SyntheticKind("motchallenge", motchallenge.write_motchallenge, motchallenge.BENCHMARKS,
+                  motchallenge.annotated_frames),
+    SyntheticKind("otb", otb.write_otb, otb.BENCHMARKS, otb.annotated_frames),
+    SyntheticKind("davis", davis.write_davis, davis.BENCHMARKS, davis.annotated_frames),
+    SyntheticKind("mots", mots_synthetic.write_mots, mots_synthetic.BENCHMARKS,
+                  mots_synthetic.annotated_frames),
+    SyntheticKind("youtube_vis", vis_synthetic.write_youtube_vis, vis_synthetic.BENCHMARKS,
+                  vis_synthetic.annotated_frames),
+    SyntheticKind("jhmdb", jhmdb_synthetic.write_jhmdb, ("JHMDB",),
+                  jhmdb_synthetic.annotated_frames),
+    SyntheticKind("posetrack", posetrack_synthetic.write_posetrack,
+                  posetrack_synthetic.BENCHMARKS, posetrack_synthetic.annotated_frames),
+)})
+
+
+def synthetic_kind(kind: str | SyntheticKind) -> SyntheticKind:
+    """``kind`` itself, or the built-in generator of that name (else a ValueError)."""
+    if isinstance(kind, SyntheticKind):
+        return kind
+    if kind not in KINDS:
+        raise ValueError(f"unknown synthetic data kind {kind!r}; valid: {', '.join(KINDS)}")
+    return KINDS[kind]
+
+
 _SPECS_ONLY: ContextVar[bool] = ContextVar("unitrack_synthetic_specs_only", default=False)
 
 
@@ -80,10 +95,10 @@ class SpecsOnly(LookupError):
     be), ``generated`` whether it is complete there.
     """
 
-    def __init__(self, benchmark: str, kind: str, path: Path) -> None:
+    def __init__(self, benchmark: str, kind: SyntheticKind, path: Path) -> None:
         self.benchmark, self.kind, self.path = benchmark, kind, path
         self.generated = is_complete(path)
-        super().__init__(f"the synthetic {kind} data set {benchmark} ({path}) was asked for "
+        super().__init__(f"the synthetic {kind.name} data set {benchmark} ({path}) was asked for "
                          "within specs_only()")
 
 
@@ -101,14 +116,14 @@ def specs_only() -> Iterator[None]:
         _SPECS_ONLY.reset(token)
 
 
-def annotated_frames(benchmark: str, kind: str = "motchallenge", split: str | None = None,
-                     ) -> dict[str, int]:
+def annotated_frames(benchmark: str, kind: str | SyntheticKind = "motchallenge",
+                     split: str | None = None) -> dict[str, int]:
     """Frames of each annotated sequence of ``split`` (None: any) of a synthetic data set.
 
     The same as reading the generated data set, without generating it.
     """
     synthetic_path(benchmark, kind)  # validates both
-    return ANNOTATED_FRAMES[kind](benchmark, split)
+    return synthetic_kind(kind).annotated_frames(benchmark, split)
 
 
 def cache_root() -> Path:
@@ -121,16 +136,16 @@ def cache_root() -> Path:
     return Path(platformdirs.user_cache_dir(APP_NAME))
 
 
-def synthetic_path(benchmark: str, kind: str = "motchallenge") -> Path:
+def synthetic_path(benchmark: str, kind: str | SyntheticKind = "motchallenge") -> Path:
     """Return where the synthetic ``benchmark`` data set of ``kind`` is (or will be) cached."""
-    if kind not in WRITERS:
-        raise ValueError(f"unknown synthetic data kind {kind!r}; valid: {', '.join(WRITERS)}")
-    if benchmark not in KIND_BENCHMARKS[kind]:
+    generator = synthetic_kind(kind)
+    if benchmark not in generator.benchmarks:
         raise ValueError(
-            f"no synthetic {kind} data for benchmark {benchmark!r}; valid: "
-            f"{', '.join(KIND_BENCHMARKS[kind])}"
+            f"no synthetic {generator.name} data for benchmark {benchmark!r}; valid: "
+            f"{', '.join(generator.benchmarks)}"
         )
-    return cache_root() / SYNTHETIC_SUBDIR / f"{kind}-{benchmark}-v{GENERATOR_VERSION}"
+    return (cache_root() / SYNTHETIC_SUBDIR
+            / f"{generator.name}-{benchmark}-v{GENERATOR_VERSION}")
 
 
 def is_complete(path: Path) -> bool:
@@ -138,15 +153,16 @@ def is_complete(path: Path) -> bool:
     return (path / MARKER_NAME).is_file()
 
 
-def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
+def ensure_synthetic(benchmark: str, kind: str | SyntheticKind = "motchallenge") -> Path:
     """Return the root (holding ``train/`` and ``test/``) of a synthetic data set, generated once.
 
     Unknown ``kind`` or ``benchmark`` raise ValueError; an unwritable cache raises OSError
     (set ``UNITRACK_CACHE`` elsewhere).
     """
     final = synthetic_path(benchmark, kind)
+    generator = synthetic_kind(kind)
     if _SPECS_ONLY.get():
-        raise SpecsOnly(benchmark, kind, final)
+        raise SpecsOnly(benchmark, generator, final)
     if is_complete(final):
         return final
     parent = final.parent
@@ -160,8 +176,9 @@ def ensure_synthetic(benchmark: str, kind: str = "motchallenge") -> Path:
     _remove_stale_temps(parent, final.name)
     temp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=parent))
     try:
-        WRITERS[kind](temp, benchmark)
-        marker = {"kind": kind, "benchmark": benchmark, "generator_version": GENERATOR_VERSION}
+        generator.write(temp, benchmark)
+        marker = {"kind": generator.name, "benchmark": benchmark,
+                  "generator_version": GENERATOR_VERSION}
         (temp / MARKER_NAME).write_text(json.dumps(marker, sort_keys=True) + "\n")
         if final.exists() and not is_complete(final):
             _discard(final, parent)
