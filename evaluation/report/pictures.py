@@ -68,15 +68,6 @@ class Picture:
     seconds: float | None = None  # the event's time in a clip of the sequence
 
 
-def loaded_sequence(bench: Any, sequence: str) -> Any:
-    """The sequence's info (files numbered from ``first_frame``) or its loaded form."""
-    dataset = bench.dataset
-    if callable(getattr(dataset, "info", None)):
-        return dataset.info(sequence)
-    loaded = dataset.load(sequence)
-    return getattr(loaded, "info", None) or loaded
-
-
 def _int(value: Any) -> int | None:
     return None if value is None or value != value else int(value)
 
@@ -228,7 +219,7 @@ def event_pictures(bench: Any, run: Path, sequence: str, events: pd.DataFrame, f
     if not items:
         return []
     try:
-        loaded = loaded_sequence(bench, sequence)
+        loaded = bench.sequence_info(sequence)
         bench.frame_image(sequence, 1)
         rate = bench.frame_rate(sequence)
     except (OSError, ValueError, KeyError, AttributeError):  # data moved or not ours to read

@@ -226,30 +226,35 @@ class Benchmark(ABC):
         """
         return None
 
+    def sequence_info(self, sequence: str) -> Any:
+        """The dataset's ``info(sequence)``, else its loaded sequence's ``info`` or itself.
+
+        What the report draws on (frame files, first frame, frame rate, annotations).
+        """
+        if callable(getattr(self.dataset, "info", None)):
+            return self.dataset.info(sequence)
+        loaded = self.dataset.load(sequence)
+        return getattr(loaded, "info", None) or loaded
+
     def frame_image(self, sequence: str, frame: int) -> Path | None:
         """The image file of 1-based ``frame`` (the report's pictures).
 
-        Default: the dataset's ``info(sequence).frame_path`` (files numbered from its
-        ``first_frame``), else the loaded sequence's ``info`` or ``frame_paths``; None when
-        the dataset says neither or ``frame`` is out of range.
+        Default: the sequence info's ``frame_path`` (files numbered from its
+        ``first_frame``), else the loaded sequence's ``frame_paths``; None when the dataset
+        says neither or ``frame`` is out of range.
         """
-        dataset = self.dataset
-        if callable(getattr(dataset, "info", None)):
-            info = dataset.info(sequence)
-        else:
-            loaded = dataset.load(sequence)
-            info = getattr(loaded, "info", None)
-            if info is None:
-                paths = tuple(getattr(loaded, "frame_paths", ()))
-                return Path(paths[frame - 1]) if 1 <= frame <= len(paths) else None
-        return info.frame_path(int(getattr(info, "first_frame", 1)) + frame - 1)
+        info = self.sequence_info(sequence)
+        if callable(getattr(info, "frame_path", None)):
+            return info.frame_path(int(getattr(info, "first_frame", 1)) + frame - 1)
+        paths = tuple(getattr(info, "frame_paths", ()))
+        return Path(paths[frame - 1]) if 1 <= frame <= len(paths) else None
 
     def frame_rate(self, sequence: str) -> float:
         """Frames per second of ``sequence`` (a clip's time of a frame).
 
-        Default: the loaded sequence's ``frame_rate``, else 30.
+        Default: the sequence info's ``frame_rate``, else 30.
         """
-        return float(getattr(self.dataset.load(sequence), "frame_rate", 0) or 30.0)
+        return float(getattr(self.sequence_info(sequence), "frame_rate", 0) or 30.0)
 
 
 def refuse_run_folder(folder: str | os.PathLike) -> None:
