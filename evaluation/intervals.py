@@ -173,7 +173,7 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
     common = [s for s in seq_a if s in seq_b]
     if not common:
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
-    check_pair(run_a, run_benchmark(run_a), run_b, bench, common)
+    check_pair(run_a, run_benchmark(run_a), run_b, run_benchmark(run_b), common)
     pooled = bench.intervals == "frames"
     if not pooled:
         stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
