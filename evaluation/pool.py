@@ -70,17 +70,25 @@ def _worker_main(conn: Connection, parent: int, threads: int) -> None:
         number, fn, args = task
 
         def beat(frames: int = 1, number: int = number) -> None:
-            conn.send(("beat", number, frames))
+            _send(conn, ("beat", number, frames))
 
         try:
             answer: tuple[Any, ...] = ("ok", number, fn(*args, beat))
         except BaseException as exc:  # noqa: BLE001 - every failure goes back to the parent
             answer = ("raised", number, exc)
         try:
-            conn.send(answer)
+            _send(conn, answer)
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            conn.send(("raised", number, RuntimeError(f"the task's answer cannot be sent "
-                                                      f"back: {type(exc).__name__}: {exc}")))
+            _send(conn, ("raised", number, RuntimeError(f"the task's answer cannot be sent "
+                                                        f"back: {type(exc).__name__}: {exc}")))
+
+
+def _send(conn: Connection, message: tuple[Any, ...]) -> None:
+    """Send to the parent; when it is gone (killed, terminated), end this worker quietly."""
+    try:
+        conn.send(message)
+    except OSError:  # BrokenPipeError: no one is left to read the answer or a traceback
+        os._exit(1)
 
 
 @dataclass
