@@ -43,6 +43,20 @@ class SequenceFailure:
         return f"{type(exc).__name__}: {exc}"
 
 
+class RemoteTraceback(Exception):  # noqa: N818 - it carries text, it is never raised
+    """The traceback of an error in a child process, as text.
+
+    The ``__cause__`` of a failure, so that ``--debug`` shows the agent's own lines.
+    """
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f"\n(in the child process that played it)\n{self.text}"
+
+
 def _watch_parent(parent: int) -> None:
     def watch() -> None:
         while True:
