@@ -25,6 +25,8 @@ REPO = Path(__file__).resolve().parents[1]
 CORPUS = REPO / "tests" / "corpus"
 PAGE = REPO / "docs" / "bad-inputs.md"
 VERDICTS = ("clear", "unclear", "crash", "silent")
+#: Where the generated part of the page ends; the hand-written sections after it are kept.
+KEPT = "<!-- Hand-written sections below: scripts/make_bad_input_docs.py keeps them. -->"
 
 HEADER = """# Bad inputs: what each one gets
 
@@ -135,7 +137,9 @@ def main() -> int:
     """Run the corpus and write the page."""
     argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     results = run_all()
-    PAGE.write_text(render(results))
+    old = PAGE.read_text() if PAGE.is_file() else ""
+    kept = "\n" + old[old.index(KEPT):] if KEPT in old else ""
+    PAGE.write_text(render(results) + kept)
     counts = collections.Counter(o.verdict for o in results.values())
     print(f"wrote {PAGE.relative_to(REPO)}: {len(results)} cases, {dict(counts)}")
     return 0
