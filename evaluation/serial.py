@@ -10,6 +10,7 @@ returns ends only what it was doing.
 
 from __future__ import annotations
 
+import importlib
 import traceback
 import warnings
 from pathlib import Path
@@ -76,11 +77,13 @@ def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Pa
     return records, failures
 
 
-def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None,
+def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None, entry: str,
                beat: Any) -> tuple[Any, ...]:
     """Child: play ``sequence`` with the kept agent (made on the first call) and save it.
 
-    ``sequence`` None closes the agent (the last task). Returns ``("ok", record)``,
+    ``sequence`` None closes the agent (the last task). ``entry``: the module of the env's
+    entry point, imported first when the id is not registered here (an id registered in
+    the parent at run time: its package registers it). Returns ``("ok", record)``,
     ``("error", message, traceback)``, ``("unmade", message, traceback)`` or ``("closed",)``.
     """
     from unitrack_env.agents.base import close_agent
@@ -97,6 +100,8 @@ def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None,
         return ("closed",)
     if "agent" not in _KEPT:
         try:
+            if entry and spec.env_id not in gym.registry:
+                importlib.import_module(entry)
             _KEPT["env"] = spec.make_env()
             _KEPT["agent"] = spec.make_agent()
         except Exception as exc:
@@ -143,9 +148,11 @@ def play_isolated(spec: Any, out: Path, todo: list[str], stamps: dict[str, Stamp
             bar.start_sequence(name)
         bar.advance(frames)
 
+    entry = gym.spec(spec.env_id).entry_point
+    entry = entry.partition(":")[0] if isinstance(entry, str) else ""
     with SupervisedPool(1, 0, step_timeout) as pool:  # 0: the child keeps torch's defaults
         played = pool.run(_play_kept, [*todo, None],
-                          lambda name: (spec, str(out), name, stamps.get(name or "")),
+                          lambda name: (spec, str(out), name, stamps.get(name or ""), entry),
                           on_beat=on_beat)
         for name, outcome in played:
             if name is None:

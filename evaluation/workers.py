@@ -133,6 +133,8 @@ def refuse_unguarded_script() -> None:
         frame = frame.f_back
     if path is None or top is None or not Path(path).is_file():
         return
+    if Path(top.f_code.co_filename).resolve() != Path(path).resolve():
+        return  # a script run by runpy under another main module: that one is re-imported
     try:
         tree = ast.parse(Path(path).read_text(encoding="utf-8"))
     except (OSError, SyntaxError, ValueError):
