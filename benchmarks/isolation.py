@@ -3,8 +3,10 @@
 ``unitrack evaluate`` plays ``--workers 1`` in one child process that the CLI watches (issue
 43: a step stuck in C code holding the GIL, a segfault or a ``close()`` that never returns
 then ends only what it was doing); ``--in-process`` plays as before. Prints, side by side, the
-wall time of whole CLI runs both ways (best and median of ``--repeats``, alternated), the
-overhead per run and per sequence, and whether the result files are byte-identical. It also
+wall time of whole CLI runs both ways (best and median of ``--repeats``, alternated), over
+every sequence and over the first one alone; the child's overhead per run, and per extra
+sequence (the difference between the two: the child keeps its environment and agent, so a
+sequence adds only heartbeats); and whether the result files are byte-identical. It also
 prints the in-process watchdog's cost per step (a kernel timer re-armed after each step).
 
 Usage: python benchmarks/isolation.py [--env UniTrack/MOT16-v0] [--agent iou] [--repeats 5]
@@ -25,11 +27,11 @@ from pathlib import Path
 from unitrack_env.evaluation.watchdog import StepWatchdog
 
 
-def evaluate(env: str, agent: str, out: Path, in_process: bool) -> float:
+def evaluate(env: str, agent: str, out: Path, in_process: bool, *extra: str) -> float:
     """Wall seconds of one ``unitrack evaluate`` run in a fresh interpreter."""
     command = [sys.executable, "-m", "unitrack_env.evaluation.cli", "evaluate", "--env", env,
                "--agent", agent, "--out", str(out), "--overwrite", "--quiet",
-               "--format", "json"]
+               "--format", "json", *extra]
     start = time.perf_counter()
     subprocess.run(command + (["--in-process"] if in_process else []), check=True,
                    capture_output=True, env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)})
@@ -68,21 +70,31 @@ def main() -> None:
     parser.add_argument("--agent", default="iou")
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    seconds: dict[bool, list[float]] = {True: [], False: []}
+    seconds: dict[tuple[bool, bool], list[float]] = {}
+    modes = [(here, one) for one in (False, True) for here in (True, False)]
     with tempfile.TemporaryDirectory() as tmp:
-        outs = {mode: Path(tmp) / ("here" if mode else "child") for mode in (True, False)}
+        outs = {mode: Path(tmp) / f"{mode[0]}-{mode[1]}" for mode in modes}
+        first = ""
         for _ in range(args.repeats):
-            for mode in (True, False):  # alternated, so that load changes hit both alike
-                seconds[mode].append(evaluate(args.env, args.agent, outs[mode], mode))
-        identical = result_bytes(outs[True]) == result_bytes(outs[False])
-        sequences = len(list((outs[True] / "sequences").glob("*.json")))
+            for here, one in modes:  # alternated, so that load changes hit every mode alike
+                if one and not first:
+                    first = sorted((outs[True, False] / "sequences").glob("*.json"))[0].stem
+                extra = ("--sequences", first) if one else ()
+                seconds.setdefault((here, one), []).append(
+                    evaluate(args.env, args.agent, outs[here, one], here, *extra))
+        identical = result_bytes(outs[True, False]) == result_bytes(outs[False, False])
+        sequences = len(list((outs[True, False] / "sequences").glob("*.json")))
+    median = {mode: statistics.median(times) for mode, times in seconds.items()}
     print(f"{args.env}, agent {args.agent}, {sequences} sequence(s), {args.repeats} runs each")
-    print(f"{'mode':<26}{'best s':>9}{'median s':>10}")
-    for mode, label in ((True, "in-process (--in-process)"), (False, "supervised child")):
-        print(f"{label:<26}{min(seconds[mode]):>9.2f}{statistics.median(seconds[mode]):>10.2f}")
-    extra = statistics.median(seconds[False]) - statistics.median(seconds[True])
-    print(f"overhead of the child: {extra:+.2f} s per run (median), "
-          f"{extra / max(1, sequences):+.2f} s per sequence")
+    print(f"{'mode':<26}{'sequences':>10}{'best s':>9}{'median s':>10}")
+    for (here, one), times in seconds.items():
+        label = "in-process (--in-process)" if here else "supervised child"
+        print(f"{label:<26}{1 if one else sequences:>10}{min(times):>9.2f}"
+              f"{statistics.median(times):>10.2f}")
+    per_run = median[False, False] - median[True, False]
+    per_sequence = (per_run - (median[False, True] - median[True, True])) / max(1, sequences - 1)
+    print(f"overhead of the child: {per_run:+.2f} s per run of {sequences} sequences (median), "
+          f"{per_sequence:+.2f} s per extra sequence")
     print(f"result files byte-identical: {'yes' if identical else 'NO'}")
     timer, thread = beat_cost(100_000)
     print(f"watchdog beat(): {timer:.2f} us per step with the kernel timer, "
