@@ -18,6 +18,9 @@ from typing import Any
 
 from .watchdog import limit, timeout_message
 
+#: A task's heartbeat that says its work is saved and the agent's close() runs (timed too).
+CLOSING = "closing"
+
 
 class WorkerDied(RuntimeError):
     """The worker process running a task ended without an answer."""
@@ -100,6 +103,7 @@ class _Worker:
     beat: float = 0.0
     frames: int = 0
     started: bool = False  # the task's first heartbeat came (start-up is not a step)
+    closing: bool = False  # the task's work is saved; the agent's close() runs
 
 
 class SupervisedPool:
@@ -141,6 +145,7 @@ class SupervisedPool:
                 elif worker.number is None and queue:
                     worker.number, worker.item = queue.popleft()
                     worker.beat, worker.frames, worker.started = time.monotonic(), 0, False
+                    worker.closing = False
                     worker.conn.send((worker.number, fn, args(worker.item)))
             if any(w.number is not None for w in self.workers):
                 yield from self._wait(on_beat)
@@ -160,8 +165,11 @@ class SupervisedPool:
                   and time.monotonic() - worker.beat >= self.step_timeout):
                 item = worker.item
                 self._retire(worker, kill=True)
-                yield item, WorkerTimedOut(timeout_message(self.step_timeout, worker.frames)
-                                           + "; its worker process was stopped")
+                yield item, WorkerTimedOut(
+                    (f"the agent's close() did not return within {self.step_timeout:g} s "
+                     "after the sequence was saved (run the same command again to keep it)"
+                     if worker.closing else timeout_message(self.step_timeout, worker.frames))
+                    + "; its worker process was stopped")
 
     def _serve(self, worker: _Worker, on_beat: Callable[[Any, int], None] | None
                ) -> Iterator[tuple[Any, Any]]:
@@ -169,6 +177,9 @@ class SupervisedPool:
         try:
             while worker.number is not None and worker.conn.poll():
                 kind, number, payload = worker.conn.recv()
+                if kind == "beat" and payload == CLOSING:
+                    worker.beat, worker.closing = time.monotonic(), True
+                    continue
                 if kind == "beat":
                     worker.beat, worker.frames = time.monotonic(), worker.frames + payload
                     worker.started = True

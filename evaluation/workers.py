@@ -89,6 +89,7 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
     from unitrack_env.agents.base import close_agent
 
     from .episode import play_episode
+    from .pool import CLOSING
     from .runner import OutputError, save_episode
 
     env = agent = None
@@ -101,6 +102,8 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
         record, _ = play_episode(env, agent, sequence, benchmark=bench, on_frame=beat)
         stamp.apply(record)  # an identity.Stamp
         save_episode(Path(out), env, record, bench)
+        if beat is not None:
+            beat(CLOSING)  # a close() that hangs is named as such
         return "ok", record.to_json()
     except OutputError:
         raise

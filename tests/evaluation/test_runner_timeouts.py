@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from unitrack_env.evaluation.pool import describe_exit
+from unitrack_env.evaluation.pool import CLOSING, SupervisedPool, WorkerTimedOut, describe_exit
 from unitrack_env.evaluation.runner import RunFailed, run
 from unitrack_env.evaluation.watchdog import Terminated, sigterm_stops
 
@@ -152,3 +152,17 @@ def test_an_isolated_run_keeps_the_in_process_results(tmp_path):
                 == (tmp_path / "child" / "data" / f"{name}.txt").read_bytes())
         assert here.records[name].digest == child.records[name].digest
     assert here.combined == child.combined
+
+
+def _saved_then_hung_in_close(item: int, beat) -> None:
+    """A pool task whose work is saved and whose agent's close() never returns."""
+    beat(0)
+    beat(CLOSING)
+    time.sleep(3600)
+
+
+def test_a_worker_stuck_in_close_is_stopped_and_named():
+    with SupervisedPool(1, 0, step_timeout=1) as pool:
+        [(item, outcome)] = list(pool.run(_saved_then_hung_in_close, [7], lambda i: (i,)))
+    assert item == 7 and isinstance(outcome, WorkerTimedOut)
+    assert "close() did not return within 1 s after the sequence was saved" in str(outcome)
