@@ -25,7 +25,7 @@ from .cli_types import (
     positive_int,
 )
 from .progress import one_line_warnings
-from .watchdog import DEFAULT_STEP_TIMEOUT
+from .watchdog import DEFAULT_STEP_TIMEOUT, Terminated, sigterm_stops
 
 #: gym.make's own keyword arguments, accepted by every environment.
 GYM_MAKE_OPTIONS: dict[str, Any] = {
@@ -140,7 +140,7 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
         report = run(args.env, args.agent, out=args.out, env_kwargs=env_kwargs,
                      agent_kwargs=agent_kwargs,
                      sequences=args.sequences,
-                     workers=args.workers, overwrite=args.overwrite,
+                     workers=args.workers, overwrite=args.overwrite, isolate=not args.in_process,
                      progress=not args.quiet and args.format == "table",
                      step_timeout=args.step_timeout, restamp=args.restamp)
     log = console if args.format == "table" else _console(stderr=True)
@@ -313,6 +313,8 @@ def _add_evaluate(ev: argparse.ArgumentParser) -> None:
     ev.add_argument("--step-timeout", type=non_negative_float, default=DEFAULT_STEP_TIMEOUT,
                     metavar="SECONDS", help="a step (the agent's act() and the env's step) "
                     "longer than this fails its sequence (default: %(default)g; 0: no limit)")
+    ev.add_argument("--in-process", action="store_true", help="with --workers 1, play here "
+                    "(for a debugger), not in a supervised child process that can be stopped")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     _format_option(ev)
     ev.set_defaults(func=_cmd_evaluate)
@@ -405,12 +407,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     console = _console()
     try:
-        with one_line_warnings():
+        with one_line_warnings(), sigterm_stops():
             return args.func(args, console)
-    except KeyboardInterrupt:
-        _console(stderr=True).print("interrupted: finished sequences are kept; run the same "
+    except KeyboardInterrupt as stop:  # Ctrl-C, or SIGTERM (Terminated): exit 130 or 143
+        what = "terminated (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
+        _console(stderr=True).print(f"{what}: finished sequences are kept; run the same "
                                     "command again to resume", markup=False)
-        return 130
+        return 143 if isinstance(stop, Terminated) else 130
     except Exception as exc:
         errors = _console(stderr=True)
         if args.debug:

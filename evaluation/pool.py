@@ -18,6 +18,9 @@ from typing import Any
 
 from .watchdog import limit, timeout_message
 
+#: A task's heartbeat that says its work is saved and the agent's close() runs (timed too).
+CLOSING = "closing"
+
 
 class WorkerDied(RuntimeError):
     """The worker process running a task ended without an answer."""
@@ -72,17 +75,25 @@ def _worker_main(conn: Connection, parent: int, threads: int,
         number, fn, args = task
 
         def beat(frames: int = 1, number: int = number) -> None:
-            conn.send(("beat", number, frames))
+            _send(conn, ("beat", number, frames))
 
         try:
             answer: tuple[Any, ...] = ("ok", number, fn(*args, beat))
         except BaseException as exc:  # noqa: BLE001 - every failure goes back to the parent
             answer = ("raised", number, exc)
         try:
-            conn.send(answer)
+            _send(conn, answer)
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            conn.send(("raised", number, RuntimeError(f"the task's answer cannot be sent "
-                                                      f"back: {type(exc).__name__}: {exc}")))
+            _send(conn, ("raised", number, RuntimeError(f"the task's answer cannot be sent "
+                                                        f"back: {type(exc).__name__}: {exc}")))
+
+
+def _send(conn: Connection, message: tuple[Any, ...]) -> None:
+    """Send to the parent; when it is gone (killed, terminated), end this worker quietly."""
+    try:
+        conn.send(message)
+    except OSError:  # BrokenPipeError: no one is left to read the answer or a traceback
+        os._exit(1)
 
 
 @dataclass
@@ -94,6 +105,7 @@ class _Worker:
     beat: float = 0.0
     frames: int = 0
     started: bool = False  # the task's first heartbeat came (start-up is not a step)
+    closing: bool = False  # the task's work is saved; the agent's close() runs
 
 
 class SupervisedPool:
@@ -141,6 +153,7 @@ class SupervisedPool:
                 elif worker.number is None and queue:
                     worker.number, worker.item = queue.popleft()
                     worker.beat, worker.frames, worker.started = time.monotonic(), 0, False
+                    worker.closing = False
                     worker.conn.send((worker.number, fn, args(worker.item)))
             if any(w.number is not None for w in self.workers):
                 yield from self._wait(on_beat)
@@ -160,8 +173,11 @@ class SupervisedPool:
                   and time.monotonic() - worker.beat >= self.step_timeout):
                 item = worker.item
                 self._retire(worker, kill=True)
-                yield item, WorkerTimedOut(timeout_message(self.step_timeout, worker.frames)
-                                           + "; its worker process was stopped")
+                yield item, WorkerTimedOut(
+                    (f"the agent's close() did not return within {self.step_timeout:g} s "
+                     "after the sequence was saved (run the same command again to keep it)"
+                     if worker.closing else timeout_message(self.step_timeout, worker.frames))
+                    + "; its worker process was stopped")
 
     def _serve(self, worker: _Worker, on_beat: Callable[[Any, int], None] | None
                ) -> Iterator[tuple[Any, Any]]:
@@ -169,6 +185,9 @@ class SupervisedPool:
         try:
             while worker.number is not None and worker.conn.poll():
                 kind, number, payload = worker.conn.recv()
+                if kind == "beat" and payload == CLOSING:
+                    worker.beat, worker.closing = time.monotonic(), True
+                    continue
                 if kind == "beat":
                     worker.beat, worker.frames = time.monotonic(), worker.frames + payload
                     worker.started = True

@@ -31,7 +31,7 @@ from .ownership import Manifest, hold_folder, outside, own_folder, settle
 from .restamp import restamp_record
 from .resume import check_run_json, record_path, stale_reason
 from .run_spec import RunSpec
-from .serial import play_here
+from .serial import play_here, play_isolated
 from .watchdog import DEFAULT_STEP_TIMEOUT
 from .workers import (
     SequenceFailure,
@@ -91,10 +91,13 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int,
+def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], elsewhere: bool,
                    env_id: str) -> tuple[type, str, str | None]:
-    """The agent class, its name for the record and its importable reference (checked)."""
-    if workers > 1:
+    """The agent class, its name for the record and its importable reference (checked).
+
+    ``elsewhere``: the agent plays in other processes, which must be able to import it.
+    """
+    if elsewhere:
         refuse_unguarded_script()
     cls = agent_class(agent)  # a name, a reference or a class; anything else: TypeError
     name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
@@ -107,12 +110,12 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], workers: int
         raise ValueError(f"agent '{name}' plays {', '.join(tasks)}, not {task} ({env_id}); "
                          f"agents for {task}: {', '.join(agents_for_task(task)) or 'none'}")
     reference = portable_reference(cls)
-    if reference is None and workers > 1:
+    if reference is None and elsewhere:
         raise ValueError(
             f"agent class {cls.__qualname__} is defined where worker processes cannot "
             "import it (a notebook, python -c, exec, or inside a function); move it to the "
             "top level of a module (or a .py file and pass 'path/to/file.py:ClassName'), or "
-            "use workers=1"
+            "use workers=1 (isolate=False)"
         )
     return cls, name, reference
 
@@ -197,6 +200,7 @@ def run(
     progress: bool = True,
     step_timeout: float | None = DEFAULT_STEP_TIMEOUT,
     restamp: bool = False,
+    isolate: bool = False,
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
@@ -205,8 +209,10 @@ def run(
     ``out`` is reused to resume unless ``overwrite`` (which deletes only files of our runs,
     per ``out/manifest.json``); ``step_timeout`` None or 0 means no limit. ``restamp``
     keeps finished sequences whose only change is the agent's code (:mod:`.restamp`: you
-    vouch that the edit cannot change them). Returns a :class:`RunReport`, the metrics also
-    in ``out/metrics.json``.
+    vouch that the edit cannot change them). ``isolate`` plays ``workers=1`` in one
+    supervised child process (:func:`.serial.play_isolated`, the CLI's default): a step
+    stuck in native code, a crash or a hung ``close()`` then ends only what it was doing.
+    Returns a :class:`RunReport`, the metrics also in ``out/metrics.json``.
 
     Raises:
         RunFailed: some sequences failed (the others are kept; rerun to resume).
@@ -215,7 +221,7 @@ def run(
     """
     agent_kwargs = dict(agent_kwargs or {})
     sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
-    cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
+    cls, name, reference = _resolve_agent(agent, agent_kwargs, workers > 1 or isolate, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
     check_out_folder(out)
@@ -224,16 +230,18 @@ def run(
         base = env.unwrapped
         names = select_sequences(sequences, base.sequence_names, env_id)
         bench = base.scoring
-        agent_obj = cls(**agent_kwargs)
+        agent_obj = cls(**agent_kwargs)  # its checks refuse bad options before the first frame
     except BaseException:
         env.close()
         raise
     try:
         with hold_folder(out, f"agent {name} on {env_id}"):
             return _run_owned(spec, env, bench, agent_obj, out, names,
-                              _Options(workers, progress, step_timeout, overwrite, restamp))
+                              _Options(workers, progress, step_timeout, overwrite, restamp,
+                                       isolate))
     finally:
-        close_agent(agent_obj)
+        if not isolate:  # isolated, only the children's copies play, and they close them
+            close_agent(agent_obj)
         env.close()
 
 
@@ -244,6 +252,7 @@ class _Options:
     step_timeout: float | None
     overwrite: bool
     restamp: bool = False
+    isolate: bool = False
 
 
 def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
@@ -285,7 +294,10 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     manifest.claim(todo)
     try:
         with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
-            if options.workers <= 1 or len(todo) <= 1:
+            if options.isolate and (options.workers <= 1 or len(todo) <= 1):
+                records, played = play_isolated(spec, out, todo, stamps, bar, causes,
+                                                options.step_timeout)
+            elif options.workers <= 1 or len(todo) <= 1:
                 records, played = play_here(spec, env, bench, agent_obj, out, todo, stamps,
                                              bar, causes, options.step_timeout)
             else:

@@ -5,11 +5,13 @@ More in docs/module-notes.md.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from types import FrameType, TracebackType
 
 #: The default limit of one step, in seconds (generous: a slow CPU model takes ~1 s).
@@ -20,6 +22,27 @@ GRACE = 30.0
 
 class StepTimeout(BaseException):  # noqa: N818 - it is a stop signal, like KeyboardInterrupt
     """A step took longer than the limit."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: the command stops as for Ctrl-C (finished sequences are kept)."""
+
+
+@contextlib.contextmanager
+def sigterm_stops() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` (on the main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def timeout_message(seconds: float, frame: int) -> str:
@@ -35,7 +58,13 @@ def limit(seconds: float | None) -> float | None:
 
 
 class StepWatchdog:
-    """The in-process watchdog: ``start(name)``, ``beat()`` after each step, ``stop()``."""
+    """The in-process watchdog: ``start(name)``, ``beat()`` after each step, ``stop()``.
+
+    On the main thread the kernel's interval timer (``setitimer``) sends SIGALRM at the
+    deadline: no thread of ours needs the GIL for it, so an agent in C code that holds the
+    GIL but checks for signals (a catastrophic regex) is stopped on time. The watchdog
+    thread is the fallback (and ends the process after ``grace`` when nothing helps).
+    """
 
     def __init__(self, seconds: float | None, where: str = "", grace: float | None = None
                  ) -> None:
@@ -64,6 +93,7 @@ class StepWatchdog:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.deadline = None
+        self._arm(0.0)
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
@@ -75,6 +105,7 @@ class StepWatchdog:
         self.sequence, self.frame, self.fired = sequence, 0, 0.0
         if self.seconds is not None:
             self.deadline = time.monotonic() + self.seconds
+            self._arm(self.seconds)
 
     def beat(self, frames: int = 1) -> None:
         """A step ended."""
@@ -82,17 +113,28 @@ class StepWatchdog:
         self.fired = 0.0
         if self.seconds is not None:
             self.deadline = time.monotonic() + self.seconds
+            self._arm(self.seconds)
 
     def stop(self) -> None:
         """The sequence ended (or failed)."""
         self.deadline = None
         self.fired = 0.0
+        self._arm(0.0)
+
+    def _arm(self, seconds: float) -> None:
+        """Have the kernel send SIGALRM in ``seconds`` (0: cancel)."""
+        if self._signals:
+            signal.setitimer(signal.ITIMER_REAL, seconds)
 
     def _on_alarm(self, signum: int, frame: FrameType | None) -> None:
         deadline = self.deadline
-        if deadline is not None and self.seconds is not None and time.monotonic() >= deadline:
-            self.deadline = None
-            raise StepTimeout(timeout_message(self.seconds, self.frame))
+        if deadline is not None and self.seconds is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.deadline = None
+                raise StepTimeout(timeout_message(self.seconds, self.frame))
+            self._arm(left)  # the timer ran a little ahead of the monotonic clock
+            return
         if callable(self._previous):  # not ours: the handler we replaced for the run
             self._previous(signum, frame)
 

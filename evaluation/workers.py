@@ -43,6 +43,20 @@ class SequenceFailure:
         return f"{type(exc).__name__}: {exc}"
 
 
+class RemoteTraceback(Exception):  # noqa: N818 - it carries text, it is never raised
+    """The traceback of an error in a child process, as text.
+
+    The ``__cause__`` of a failure, so that ``--debug`` shows the agent's own lines.
+    """
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f"\n(in the child process that played it)\n{self.text}"
+
+
 def _watch_parent(parent: int) -> None:
     def watch() -> None:
         while True:
@@ -75,6 +89,7 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
     from unitrack_env.agents.base import close_agent
 
     from .episode import OutputError, play_episode, save_episode
+    from .pool import CLOSING
 
     env = agent = None
     try:
@@ -86,6 +101,8 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
         record, _ = play_episode(env, agent, sequence, benchmark=bench, on_frame=beat)
         stamp.apply(record)  # an identity.Stamp
         save_episode(Path(out), env, record, bench)
+        if beat is not None:
+            beat(CLOSING)  # a close() that hangs is named as such
         return "ok", record.to_json()
     except OutputError:
         raise
@@ -118,6 +135,8 @@ def refuse_unguarded_script() -> None:
         frame = frame.f_back
     if path is None or top is None or not Path(path).is_file():
         return
+    if Path(top.f_code.co_filename).resolve() != Path(path).resolve():
+        return  # a script run by runpy under another main module: that one is re-imported
     try:
         tree = ast.parse(Path(path).read_text(encoding="utf-8"))
     except (OSError, SyntaxError, ValueError):

@@ -58,6 +58,7 @@ def run_command(command: str, monkeypatch: pytest.MonkeyPatch, *extra: str) -> N
     """Run a ``python <script>.py [args]`` line of the doc in this process (exit status 0)."""
     python, script, *args = shlex.split(command)
     assert python == "python", command
+    script = str(Path(script).resolve())  # as `python x.py` gives it: a child process finds it
     monkeypatch.setattr(sys, "argv", [script, *args, *extra])
     try:
         runpy.run_path(script, run_name="__main__")

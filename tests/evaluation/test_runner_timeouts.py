@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
 
-from unitrack_env.evaluation.pool import describe_exit
+from unitrack_env.evaluation.pool import CLOSING, SupervisedPool, WorkerTimedOut, describe_exit
 from unitrack_env.evaluation.runner import RunFailed, run
+from unitrack_env.evaluation.watchdog import Terminated, sigterm_stops
 
 ENV = "UniTrack/MOT16-v0"
 
@@ -111,3 +114,55 @@ def test_a_step_that_cannot_be_interrupted_ends_the_process_with_a_line(tmp_path
     assert "sequence 'SYN-02': no step finished within 1 s" in done.stderr
     assert "--workers 2" in done.stderr
     assert (tmp_path / "run" / "sequences" / "SYN-01.json").is_file()  # kept
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_step_in_c_code_holding_the_gil_is_stopped_in_this_process(tmp_path):
+    # A catastrophic regex holds the GIL (a watchdog thread could never run) but checks for
+    # signals: the kernel timer's SIGALRM stops it on time, and the next sequence plays.
+    agent = _agent(tmp_path, "import re; re.match(r'(a+)+$', 'a' * 40 + 'b')")
+    script = textwrap.dedent(f"""
+        from unitrack_env.evaluation.runner import RunFailed, run
+        try:
+            run({ENV!r}, {agent!r}, out={str(tmp_path / 'run')!r}, progress=False,
+                step_timeout=1)
+        except RunFailed as failed:
+            print(failed.failures["SYN-01"])
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, env=os.environ | {"PYTHONPATH": os.pathsep.join(
+                              sys.path)})  # a hard limit: a regression fails, never hangs
+    assert "no step finished within 1 s (after frame 2)" in done.stdout, done.stderr
+    assert (tmp_path / "run" / "sequences" / "SYN-02.json").is_file()
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_sigterm_inside_the_block_stops_like_ctrl_c():
+    with pytest.raises(Terminated), sigterm_stops():
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
+
+
+def test_an_isolated_run_keeps_the_in_process_results(tmp_path):
+    here = run(ENV, "iou", out=tmp_path / "here", progress=False)
+    child = run(ENV, "iou", out=tmp_path / "child", progress=False, isolate=True)
+    for name in ("SYN-01", "SYN-02"):
+        assert ((tmp_path / "here" / "data" / f"{name}.txt").read_bytes()
+                == (tmp_path / "child" / "data" / f"{name}.txt").read_bytes())
+        assert here.records[name].digest == child.records[name].digest
+    assert here.combined == child.combined
+
+
+def _saved_then_hung_in_close(item: int, beat) -> None:
+    """A pool task whose work is saved and whose agent's close() never returns."""
+    beat(0)
+    beat(CLOSING)
+    time.sleep(3600)
+
+
+def test_a_worker_stuck_in_close_is_stopped_and_named():
+    with SupervisedPool(1, 0, step_timeout=1) as pool:
+        [(item, outcome)] = list(pool.run(_saved_then_hung_in_close, [7], lambda i: (i,)))
+    assert item == 7 and isinstance(outcome, WorkerTimedOut)
+    assert "close() did not return within 1 s after the sequence was saved" in str(outcome)
