@@ -20,10 +20,11 @@ import gymnasium as gym
 
 from unitrack_env.benchmarks.base import Benchmark
 
-from .episode import SequenceRecord, play_episode
+from .episode import SequenceRecord, play_episode, save_episode
 from .identity import Stamp
+from .pool import SupervisedPool
 from .watchdog import StepTimeout, StepWatchdog, limit
-from .workers import RemoteTraceback, SequenceFailure
+from .workers import RemoteTraceback, SequenceFailure, init_worker
 
 #: The child's environment and agent, kept from one sequence to the next (as in this process).
 _KEPT: dict[str, Any] = {}
@@ -39,8 +40,6 @@ def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Pa
 
     A step longer than ``step_timeout`` fails its sequence (:mod:`.watchdog`).
     """
-    from .episode import save_episode
-
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     player = env
@@ -88,8 +87,6 @@ def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None, e
     """
     from unitrack_env.agents.base import close_agent
 
-    from .runner import save_episode
-
     if sequence is None:
         beat(0)  # close() is timed like a step
         agent, env = _KEPT.pop("agent", None), _KEPT.pop("env", None)
@@ -134,8 +131,6 @@ def play_isolated(spec: Any, out: Path, todo: list[str], stamps: dict[str, Stamp
     runs last in the child, timed like a step: one that never returns is stopped with a
     warning, the results kept.
     """
-    from .pool import SupervisedPool
-
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     if not todo:  # all kept (a resumed run): no child, no copy of the agent to close
@@ -150,7 +145,7 @@ def play_isolated(spec: Any, out: Path, todo: list[str], stamps: dict[str, Stamp
 
     entry = gym.spec(spec.env_id).entry_point
     entry = entry.partition(":")[0] if isinstance(entry, str) else ""
-    with SupervisedPool(1, 0, step_timeout) as pool:  # 0: the child keeps torch's defaults
+    with SupervisedPool(1, 0, step_timeout, init=init_worker) as pool:  # 0: torch defaults
         played = pool.run(_play_kept, [*todo, None],
                           lambda name: (spec, str(out), name, stamps.get(name or ""), entry),
                           on_beat=on_beat)

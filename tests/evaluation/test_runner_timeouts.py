@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from unitrack_env.evaluation.pool import CLOSING, SupervisedPool, WorkerTimedOut, describe_exit
+from unitrack_env.evaluation.workers import init_worker
 from unitrack_env.evaluation.runner import RunFailed, run
 from unitrack_env.evaluation.watchdog import Terminated, sigterm_stops
 
@@ -162,7 +163,7 @@ def _saved_then_hung_in_close(item: int, beat) -> None:
 
 
 def test_a_worker_stuck_in_close_is_stopped_and_named():
-    with SupervisedPool(1, 0, step_timeout=1) as pool:
+    with SupervisedPool(1, 0, step_timeout=1, init=init_worker) as pool:
         [(item, outcome)] = list(pool.run(_saved_then_hung_in_close, [7], lambda i: (i,)))
     assert item == 7 and isinstance(outcome, WorkerTimedOut)
     assert "close() did not return within 1 s after the sequence was saved" in str(outcome)
