@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from unitrack_env.evaluation.pool import CLOSING, SupervisedPool, WorkerTimedOut, describe_exit
-from unitrack_env.evaluation.workers import init_worker
 from unitrack_env.evaluation.runner import RunFailed, run
 from unitrack_env.evaluation.watchdog import Terminated, sigterm_stops
+from unitrack_env.evaluation.workers import init_worker
 
 ENV = "UniTrack/MOT16-v0"
 
