@@ -23,6 +23,7 @@ from unitrack_env.datasets.synthetic import davis, motchallenge, otb
 from unitrack_env.datasets.synthetic import jhmdb as jhmdb_synthetic
 from unitrack_env.datasets.synthetic import mots as mots_synthetic
 from unitrack_env.datasets.synthetic import posetrack as posetrack_synthetic
+from unitrack_env.datasets.synthetic import tapvid as tapvid_synthetic
 from unitrack_env.datasets.synthetic import youtube_vis as vis_synthetic
 
 #: Version of the generated data; bump it whenever any writer's output changes, so that
@@ -48,6 +49,7 @@ WRITERS: Mapping[str, Callable[[Path, str], None]] = MappingProxyType({
     "youtube_vis": vis_synthetic.write_youtube_vis,
     "jhmdb": jhmdb_synthetic.write_jhmdb,
     "posetrack": posetrack_synthetic.write_posetrack,
+    "tapvid": tapvid_synthetic.write_tapvid,
 })
 #: Benchmarks each kind can generate.
 KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
@@ -58,6 +60,7 @@ KIND_BENCHMARKS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "youtube_vis": vis_synthetic.BENCHMARKS,
     "jhmdb": ("JHMDB",),
     "posetrack": posetrack_synthetic.BENCHMARKS,
+    "tapvid": tapvid_synthetic.BENCHMARKS,
 })
 #: Each kind's ``annotated_frames(benchmark, split)``: the frames of every annotated sequence
 #: its writer writes, known before writing.
@@ -69,6 +72,7 @@ ANNOTATED_FRAMES: Mapping[str, Callable[[str, str | None], dict[str, int]]] = Ma
     "youtube_vis": vis_synthetic.annotated_frames,
     "jhmdb": jhmdb_synthetic.annotated_frames,
     "posetrack": posetrack_synthetic.annotated_frames,
+    "tapvid": tapvid_synthetic.annotated_frames,
 })
 _SPECS_ONLY: ContextVar[bool] = ContextVar("unitrack_synthetic_specs_only", default=False)
 
