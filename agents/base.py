@@ -35,6 +35,8 @@ _BUILTIN_MODULES: dict[str, str] = {
     "unitrack-vos": "unitrack_env.agents.heads.vos",
     "unitrack-pose": "unitrack_env.agents.heads.pose",
     "static-points": "unitrack_env.agents.baselines.static_points",
+    "lk-points": "unitrack_env.agents.baselines.lucas_kanade",
+    "unitrack-points": "unitrack_env.agents.heads.points",
 }
 
 
