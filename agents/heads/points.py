@@ -25,7 +25,7 @@ from ..appearance.spec import AppearanceSpec
 from ..base import Agent
 from ..primitives.label_propagation import LabelPropagator
 from ..primitives.point_queries import QueryBook
-from .pose import MIN_SIGMA, REFINE_RADIUS, belief_maps, decode_maps
+from .pose import MIN_PEAK, MIN_SIGMA, REFINE_RADIUS, belief_maps, decode_maps
 from .vos import make_propagation_config
 
 SIGMA: float = MIN_SIGMA
@@ -83,17 +83,20 @@ class UniTrackPointsAgent(Agent, name="unitrack-points", tasks=("points",)):
         self.book = QueryBook()
         self._groups: list[_Group] = []
         self._scale = np.ones(2)  # feature cells per raster pixel (x, y)
+        #: Per query id, its last peak as a share of its query-frame peak (the confidence
+        #: occlusion is decided from; 1 at the query frame).
+        self.confidence = np.zeros(0)
 
     def _features(self, frame: np.ndarray) -> torch.Tensor:
-        size = self.config.input_size
-        if size is not None and (frame.shape[1], frame.shape[0]) != tuple(size):
-            frame = cv2.resize(np.ascontiguousarray(frame), tuple(size),
+        raster_height, raster_width = frame.shape[:2]
+        width, height = self.config.input_size or (raster_width, raster_height)
+        if (raster_width, raster_height) != (width, height):
+            frame = cv2.resize(np.ascontiguousarray(frame), (width, height),
                                interpolation=cv2.INTER_LINEAR)
         features = self.cached.features(frame)[0]
-        width, height = size or (frame.shape[1], frame.shape[0])
         rows, cols = self.model.map_extent(height, width)  # input pixels the map spans
-        self._scale = np.array([features.shape[2] / (cols * frame.shape[1] / width),
-                                features.shape[1] / (rows * frame.shape[0] / height)])
+        self._scale = np.array([features.shape[2] / (cols * raster_width / width),
+                                features.shape[1] / (rows * raster_height / height)])
         return features
 
     def _to_grid(self, points: np.ndarray) -> np.ndarray:
@@ -107,6 +110,7 @@ class UniTrackPointsAgent(Agent, name="unitrack-points", tasks=("points",)):
         """Start an episode (queries arrive with the observations)."""
         self.book.reset(info)
         self._groups = []
+        self.confidence = np.ones(self.book.capacity)
 
     def _start_group(self, ids: np.ndarray, features: torch.Tensor) -> None:
         shape = (features.shape[1], features.shape[2])
@@ -126,8 +130,14 @@ class UniTrackPointsAgent(Agent, name="unitrack-points", tasks=("points",)):
             for group in self._groups:
                 maps = group.propagator.step(features)
                 cells, peaks = decode_maps(maps.cpu(), self.config.refine_radius)
-                self.book.positions[group.ids] = self._to_raster(cells)
-                self.book.occluded[group.ids] = peaks < self.config.occlusion_ratio * group.peaks
+                kept = peaks > MIN_PEAK  # else the map is empty: stay where it was
+                self.book.positions[group.ids[kept]] = self._to_raster(cells[kept])
+                self.confidence[group.ids] = np.divide(
+                    np.where(kept, peaks, 0.0), group.peaks, out=np.zeros(len(peaks)),
+                    where=group.peaks > 0)
+                self.book.occluded[group.ids] = (self.confidence[group.ids]
+                                                 < self.config.occlusion_ratio)
             if len(new):
+                self.confidence[new] = 1.0
                 self._start_group(new, features)
         return self.book.action()

@@ -104,3 +104,14 @@ def test_unitrack_points_plays_both_query_modes(mode):
     while not terminated:
         observation, _, terminated, _, info = env.step(agent.act(observation))
     assert 0.0 <= info["metrics"]["AJ"] <= 1.0
+
+
+def test_unitrack_points_maps_the_raster_onto_a_smaller_input():
+    """With ``input_size`` half the raster, a feature cell spans 16 raster pixels."""
+    texture = _texture(2, 256)
+    agent = make_agent("unitrack-points", input_size=(128, 128), feature_cache=False,
+                       num_threads=1)
+    agent.reset(None, INFO)
+    agent.act(_observation(texture, [0], [[200.5, 100.5]], [0]))
+    assert np.allclose(agent._scale, [1 / 16, 1 / 16])
+    assert agent._groups[0].peaks[0] > 0.3  # the point's belief map lies on the grid
