@@ -166,3 +166,27 @@ def test_full_resolution_and_real_fixture(shared_data, tmp_path):
     assert info["raster_size"] == (256, 256) and info["num_queries"] == 19
     synthetic = gym.make("UniTrack/TAPVid-DAVIS-v0", resolution="full").unwrapped
     assert synthetic.reset()[1]["raster_size"] == (320, 180)
+
+
+def test_cli_evaluate_then_score_the_folder_in_both_modes(tmp_path, capsys):
+    import json
+
+    from unitrack_env.evaluation.cli import main
+
+    for mode in ("first", "strided"):
+        out = tmp_path / mode
+        assert main(["evaluate", "--env", "UniTrack/TAPVid-RGBStacking-v0", "--agent",
+                     "lk-points", "--env-arg", f"query_mode={mode}", "--out", str(out),
+                     "--quiet", "--format", "json"]) == 0
+        played = json.loads(capsys.readouterr().out)
+        assert sorted(p.name for p in (out / "data").iterdir()) == ["0.npz", "1.npz"]
+        assert main(["score", "--env", "UniTrack/TAPVid-RGBStacking-v0", "--env-arg",
+                     f"query_mode={mode}", "--results", str(out / "data"),
+                     "--format", "json"]) == 0
+        scored = json.loads(capsys.readouterr().out)
+        assert scored["combined"] == pytest.approx(played["combined"])
+        assert set(scored["combined"]) >= {"AJ", "delta_x_avg", "OA"}
+    # the strided results are not the "first" queries: refused, naming the file
+    assert main(["score", "--env", "UniTrack/TAPVid-RGBStacking-v0", "--results",
+                 str(tmp_path / "strided" / "data")]) != 0
+    assert "0.npz, field 'query_points'" in capsys.readouterr().err
