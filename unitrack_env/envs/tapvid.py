@@ -54,6 +54,9 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
     again at its frame, and the agent answers the frames before it. No agent is scored on a
     frame it has not been shown after the query's frame in playing order. A forward pass
     scores frames ``t >= q`` (``t = q`` is never scored), the reversed pass frames ``t < q``.
+    Both modes score exactly the (query, frame) pairs the reference scores, so the numbers
+    are comparable with published ones; the trackers behind those saw whole videos at once
+    (offline), which an online agent here never does.
 
     With no ``root`` (and no ``UNITRACK_DATA``), a small deterministic synthetic data set in
     the same pickle layout is generated once into the user cache: textured objects crossing
