@@ -34,6 +34,9 @@ _BUILTIN_MODULES: dict[str, str] = {
     "unitrack-dcf": "unitrack_env.agents.heads.sot",
     "unitrack-vos": "unitrack_env.agents.heads.vos",
     "unitrack-pose": "unitrack_env.agents.heads.pose",
+    "static-points": "unitrack_env.agents.baselines.static_points",
+    "lk-points": "unitrack_env.agents.baselines.lucas_kanade",
+    "unitrack-points": "unitrack_env.agents.heads.points",
 }
 
 

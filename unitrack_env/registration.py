@@ -67,6 +67,8 @@ class Variant:
 _MOT = "unitrack_env.envs.motchallenge:MOTChallengeEnv"
 _B = "unitrack_env.benchmarks."
 _MOT_SCORING = _B + "motchallenge:MOTChallengeBenchmark"
+_TAPVID = "unitrack_env.envs.tapvid:TAPVidEnv"
+_TAPVID_SCORING = _B + "tapvid:TAPVidBenchmark"
 
 VARIANTS: tuple[Variant, ...] = (
     Variant("MOT15", _MOT, {"benchmark": "MOT15"}, folder="MOT15", scoring=_MOT_SCORING),
@@ -87,6 +89,12 @@ VARIANTS: tuple[Variant, ...] = (
             scoring=_B + "jhmdb:JHMDBBenchmark"),
     Variant("PoseTrack", "unitrack_env.envs.posetrack:PoseTrackEnv", {},
             folder="PoseTrack2018", scoring=_B + "posetrack:PoseTrackBenchmark"),
+    Variant("TAPVid-DAVIS", _TAPVID, {"benchmark": "TAPVid-DAVIS"}, folder="TAPVid",
+            scoring=_TAPVID_SCORING),
+    Variant("TAPVid-RGBStacking", _TAPVID, {"benchmark": "TAPVid-RGBStacking"},
+            folder="TAPVid", scoring=_TAPVID_SCORING),
+    Variant("RoboTAP", _TAPVID, {"benchmark": "RoboTAP"}, folder="RoboTAP",
+            scoring=_TAPVID_SCORING),
 )
 
 #: Rows added at run time by :func:`register_variant` (a user's own tasks).

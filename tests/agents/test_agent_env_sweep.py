@@ -28,6 +28,7 @@ FAST_OPTIONS: dict[str, dict[str, Any]] = {
     "unitrack-vos": {"num_threads": 1},
     "unitrack-xcorr": {"num_threads": 1},
     "unitrack-dcf": {"num_threads": 1},
+    "unitrack-points": {"input_size": (128, 128), "feature_cache": False, "num_threads": 1},
 }
 
 

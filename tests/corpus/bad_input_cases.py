@@ -1484,3 +1484,53 @@ CASES = CASES + (
        _render_into(_not_writable), "exit 2:", "episode.mp4", "not writable",
        error="CLIFailed"),
 )
+
+
+# ------------------------------------------------------------------------- TAP-Vid pickles
+def tapvid(change: Callable[[dict], bytes | None]) -> Callable[[Path], None]:
+    """A TAP-Vid case: the synthetic DAVIS pickle changed by ``change(videos)`` (its return:
+    the file's bytes, or None to pickle the changed dict), opened on its first video."""
+    def run(scratch: Path) -> None:
+        from unitrack_env.datasets.tapvid import restricted_load
+
+        videos = restricted_load(synthetic("tapvid", "TAPVid-DAVIS") / "tapvid_davis.pkl")
+        videos = {name: dict(entry) for name, entry in videos.items()}
+        data = change(videos)
+        write(scratch / "tapvid_davis.pkl", data if data is not None else
+              pickle.dumps(videos, protocol=4))
+        open_env("UniTrack/TAPVid-DAVIS-v0", scratch, "syn-cross")
+    return run
+
+
+def _tapvid_set(key: str, value: Callable[[Any], Any]) -> Callable[[dict], None]:
+    def change(videos: dict) -> None:
+        videos["syn-cross"][key] = value(videos["syn-cross"][key])
+    return change
+
+
+def _point_outside(points: np.ndarray) -> np.ndarray:
+    points = points.copy()
+    points[0, 0] = [1.5, 0.5]  # track 0 is a background point, visible in frame 0
+    return points
+
+
+CASES = CASES + (
+    _c("TAPVid-pickle-global", "a pickle that asks for os.system (code that would run when "
+       "unpickled)", tapvid(lambda videos: b"cos\nsystem\n(S'true'\ntR."),
+       "tapvid_davis.pkl", "the global os.system", "it was not loaded"),
+    _c("TAPVid-point-outside-frame", "a visible point at x = 1.5 (points are fractions of "
+       "the frame)", tapvid(_tapvid_set("points", _point_outside)),
+       "tapvid_davis.pkl, field 'points'", "video 'syn-cross': visible point 0 at frame 0",
+       "outside 0..1"),
+    _c("TAPVid-occluded-shape", "occlusion flags for one frame fewer than the video",
+       tapvid(_tapvid_set("occluded", lambda occ: occ[:, :-1])),
+       "field 'occluded'", "'occluded' is bool"),
+    _c("TAPVid-video-float", "frames stored as float32",
+       tapvid(_tapvid_set("video", lambda video: video.astype(np.float32))),
+       "field 'video'", "'video' is float32", "expected uint8 [T, H, W, 3]"),
+    _c("action-tapvid-nan", "TAP-Vid: a NaN position for an active query",
+       act("UniTrack/TAPVid-DAVIS-v0", lambda obs: {
+           "tracks": np.full((len(obs["active"]), 2), np.nan, np.float32),
+           "occluded": np.zeros(len(obs["active"]), np.int8)}),
+       "frame 0: query 0:", "must be finite", error="InvalidActionError"),
+)

@@ -23,7 +23,7 @@ from unitrack_env.registration import variant
 ALL_IDS = unitrack_env.env_ids()
 #: A cheap agent per task (none of them looks at pixels).
 AGENTS = {"mot": "iou", "mots": "iou", "vis": "iou", "posetrack": "iou", "sot": "repeat-box",
-          "vos": "repeat-mask", "pose-prop": "repeat-pose"}
+          "vos": "repeat-mask", "pose-prop": "repeat-pose", "points": "static-points"}
 
 
 def _files(folder: Path) -> dict[str, bytes]:

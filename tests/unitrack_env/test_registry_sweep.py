@@ -137,7 +137,8 @@ def test_reset_info_names_task_and_capacities(env_id):
         _, info = env.reset(seed=0)
         assert info["task"] == unitrack_env.task_of(env_id)
         base = env.unwrapped
-        expected = {k: getattr(base, k) for k in ("max_tracks", "max_detections", "max_people")
+        expected = {k: getattr(base, k) for k in ("max_tracks", "max_detections", "max_people",
+                                                      "max_queries")
                     if hasattr(base, k)}
         assert info["capacities"] == expected
         if "max_tracks" in expected:

@@ -24,6 +24,7 @@ from unitrack_env.datasets.synthetic import davis, motchallenge, otb
 from unitrack_env.datasets.synthetic import jhmdb as jhmdb_synthetic
 from unitrack_env.datasets.synthetic import mots as mots_synthetic
 from unitrack_env.datasets.synthetic import posetrack as posetrack_synthetic
+from unitrack_env.datasets.synthetic import tapvid as tapvid_synthetic
 from unitrack_env.datasets.synthetic import youtube_vis as vis_synthetic
 
 #: Version of the generated data; bump it whenever any writer's output changes, so that
@@ -73,6 +74,8 @@ KINDS: Mapping[str, SyntheticKind] = MappingProxyType({kind.name: kind for kind 
                   jhmdb_synthetic.annotated_frames),
     SyntheticKind("posetrack", posetrack_synthetic.write_posetrack,
                   posetrack_synthetic.BENCHMARKS, posetrack_synthetic.annotated_frames),
+    SyntheticKind("tapvid", tapvid_synthetic.write_tapvid, tapvid_synthetic.BENCHMARKS,
+                  tapvid_synthetic.annotated_frames),
 )})
 
 
