@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import os
 import warnings
 from collections.abc import Callable
@@ -15,13 +16,17 @@ import numpy as np
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
 from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.base import SequenceDataset
+from unitrack_env.datasets.lasot import LASOT_SYNTHETIC, LaSOTDataset
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
+from unitrack_env.datasets.synthetic.cache import SyntheticKind
+from unitrack_env.datasets.uav123 import UAV123_SYNTHETIC, UAV123Dataset
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.metrics.sot import (
+    SOTScores,
     aggregate_sot,
     center_error_per_frame,
     evaluate_sot_sequence,
@@ -45,18 +50,20 @@ class SOTFormat:
     ``reader(root)`` lists and loads its sequences (a
     :class:`~unitrack_env.datasets.base.SequenceDataset` of
     :class:`~unitrack_env.datasets.sot.SOTSequence`); ``folder`` is its folder under
-    ``$UNITRACK_DATA``; ``name`` the rule set score reports name.
+    ``$UNITRACK_DATA``; ``name`` the rule set score reports name. ``synthetic``: the
+    format's own synthetic default in its layout (None: the task's, OTB layout, read with
+    the OTB reader). ``absent_fails``: frames the reader flags ``absent`` are scored by the
+    LaSOT toolkit's rule (removed, the rates still divided by every frame);
+    ``normalized``: the scores add LaSOT's normalized precision (the benchmark is then a
+    :class:`SOTProtocolBenchmark`, whose columns include it).
     """
 
-    reader: Callable[[Path], SequenceDataset[SOTSequence]]
+    reader: Callable[..., SequenceDataset[SOTSequence]]
     folder: str
     name: str
-
-
-#: The data formats :class:`OTBBenchmark` reads (its and ``OTBEnv``'s ``data_format=``). A new
-#: format of the task is one row here (or added by a project at run time) beside its reader;
-#: without ``root=`` and data it plays the task's embedded synthetic data (OTB layout).
-SOT_FORMATS: dict[str, SOTFormat] = {"otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK)}
+    synthetic: SyntheticKind | None = None
+    absent_fails: bool = False
+    normalized: bool = False
 
 
 def format_box_value(value: float) -> str:
@@ -93,18 +100,33 @@ class OTBBenchmark(Benchmark):
         ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02)
 
     def __init__(self, dataset: SequenceDataset[SOTSequence], *, synthetic: bool = False,
-                 rules: str = BENCHMARK) -> None:
+                 rules: str = BENCHMARK, sot_format: SOTFormat | None = None) -> None:
         super().__init__(dataset, synthetic=synthetic)
         self.rules = rules
+        self.sot_format = sot_format or SOTFormat(OTBDataset, BENCHMARK_FOLDER, rules)
 
     @classmethod
     def build(cls, root: str | os.PathLike | None = None, data_format: str = "otb",
-              ) -> OTBBenchmark:
-        """The benchmark of ``OTBEnv(root=, data_format=)`` (a key of :data:`SOT_FORMATS`)."""
+              split: str | None = None, variant: str | None = None) -> OTBBenchmark:
+        """The benchmark of ``OTBEnv(root=, data_format=, split=, variant=)``.
+
+        ``data_format`` is a key of :data:`SOT_FORMATS`; ``split`` and ``variant`` go to
+        its reader when given (a reader without them refuses them).
+        """
         chosen = SOT_FORMATS[one_of("data_format", data_format, SOT_FORMATS)]
-        path, synthetic = data_root(root, chosen.folder, "OTB", "otb")
-        reader = OTBDataset if synthetic else chosen.reader  # the task's synthetic data
-        return cls(reader(path), synthetic=synthetic, rules=chosen.name)
+        options = {k: v for k, v in (("split", split), ("variant", variant)) if v is not None}
+        unknown = set(options) - set(inspect.signature(chosen.reader).parameters)
+        if unknown:
+            raise ValueError(f"data_format {data_format!r} takes no {', '.join(sorted(unknown))}=")
+        kind = chosen.synthetic
+        if kind is None:
+            path, synthetic = data_root(root, chosen.folder, "OTB", "otb")
+        else:
+            path, synthetic = data_root(root, chosen.folder, kind.benchmarks[0], kind)
+        reader = OTBDataset if synthetic and kind is None else chosen.reader
+        klass = SOTProtocolBenchmark if chosen.normalized else OTBBenchmark
+        dataset = reader(path, **options) if reader is chosen.reader else reader(path)
+        return klass(dataset, synthetic=synthetic, rules=chosen.name, sot_format=chosen)
 
     @property
     def name(self) -> str:
@@ -150,17 +172,23 @@ class OTBBenchmark(Benchmark):
         """SHA-256 of the boxes rounded to 1e-3."""
         return rounded_digest(results)
 
+    def _evaluate(self, sequence: SOTSequence, results: np.ndarray) -> SOTScores:
+        """One sequence's scores by its format's rules (absent frames, normalized precision)."""
+        rules = self.sot_format
+        return evaluate_sot_sequence(results, sequence.boxes,
+                                     absent=sequence.absent if rules.absent_fails else None,
+                                     normalized=rules.normalized)
+
     def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
-        """The OTB metrics of one sequence's boxes."""
-        return evaluate_sot_sequence(results, self.load(sequence).boxes).as_dict()
+        """The metrics of one sequence's boxes."""
+        return self._evaluate(self.load(sequence), results).as_dict()
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` result files with the OTB toolkit's rules."""
         per_sequence, scores = {}, {}
         for name in sequences:
             sequence = self.load(self.dataset.resolve(name))
-            scores[sequence.name] = evaluate_sot_sequence(self.read(folder, sequence.name),
-                                                          sequence.boxes)
+            scores[sequence.name] = self._evaluate(sequence, self.read(folder, sequence.name))
             per_sequence[sequence.name] = scores[sequence.name].as_dict()
         combined: dict[str, float] = {}
         if scores:
@@ -183,3 +211,24 @@ class OTBBenchmark(Benchmark):
     def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
         """1 per sequence: OTB's combined scores are means of the sequences' scores."""
         return dict.fromkeys(sequences, 1.0)
+
+
+class SOTProtocolBenchmark(OTBBenchmark):
+    """A SOT benchmark whose protocol adds LaSOT's normalized precision (LaSOT, UAV123 here).
+
+    Same files and rules as :class:`OTBBenchmark` plus the format's absent-frame rule;
+    ``NormPrecision`` is the normalized precision plot at 0.2 (LaSOT toolkit's rank point).
+    """
+
+    columns = ("AUC", "Precision@20px", "NormPrecision", "AverageOverlap")
+
+
+#: The data formats :class:`OTBBenchmark` reads (its and ``OTBEnv``'s ``data_format=``). A new
+#: format of the task is one row here (or added by a project at run time) beside its reader;
+#: without ``root=`` and data it plays its own synthetic default, else the task's (OTB layout).
+SOT_FORMATS: dict[str, SOTFormat] = {
+    "otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK),
+    "lasot": SOTFormat(LaSOTDataset, "LaSOT", "LaSOT", LASOT_SYNTHETIC, absent_fails=True,
+                       normalized=True),
+    "uav123": SOTFormat(UAV123Dataset, "UAV123", "UAV123", UAV123_SYNTHETIC, normalized=True),
+}

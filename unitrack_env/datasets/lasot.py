@@ -1,4 +1,4 @@
-"""LaSOT and GOT-10k readers (layouts in :mod:`unitrack_env.datasets.otb`)."""
+"""LaSOT and GOT-10k readers (layouts in :mod:`unitrack_env.datasets.otb`), LaSOT synthetic data."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.base import SequenceDataset
+from unitrack_env.datasets.otb import _check_boxes
 from unitrack_env.datasets.sot import (
     SOTSequence,
     numbered_images,
@@ -14,19 +15,47 @@ from unitrack_env.datasets.sot import (
     read_flags,
     read_image_size,
 )
+from unitrack_env.datasets.synthetic.cache import SyntheticKind
+from unitrack_env.datasets.synthetic.otb import render_target, write_images
+from unitrack_env.datasets.synthetic.scene_model import SceneConfig
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+
+#: LaSOT's split files at the root of the release, by ``split=`` name.
+LASOT_SPLIT_FILES = {"test": "testing_set.txt", "train": "training_set.txt"}
+#: ``split=`` values that read every sequence found (``"ext"``: the LaSOT extension release,
+#: 150 sequences in the same layout and no split file).
+LASOT_ALL = ("all", "ext")
+
+
+def _split_names(root: Path, split: str | Path | None) -> tuple[Path | None, bool]:
+    """The split file ``split`` names (None: every sequence) and whether it must exist."""
+    if split is None:
+        default = root / LASOT_SPLIT_FILES["test"]
+        return (default if default.is_file() else None), False
+    if split in LASOT_ALL:
+        return None, False
+    if split in LASOT_SPLIT_FILES:
+        return root / LASOT_SPLIT_FILES[split], True
+    path = Path(split)
+    if not path.is_file():
+        raise DataFormatError(path, "LaSOT split: give test, train, all, ext or a split file "
+                                    "(one sequence name per line)")
+    return path, True
 
 
 class LaSOTDataset(SequenceDataset[SOTSequence]):
-    """LaSOT: ``<root>/<class>/<class>-<n>/{img/*.jpg, groundtruth.txt, ...}``.
+    """LaSOT: ``<root>/<class>/<class>-<n>/{img/%08d.jpg, groundtruth.txt, ...}``.
 
-    ``absent`` = ``full_occlusion.txt`` OR ``out_of_view.txt`` (pytracking's
-    ``target_visible`` is its negation). Frames are the sorted ``img/`` images, which must
-    number exactly as many as the ground-truth rows. ``split_file`` (e.g. the official
-    ``testing_set.txt``) lists the sequences to read, one per line.
+    ``absent`` = ``full_occlusion.txt`` OR ``out_of_view.txt`` (one line of comma-separated
+    0/1 flags; pytracking's ``target_visible`` is its negation); ``nlp.txt`` is the
+    sequence's ``description``. Frames are the sorted ``img/`` images, which must number
+    exactly as many as the ground-truth rows. ``split``: ``"test"`` / ``"train"`` (the
+    release's ``testing_set.txt`` / ``training_set.txt``), ``"all"`` or ``"ext"`` (every
+    sequence found), or a split file's path; default: ``testing_set.txt`` when the root has
+    one, else every sequence.
     """
 
-    def __init__(self, root: str | Path, split_file: str | Path | None = None) -> None:
+    def __init__(self, root: str | Path, split: str | Path | None = None) -> None:
         self.root = Path(root)
         if not self.root.is_dir():
             raise DataFormatError(self.root, "LaSOT root folder missing")
@@ -35,8 +64,11 @@ class LaSOTDataset(SequenceDataset[SOTSequence]):
             for cls in sorted(self.root.iterdir()) if cls.is_dir()
             for seq in sorted(cls.iterdir()) if (seq / "groundtruth.txt").is_file()
         }
+        split_file, required = _split_names(self.root, split)
         if split_file is not None:
-            wanted = [s.strip() for s in Path(split_file).read_text().splitlines() if s.strip()]
+            if required and not split_file.is_file():
+                raise DataFormatError(split_file, f"LaSOT split '{split}' needs this file")
+            wanted = [s.strip() for s in split_file.read_text().splitlines() if s.strip()]
             missing = [s for s in wanted if s not in found]
             if missing:
                 raise DataFormatError(split_file, f"lists sequences not under {self.root}: "
@@ -48,11 +80,12 @@ class LaSOTDataset(SequenceDataset[SOTSequence]):
         self.sequence_names: list[str] = list(found)
 
     def load(self, name: str) -> SOTSequence:
-        """Read one sequence."""
+        """Read one sequence; DataFormatError naming the file when it cannot be played."""
         if name not in self._dirs:
             raise UnknownSequenceError(f"no LaSOT sequence '{name}' in {self.root}")
         seq = self._dirs[name]
         boxes = read_box_file(seq / "groundtruth.txt")
+        _check_boxes(seq / "groundtruth.txt", boxes, 0)
         images = numbered_images(seq / "img")
         numbers = sorted(images)
         if len(numbers) != len(boxes):
@@ -64,9 +97,60 @@ class LaSOTDataset(SequenceDataset[SOTSequence]):
         for flag_file in ("full_occlusion.txt", "out_of_view.txt"):
             if (seq / flag_file).is_file():
                 absent |= read_flags(seq / flag_file, len(boxes))
+        nlp = seq / "nlp.txt"
+        description = nlp.read_text(encoding="utf-8-sig").strip() if nlp.is_file() else ""
         frames = tuple(images[n] for n in numbers)
         return SOTSequence(name, frames, tuple(numbers), boxes, read_image_size(frames[0]),
-                           absent, "LaSOT")
+                           absent, "LaSOT", description)
+
+
+#: The synthetic LaSOT default: class, sequence number, scene, split. Each target is
+#: flagged fully occluded where less than a quarter of it is visible (the absent-frame rule).
+_SCENE = {"num_objects": 3, "num_crossings": 1, "num_static_persons": 0, "num_occluders": 1,
+          "object_height_range": (60.0, 100.0), "speed_range": (1.0, 2.5)}
+SYNTHETIC_LASOT = (
+    ("walker", 1, SceneConfig(width=320, height=240, num_frames=36, seed=0, **_SCENE), "test"),
+    ("walker", 2, SceneConfig(width=320, height=240, num_frames=30, seed=10, **_SCENE), "test"),
+    ("crosser", 1, SceneConfig(width=360, height=240, num_frames=24, seed=4, **_SCENE), "train"),
+)
+#: Visibility below which the synthetic target is flagged in ``full_occlusion.txt``.
+OCCLUDED_BELOW = 0.25
+
+
+def _flags(values: np.ndarray) -> str:
+    return ",".join(str(int(v)) for v in values) + "\n"
+
+
+def write_synthetic_lasot(root: Path, benchmark: str = "LaSOT") -> None:
+    """Write :data:`SYNTHETIC_LASOT` in LaSOT's exact layout (split files included)."""
+    splits: dict[str, list[str]] = {"test": [], "train": []}
+    for cls, number, scene, split in SYNTHETIC_LASOT:
+        images, boxes, visibility = render_target(scene)
+        folder = Path(root) / cls / f"{cls}-{number}"
+        write_images(folder / "img", images, [f"{i + 1:08d}.jpg" for i in range(len(images))])
+        (folder / "groundtruth.txt").write_text(
+            "".join(",".join(f"{v:.0f}" for v in row) + "\n" for row in boxes))
+        occluded = visibility < OCCLUDED_BELOW
+        occluded[0] = False
+        (folder / "full_occlusion.txt").write_text(_flags(occluded))
+        (folder / "out_of_view.txt").write_text(_flags(np.zeros(len(boxes))))
+        (folder / "nlp.txt").write_text(f"synthetic person walking, the {cls} of the scene")
+        splits[split].append(folder.name)
+    for split, names in splits.items():
+        (Path(root) / LASOT_SPLIT_FILES[split]).write_text("\n".join(names) + "\n")
+
+
+def synthetic_lasot_frames(benchmark: str = "LaSOT", split: str | None = None,
+                           ) -> dict[str, int]:
+    """Frames of each synthetic sequence of ``split`` (default: test), known before writing."""
+    wanted = split or "test"
+    return {f"{cls}-{number}": scene.num_frames for cls, number, scene, s in SYNTHETIC_LASOT
+            if wanted in LASOT_ALL or s == wanted}
+
+
+#: LaSOT's embedded synthetic default (a generator of :mod:`~unitrack_env.datasets.synthetic`).
+LASOT_SYNTHETIC = SyntheticKind("lasot", write_synthetic_lasot, ("LaSOT",),
+                                synthetic_lasot_frames)
 
 
 class GOT10kDataset(SequenceDataset[SOTSequence]):
