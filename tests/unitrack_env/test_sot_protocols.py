@@ -233,3 +233,64 @@ def test_real_fixtures_read_in_their_official_layouts(shared_data):
     assert not lasot.absent.any()
     uav = UAV123Dataset(Path(shared_data) / "UAV123")
     assert uav.folder == "UAV123_10fps" and uav.load("wakeboard7").num_frames == 67
+
+
+def test_rule_differences_measure_the_absent_frame_rules(tmp_path):
+    from unitrack_env.benchmarks.otb import rule_differences
+
+    bench = benchmark_for("UniTrack/LaSOT-v0")
+    for name in bench.sequence_names:
+        gt = bench.load(name).boxes
+        bench.write(tmp_path, name, gt)  # a perfect tracker
+    diff = rule_differences(bench, tmp_path, bench.sequence_names)
+    absent = [bench.load(n).absent.mean() for n in bench.sequence_names]
+    # The LaSOT toolkit fails a perfect tracker on every absent frame; excluding them does not.
+    assert diff["excluded"]["Precision@20px"] == pytest.approx(1.0)
+    assert diff["default"]["Precision@20px"] == pytest.approx(1 - np.mean(absent))
+    assert diff["difference"]["AUC"] < 0
+
+
+def test_got10k_id_plays_val_and_writes_the_servers_layout_for_test(tmp_path, got10k):
+    from got10k.utils.metrics import rect_iou
+
+    env = gym.make("UniTrack/GOT10k-v0")
+    check_env(env.unwrapped, skip_render_check=True)
+    observation, info = env.reset()
+    terminated = False
+    while not terminated:
+        observation, _, terminated, _, info = env.step(observation["init_box"])
+    assert set(info["metrics"]) == {"AO", "SR0.5", "SR0.75"}
+    env.close()
+    val = benchmark_for("UniTrack/GOT10k-v0")
+    assert type(val) is benchmark_class("UniTrack/GOT10k-v0")
+    rng = np.random.default_rng(3)
+    pooled = []
+    for name in val.sequence_names:
+        sequence = val.load(name)
+        for k in (1, 2):  # two repetitions, pooled like the toolkit
+            run = _random_run(rng, sequence.boxes)
+            path = tmp_path / name / f"{name}_{k:03d}.txt"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text("\n".join(",".join(map(str, r)) for r in run) + "\n")
+            ref = rect_iou(run[1:].copy(), sequence.boxes[1:].copy(), bound=sequence.image_size)
+            pooled.append(ref[~sequence.absent[1:]])
+    report = val.score_files(tmp_path, val.sequence_names)
+    assert report.combined["AO"] == pytest.approx(np.concatenate(pooled).mean(), abs=1e-6)
+    test = benchmark_for("UniTrack/GOT10k-v0", split="test")
+    name = test.sequence_names[0]
+    assert not test.has_ground_truth(name)
+    test.write(tmp_path / "submit", name, np.tile(test.load(name).init_box, (3, 1)))
+    assert (tmp_path / "submit" / name / f"{name}_001.txt").is_file()
+
+
+def test_bad_got10k_labels_are_named(tmp_path):
+    from unitrack_env.datasets.lasot import GOT10kDataset, write_synthetic_got10k
+
+    write_synthetic_got10k(tmp_path)
+    cover = tmp_path / "val" / "GOT-10k_Val_000001" / "cover.label"
+    cover.write_text("9\n" + cover.read_text().split("\n", 1)[1])
+    with pytest.raises(DataFormatError, match=r"cover.label.*line 1.*0-8"):
+        GOT10kDataset(tmp_path).load("GOT-10k_Val_000001")
+    (tmp_path / "val" / "list.txt").write_text("GOT-10k_Val_000009\n")
+    with pytest.raises(DataFormatError, match="list.txt.*GOT-10k_Val_000009"):
+        GOT10kDataset(tmp_path)

@@ -153,11 +153,26 @@ LASOT_SYNTHETIC = SyntheticKind("lasot", write_synthetic_lasot, ("LaSOT",),
                                 synthetic_lasot_frames)
 
 
-class GOT10kDataset(SequenceDataset[SOTSequence]):
-    """GOT-10k: ``<root>/<split>/<seq>/{*.jpg, groundtruth.txt, absence.label}``.
+def read_cover(path: Path, expected: int) -> np.ndarray:
+    """GOT-10k's ``cover.label``: one integer 0-8 per frame (the visible eighths of the target)."""
+    tokens = path.read_text(encoding="utf-8-sig").split()
+    if len(tokens) != expected:
+        raise DataFormatError(path, f"has {len(tokens)} labels, expected {expected} (one a frame)")
+    for line, token in enumerate(tokens, start=1):
+        if not (token.isdigit() and int(token) <= 8):
+            raise DataFormatError(path, f"cover must be an integer 0-8, not {token!r}", line=line)
+    return np.array([int(t) for t in tokens])
 
-    On the test split ``groundtruth.txt`` holds only the first frame's box; the other rows
-    are NaN and :attr:`SOTSequence.has_ground_truth` is False.
+
+class GOT10kDataset(SequenceDataset[SOTSequence]):
+    """GOT-10k: ``<root>/<split>/list.txt`` and ``<split>/<seq>/`` with its files.
+
+    Each sequence: ``%08d.jpg``, ``groundtruth.txt``, ``absence.label``, ``cover.label``,
+    ``cut_by_image.label`` (read and checked), ``meta_info.ini`` (not read).
+    ``absent`` = ``absence.label`` OR ``cover.label == 0``: the frames GOT-10k's toolkit
+    leaves out (it scores frames with ``cover > 0``). On the test split ``groundtruth.txt``
+    holds only the first frame's box; the other rows are NaN and
+    :attr:`SOTSequence.has_ground_truth` is False.
     """
 
     def __init__(self, root: str | Path, split: str = "val") -> None:
@@ -167,6 +182,10 @@ class GOT10kDataset(SequenceDataset[SOTSequence]):
         listing = self.split_dir / "list.txt"
         if listing.is_file():
             names = [s.strip() for s in listing.read_text().splitlines() if s.strip()]
+            missing = [n for n in names if not (self.split_dir / n).is_dir()]
+            if missing:
+                raise DataFormatError(listing, f"lists sequences with no folder: "
+                                      f"{', '.join(missing[:5])}")
         else:
             names = sorted(p.name for p in self.split_dir.iterdir()
                            if (p / "groundtruth.txt").is_file())
@@ -175,13 +194,14 @@ class GOT10kDataset(SequenceDataset[SOTSequence]):
         self.sequence_names: list[str] = names
 
     def load(self, name: str) -> SOTSequence:
-        """Read one sequence."""
+        """Read one sequence; DataFormatError naming the file when it cannot be played."""
         if name not in self.sequence_names:
             raise UnknownSequenceError(f"no GOT-10k sequence '{name}' in {self.split_dir}")
         seq = self.split_dir / name
         images = numbered_images(seq)
         numbers = sorted(images)
         boxes = read_box_file(seq / "groundtruth.txt")
+        _check_boxes(seq / "groundtruth.txt", boxes, 0)
         if len(boxes) == 1 and len(numbers) > 1:  # test split: first frame only
             boxes = np.vstack([boxes, np.full((len(numbers) - 1, 4), np.nan)])
         if len(boxes) != len(numbers):
@@ -192,6 +212,57 @@ class GOT10kDataset(SequenceDataset[SOTSequence]):
         absent = np.zeros(len(numbers), dtype=bool)
         if (seq / "absence.label").is_file():
             absent = read_flags(seq / "absence.label", len(numbers))
+        if (seq / "cover.label").is_file():
+            absent = absent | (read_cover(seq / "cover.label", len(numbers)) == 0)
+        if (seq / "cut_by_image.label").is_file():
+            read_flags(seq / "cut_by_image.label", len(numbers))
         frames = tuple(images[n] for n in numbers)
         return SOTSequence(name, frames, tuple(numbers), boxes, read_image_size(frames[0]),
                            absent, "GOT-10k")
+
+
+#: The synthetic GOT-10k default: split, name, scene. Cover is the visible eighths of the
+#: target (0 where less than 1/16 shows, absence.label 1 there); test keeps the first box.
+SYNTHETIC_GOT10K = (
+    ("val", "GOT-10k_Val_000001", SceneConfig(width=320, height=240, num_frames=30, seed=10,
+                                              **_SCENE)),
+    ("val", "GOT-10k_Val_000002", SceneConfig(width=320, height=240, num_frames=24, seed=0,
+                                              **_SCENE)),
+    ("test", "GOT-10k_Test_000001", SceneConfig(width=360, height=240, num_frames=24, seed=4,
+                                                **_SCENE)),
+)
+
+
+def write_synthetic_got10k(root: Path, benchmark: str = "GOT-10k") -> None:
+    """Write :data:`SYNTHETIC_GOT10K` in GOT-10k's exact layout (``list.txt`` per split)."""
+    lists: dict[str, list[str]] = {"val": [], "test": []}
+    for split, name, scene in SYNTHETIC_GOT10K:
+        images, boxes, visibility = render_target(scene)
+        folder = Path(root) / split / name
+        write_images(folder, images, [f"{i + 1:08d}.jpg" for i in range(len(images))])
+        rows = [",".join(f"{v:.4f}" for v in row) for row in boxes - [1, 1, 0, 0]]
+        (folder / "groundtruth.txt").write_text("\n".join(rows[:1] if split == "test" else rows)
+                                               + "\n")
+        lists[split].append(name)
+        if split == "test":  # the release's test sequences carry no labels
+            continue
+        cover = np.round(visibility * 8).astype(int)
+        cover[0] = max(cover[0], 1)
+        (folder / "cover.label").write_text("".join(f"{c}\n" for c in cover))
+        (folder / "absence.label").write_text("".join(f"{int(c == 0)}\n" for c in cover))
+        (folder / "cut_by_image.label").write_text("0\n" * len(cover))
+        (folder / "meta_info.ini").write_text(
+            f"[METAINFO]\nobject_class: person\nresolution: ({scene.width}, {scene.height})\n")
+    for split, names in lists.items():
+        (Path(root) / split / "list.txt").write_text("\n".join(names) + "\n")
+
+
+def synthetic_got10k_frames(benchmark: str = "GOT-10k", split: str | None = None,
+                            ) -> dict[str, int]:
+    """Frames of each annotated synthetic sequence (val; test has only its first box)."""
+    return {name: scene.num_frames for s, name, scene in SYNTHETIC_GOT10K if s == "val"}
+
+
+#: GOT-10k's embedded synthetic default.
+GOT10K_SYNTHETIC = SyntheticKind("got10k", write_synthetic_got10k, ("GOT-10k",),
+                                 synthetic_got10k_frames)

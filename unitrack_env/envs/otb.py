@@ -99,6 +99,13 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     ``variant="10fps"``); annotations of sub-sequences (``person12_1``) are skipped with a
     warning, their frame ranges being in the toolkit's ``configSeqs.m`` only. Both have a
     synthetic default in their own layout (with absent frames), and report ``NormPrecision``.
+    ``UniTrack/GOT10k-v0`` reads GOT-10k (``<split>/list.txt``, ``<seq>/%08d.jpg``,
+    ``groundtruth.txt``, ``absence.label``, ``cover.label``, ``cut_by_image.label``;
+    ``split="val"`` by default, ``"test"`` has the first box only) and reports its AO, SR0.5
+    and SR0.75 over the frames after the first with ``cover > 0``, boxes clipped to the
+    image, frames pooled over sequences; results are written in the evaluation server's
+    layout ``<seq>/<seq>_001.txt``. No real GOT-10k sample is in the project's fixtures: it
+    is tested on its synthetic default only. More in docs/envs/sot-protocols.md.
 
     ## Observation space
     A ``Dict``:
