@@ -83,6 +83,8 @@ VARIANTS: tuple[Variant, ...] = (
             folder="UAV123", scoring=_B + "otb:SOTProtocolBenchmark"),
     Variant("GOT10k", "unitrack_env.envs.otb:OTBEnv", {"data_format": "got10k"},
             folder="GOT-10k", scoring=_B + "otb:GOT10kBenchmark"),
+    Variant("TrackingNet", "unitrack_env.envs.otb:OTBEnv", {"data_format": "trackingnet"},
+            folder="TrackingNet", scoring=_B + "otb:SOTProtocolBenchmark"),
     Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, folder="DAVIS",
             scoring=_B + "davis:DAVISBenchmark"),
     Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"},

@@ -294,3 +294,25 @@ def test_bad_got10k_labels_are_named(tmp_path):
     (tmp_path / "val" / "list.txt").write_text("GOT-10k_Val_000009\n")
     with pytest.raises(DataFormatError, match="list.txt.*GOT-10k_Val_000009"):
         GOT10kDataset(tmp_path)
+
+
+def test_trackingnet_id_plays_train_and_test_writes_flat_submission(tmp_path):
+    from unitrack_env.datasets.trackingnet import TrackingNetDataset, write_synthetic_trackingnet
+
+    env = gym.make("UniTrack/TrackingNet-v0")
+    check_env(env.unwrapped, skip_render_check=True)
+    observation, info = env.reset()
+    terminated = False
+    while not terminated:
+        observation, _, terminated, _, info = env.step(observation["init_box"])
+    assert {"AUC", "Precision@20px", "NormPrecision"} <= set(info["metrics"])
+    env.close()
+    test = benchmark_for("UniTrack/TrackingNet-v0", split="test")
+    assert test.sequence_names == ["syntest_0"] and not test.has_ground_truth("syntest_0")
+    test.write(tmp_path / "submit", "syntest_0", np.tile(test.load("syntest_0").init_box, (24, 1)))
+    assert (tmp_path / "submit" / "syntest_0.txt").is_file()
+    write_synthetic_trackingnet(tmp_path / "TN")
+    assert TrackingNetDataset(tmp_path / "TN", "TRAIN_1").sequence_names == ["synwalk_1"]
+    (tmp_path / "TN" / "TRAIN_0" / "frames" / "synwalk_0" / "29.jpg").unlink()
+    with pytest.raises(DataFormatError, match="synwalk_0.txt.*30 rows but the frame folder"):
+        TrackingNetDataset(tmp_path / "TN").load("synwalk_0")

@@ -25,6 +25,7 @@ from unitrack_env.datasets.lasot import (
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.datasets.synthetic.cache import SyntheticKind
+from unitrack_env.datasets.trackingnet import TRACKINGNET_SYNTHETIC, TrackingNetDataset
 from unitrack_env.datasets.uav123 import UAV123_SYNTHETIC, UAV123Dataset
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
@@ -308,6 +309,8 @@ SOT_FORMATS: dict[str, SOTFormat] = {
     "uav123": SOTFormat(UAV123Dataset, "UAV123", "UAV123", UAV123_SYNTHETIC, normalized=True),
     "got10k": SOTFormat(GOT10kDataset, "GOT-10k", "GOT-10k", GOT10K_SYNTHETIC,
                         benchmark="got10k"),
+    "trackingnet": SOTFormat(TrackingNetDataset, "TrackingNet", "TrackingNet",
+                             TRACKINGNET_SYNTHETIC, normalized=True),
 }
 
 

@@ -105,7 +105,12 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     and SR0.75 over the frames after the first with ``cover > 0``, boxes clipped to the
     image, frames pooled over sequences; results are written in the evaluation server's
     layout ``<seq>/<seq>_001.txt``. No real GOT-10k sample is in the project's fixtures: it
-    is tested on its synthetic default only. More in docs/envs/sot-protocols.md.
+    is tested on its synthetic default only. ``UniTrack/TrackingNet-v0`` reads TrackingNet
+    (``TRAIN_<k>/`` and ``TEST/``, each with ``frames/<seq>/<i>.jpg`` and
+    ``anno/<seq>.txt``; ``split="train"`` by default, ``"TRAIN_<k>"`` or ``"test"``, whose
+    annotation is the first box only) with the columns of LaSOT; its results are the
+    server's flat ``<seq>.txt`` files. No real TrackingNet sample is in the fixtures either.
+    More in docs/envs/sot-protocols.md.
 
     ## Observation space
     A ``Dict``:
