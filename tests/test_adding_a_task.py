@@ -8,7 +8,7 @@ registration row (:func:`unitrack_env.registration.register_variant`), two trivi
 data script and a script that runs the ``unitrack`` command with the task registered. The
 commands of the doc's shell block then run in that folder: ``evaluate``, ``score``,
 ``events``, ``compare``, ``report`` and ``scorecard``. Nothing in unitrack-env is edited.
-The doc's data-format example adds a LaSOT id beside OTB through ``SOT_FORMATS``.
+The doc's data-format example adds a LaSOT-layout id beside OTB through ``SOT_FORMATS``.
 """
 
 from __future__ import annotations
@@ -207,13 +207,13 @@ def test_a_sot_data_format_is_a_reader_a_format_row_and_a_registration_row(
     monkeypatch.delenv("UNITRACK_DATA", raising=False)
     exec(compile(example, str(DOC), "exec"), {})  # noqa: S102 - the doc's own example
     try:
-        root = _lasot_folder(tmp_path / "LaSOT")
-        report = run("UniTrack/LaSOT-v0", "repeat-box", out=tmp_path / "run",
+        root = _lasot_folder(tmp_path / "MyLaSOT")
+        report = run("UniTrack/MyLaSOT-v0", "repeat-box", out=tmp_path / "run",
                      env_kwargs={"root": str(root)}, progress=False)
         assert sorted(report.records) == ["blob-1", "blob-2"]
         assert report.scores.combined["AUC"] > 0
         assert len(load_events(tmp_path / "run", sequence="blob-1")) == 6
-        default = benchmark_for("UniTrack/LaSOT-v0")  # no data: the task's synthetic data
-        assert default.synthetic and default.name == "LaSOT" and default.sequence_names
+        default = benchmark_for("UniTrack/MyLaSOT-v0")  # no data: the task's synthetic data
+        assert default.synthetic and default.name == "MyLaSOT" and default.sequence_names
     finally:
-        gym.registry.pop("UniTrack/LaSOT-v0", None)
+        gym.registry.pop("UniTrack/MyLaSOT-v0", None)

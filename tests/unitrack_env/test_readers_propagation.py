@@ -161,7 +161,7 @@ def test_lasot_reader(tmp_path):
     (seq / "out_of_view.txt").write_text("0,0,1")
     split = tmp_path / "testing_set.txt"
     split.write_text("airplane-1\n")
-    ds = lasot.LaSOTDataset(tmp_path, split_file=split)
+    ds = lasot.LaSOTDataset(tmp_path, split=split)
     s = ds.load("airplane-1")
     assert s.benchmark == "LaSOT" and s.num_frames == 3
     assert s.absent.tolist() == [False, True, True]

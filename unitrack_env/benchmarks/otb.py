@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import os
 import warnings
 from collections.abc import Callable
@@ -15,16 +16,28 @@ import numpy as np
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
 from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.base import SequenceDataset
+from unitrack_env.datasets.lasot import (
+    GOT10K_SYNTHETIC,
+    LASOT_SYNTHETIC,
+    GOT10kDataset,
+    LaSOTDataset,
+)
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
+from unitrack_env.datasets.synthetic.cache import SyntheticKind
+from unitrack_env.datasets.trackingnet import TRACKINGNET_SYNTHETIC, TrackingNetDataset
+from unitrack_env.datasets.uav123 import UAV123_SYNTHETIC, UAV123Dataset
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.metrics.sot import (
+    SOTScores,
     aggregate_sot,
     center_error_per_frame,
     evaluate_sot_sequence,
+    got10k_overlaps,
+    got10k_scores,
     overlap_per_frame,
     repair_predictions,
 )
@@ -45,18 +58,22 @@ class SOTFormat:
     ``reader(root)`` lists and loads its sequences (a
     :class:`~unitrack_env.datasets.base.SequenceDataset` of
     :class:`~unitrack_env.datasets.sot.SOTSequence`); ``folder`` is its folder under
-    ``$UNITRACK_DATA``; ``name`` the rule set score reports name.
+    ``$UNITRACK_DATA``; ``name`` the rule set score reports name. ``synthetic``: the
+    format's own synthetic default in its layout (None: the task's, OTB layout, read with
+    the OTB reader). ``absent_fails``: frames the reader flags ``absent`` are scored by the
+    LaSOT toolkit's rule (removed, the rates still divided by every frame);
+    ``normalized``: the scores add LaSOT's normalized precision (the benchmark is then a
+    :class:`SOTProtocolBenchmark`, whose columns include it); ``benchmark="got10k"``: the
+    GOT-10k protocol (:class:`GOT10kBenchmark`).
     """
 
-    reader: Callable[[Path], SequenceDataset[SOTSequence]]
+    reader: Callable[..., SequenceDataset[SOTSequence]]
     folder: str
     name: str
-
-
-#: The data formats :class:`OTBBenchmark` reads (its and ``OTBEnv``'s ``data_format=``). A new
-#: format of the task is one row here (or added by a project at run time) beside its reader;
-#: without ``root=`` and data it plays the task's embedded synthetic data (OTB layout).
-SOT_FORMATS: dict[str, SOTFormat] = {"otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK)}
+    synthetic: SyntheticKind | None = None
+    absent_fails: bool = False
+    normalized: bool = False
+    benchmark: str = "otb"
 
 
 def format_box_value(value: float) -> str:
@@ -93,18 +110,34 @@ class OTBBenchmark(Benchmark):
         ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02)
 
     def __init__(self, dataset: SequenceDataset[SOTSequence], *, synthetic: bool = False,
-                 rules: str = BENCHMARK) -> None:
+                 rules: str = BENCHMARK, sot_format: SOTFormat | None = None) -> None:
         super().__init__(dataset, synthetic=synthetic)
         self.rules = rules
+        self.sot_format = sot_format or SOTFormat(OTBDataset, BENCHMARK_FOLDER, rules)
 
     @classmethod
     def build(cls, root: str | os.PathLike | None = None, data_format: str = "otb",
-              ) -> OTBBenchmark:
-        """The benchmark of ``OTBEnv(root=, data_format=)`` (a key of :data:`SOT_FORMATS`)."""
+              split: str | None = None, variant: str | None = None) -> OTBBenchmark:
+        """The benchmark of ``OTBEnv(root=, data_format=, split=, variant=)``.
+
+        ``data_format`` is a key of :data:`SOT_FORMATS`; ``split`` and ``variant`` go to
+        its reader when given (a reader without them refuses them).
+        """
         chosen = SOT_FORMATS[one_of("data_format", data_format, SOT_FORMATS)]
-        path, synthetic = data_root(root, chosen.folder, "OTB", "otb")
-        reader = OTBDataset if synthetic else chosen.reader  # the task's synthetic data
-        return cls(reader(path), synthetic=synthetic, rules=chosen.name)
+        options = {k: v for k, v in (("split", split), ("variant", variant)) if v is not None}
+        unknown = set(options) - set(inspect.signature(chosen.reader).parameters)
+        if unknown:
+            raise ValueError(f"data_format {data_format!r} takes no {', '.join(sorted(unknown))}=")
+        kind = chosen.synthetic
+        if kind is None:
+            path, synthetic = data_root(root, chosen.folder, "OTB", "otb")
+        else:
+            path, synthetic = data_root(root, chosen.folder, kind.benchmarks[0], kind)
+        reader = OTBDataset if synthetic and kind is None else chosen.reader
+        klass = (GOT10kBenchmark if chosen.benchmark == "got10k" else
+                 SOTProtocolBenchmark if chosen.normalized else OTBBenchmark)
+        dataset = reader(path, **options) if reader is chosen.reader else reader(path)
+        return klass(dataset, synthetic=synthetic, rules=chosen.name, sot_format=chosen)
 
     @property
     def name(self) -> str:
@@ -150,17 +183,23 @@ class OTBBenchmark(Benchmark):
         """SHA-256 of the boxes rounded to 1e-3."""
         return rounded_digest(results)
 
+    def _evaluate(self, sequence: SOTSequence, results: np.ndarray) -> SOTScores:
+        """One sequence's scores by its format's rules (absent frames, normalized precision)."""
+        rules = self.sot_format
+        return evaluate_sot_sequence(results, sequence.boxes,
+                                     absent=sequence.absent if rules.absent_fails else None,
+                                     normalized=rules.normalized)
+
     def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
-        """The OTB metrics of one sequence's boxes."""
-        return evaluate_sot_sequence(results, self.load(sequence).boxes).as_dict()
+        """The metrics of one sequence's boxes."""
+        return self._evaluate(self.load(sequence), results).as_dict()
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` result files with the OTB toolkit's rules."""
         per_sequence, scores = {}, {}
         for name in sequences:
             sequence = self.load(self.dataset.resolve(name))
-            scores[sequence.name] = evaluate_sot_sequence(self.read(folder, sequence.name),
-                                                          sequence.boxes)
+            scores[sequence.name] = self._evaluate(sequence, self.read(folder, sequence.name))
             per_sequence[sequence.name] = scores[sequence.name].as_dict()
         combined: dict[str, float] = {}
         if scores:
@@ -183,3 +222,120 @@ class OTBBenchmark(Benchmark):
     def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
         """1 per sequence: OTB's combined scores are means of the sequences' scores."""
         return dict.fromkeys(sequences, 1.0)
+
+
+class SOTProtocolBenchmark(OTBBenchmark):
+    """A SOT benchmark whose protocol adds LaSOT's normalized precision (LaSOT, UAV123 here).
+
+    Same files and rules as :class:`OTBBenchmark` plus the format's absent-frame rule;
+    ``NormPrecision`` is the normalized precision plot at 0.2 (LaSOT toolkit's rank point).
+    """
+
+    columns = ("AUC", "Precision@20px", "NormPrecision", "AverageOverlap")
+
+
+class GOT10kBenchmark(OTBBenchmark):
+    """GOT-10k's protocol: AO, SR0.5 and SR0.75 over the visible frames after the first.
+
+    Results are written as the evaluation server's layout, ``<folder>/<seq>/<seq>_001.txt``
+    (one ``x,y,w,h`` line per frame; ``_002``, ``_003`` for further repetitions, all pooled
+    when scoring, as the toolkit does). Frames the reader flags absent (``cover == 0``) are
+    left out and boxes are clipped to the image; the combined row pools the frames of every
+    sequence (not a mean of sequences).
+    """
+
+    columns = ("AO", "SR0.5", "SR0.75")
+    intervals = ""
+    no_intervals = "GOT-10k's AO and SR pool the visible frames of all sequences"
+    frame_metrics = MappingProxyType({})
+
+    def _result_path(self, folder: str | os.PathLike, sequence: str, repetition: int = 1,
+                     ) -> Path:
+        return Path(folder) / sequence / f"{sequence}_{repetition:03d}.txt"
+
+    def write(self, folder: str | os.PathLike, sequence: str, results: np.ndarray) -> None:
+        """Write ``<folder>/<seq>/<seq>_001.txt`` (the server's layout), atomically."""
+        atomic_write_text(self._result_path(folder, sequence), format_otb_results(results))
+
+    def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
+        """Read repetition 1; DataFormatError unless it has one box per frame."""
+        return self._read_run(self._result_path(folder, sequence), self.load(sequence))
+
+    def _read_run(self, path: Path, loaded: SOTSequence) -> np.ndarray:
+        if not path.is_file():
+            raise DataFormatError(path, f"no result file for sequence '{loaded.name}'")
+        boxes = read_box_file(path)
+        if len(boxes) != loaded.num_frames:
+            raise DataFormatError(path, f"has {len(boxes)} boxes but '{loaded.name}' has "
+                                        f"{loaded.num_frames} frames")
+        return boxes
+
+    def _overlaps(self, sequence: SOTSequence, results: np.ndarray) -> np.ndarray:
+        cover = (~np.asarray(sequence.absent)).astype(int)
+        return got10k_overlaps(results, sequence.boxes, cover, sequence.image_size)
+
+    def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
+        """AO, SR0.5 and SR0.75 of one run of a sequence."""
+        loaded = self.load(sequence)
+        return got10k_scores(self._overlaps(loaded, results))
+
+    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
+        """Score every repetition ``<seq>/<seq>_<k>.txt`` found, frames pooled."""
+        per_sequence, pooled = {}, []
+        for name in sequences:
+            loaded = self.load(self.dataset.resolve(name))
+            runs = sorted((Path(folder) / loaded.name).glob(f"{loaded.name}_[0-9][0-9][0-9].txt"))
+            if not runs:
+                runs = [self._result_path(folder, loaded.name)]  # its error names it
+            overlaps = np.concatenate([self._overlaps(loaded, self._read_run(p, loaded))
+                                       for p in runs])
+            per_sequence[loaded.name] = got10k_scores(overlaps)
+            pooled.append(overlaps)
+        combined = got10k_scores(np.concatenate(pooled)) if pooled else {}
+        return ScoreReport(self.name, per_sequence, combined)
+
+    def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
+        """Visible frames after the first: GOT-10k pools frames."""
+        return {s: float((~self.load(s).absent[1:]).sum()) for s in sequences}
+
+
+#: The data formats :class:`OTBBenchmark` reads (its and ``OTBEnv``'s ``data_format=``). A new
+#: format of the task is one row here (or added by a project at run time) beside its reader;
+#: without ``root=`` and data it plays its own synthetic default, else the task's (OTB layout).
+SOT_FORMATS: dict[str, SOTFormat] = {
+    "otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK),
+    "lasot": SOTFormat(LaSOTDataset, "LaSOT", "LaSOT", LASOT_SYNTHETIC, absent_fails=True,
+                       normalized=True),
+    "uav123": SOTFormat(UAV123Dataset, "UAV123", "UAV123", UAV123_SYNTHETIC, normalized=True),
+    "got10k": SOTFormat(GOT10kDataset, "GOT-10k", "GOT-10k", GOT10K_SYNTHETIC,
+                        benchmark="got10k"),
+    "trackingnet": SOTFormat(TrackingNetDataset, "TrackingNet", "TrackingNet",
+                             TRACKINGNET_SYNTHETIC, normalized=True),
+}
+
+
+def rule_differences(bench: OTBBenchmark, folder: str | os.PathLike,
+                     sequences: list[str]) -> dict[str, dict[str, float]]:
+    """Score result files by the format's rules and with absent / invalid frames excluded.
+
+    ``"excluded"`` leaves out, from numerator and denominator, every frame whose target is
+    absent or whose ground truth is NaN or empty: the ``got10k`` package's UAV123 rule (its
+    ``ExperimentUAV123._calc_metrics``), where LaSOT's and the OTB toolkit's count them as
+    failures (success) or passes (precision, invalid OTB ground truth). Returns the combined
+    scores of ``"default"``, ``"excluded"`` and their ``"difference"`` (default - excluded).
+    """
+    rules = bench.sot_format
+    per_rule: dict[str, list[SOTScores]] = {"default": [], "excluded": []}
+    for name in sequences:
+        sequence = bench.load(bench.dataset.resolve(name))
+        boxes = bench.read(folder, sequence.name)
+        per_rule["default"].append(bench._evaluate(sequence, boxes))
+        kept = ~np.asarray(sequence.absent, dtype=bool)
+        kept[0] = True
+        per_rule["excluded"].append(evaluate_sot_sequence(
+            repair_predictions(boxes, sequence.boxes)[kept], sequence.boxes[kept],
+            invalid_gt="exclude", normalized=rules.normalized))
+    combined = {rule: aggregate_sot(scores).as_dict() for rule, scores in per_rule.items()}
+    combined["difference"] = {k: combined["default"][k] - combined["excluded"][k]
+                              for k in combined["default"]}
+    return combined

@@ -37,7 +37,8 @@ class SOTSequence:
 
     ``boxes`` are ``(x, y, w, h)`` as written (1-based); NaN rows have no annotation and OTB
     marks an absent target with a non-positive box. ``absent`` holds the benchmark's
-    not-visible flags (all False for OTB); ``image_size`` is the first frame's ``(w, h)``.
+    not-visible flags (all False for OTB); ``image_size`` is the first frame's ``(w, h)``;
+    ``description`` the target's sentence where the benchmark has one (LaSOT's ``nlp.txt``).
     """
 
     name: str
@@ -47,6 +48,7 @@ class SOTSequence:
     image_size: tuple[int, int]
     absent: np.ndarray
     benchmark: str
+    description: str = ""
 
     def __post_init__(self) -> None:
         n = len(self.frame_paths)

@@ -87,6 +87,31 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     tab-separated, one grayscale sequence whose images start at ``0011.jpg``), generated
     once into the user cache, so it works offline.
 
+    ``UniTrack/LaSOT-v0`` reads LaSOT (``<class>/<class>-<n>/img/%08d.jpg``,
+    ``groundtruth.txt``, ``full_occlusion.txt`` and ``out_of_view.txt`` as one line of
+    comma-separated flags, ``nlp.txt`` given as ``info["nlp"]``; ``split=`` as above, default
+    the root's ``testing_set.txt``). It scores by the LaSOT toolkit's rules: a frame where the
+    target is absent (either flag) is removed before scoring but the rates stay divided by all
+    frames, so it fails both plots; ``NormPrecision`` is the normalized precision plot (centre
+    error over the true box's width and height) at 0.2. ``UniTrack/UAV123-v0`` reads UAV123
+    (``data_seq/UAV123[_10fps]/<seq>/%06d.jpg``, ``anno/UAV123[_10fps]/<seq>.txt``, a NaN row
+    = target absent, scored by the OTB toolkit's rule for invalid ground truth;
+    ``variant="10fps"``); annotations of sub-sequences (``person12_1``) are skipped with a
+    warning, their frame ranges being in the toolkit's ``configSeqs.m`` only. Both have a
+    synthetic default in their own layout (with absent frames), and report ``NormPrecision``.
+    ``UniTrack/GOT10k-v0`` reads GOT-10k (``<split>/list.txt``, ``<seq>/%08d.jpg``,
+    ``groundtruth.txt``, ``absence.label``, ``cover.label``, ``cut_by_image.label``;
+    ``split="val"`` by default, ``"test"`` has the first box only) and reports its AO, SR0.5
+    and SR0.75 over the frames after the first with ``cover > 0``, boxes clipped to the
+    image, frames pooled over sequences; results are written in the evaluation server's
+    layout ``<seq>/<seq>_001.txt``. No real GOT-10k sample is in the project's fixtures: it
+    is tested on its synthetic default only. ``UniTrack/TrackingNet-v0`` reads TrackingNet
+    (``TRAIN_<k>/`` and ``TEST/``, each with ``frames/<seq>/<i>.jpg`` and
+    ``anno/<seq>.txt``; ``split="train"`` by default, ``"TRAIN_<k>"`` or ``"test"``, whose
+    annotation is the first box only) with the columns of LaSOT; its results are the
+    server's flat ``<seq>.txt`` files. No real TrackingNet sample is in the fixtures either.
+    More in docs/envs/sot-protocols.md.
+
     ## Observation space
     A ``Dict``:
 
@@ -139,6 +164,8 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     - ``data_format``: the layout of ``root``, a key of
       :data:`unitrack_env.benchmarks.otb.SOT_FORMATS` (default ``"otb"``; a registered id of
       another SOT data set passes its own).
+    - ``split``, ``variant``: passed to the format's reader (LaSOT: ``"test"``, ``"train"``,
+      ``"all"``, ``"ext"`` or a split file; UAV123: ``variant="10fps"``).
     - ``max_frame_size``: bound ``(height, width)`` of the frame space.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).
@@ -155,10 +182,12 @@ class OTBEnv(SequenceEnv[SOTSequence]):
         root: str | os.PathLike | None = None,
         sequences: list[str] | tuple[str, ...] | None = None,
         data_format: str = "otb",
+        split: str | None = None,
+        variant: str | None = None,
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
-        self.scoring = OTBBenchmark.build(root, data_format)
+        self.scoring = OTBBenchmark.build(root, data_format, split, variant)
         self.dataset = self.scoring.dataset
         if sequences is not None:
             self.sequence_names = [self.dataset.resolve(s) for s in sequences]
@@ -200,9 +229,12 @@ class OTBEnv(SequenceEnv[SOTSequence]):
         self._sequence = sequence
         self._results = []
         self._scored = None
-        return dict(seq_length=sequence.num_frames, frame_rate=30.0,
+        info = dict(seq_length=sequence.num_frames, frame_rate=30.0,
                     image_size=(height, width), benchmark=self.scoring.name,
                     has_ground_truth=sequence.has_ground_truth, synthetic=self.synthetic)
+        if sequence.description:  # LaSOT's nlp.txt
+            info["nlp"] = sequence.description
+        return info
 
     def _observe(self, t: int) -> dict[str, Any]:
         image = self._read_frame(t)

@@ -23,6 +23,13 @@ OTB_CENTER_THRESHOLDS.setflags(write=False)
 PRECISION_THRESHOLD_PX: float = 20.0
 """The precision plot's reported point: fraction of frames with centre error <= 20 px."""
 
+NORM_PRECISION_THRESHOLDS: np.ndarray = np.arange(0, 51, dtype=np.float64) / 100.0
+"""Thresholds of LaSOT's normalized precision plot, MATLAB ``(0:50) / 100``."""
+NORM_PRECISION_THRESHOLDS.setflags(write=False)
+
+NORM_PRECISION_THRESHOLD: float = 0.2
+"""The normalized precision plot's reported point (LaSOT toolkit's ``rank_idx = 21``)."""
+
 INVALID_GT_TOOLKIT = "toolkit"
 """Invalid ground truth as the OTB MATLAB toolkit treats it (see the module docstring)."""
 INVALID_GT_EXCLUDE = "exclude"
@@ -55,7 +62,8 @@ def _check_pair(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def overlap_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """Return the IoU of ``pred[i]`` with ``gt[i]`` for every row ``i``.
 
-    Rows where either box is non-finite or has no area get 0.
+    Rows where either box is non-finite or has no area get 0; rounding never lifts a value
+    above 1 (identical fractional boxes could read 1 + 1 ulp and pass the 1.0 threshold).
 
     >>> overlap_per_frame(np.array([[0, 0, 10, 10]]), np.array([[5, 0, 10, 10]]))
     array([0.33333333])
@@ -72,7 +80,7 @@ def overlap_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     union = area_p + area_g - inter
     out = np.zeros(len(p))
     np.divide(inter, union, out=out, where=finite & (union > 0))
-    return out
+    return np.minimum(out, 1.0)
 
 
 def center_error_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -86,6 +94,20 @@ def center_error_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     p, g = _check_pair(pred, gt)
     dc = (p[:, :2] + p[:, 2:] / 2.0) - (g[:, :2] + g[:, 2:] / 2.0)
     err = np.hypot(dc[:, 0], dc[:, 1])
+    err[~np.isfinite(err)] = np.inf
+    return err
+
+
+def normalized_center_error(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Centre distance with x divided by the true width and y by the true height (LaSOT).
+
+    >>> normalized_center_error(np.array([[2, 0, 10, 10]]), np.array([[0, 0, 20, 10]]))
+    array([0.4])
+    """
+    p, g = _check_pair(pred, gt)
+    dc = (p[:, :2] + p[:, 2:] / 2.0) - (g[:, :2] + g[:, 2:] / 2.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.hypot(dc[:, 0] / g[:, 2], dc[:, 1] / g[:, 3])
     err[~np.isfinite(err)] = np.inf
     return err
 
@@ -180,14 +202,26 @@ class SOTScores:
     average_overlap: float
     num_frames: int
     num_sequences: int = 1
+    norm_precision_curve: np.ndarray | None = None
+
+    @property
+    def norm_precision(self) -> float | None:
+        """Normalized precision at 0.2 (None unless it was computed)."""
+        if self.norm_precision_curve is None:
+            return None
+        return _precision_at(self.norm_precision_curve, NORM_PRECISION_THRESHOLDS,
+                             NORM_PRECISION_THRESHOLD)
 
     def as_dict(self) -> dict[str, float]:
-        """Return the scalar metrics keyed by their report names."""
-        return {
+        """Return the scalar metrics keyed by their report names (NormPrecision if computed)."""
+        scores = {
             "AUC": self.auc,
             "Precision@20px": self.precision_20px,
             "AverageOverlap": self.average_overlap,
         }
+        if self.norm_precision is not None:
+            scores["NormPrecision"] = self.norm_precision
+        return scores
 
 
 def _precision_at(curve: np.ndarray, thresholds: np.ndarray, px: float) -> float:
@@ -203,34 +237,50 @@ def evaluate_sot_sequence(
     *,
     init_from_gt: bool = True,
     invalid_gt: InvalidGTRule = INVALID_GT_TOOLKIT,
+    absent: np.ndarray | None = None,
+    normalized: bool = False,
 ) -> SOTScores:
     """Score one sequence the way the OTB toolkit does (one-pass evaluation, OPE).
 
     ``init_from_gt`` replaces frame 0's prediction by the ground truth (toolkit default);
-    ``invalid_gt`` is a :func:`valid_ground_truth` rule.
+    ``invalid_gt`` is a :func:`valid_ground_truth` rule. ``absent`` (bool per frame) applies
+    the LaSOT toolkit's rule: absent frames are removed before scoring but the rates stay
+    divided by every frame, so an absent frame fails every threshold of both plots.
+    ``normalized`` adds LaSOT's normalized precision curve.
     """
     p, g = _check_pair(pred, gt)
     if len(p) == 0:
         raise ValueError("cannot score an empty sequence")
     p = repair_predictions(p, g, init_from_gt=init_from_gt)
     valid = valid_ground_truth(g, invalid_gt)
-    overlaps = overlap_per_frame(p, g)
-    errors = center_error_per_frame(p, g)
+    errors = {"ov": overlap_per_frame(p, g), "ce": center_error_per_frame(p, g)}
+    if normalized:
+        errors["nce"] = normalized_center_error(p, g)
     if invalid_gt == INVALID_GT_TOOLKIT:
-        overlaps[~valid] = _INVALID_SCORE
-        errors[~valid] = _INVALID_SCORE
+        for values in errors.values():
+            values[~valid] = _INVALID_SCORE
     else:
-        overlaps, errors = overlaps[valid], errors[valid]
-    s_curve = success_curve(overlaps)
-    p_curve = precision_curve(errors)
-    valid_overlaps = overlaps[overlaps >= 0]
+        errors = {k: v[valid] for k, v in errors.items()}
+    gone = np.zeros(len(errors["ov"]), dtype=bool)
+    if absent is not None:
+        gone = np.asarray(absent, dtype=bool)
+        gone = gone if invalid_gt == INVALID_GT_TOOLKIT else gone[valid]
+    valid_overlaps = errors["ov"][(errors["ov"] >= 0) & ~gone]
+    errors["ov"][gone] = _INVALID_SCORE
+    for key in ("ce", "nce"):
+        if key in errors:
+            errors[key][gone] = np.inf
+    p_curve = precision_curve(errors["ce"])
+    s_curve = success_curve(errors["ov"])
     return SOTScores(
         success_curve=s_curve,
         precision_curve=p_curve,
         auc=float(np.mean(s_curve)),
         precision_20px=_precision_at(p_curve, OTB_CENTER_THRESHOLDS, PRECISION_THRESHOLD_PX),
         average_overlap=float(valid_overlaps.mean()) if len(valid_overlaps) else float("nan"),
-        num_frames=len(overlaps),
+        num_frames=len(errors["ov"]),
+        norm_precision_curve=(precision_curve(errors["nce"], NORM_PRECISION_THRESHOLDS)
+                              if normalized else None),
     )
 
 
@@ -243,6 +293,7 @@ def aggregate_sot(scores: Sequence[SOTScores]) -> SOTScores:
         raise ValueError("no sequences to aggregate")
     s_curve = np.mean([s.success_curve for s in scores], axis=0)
     p_curve = np.mean([s.precision_curve for s in scores], axis=0)
+    norm = [s.norm_precision_curve for s in scores]
     return SOTScores(
         success_curve=s_curve,
         precision_curve=p_curve,
@@ -251,4 +302,57 @@ def aggregate_sot(scores: Sequence[SOTScores]) -> SOTScores:
         average_overlap=float(np.nanmean([s.average_overlap for s in scores])),
         num_frames=int(sum(s.num_frames for s in scores)),
         num_sequences=int(sum(s.num_sequences for s in scores)),
+        norm_precision_curve=(None if any(c is None for c in norm)
+                              else np.mean(norm, axis=0)),
     )
+
+
+GOT10K_SUCCESS_THRESHOLDS: tuple[float, float] = (0.5, 0.75)
+"""GOT-10k's success rates: the fraction of frames whose overlap is above 0.5 and 0.75."""
+
+
+def bounded_overlap(pred: np.ndarray, gt: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """IoU after clipping both boxes to the ``(width, height)`` image (the GOT-10k toolkit's).
+
+    ``x`` and ``y`` are clipped to ``[0, width]`` / ``[0, height]``, then ``w`` / ``h`` to
+    what remains of the image to their right / below.
+    """
+    width, height = image_size
+    boxes = []
+    for b in _check_pair(pred, gt):
+        b = b.copy()
+        b[:, 0] = np.clip(b[:, 0], 0, width)
+        b[:, 1] = np.clip(b[:, 1], 0, height)
+        b[:, 2] = np.clip(b[:, 2], 0, width - b[:, 0])
+        b[:, 3] = np.clip(b[:, 3], 0, height - b[:, 1])
+        boxes.append(b)
+    return overlap_per_frame(*boxes)
+
+
+def got10k_overlaps(pred: np.ndarray, gt: np.ndarray, cover: np.ndarray,
+                    image_size: tuple[int, int]) -> np.ndarray:
+    """The overlaps GOT-10k scores in one run of a sequence.
+
+    Frames after the first whose ``cover.label`` is above 0 (the target visible), with both
+    boxes clipped to the image.
+    """
+    p, g = _check_pair(pred, gt)
+    visible = np.asarray(cover)[1:] > 0
+    if len(visible) != len(p) - 1:
+        raise ValueError(f"cover has {len(visible) + 1} labels but there are {len(p)} frames")
+    return bounded_overlap(p[1:], g[1:], image_size)[visible]
+
+
+def got10k_scores(overlaps: np.ndarray) -> dict[str, float]:
+    """AO, SR0.5 and SR0.75 of the overlaps of every scored frame.
+
+    GOT-10k pools the frames of all sequences and repetitions: pass their concatenation
+    for the overall score.
+    """
+    o = np.asarray(overlaps, dtype=np.float64).reshape(-1)
+    if len(o) == 0:
+        raise ValueError("no frame with a visible target to score")
+    scores = {"AO": float(o.mean())}
+    for threshold in GOT10K_SUCCESS_THRESHOLDS:
+        scores[f"SR{threshold:g}"] = float(np.mean(o > threshold))
+    return scores

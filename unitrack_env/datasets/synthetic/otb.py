@@ -113,22 +113,37 @@ def target_boxes(video: SyntheticVideo, target: int) -> np.ndarray:
     return np.asarray(rows, dtype=np.float64)
 
 
+def render_target(scene: SceneConfig, grayscale: bool = False,
+                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """Render ``scene`` and follow its target: BGR (or grey) frames, 1-based boxes, visibility.
+
+    What every SOT layout's synthetic default writes (the layouts differ in file names only).
+    """
+    video = render_scene(scene)
+    target = choose_target(video)
+    code = cv2.COLOR_RGB2GRAY if grayscale else cv2.COLOR_RGB2BGR
+    images = [cv2.cvtColor(frame.image, code) for frame in video]
+    visibility = np.array([next(a.visibility for a in frame.objects if a.id == target)
+                           for frame in video], dtype=np.float64)
+    return images, target_boxes(video, target), visibility
+
+
+def write_images(folder: Path, images: list[np.ndarray], names: list[str]) -> None:
+    """Write ``images`` as JPEGs named ``names`` into ``folder`` (created)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY]
+    for image, name in zip(images, names, strict=True):
+        if not cv2.imwrite(str(folder / name), image, params):
+            raise OSError(f"could not write {folder / name}")
+
+
 def write_sequence(root: Path, sequence: SyntheticOTBSequence) -> Path:
     """Render one sequence into ``root/<name>/`` (``img/`` and ``groundtruth_rect.txt``)."""
-    video = render_scene(sequence.scene)
-    target = choose_target(video)
+    images, boxes, _ = render_target(sequence.scene, sequence.grayscale)
     folder = Path(root) / sequence.name
-    images = folder / "img"
-    images.mkdir(parents=True, exist_ok=True)
-    params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY]
-    for frame in video:
-        number = sequence.first_frame + frame.index
-        code = cv2.COLOR_RGB2GRAY if sequence.grayscale else cv2.COLOR_RGB2BGR
-        path = images / f"{number:0{IMAGE_DIGITS}d}.jpg"
-        if not cv2.imwrite(str(path), cv2.cvtColor(frame.image, code), params):
-            raise OSError(f"could not write {path}")
-    lines = [sequence.separator.join(f"{v:.0f}" for v in row)
-             for row in target_boxes(video, target)]
+    write_images(folder / "img", images, [
+        f"{sequence.first_frame + i:0{IMAGE_DIGITS}d}.jpg" for i in range(len(images))])
+    lines = [sequence.separator.join(f"{v:.0f}" for v in row) for row in boxes]
     text = "\n".join(lines) + ("\n" if sequence.trailing_newline else "")
     (folder / "groundtruth_rect.txt").write_text(text)
     return folder
