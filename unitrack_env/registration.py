@@ -77,6 +77,8 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("MOT20", _MOT, {"benchmark": "MOT20"}, folder="MOT20", scoring=_MOT_SCORING),
     # Custom data in the MOTChallenge layout; pass root= and the benchmark= rule set.
     Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, scoring=_MOT_SCORING),
+    Variant("KITTI", "unitrack_env.envs.kitti:KITTIEnv", {}, folder="KITTI",
+            scoring=_B + "kitti:KITTIBenchmark"),
     Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, folder="OTB",
             scoring=_B + "otb:OTBBenchmark"),
     Variant("LaSOT", "unitrack_env.envs.otb:OTBEnv", {"data_format": "lasot"}, folder="LaSOT",

@@ -1400,6 +1400,54 @@ def _results_with_id(value: int) -> Callable[[Path], Path]:
     return build
 
 
+# ------------------------------------------- issue 40: data of the wrong benchmark
+def _as_mot17(scratch: Path) -> Path:
+    """The synthetic MOT17 with its sequences named as MOT17's (MOT17-02-FRCNN, ...)."""
+    root = clone(synthetic("motchallenge", "MOT17"), scratch / "MOT17")
+    for old, new in (("SYN-01", "MOT17-02-FRCNN"), ("SYN-02", "MOT17-04-FRCNN")):
+        (root / "train" / old).rename(root / "train" / new)
+    return root
+
+
+def _scores_times(factor: float) -> Callable[[str], str]:
+    """An edit of det.txt that multiplies every score (column 7) by ``factor``."""
+    def change(content: str) -> str:
+        rows = [line.split(",") for line in content.splitlines() if line.strip()]
+        return "".join(",".join([*r[:6], f"{float(r[6]) * factor:g}", *r[7:]]) + "\n"
+                       for r in rows)
+    return change
+
+
+def _mot17_under(env_id: str) -> Callable[[Path], None]:
+    """The synthetic MOT17 (its own SYN names) opened by ``env_id``."""
+    return lambda scratch: open_env(
+        env_id, clone(synthetic("motchallenge", "MOT17"), scratch / "MOT17"), MOT_SEQ)
+
+
+def kitti(change: Callable[[Path], None], **kwargs: Any) -> Callable[[Path], None]:
+    """A KITTI case: ``change`` breaks ``training/`` of a copy of the synthetic KITTI split."""
+    def run(scratch: Path) -> None:
+        from unitrack_env.datasets.synthetic.kitti import KIND
+
+        root = clone(synthetic(KIND, "KITTI"), scratch / "KITTI")  # type: ignore[arg-type]
+        change(root / "training")
+        open_env("UniTrack/KITTI-v0", root, "0000", **kwargs)
+    return run
+
+
+def _kitti_line(rel: str, number: int, change: Callable[[list[str]], None]
+                ) -> Callable[[Path], None]:
+    def apply(split: Path) -> None:
+        def edit_line(content: str) -> str:
+            lines = content.splitlines()
+            cells = lines[number - 1].split()
+            change(cells)
+            lines[number - 1] = " ".join(cells)
+            return "\n".join(lines) + "\n"
+        edit(split / rel, edit_line)
+    return apply
+
+
 CASES = CASES + (
     _c("MOT-gt-10001-ids", "a gt.txt with 10,001 distinct ids (the issue's had 10 million)",
        mot(_many_gt_ids), "gt.txt, line 10001, field 'id'", "10,001 distinct ground-truth ids",
@@ -1483,6 +1531,31 @@ CASES = CASES + (
     _c("CLI-render-read-only-folder", "unitrack render --out into a folder it cannot write",
        _render_into(_not_writable), "exit 2:", "episode.mp4", "not writable",
        error="CLIFailed"),
+    _c("CLI-MOT15-on-MOT17-data", "unitrack evaluate --env UniTrack/MOT15-v0 on MOT17 data "
+       "(sequences MOT17-02-FRCNN, ...)",
+       cli("evaluate", "--env", "UniTrack/MOT15-v0", "--root", "{data}", "--agent", "iou",
+           "--out", "{out}", "--quiet", data=_as_mot17),
+       "exit 2:", "MOT17-02-FRCNN", "named like a MOT17 sequence", "use UniTrack/MOT17-v0",
+       error="CLIFailed"),
+    _c("MOT-class-columns-under-MOT15", "custom data whose gt.txt has MOT17's class columns, "
+       "under MOT15's rules", _mot17_under("UniTrack/MOT15-v0"), "gt.txt",
+       "9 columns with class ids", "MOT16/17/20 layout",
+       "use UniTrack/MOTChallenge-v0 with benchmark='MOT17'"),
+    _c("MOT-scores-far-above-unit", "det.txt scores times 100 under MOT17's 0..1",
+       mot(_at(DET, _scores_times(100.0))), "det.txt", "far above MOT17's declared 0..1",
+       "UniTrack/MOT15-v0", "score_range=", kind="warning"),
+    _c("KITTI-no-detections", "KITTI data without det_02/ and no detections=",
+       kitti(lambda split: shutil.rmtree(split / "det_02")), "det_02/0000.txt",
+       "no detections", "detections="),
+    _c("KITTI-label-short-row", "a label_02 row cut to 12 columns",
+       kitti(_kitti_line("label_02/0000.txt", 3, lambda c: c.__delitem__(slice(12, None)))),
+       "label_02/0000.txt, line 3", "12 columns, expected at least 17"),
+    _c("KITTI-label-unknown-type", "a label_02 row of type 'Bus'",
+       kitti(_kitti_line("label_02/0000.txt", 2, lambda c: c.__setitem__(2, "Bus"))),
+       "label_02/0000.txt, line 2, field 'type'", "unknown type 'Bus'"),
+    _c("KITTI-det-frame-past-end", "a detection in frame 99 of a 16-frame sequence",
+       kitti(_kitti_line("det_02/0000.txt", 1, lambda c: c.__setitem__(0, "99"))),
+       "det_02/0000.txt, line 1, field 'frame'", "16 frames"),
 )
 
 

@@ -24,6 +24,7 @@ from unitrack_env.benchmarks.views import (
     association_head,
     iou_baseline,
 )
+from unitrack_env.datasets.mot_signatures import check_signature
 from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import (
@@ -170,6 +171,7 @@ def score_split_folder(gt: str | os.PathLike, results: str | os.PathLike, benchm
     refuse_run_folder(results)
     split = (sorted(d.name for d in gt.iterdir() if (d / "gt" / "gt.txt").is_file())
              if gt.is_dir() else [])
+    check_signature(benchmark, gt, split)  # another benchmark's data: refused, naming its id
     if not split or not results.is_dir():  # score_folder names what is wrong
         return score_folder(gt, results, benchmark=benchmark, sequences=sequences)
     extra = sorted(p.stem for p in results.glob("*.txt") if p.stem not in split)

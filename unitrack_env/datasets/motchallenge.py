@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.limits import MAX_FRAMES, check_image_size
+from unitrack_env.datasets.mot_signatures import check_signature
 from unitrack_env.datasets.motchallenge_tables import DET_FIELDS, GT_FIELDS, check_rows, parse_table
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
@@ -282,6 +283,7 @@ class MOTChallengeDataset:
         )
         if not self.sequence_names:
             raise DataFormatError(self.split_dir, "contains no sequence folders with seqinfo.ini")
+        check_signature(benchmark, self.split_dir, self.sequence_names)
         if detections != "public" and Path(detections).is_dir():
             stray = sorted(p.name for p in Path(detections).glob("*.txt")
                            if p.stem not in self.sequence_names)

@@ -94,6 +94,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     - ``benchmark``: rule set, one of ``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``.
     - ``root``: the benchmark folder holding ``train/`` and ``test/`` (default:
       ``$UNITRACK_DATA/<benchmark>`` if that variable is set, else the synthetic default).
+      Data of another benchmark (sequences named like its own, or MOT16/17/20 class columns
+      under MOT15) are refused before the first frame, naming the id to use
+      (``unitrack_env.datasets.mot_signatures``).
     - ``split``: sub-folder to read (``"train"`` or ``"test"``).
     - ``sequences``: restrict to these sequence names (default: all of the split).
     - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
