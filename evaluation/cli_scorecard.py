@@ -24,7 +24,8 @@ def add_options(card: argparse.ArgumentParser) -> None:
     card.add_argument("--data", help="folder holding benchmark folders (MOT17/, DAVIS/, ...; "
                       "default: $UNITRACK_DATA); tasks without one use synthetic data, marked")
     card.add_argument("--tasks", help="comma-separated subset of: sot, vos, mot, mots, "
-                      "posetrack, pose-prop, vis (default: all)")
+                      "posetrack, pose-prop, vis (default: all of these), or an opt-in "
+                      "column named on its own (points: TAP-Vid)")
     card.add_argument("--out", required=True, help="output folder (finished cells are reused)")
     card.add_argument("--backend", choices=("pool", "ray"), default="pool",
                       help="where cells run: local processes (default) or Ray")

@@ -187,7 +187,7 @@ def _checked_request(models: Sequence[ModelSpec], tasks: Sequence[str] | None,
     names = list(tasks) if tasks else list(TASKS)
     unknown = [t for t in names if t not in TASKS]
     if unknown:
-        raise ValueError(f"unknown tasks {unknown}; valid: {', '.join(TASKS)}")
+        raise ValueError(f"unknown tasks {unknown}; valid: {', '.join(TASKS.every())}")
     if not models:
         raise ValueError("give at least one --model (e.g. imagenet-lite0)")
     labels = [m.name for m in models]

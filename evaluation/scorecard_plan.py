@@ -37,7 +37,8 @@ class _Tasks(Mapping[str, Task]):
     """The scorecard's tasks, in column order, read from the registration table.
 
     Every registered benchmark that declares a ``scorecard`` column, rows registered at run
-    time included.
+    time included. Iterating gives the default task set; an ``opt_in`` column is left out
+    of it but found by name (``TASKS[name]``, ``name in TASKS``; all: :meth:`every`).
     """
 
     _rows: tuple = ()
@@ -64,14 +65,18 @@ class _Tasks(Mapping[str, Task]):
         return self._table()[name]
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._table())
+        return iter([name for name, task in self._table().items() if not task.opt_in])
 
     def __len__(self) -> int:
-        return len(self._table())
+        return len(list(iter(self)))
+
+    def every(self) -> list[str]:
+        """Every task's name, opt-in columns included, in column order."""
+        return list(self._table())
 
 
 #: The tasks in the paper's Table 2 order, then the appendix tasks (and a user's own).
-TASKS: Mapping[str, Task] = _Tasks()
+TASKS: _Tasks = _Tasks()
 #: Row label of the appearance-free baselines.
 BASELINE = "baseline (no appearance)"
 

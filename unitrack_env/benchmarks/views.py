@@ -49,7 +49,8 @@ class ScorecardColumn:
     one's synthetic default); ``axis``: the (head label, metric) drawn on the radar chart;
     ``order``: the column's place (the paper's Table 2 order); ``input_size``: the network
     input per frame of its appearance head, ``(images, height, width)``; ``head_seconds``:
-    the head's own seconds per frame besides the backbone (None: the association heads').
+    the head's own seconds per frame besides the backbone (None: the association heads');
+    ``opt_in``: left out of the default task set, played only when asked for by name.
     """
 
     title: str
@@ -61,6 +62,7 @@ class ScorecardColumn:
     order: float = 100.0
     input_size: tuple[int, int, int] = (1, 512, 512)
     head_seconds: float | None = None
+    opt_in: bool = False
 
 
 def association_head(metrics: tuple[str, ...]) -> Head:
