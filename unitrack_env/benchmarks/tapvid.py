@@ -17,9 +17,11 @@ from typing import Any
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
+from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.tapvid import PICKLE_PATTERNS, PointVideo, TAPVidDataset
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_bytes
+from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.point_queries import (
     EVAL_SIZE,
     PointQueries,
@@ -28,7 +30,14 @@ from unitrack_env.metrics.point_queries import (
     sample_queries,
     to_raster,
 )
-from unitrack_env.metrics.points import COLUMNS, mean_over_videos, video_metrics
+from unitrack_env.metrics.points import (
+    COLUMNS,
+    evaluated_pairs,
+    event_rows,
+    frame_values,
+    mean_over_videos,
+    video_metrics,
+)
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
 #: The arrays of a result file, in the order they are written.
@@ -97,6 +106,19 @@ class TAPVidBenchmark(Benchmark):
     task = "points"
     columns = COLUMNS
 
+    #: The report's curve: each frame's ``<δ^x_avg`` over its points visible in the ground
+    #: truth (the ``pck`` column of its ``"frame"`` event).
+    report_view = ReportView(value=("pck", "<δx visible"), value_type="frame")
+    no_intervals = ("AJ, <δ^x_avg and OA are ratios of sums over a video's (query, frame) "
+                    "pairs, then means over videos; a mean of per-frame values is not these "
+                    "metrics, and `compare` has no interval from per-frame sums for them")
+    #: Opt-in (``--tasks points``): the default scorecard stays the paper's Table 2 tasks.
+    scorecard = ScorecardColumn(
+        "Points", ("UniTrack/TAPVid-DAVIS-v0",),
+        (Head("unitrack-points", "UniTrack", COLUMNS),),
+        Head("static-points", "static-points", COLUMNS, appearance=False),
+        ("UniTrack", "AJ"), order=8, input_size=(1, 256, 256), opt_in=True)
+
     def __init__(self, dataset: TAPVidDataset, query_mode: str = "first",
                  resolution: str = "256", *, synthetic: bool = False) -> None:
         super().__init__(dataset, synthetic=synthetic)
@@ -162,6 +184,14 @@ class TAPVidBenchmark(Benchmark):
     def score_sequence(self, sequence: str, results: dict[str, Any],
                        path: Path | None = None) -> dict[str, float]:
         """The metrics of one video's results (their queries must be the ground truth's)."""
+        truth = self._checked_queries(sequence, results, path)
+        return video_metrics(truth.query_points, truth.tracks, truth.occluded,
+                             np.asarray(results["tracks"]), np.asarray(results["occluded"]),
+                             self.query_mode)
+
+    def _checked_queries(self, sequence: str, results: dict[str, Any],
+                         path: Path | None) -> PointQueries:
+        """The ground-truth queries of ``sequence``, if the results answer exactly those."""
         truth = self.queries(sequence)
         where = path or Path(f"<{sequence} results>")
         given = np.asarray(results["query_points"], np.float64)
@@ -171,9 +201,37 @@ class TAPVidBenchmark(Benchmark):
                                          f"'{sequence}' in {self.name} (sampled as the "
                                          "reference does; see docs/envs/tapvid.md)",
                                   field="query_points")
-        return video_metrics(truth.query_points, truth.tracks, truth.occluded,
-                             np.asarray(results["tracks"]), np.asarray(results["occluded"]),
-                             self.query_mode)
+        return truth
+
+    def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
+        """Per frame (1-based) a ``"frame"`` event, per evaluated (query, frame) pair one more.
+
+        ``"frame"``: ``pck`` = the frame's ``<δ^x_avg`` over its points visible in the ground
+        truth (NaN if none). A pair is a ``"point"`` event when its predicted occlusion flag
+        is right, an ``"occlusion_error"`` when wrong; ``object`` = the query, ``x, y`` the
+        true and ``tx, ty`` the predicted position, ``distance`` their distance in raster
+        pixels (NaN where the point is occluded in the ground truth).
+        """
+        path = Path(folder) / f"{sequence}.npz"
+        results = read_results(path, self.load(sequence).num_frames)
+        truth = self._checked_queries(sequence, results, path)
+        evaluated = evaluated_pairs(truth.query_frames, truth.occluded.shape[1],
+                                    self.query_mode)
+        arrays = (results["tracks"], results["occluded"], truth.tracks, truth.occluded,
+                  evaluated)
+        per_frame = frame_values(*arrays)["delta_x_avg"]
+        rows = EventRows(sequence)
+        for t, value in enumerate(per_frame, start=1):
+            rows.add(t, "frame", pck=float(value))
+        for pair in event_rows(*arrays):
+            t, q = int(pair["frame"]), int(pair["query"])
+            x, y = map(float, truth.tracks[q, t])
+            tx, ty = map(float, results["tracks"][q, t])
+            error = pair["error_px"]
+            rows.add(t + 1, "point" if pair["occlusion_correct"] else "occlusion_error",
+                     object=q, x=x, y=y, tx=tx, ty=ty,
+                     distance=float("nan") if error is None else float(error))
+        return rows
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<video>.npz`` files: per video, and their mean."""
