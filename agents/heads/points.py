@@ -11,7 +11,6 @@ Queries revealed at the same frame share one propagator (one memory bank per que
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,12 +20,11 @@ import torch
 
 from ..appearance.cached_model import with_cache
 from ..appearance.model import AppearanceModel, torch_threads
-from ..appearance.spec import AppearanceSpec
 from ..base import Agent
 from ..primitives.label_propagation import LabelPropagator
 from ..primitives.point_queries import QueryBook
 from .pose import MIN_PEAK, MIN_SIGMA, REFINE_RADIUS, belief_maps, decode_maps
-from .vos import make_propagation_config
+from .vos import PropagationHeadConfig
 
 SIGMA: float = MIN_SIGMA
 """Gaussian sigma of a point's belief map, in feature cells: the paper's floor
@@ -42,24 +40,22 @@ median at 0.45 and 0.56; that of occluded points its median at 0.18 and 0.14
 
 
 @dataclass(frozen=True)
-class UniTrackPointsConfig(AppearanceSpec):
-    """Options of ``unitrack-points`` (appearance fields from :class:`AppearanceSpec`).
+class UniTrackPointsConfig(PropagationHeadConfig):
+    """Options of ``unitrack-points``: :class:`PropagationHeadConfig`'s and the head's own.
+
+    From :class:`PropagationHeadConfig`: appearance, flat propagation fields, feature cache.
 
     Attributes:
         input_size: ``(width, height)`` frames are resized to (None: the raster as given).
         sigma: Belief map sigma (feature cells).
         refine_radius: Soft-argmax neighbourhood half-side (feature cells; 0: argmax).
         occlusion_ratio: Peak share under which a point is reported occluded.
-        propagation: :class:`LabelPropagationConfig` fields to override (paper defaults).
-        feature_cache: The on-disk feature cache (as the other heads').
     """
 
     input_size: tuple[int, int] | None = None
     sigma: float = SIGMA
     refine_radius: int = REFINE_RADIUS
     occlusion_ratio: float = OCCLUSION_RATIO
-    propagation: dict[str, Any] | None = None
-    feature_cache: str | os.PathLike[str] | bool | None = True
 
 
 class _Group:
@@ -78,7 +74,7 @@ class UniTrackPointsAgent(Agent, name="unitrack-points", tasks=("points",)):
                  **options: Any) -> None:
         self.config, self.model = UniTrackPointsConfig.configure(self.name, options,
                                                                  appearance_model)
-        self.propagation = make_propagation_config(self.config.propagation, self.model.stride)
+        self.propagation = self.config.propagation_config(self.model.stride)
         self.cached = with_cache(self.model, self.config.feature_cache)
         self.book = QueryBook()
         self._groups: list[_Group] = []
