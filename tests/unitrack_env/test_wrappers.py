@@ -33,6 +33,9 @@ def _echo(env, observation):
         labels = observation["init_labels"].copy()
         labels[labels == 255] = 0
         return labels
+    if base.task == "points":  # every active query: occluded (a valid answer on any frame)
+        size = observation["active"].shape[0]
+        return {"tracks": np.zeros((size, 2), np.float32), "occluded": np.ones(size, np.int8)}
     return observation["init_box" if base.task == "sot" else "init_keypoints"]
 
 
