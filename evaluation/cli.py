@@ -19,12 +19,7 @@ from typing import Any
 
 from rich.console import Console
 
-from .cli_types import (
-    names,
-    non_negative_float,
-    positive_float,
-    positive_int,
-)
+from .cli_types import names, non_negative_float, positive_float, positive_int
 from .progress import one_line_warnings
 from .watchdog import DEFAULT_STEP_TIMEOUT
 
@@ -408,6 +403,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_report import add_parsers as add_report_parsers
 
     add_report_parsers(sub)  # unitrack events|compare|report
+    from .cli_tune import add_parser as add_tune_parser
+
+    add_tune_parser(sub)  # unitrack tune
     return parser
 
 
