@@ -155,7 +155,8 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
                      sequences=args.sequences,
                      workers=args.workers, overwrite=args.overwrite,
                      progress=not args.quiet and args.format == "table",
-                     step_timeout=args.step_timeout, restamp=args.restamp)
+                     step_timeout=args.step_timeout, restamp=args.restamp,
+                     backend=args.backend, address=args.address)
     log = console if args.format == "table" else _console(stderr=True)
     if cache_summary():
         log.print(cache_summary(), markup=False)
@@ -327,6 +328,10 @@ def _add_evaluate(ev: argparse.ArgumentParser) -> None:
     ev.add_argument("--step-timeout", type=non_negative_float, default=DEFAULT_STEP_TIMEOUT,
                     metavar="SECONDS", help="a step (the agent's act() and the env's step) "
                     "longer than this fails its sequence (default: %(default)g; 0: no limit)")
+    ev.add_argument("--backend", choices=("local", "ray"), default="local", help="where "
+                    "sequences play: local processes (--workers) or Ray tasks, one each")
+    ev.add_argument("--address", help="with --backend ray: the cluster to join, auto or "
+                    "ray://host:port (default: start a local Ray with --workers CPUs)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     _format_option(ev)
     ev.set_defaults(func=_cmd_evaluate)

@@ -206,6 +206,8 @@ def run(
     progress: bool = True,
     step_timeout: float | None = DEFAULT_STEP_TIMEOUT,
     restamp: bool = False,
+    backend: str = "local",
+    address: str | None = None,
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
@@ -214,8 +216,9 @@ def run(
     ``out`` is reused to resume unless ``overwrite`` (which deletes only files of our runs,
     per ``out/manifest.json``); ``step_timeout`` None or 0 means no limit. ``restamp``
     keeps finished sequences whose only change is the agent's code (:mod:`.restamp`: you
-    vouch that the edit cannot change them). Returns a :class:`RunReport`, the metrics also
-    in ``out/metrics.json``.
+    vouch that the edit cannot change them). ``backend="ray"`` plays each sequence as a Ray
+    task (:mod:`.ray_sequences`; ``address``: a cluster, default a local Ray). Returns a
+    :class:`RunReport`, the metrics also in ``out/metrics.json``.
 
     Raises:
         RunFailed: some sequences failed (the others are kept; rerun to resume).
@@ -223,6 +226,9 @@ def run(
         OutputError: ``out`` cannot be written, or files no run of ours wrote are in the way.
     """
     agent_kwargs = dict(agent_kwargs or {})
+    if backend not in ("local", "ray") or (address is not None and backend != "ray"):
+        raise ValueError(f"backend must be 'local' or 'ray' (got {backend!r}); --address goes "
+                         "with --backend ray")
     sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
     cls, name, reference = _resolve_agent(agent, agent_kwargs, workers, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
@@ -240,7 +246,8 @@ def run(
     try:
         with hold_folder(out, f"agent {name} on {env_id}"):
             return _run_owned(spec, env, bench, agent_obj, out, names,
-                              _Options(workers, progress, step_timeout, overwrite, restamp))
+                              _Options(workers, progress, step_timeout, overwrite, restamp,
+                                       backend, address))
     finally:
         close_agent(agent_obj)
         env.close()
@@ -253,6 +260,8 @@ class _Options:
     step_timeout: float | None
     overwrite: bool
     restamp: bool = False
+    backend: str = "local"
+    address: str | None = None
 
 
 def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
@@ -293,7 +302,12 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     manifest.claim(todo)
     try:
         with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
-            if options.workers <= 1 or len(todo) <= 1:
+            if options.backend == "ray" and todo:
+                from .ray_sequences import play_on_ray
+
+                records, played = play_on_ray(spec, out, todo, stamps, lengths, bar=bar,
+                                              workers=options.workers, address=options.address)
+            elif options.workers <= 1 or len(todo) <= 1:
                 records, played = play_here(spec, env, bench, agent_obj, out, todo, stamps,
                                              bar, causes, options.step_timeout)
             else:
