@@ -85,6 +85,16 @@ def test_paper_study_from_table2_and_published_probe_accuracies(tmp_path, capsys
               f"{paper['pearson'][0]:+.2f} .. {paper['pearson'][1]:+.2f}")
         print(f"  Spearman rho {min(rho):+.2f} .. {max(rho):+.2f}   paper "
               f"{paper['spearman'][0]:+.2f} .. {paper['spearman'][1]:+.2f}")
+        print("  other Table 2 columns (r / rho at the better layer, layer3, layer4):")
+        for i, column in enumerate(DATA["columns"]):
+            sign = -1 if column in DATA["lower_is_better"] else 1
+            cells = []
+            for layer in ("best", 0, 1):
+                y = [sign * (bolded(m, column) if layer == "best" else
+                             DATA["models"][m]["table2"][i][layer]) for m in DATA["models"]]
+                cells.append(f"{stats.pearsonr(x, y).statistic:+.2f} / "
+                             f"{stats.spearmanr(x, y).statistic:+.2f}")
+            print(f"    {column:16s} " + "   ".join(cells))
     # The paper's finding, which these inputs reproduce: no strong correlation on any task
     # (|r|, |rho| < 0.5), and VOS the one mildly inverse task.
     assert all(abs(v) < 0.5 for v in r + rho)
