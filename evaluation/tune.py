@@ -236,11 +236,13 @@ def _study(optuna: Any, out: Path, direction: str, seed: int) -> Any:
                                 direction=direction,
                                 sampler=optuna.samplers.TPESampler(seed=seed + done))
     finished = {setting_digest(t.params) for t in study.trials if t.state.name == "COMPLETE"}
+    finished |= {setting_digest(t.system_attrs.get("fixed_params", {}))  # queued already
+                 for t in study.trials if t.state.name == "WAITING"}
     for t in study.trials:
         if t.state.name in ("FAIL", "RUNNING") and setting_digest(t.params) not in finished:
             if t.state.name == "RUNNING":  # killed, not interrupted: mark it over
                 study._storage.set_trial_state_values(t._trial_id, optuna.trial.TrialState.FAIL)
-            study.enqueue_trial(t.params, skip_if_exists=True)
+            study.enqueue_trial(t.params)  # (skip_if_exists would see the failed one)
             finished.add(setting_digest(t.params))
     return study
 
