@@ -112,6 +112,9 @@ def _print_result(console: Console, spec: Any, result: dict[str, Any]) -> None:
                       f"{cost['later_median_cpu_seconds']:.1f} s, ratio {cost['cpu_ratio']:.2f}"
                       " (later trials read the backbone's features from the cache)",
                       markup=False, soft_wrap=True)
+    elif len(result["history"]) > 1:
+        console.print("cost: not measured (the first trial, the one that ran the backbone, "
+                      "was interrupted and resumed)", markup=False, soft_wrap=True)
     v = result["validation"]
     line = (f"validation ({', '.join(v['sequences'])}): {spec.metric} best "
             f"{_percent(v['best'])} vs defaults {_percent(v['defaults'])}")

@@ -291,13 +291,14 @@ def _median(values: list[float]) -> float:
 
 
 def trial_cost(rows: list[dict[str, Any]]) -> dict[str, float] | None:
-    """The first trial that played against the median of those after it.
+    """The first trial against the median of the later ones that played.
 
-    In wall-clock and in CPU seconds (CPU time is the steadier on a shared machine).
+    None when the first trial (the one that ran the backbone) was interrupted: its cost is
+    not recorded. In wall-clock and in CPU seconds (CPU time is the steadier on a shared machine).
     """
     played = [r for r in rows if r["state"] == "COMPLETE" and r["played"]]
-    if len(played) < 2:
-        return None
+    if len(played) < 2 or played[0]["number"] != rows[0]["number"]:
+        return None  # the first trial (the one that ran the backbone) was interrupted
     out = {}
     for key, name in (("seconds", ""), ("cpu_seconds", "cpu_")):
         if all(r.get(key) is not None for r in played):

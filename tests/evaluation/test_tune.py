@@ -84,10 +84,12 @@ def test_trial_cost_is_later_trials_over_the_first():
             {"state": "COMPLETE", "played": 1, "seconds": 2.0, "cpu_seconds": 2.0},
             {"state": "FAIL", "played": None, "seconds": None},
             {"state": "COMPLETE", "played": 1, "seconds": 4.0, "cpu_seconds": 2.0}]
+    rows = [{"number": i, **row} for i, row in enumerate(rows)]
     assert trial_cost(rows) == {"first_seconds": 10.0, "later_median_seconds": 3.0,
                                 "ratio": 0.3, "first_cpu_seconds": 8.0,
                                 "later_median_cpu_seconds": 2.0, "cpu_ratio": 0.25}
     assert trial_cost(rows[:2]) is None
+    assert trial_cost(rows[1:]) is None  # the first trial was interrupted: not recorded
 
 
 def test_an_interrupted_trial_is_queued_again_with_its_setting(tmp_path):
@@ -143,7 +145,7 @@ def test_tune_resumes_after_ctrl_c_and_validates(tmp_path):
     assert len(complete) == 3
     assert kept <= {Path(r["folder"]).name for r in complete}  # not played again
     assert "best: trial" in again.stdout and "95% interval" in again.stdout
-    assert "cost: first trial" in again.stdout
+    assert "cost: " in again.stdout  # measured, or why not (the first trial was stopped)
     validation = result["validation"]
     assert validation["low"] <= validation["diff"] <= validation["high"]
     print(again.stdout)
