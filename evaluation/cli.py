@@ -18,12 +18,7 @@ from typing import Any
 
 from rich.console import Console
 
-from .cli_types import (
-    names,
-    non_negative_float,
-    positive_float,
-    positive_int,
-)
+from .cli_types import names, non_negative_float, positive_float, positive_int
 from .progress import one_line_warnings
 from .watchdog import DEFAULT_STEP_TIMEOUT, Terminated, sigterm_stops
 
@@ -142,7 +137,8 @@ def _cmd_evaluate(args: argparse.Namespace, console: Console) -> int:
                      sequences=args.sequences,
                      workers=args.workers, overwrite=args.overwrite, isolate=not args.in_process,
                      progress=not args.quiet and args.format == "table",
-                     step_timeout=args.step_timeout, restamp=args.restamp)
+                     step_timeout=args.step_timeout, restamp=args.restamp,
+                     backend=args.backend, address=args.address)
     log = console if args.format == "table" else _console(stderr=True)
     if cache_summary():
         log.print(cache_summary(), markup=False)
@@ -315,6 +311,10 @@ def _add_evaluate(ev: argparse.ArgumentParser) -> None:
                     "longer than this fails its sequence (default: %(default)g; 0: no limit)")
     ev.add_argument("--in-process", action="store_true", help="with --workers 1, play here "
                     "(for a debugger), not in a supervised child process that can be stopped")
+    ev.add_argument("--backend", choices=("local", "ray"), default="local", help="where "
+                    "sequences play: local processes (--workers) or Ray tasks, one each")
+    ev.add_argument("--address", help="with --backend ray: the cluster to join, auto or "
+                    "ray://host:port (default: start a local Ray with --workers CPUs)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     _format_option(ev)
     ev.set_defaults(func=_cmd_evaluate)
@@ -391,6 +391,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_report import add_parsers as add_report_parsers
 
     add_report_parsers(sub)  # unitrack events|compare|report
+    from .cli_tune import add_parser as add_tune_parser
+
+    add_tune_parser(sub)  # unitrack tune
     return parser
 
 

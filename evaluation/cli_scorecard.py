@@ -18,9 +18,13 @@ from .cli_types import positive_int
 def add_options(card: argparse.ArgumentParser) -> None:
     """The options of ``unitrack scorecard``."""
     card.add_argument("--model", action="append",
-                      metavar="WEIGHTS[,arch=A][,layer=L][,stride=S][,label=N]",
+                      metavar="WEIGHTS[,arch=A][,layer=L][,stride=S][,label=N][,KIND:NAME=V]",
                       help="an appearance model (a row): imagenet-lite0, random, or a "
-                      "checkpoint file, with options (repeatable)")
+                      "checkpoint file, with options and numbers from other evaluations, "
+                      "e.g. probe:imagenet=71.1 (repeatable)")
+    card.add_argument("--external", metavar="CSV", help="numbers from other evaluations: "
+                      "a CSV with a model column (the labels) and KIND:NAME[:lower] columns; "
+                      "writes the correlation study (correlation.md/.json and figures)")
     card.add_argument("--data", help="folder holding benchmark folders (MOT17/, DAVIS/, ...; "
                       "default: $UNITRACK_DATA); tasks without one use synthetic data, marked")
     card.add_argument("--tasks", help="comma-separated subset of: sot, vos, mot, mots, "
@@ -65,17 +69,22 @@ def _print_restamp(console: Console, label: str, result: list[str] | str) -> Non
 def run_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
     from . import scorecard as sc
+    from .correlation_study import merge_externals, read_external_csv, split_model_text
     from .scorecard_plan import ModelSpec
     from .scorecard_report import merge_cards
 
     out = Path(args.out)
+    split = [split_model_text(text) for text in args.model or ()]
+    externals = read_external_csv(args.external) if args.external else {}
     if args.compare:
         card = merge_cards([Path(p) for p in args.compare])
         files = sc.write_outputs(out, card, radar_scale=args.radar_scale)
     else:
         if not args.model:
             raise ValueError("give --model (one or more), or --compare earlier scorecards")
-        models = [ModelSpec.parse(text) for text in args.model]
+        models = [ModelSpec.parse(text) for text, _ in split]
+        externals = merge_externals(externals, *({m.name: given} for m, (_, given)
+                                                 in zip(models, split, strict=True)))
         tasks = args.tasks.split(",") if args.tasks else None
         data = args.data or os.environ.get("UNITRACK_DATA")
         with cell_progress(enabled=not args.quiet) as progress:
@@ -93,7 +102,13 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
         from .intervals import write_card_intervals
 
         files += write_card_intervals(out, card)
+    if any(externals.values()):
+        from .correlation_study import write_correlation
+
+        files += write_correlation(out, card, externals)
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)
+    if any(externals.values()):
+        console.print((out / "correlation.md").read_text(), markup=False, soft_wrap=True)
     console.print("wrote " + ", ".join(str(f) for f in files), markup=False, soft_wrap=True)
     return 0
 

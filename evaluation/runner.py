@@ -201,6 +201,8 @@ def run(
     step_timeout: float | None = DEFAULT_STEP_TIMEOUT,
     restamp: bool = False,
     isolate: bool = False,
+    backend: str = "local",
+    address: str | None = None,
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
@@ -212,7 +214,9 @@ def run(
     vouch that the edit cannot change them). ``isolate`` plays ``workers=1`` in one
     supervised child process (:func:`.serial.play_isolated`, the CLI's default): a step
     stuck in native code, a crash or a hung ``close()`` then ends only what it was doing.
-    Returns a :class:`RunReport`, the metrics also in ``out/metrics.json``.
+    ``backend="ray"`` plays each sequence as a Ray task (:mod:`.ray_sequences`; ``address``:
+    a cluster, default a local Ray). Returns a :class:`RunReport`, the metrics also in
+    ``out/metrics.json``.
 
     Raises:
         RunFailed: some sequences failed (the others are kept; rerun to resume).
@@ -220,8 +224,12 @@ def run(
         OutputError: ``out`` cannot be written, or files no run of ours wrote are in the way.
     """
     agent_kwargs = dict(agent_kwargs or {})
+    if backend not in ("local", "ray") or (address is not None and backend != "ray"):
+        raise ValueError(f"backend must be 'local' or 'ray' (got {backend!r}); --address goes "
+                         "with --backend ray")
     sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
-    cls, name, reference = _resolve_agent(agent, agent_kwargs, workers > 1 or isolate, env_id)
+    cls, name, reference = _resolve_agent(agent, agent_kwargs,
+                                          workers > 1 or isolate or backend == "ray", env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
     check_out_folder(out)
@@ -238,7 +246,7 @@ def run(
         with hold_folder(out, f"agent {name} on {env_id}"):
             return _run_owned(spec, env, bench, agent_obj, out, names,
                               _Options(workers, progress, step_timeout, overwrite, restamp,
-                                       isolate))
+                                       isolate, backend, address))
     finally:
         if not isolate:  # isolated, only the children's copies play, and they close them
             close_agent(agent_obj)
@@ -253,6 +261,8 @@ class _Options:
     overwrite: bool
     restamp: bool = False
     isolate: bool = False
+    backend: str = "local"
+    address: str | None = None
 
 
 def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
@@ -294,7 +304,12 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     manifest.claim(todo)
     try:
         with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
-            if options.isolate and (options.workers <= 1 or len(todo) <= 1):
+            if options.backend == "ray" and todo:
+                from .ray_sequences import play_on_ray
+
+                records, played = play_on_ray(spec, out, todo, stamps, lengths, bar=bar,
+                                              workers=options.workers, address=options.address)
+            elif options.isolate and (options.workers <= 1 or len(todo) <= 1):
                 records, played = play_isolated(spec, out, todo, stamps, bar, causes,
                                                 options.step_timeout)
             elif options.workers <= 1 or len(todo) <= 1:

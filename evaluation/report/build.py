@@ -121,6 +121,7 @@ def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
 
 def scorecard_section(folder: Path, out: Path) -> str:
     """A scorecard folder's table (its Markdown as HTML) and radar chart."""
+    from ..correlation_plot import report_section as correlation_section
     from ..scorecard_report import columns, value
 
     card = json.loads((folder / "scorecard.json").read_text(encoding="utf-8"))
@@ -142,7 +143,7 @@ def scorecard_section(folder: Path, out: Path) -> str:
             radar = f'<p><img src="{src.name}" alt="radar chart" style="max-width:600px"></p>'
             break
     return ('<h2 id="scorecard">Scorecard</h2>' + table(headers, rows, table_id="metrics-table")
-            + radar + _card_intervals(folder))
+            + radar + _card_intervals(folder) + correlation_section(folder, out))
 
 
 def _card_intervals(folder: Path) -> str:

@@ -1607,3 +1607,33 @@ CASES = CASES + (
            "occluded": np.zeros(len(obs["active"]), np.int8)}),
        "frame 0: query 0:", "must be finite", error="InvalidActionError"),
 )
+
+def _probe_csv(scratch: Path) -> Path:
+    write(scratch / "probe.csv", "model,probe:imagenet\nrandom,4\nlite,n/a\n")
+    return scratch
+
+
+CASES = CASES + (
+    _c("CLI-tune-mistyped-space", "unitrack tune --space association.appearance_treshold=0.5..0.9",
+       cli("tune", "--env", "UniTrack/MOT16-v0", "--agent", "unitrack", "--space",
+           "association.appearance_treshold=0.5..0.9", "--tune-sequences", "SYN-01",
+           "--validation-sequences", "SYN-02", "--metric", "IDF1", "--out", "{out}"),
+       "exit 2:", "appearance_treshold", "valid fields", "appearance_threshold",
+       error="CLIFailed"),
+    _c("CLI-tune-overlapping-splits", "unitrack tune with a sequence in both splits",
+       cli("tune", "--env", "UniTrack/MOT16-v0", "--agent", "unitrack", "--space",
+           "new_track_score=0.3..0.9", "--tune-sequences", "SYN-01",
+           "--validation-sequences", "SYN-01", "--metric", "IDF1", "--out", "{out}"),
+       "exit 2:", "SYN-01 in both --tune-sequences and --validation-sequences",
+       error="CLIFailed"),
+    _c("CLI-scorecard-external-not-a-number", "unitrack scorecard --model "
+       "random,probe:imagenet=high",
+       cli("scorecard", "--model", "random,probe:imagenet=high", "--out", "{out}"),
+       "exit 2:", "probe:imagenet", "'high' is not a number", error="CLIFailed"),
+    _c("CLI-scorecard-external-csv-bad-cell", "unitrack scorecard --external CSV with a "
+       "non-number in line 3",
+       cli("scorecard", "--model", "random", "--external", "{data}/probe.csv", "--out",
+           "{out}", data=_probe_csv),
+       "exit 2:", "probe.csv, line 3, column probe:imagenet", "'n/a' is not a number",
+       error="CLIFailed"),
+)

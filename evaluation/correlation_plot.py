@@ -1,0 +1,94 @@
+"""The correlation study's figure (the UniTrack paper's Figure 4), and its report section.
+
+One figure per external metric: a scatter panel per task, the other evaluation on the x-axis,
+tracking on the y-axis, each model's label beside its point, and both coefficients in the
+panel's lower left corner as in the paper. PNG and SVG with the same bytes for the same
+study (no date, a fixed SVG id salt).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+from pathlib import Path
+from typing import Any
+
+
+def _coefficients(row: dict[str, Any]) -> str:
+    if row["pearson"] is None:
+        return f"n={row['n']}: no coefficient"
+    return (f"ρ = {row['spearman']:+.2f}\nr = {row['pearson']:+.2f}\n"
+            f"n = {row['n']}")
+
+
+def draw_scatter(rows: list[dict[str, Any]], stem: Path) -> list[Path]:
+    """Write ``<stem>.png`` and ``<stem>.svg`` for one metric's rows; [] without matplotlib."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        warnings.warn("no correlation figure: matplotlib is missing (pip install "
+                      "'unitrack-env[plots]')", stacklevel=2)
+        return []
+    figure, panels = plt.subplots(1, len(rows), figsize=(3.0 * len(rows), 3.2), squeeze=False)
+    for ax, row in zip(panels[0], rows, strict=True):
+        xs = [p["x"] for p in row["points"]]
+        ys = [100 * p["y"] for p in row["points"]]
+        hollow = row["source"] == "synthetic"
+        ax.scatter(xs, ys, s=22, color="tab:blue", facecolors="white" if hollow else None)
+        for point, x, y in zip(row["points"], xs, ys, strict=True):
+            ax.annotate(point["model"], (x, y), fontsize=6, xytext=(3, 2),
+                        textcoords="offset points")
+        ax.text(0.03, 0.03, _coefficients(row), transform=ax.transAxes, fontsize=8,
+                va="bottom", ha="left", bbox={"facecolor": "white", "alpha": 0.8,
+                                              "edgecolor": "none"})
+        synthetic = "\n[synthetic data]" if hollow else ""
+        ax.set_title(row["title"] + synthetic, fontsize=9)
+        ax.set_xlabel(row["metric_name"] + (" (lower is better)" if row["lower_is_better"]
+                                            else ""), fontsize=8)
+        ax.tick_params(labelsize=7)
+    panels[0][0].set_ylabel("tracking (%)", fontsize=8)
+    figure.tight_layout()
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    written = []
+    with matplotlib.rc_context({"svg.hashsalt": "unitrack-correlation"}):
+        for suffix in (".png", ".svg"):
+            path = stem.with_suffix(suffix)
+            figure.savefig(path, dpi=150, metadata={"Date": None} if suffix == ".svg" else None)
+            written.append(path)
+    plt.close(figure)
+    return written
+
+
+def report_section(folder: Path, out: Path) -> str:
+    """The HTML of a scorecard folder's correlation study ("" when it has none)."""
+    from .correlation_study import figure_stem
+    from .report.html import esc, table
+
+    path = folder / "correlation.json"
+    if not path.is_file():
+        return ""
+    result = json.loads(path.read_text(encoding="utf-8"))
+    html = ["<h2 id=\"correlation\">Correlation study</h2>"]
+    for name in result["metrics"]:
+        rows = []
+        for c in (c for c in result["correlations"] if c["metric"] == name):
+            cells = [c["title"], str(c["n"])]
+            for key in ("pearson", "spearman"):
+                ci = c[f"{key}_ci"]
+                cells.append("-" if c[key] is None else f"{c[key]:+.2f}" + (
+                    f" [{ci[0]:+.2f}, {ci[1]:+.2f}]" if ci else ""))
+            rows.append("<tr>" + "".join(f'<td class="text">{esc(v)}</td>'
+                                         for v in [*cells, c["verdict"]]) + "</tr>")
+        html.append(f"<h3>{esc(name)}</h3>" + table(
+            ["task", "models", "Pearson r [95%]", "Spearman rho [95%]", "verdict"], rows,
+            table_id=f"correlation-{figure_stem(name)}"))
+        src = folder / f"correlation-{figure_stem(name)}.svg"
+        if src.is_file():
+            shutil.copyfile(src, out / src.name)
+            html.append(f'<p><img src="{esc(src.name)}" alt="correlation with {esc(name)}" '
+                        'style="max-width:100%"></p>')
+    return "".join(html)
