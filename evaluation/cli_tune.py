@@ -12,7 +12,7 @@ from .cli_types import names, positive_int
 EXAMPLES = """examples:
   unitrack tune --env UniTrack/MOT16-v0 --agent unitrack --tune-sequences SYN-01 \\
       --validation-sequences SYN-02 --metric IDF1 --trials 8 --out runs/tune \\
-      --space new_track_score=0.3..0.9 --space association.appearance_threshold=0.5..0.9 \\
+      --space new_track_score=0.3..0.9 --space appearance_threshold=0.5..0.9 \\
       --space use_motion=True|False
 """
 
@@ -30,8 +30,7 @@ def add_parser(sub: Any) -> None:
     tp.add_argument("--space", action="append", required=True,
                     metavar="NAME=LOW..HIGH[:log] | NAME=A|B",
                     help="an option to search (repeatable): a range (float when a bound has "
-                    "a decimal point, else int) or choices; NAME may be OPTION.FIELD of a "
-                    "dict option, e.g. association.iou_threshold=0.3..0.7")
+                    "a decimal point, else int) or choices, e.g. iou_threshold=0.3..0.7")
     tp.add_argument("--tune-sequences", type=names, required=True,
                     help="comma-separated sequences the search scores settings on")
     tp.add_argument("--validation-sequences", type=names, required=True,

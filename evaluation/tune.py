@@ -1,7 +1,7 @@
 """``unitrack tune``: a hyper-parameter search over a head's options, on Optuna.
 
-The search space names agent options (``new_track_score``) or fields of a dict option
-(``association.appearance_threshold``): ``NAME=LOW..HIGH`` (a float range when a bound has a
+The search space names agent options (``new_track_score``, ``appearance_threshold``: a
+head's config is flat): ``NAME=LOW..HIGH`` (a float range when a bound has a
 decimal point, else an integer range; ``:log`` for a log scale) or ``NAME=A|B|C`` (choices,
 read as ``--agent-arg`` reads values). Names, bounds and choices are checked with
 :func:`~unitrack_env.agents.options.check_options` (as ``--agent-arg`` is) and by making
@@ -44,11 +44,6 @@ class Dimension:
     high: float | int | None = None
     log: bool = False
     choices: tuple[Any, ...] = ()
-
-    @property
-    def option(self) -> str:
-        """The agent option it sets (``association`` for ``association.iou_threshold``)."""
-        return self.name.split(".", 1)[0]
 
     def suggest(self, trial: Any) -> Any:
         """The trial's value (Optuna's suggest API)."""
@@ -98,39 +93,26 @@ def parse_dimension(text: str) -> Dimension:
 
 
 def apply(base: dict[str, Any], params: dict[str, Any]) -> dict[str, Any]:
-    """The agent options of a setting: ``base`` with ``params`` (dotted names into dicts)."""
-    out = dict(base)
-    for name, value in params.items():
-        option, dot, field_name = name.partition(".")
-        if dot:
-            out[option] = {**out.get(option, {}), field_name: value}
-        else:
-            out[name] = value
-    return out
+    """The agent options of a setting: ``base`` with ``params``."""
+    return {**base, **params}
 
 
 def check_space(agent: str, space: list[Dimension], base: dict[str, Any]) -> None:
     """Refuse an unknown option, a value of the wrong type, or a setting the agent rejects."""
     from unitrack_env.agents.base import agent_class, close_agent
-    from unitrack_env.agents.options import agent_options, check_options, conforms
+    from unitrack_env.agents.options import check_options
 
     cls = agent_class(agent)
-    options = agent_options(cls)
     names = [d.name for d in space]
     if len(set(names)) != len(names):
         raise ValueError(f"--space names an option twice: {', '.join(names)}")
     for d in space:
-        if d.name in base or d.option in base and "." not in d.name:
+        if d.name in base:
             raise ValueError(f"--space {d.name} is also fixed by --agent-arg; give it once")
-        if "." in d.name:
-            if d.option not in options or not conforms({}, options[d.option]):
-                raise ValueError(f"--space {d.name}: agent '{agent}' has no dict option "
-                                 f"'{d.option}' to hold '{d.name.split('.', 1)[1]}'")
-            continue
         for value in d.corners():  # typed already: checked as --agent-arg checks its values
             check_options(cls, {d.name: value}, agent=agent)
-    # Make the agent with every bound and choice: what its own config refuses (a dict
-    # option's unknown field, a value out of its range) is one error now.
+    # Make the agent with every bound and choice: what its own config refuses (a value out
+    # of its range) is one error now.
     for i in range(max(len(d.corners()) for d in space)):
         setting = {d.name: d.corners()[min(i, len(d.corners()) - 1)] for d in space}
         try:
