@@ -224,12 +224,10 @@ def run(
         OutputError: ``out`` cannot be written, or files no run of ours wrote are in the way.
     """
     agent_kwargs = dict(agent_kwargs or {})
-    if backend not in ("local", "ray") or (address is not None and backend != "ray"):
-        raise ValueError(f"backend must be 'local' or 'ray' (got {backend!r}); --address goes "
-                         "with --backend ray")
+    options = _Options(workers, progress, step_timeout, overwrite, restamp, isolate, backend,
+                       address)
     sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
-    cls, name, reference = _resolve_agent(agent, agent_kwargs,
-                                          workers > 1 or isolate or backend == "ray", env_id)
+    cls, name, reference = _resolve_agent(agent, agent_kwargs, options.elsewhere, env_id)
     spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
     out = Path(out)
     check_out_folder(out)
@@ -244,9 +242,7 @@ def run(
         raise
     try:
         with hold_folder(out, f"agent {name} on {env_id}"):
-            return _run_owned(spec, env, bench, agent_obj, out, names,
-                              _Options(workers, progress, step_timeout, overwrite, restamp,
-                                       isolate, backend, address))
+            return _run_owned(spec, env, bench, agent_obj, out, names, options)
     finally:
         if not isolate:  # isolated, only the children's copies play, and they close them
             close_agent(agent_obj)
@@ -263,6 +259,17 @@ class _Options:
     isolate: bool = False
     backend: str = "local"
     address: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.backend not in ("local", "ray") or (self.address is not None
+                                                     and self.backend != "ray"):
+            raise ValueError(f"backend must be 'local' or 'ray' (got {self.backend!r}); "
+                             "--address goes with --backend ray")
+
+    @property
+    def elsewhere(self) -> bool:
+        """Whether the agent plays in other processes (which must be able to import it)."""
+        return self.workers > 1 or self.isolate or self.backend == "ray"
 
 
 def _run_owned(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Path,
