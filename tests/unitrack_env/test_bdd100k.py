@@ -138,3 +138,15 @@ def test_a_result_frame_beyond_the_sequence_is_named(bdd, tmp_path):
 def test_a_root_without_the_split_folder_is_named(tmp_path):
     with pytest.raises(DataFormatError, match="box_track_20"):
         BDD100KBenchmark.build(tmp_path)
+
+
+def test_crowd_boxes_are_ignore_regions_not_misses(bdd, tmp_path):
+    bench, gt = bdd
+    frames = json.loads(gt.read_text())
+    crowd = sum(lab["attributes"]["crowd"] for f in frames for lab in f["labels"])
+    for frame in frames:  # results without the 132 crowd boxes: nothing is missed
+        frame["labels"] = [lab for lab in frame["labels"] if not lab["attributes"]["crowd"]]
+    (tmp_path / f"{SEQ}.json").write_text(json.dumps(frames))
+    combined = bench.score_folder(tmp_path).combined
+    assert crowd == 132
+    assert combined["car/HOTA"] == 1.0 and combined["car/MOTA"] == 1.0

@@ -2,8 +2,9 @@
 
 ``<root>/labels/box_track_20/<split>/`` holds ``*.json`` files (every one is read; the
 sequence is the file's stem, as TrackEval names it). Each file is a list of frames with
-``frameIndex`` (from 0) and ``labels``; a label has ``id``, ``category``, ``box2d`` (``x1 y1
-x2 y2``) and ``attributes`` (``crowd``: the box is an ignore region). Results are the same
+``frameIndex`` (from 0; TrackEval's ``index`` is read too) and ``labels``; a label has ``id``,
+``category``, ``box2d`` (``x1 y1 x2 y2``) and ``attributes`` (``crowd``, or TrackEval's
+``Crowd``: a ground-truth box that is an ignore region). Results are the same
 layout with a ``score`` per label.
 """
 
@@ -71,7 +72,7 @@ def _label(raw: Any, where: str, categories: tuple[str, ...]) -> BDDLabel:
             or not math.isfinite(score):
         raise ValueError(f"{where}.score: a finite number is required, got {score!r}")
     return BDDLabel(str(ident), category, (values[0], values[1], values[2], values[3]),
-                    bool(attributes.get("crowd", False)), float(score))
+                    bool(attributes.get("crowd", attributes.get("Crowd", False))), float(score))
 
 
 def read_bdd_frames(path: Path, *, results: bool = False,
