@@ -52,7 +52,8 @@ def trackeval_direct(gt_file: Path, result_file: Path, tmp: Path) -> dict:
 def _perturbed(gt_file: Path, out: Path) -> None:
     """Every 7th box dropped, two car tracks' ids swapped from frame 100, a score per box."""
     frames = json.loads(gt_file.read_text())
-    swap = {"a-00122062": "a-00122063", "a-00122063": "a-00122062"}
+    first, second = [lab["id"] for lab in frames[100]["labels"] if lab["category"] == "car"][:2]
+    swap = {first: second, second: first}
     k = 0
     for frame in frames:
         kept = []
@@ -104,6 +105,7 @@ def test_perturbed_results_score_as_trackeval_per_class(bdd, tmp_path):
             checked += 1
     assert checked > 400
     assert 0.5 < ours["cls_comb_det_av"]["HOTA"] < 1.0  # the perturbation shows
+    assert ours["cls_comb_det_av"]["IDSW"] >= 2
 
 
 def test_rows_written_and_read_back_score_the_same(bdd, tmp_path):
