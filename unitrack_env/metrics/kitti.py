@@ -12,7 +12,7 @@ from __future__ import annotations
 import io
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -78,20 +78,31 @@ def kitti_raw_scores(label_dir: Path, results: Path,
     return out
 
 
-def combine(raw: Mapping[str, Mapping[str, dict[str, Any]]]) -> dict[str, dict[str, float]]:
-    """Per class over the given sequences, and the two class combinations, flattened.
+def combine(raw: Mapping[str, Mapping[str, dict[str, Any]]],
+            classes: Sequence[str] = CLASSES,
+            super_categories: Mapping[str, Sequence[str]] | None = None,
+            ) -> dict[str, dict[str, float]]:
+    """Per class over the given sequences, and the class combinations, flattened.
 
-    ``raw`` is :func:`kitti_raw_scores`' output (or a part of it); the combinations are
-    TrackEval's ``combine_classes_class_averaged`` and ``combine_classes_det_averaged``.
+    ``raw`` is :func:`kitti_raw_scores`' output (or a part of it, or another dataset's of the
+    same shape) and ``classes`` its classes; the combinations are TrackEval's
+    ``combine_classes_class_averaged`` and ``combine_classes_det_averaged``, and, for each
+    ``super_categories`` entry (name: its classes), the detection average of its classes, as
+    TrackEval's Evaluator does for datasets with super-categories (BDD100K).
     """
-    per_class: dict[str, dict[str, Any]] = {cls: {} for cls in CLASSES}
+    groups = dict(super_categories or {})
+    per_class: dict[str, dict[str, Any]] = {cls: {} for cls in classes}
     combos: dict[str, dict[str, Any]] = {CLASS_AVERAGE: {}, DETECTION_AVERAGE: {}}
+    combos.update({name: {} for name in groups})
     for metric in trackeval_metrics():
         name = metric.get_name()
-        for cls in CLASSES:
+        for cls in classes:
             per_seq = {seq: raw[seq][cls][name] for seq in raw}
             per_class[cls][name] = metric.combine_sequences(per_seq)  # as the Evaluator
-        by_class = {cls: per_class[cls][name] for cls in CLASSES}
+        by_class = {cls: per_class[cls][name] for cls in classes}
         combos[CLASS_AVERAGE][name] = metric.combine_classes_class_averaged(by_class)
         combos[DETECTION_AVERAGE][name] = metric.combine_classes_det_averaged(by_class)
+        for group, members in groups.items():
+            combos[group][name] = metric.combine_classes_det_averaged(
+                {cls: by_class[cls] for cls in members})
     return {key: flatten_results(value) for key, value in {**per_class, **combos}.items()}

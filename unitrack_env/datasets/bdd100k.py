@@ -1,0 +1,143 @@
+"""Reader for BDD100K box tracking: one JSON list of frames per video (Scalabel format).
+
+``<root>/labels/box_track_20/<split>/`` holds ``*.json`` files (every one is read; the
+sequence is the file's stem, as TrackEval names it). Each file is a list of frames with
+``frameIndex`` (from 0; TrackEval's ``index`` is read too) and ``labels``; a label has ``id``,
+``category``, ``box2d`` (``x1 y1 x2 y2``) and ``attributes`` (``crowd``, or TrackEval's
+``Crowd``: a ground-truth box that is an ignore region). Results are the same
+layout with a ``score`` per label.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from unitrack_env.datasets.limits import MAX_FRAMES
+from unitrack_env.errors import DataFormatError, UnknownSequenceError
+
+#: BDD100K's 8 evaluated classes, in TrackEval's order; ids in rows are 1 + the index.
+CLASSES: tuple[str, ...] = ("pedestrian", "rider", "car", "bus", "truck", "train",
+                            "motorcycle", "bicycle")
+#: Ground-truth categories TrackEval turns into ignore regions (as crowd boxes).
+DISTRACTORS: tuple[str, ...] = ("other person", "trailer", "other vehicle")
+#: BDD100K's super-categories (TrackEval's), each the detection average of its classes.
+SUPER_CATEGORIES: dict[str, tuple[str, ...]] = {
+    "HUMAN": ("pedestrian", "rider"), "VEHICLE": ("car", "truck", "bus", "train"),
+    "BIKE": ("motorcycle", "bicycle")}
+#: Where the split folders are under the root.
+LABELS = Path("labels") / "box_track_20"
+_BOX = ("x1", "y1", "x2", "y2")
+
+
+@dataclass(frozen=True)
+class BDDLabel:
+    """One box: its id (as written), category, ``x1 y1 x2 y2``, crowd flag and score."""
+
+    ident: str
+    category: str
+    box: tuple[float, float, float, float]
+    crowd: bool
+    score: float
+
+
+def _label(raw: Any, where: str, categories: tuple[str, ...]) -> BDDLabel:
+    """One label checked field by field; ``where`` names it in messages."""
+    if not isinstance(raw, dict):
+        raise ValueError(f"{where}: a label must be an object")
+    ident = raw.get("id")
+    if not isinstance(ident, (str, int)) or isinstance(ident, bool):
+        raise ValueError(f"{where}.id: a string or integer is required, got {ident!r}")
+    category = raw.get("category")
+    if category not in categories:
+        raise ValueError(f"{where}.category: {category!r} is not one of {list(categories)}")
+    box = raw.get("box2d")
+    if not isinstance(box, dict):
+        raise ValueError(f"{where}.box2d: an object with {list(_BOX)} is required")
+    values = []
+    for key in _BOX:
+        value = box.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise ValueError(f"{where}.box2d.{key}: a finite number is required, got {value!r}")
+        values.append(float(value))
+    attributes = raw.get("attributes") or {}
+    if not isinstance(attributes, dict):
+        raise ValueError(f"{where}.attributes: an object is required")
+    score = raw.get("score", 1.0)
+    if isinstance(score, bool) or not isinstance(score, (int, float)) \
+            or not math.isfinite(score):
+        raise ValueError(f"{where}.score: a finite number is required, got {score!r}")
+    return BDDLabel(str(ident), category, (values[0], values[1], values[2], values[3]),
+                    bool(attributes.get("crowd", attributes.get("Crowd", False))), float(score))
+
+
+def read_bdd_frames(path: Path, *, results: bool = False,
+                    length: int | None = None) -> list[list[BDDLabel]]:
+    """The labels of each frame of ``path`` (frames from 0; missing frames are empty).
+
+    Ground truth (``results=False``) may hold the 8 classes and the distractor categories;
+    results only the 8 classes, with frames inside ``length`` when it is given.
+    DataFormatError names the file and the frame / label / field of a problem.
+    """
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DataFormatError(path, "missing") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise DataFormatError(path, f"unreadable JSON ({exc})") from None
+    if not isinstance(data, list):
+        raise DataFormatError(path, "a JSON list of frames is required")
+    categories = CLASSES if results else CLASSES + DISTRACTORS
+    frames: dict[int, list[BDDLabel]] = {}
+    for position, frame in enumerate(data):
+        where = f"frame [{position}]"
+        try:
+            if not isinstance(frame, dict):
+                raise ValueError(f"{where}: a frame must be an object")
+            index = frame.get("frameIndex", frame.get("index"))
+            if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+                raise ValueError(f"{where}.frameIndex: an integer >= 0 is required, "
+                                 f"got {index!r}")
+            limit = length if length is not None else MAX_FRAMES
+            if index >= limit:
+                raise ValueError(f"{where}.frameIndex: {index} is beyond the sequence's "
+                                 f"{limit} frames")
+            if index in frames:
+                raise ValueError(f"{where}.frameIndex: frame {index} appears twice")
+            labels = frame.get("labels") or []
+            if not isinstance(labels, list):
+                raise ValueError(f"{where}.labels: a list is required")
+            frames[index] = [_label(raw, f"{where}.labels[{i}]", categories)
+                             for i, raw in enumerate(labels)]
+        except ValueError as exc:
+            raise DataFormatError(path, str(exc)) from None
+    count = length if length is not None else (max(frames) + 1 if frames else 0)
+    return [frames.get(t, []) for t in range(count)]
+
+
+class BDD100KDataset:
+    """The videos of one split: ``<root>/labels/box_track_20/<split>/*.json``."""
+
+    def __init__(self, root: str | Path, split: str = "val") -> None:
+        self.root = Path(root)
+        self.split = split
+        self.split_dir = self.root / LABELS / split
+        if not self.split_dir.is_dir():
+            raise DataFormatError(self.split_dir, "missing: BDD100K's box-track labels of "
+                                  f"split {split!r} are expected there")
+        files = sorted(self.split_dir.glob("*.json"))
+        if not files:
+            raise DataFormatError(self.split_dir, "holds no *.json file")
+        self.files = {f.stem: f for f in files}
+        self.sequence_names = list(self.files)
+        self.lengths = {name: len(read_bdd_frames(f)) for name, f in self.files.items()}
+
+    def ground_truth_path(self, name: str) -> Path:
+        """The JSON file of ``name``."""
+        if name not in self.files:
+            raise UnknownSequenceError(f"unknown BDD100K sequence {name!r} in {self.split_dir}")
+        return self.files[name]
