@@ -4,7 +4,9 @@
 run's benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the metrics
 from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) takes the per-frame values of its
 ``frame_metrics`` from the events (means over frames), sequences combined as the official
-score combines them (its ``combine_weights``); other tasks (MOTS, PoseTrack, VIS) get none.
+score combines them (its ``combine_weights``); ``"counts"`` (TAP-Vid) recomputes each
+sequence's metrics from per-frame additive counts and takes their mean over sequences; other
+tasks (MOTS, PoseTrack, VIS) get none.
 :func:`compare_runs` serves ``unitrack compare`` (and the report's comparison).
 """
 
@@ -156,6 +158,87 @@ def compare_frames(run_a: str | os.PathLike, run_b: str | os.PathLike, bench: Be
     return rows, frames, blocks
 
 
+def count_replicates(counts: dict[str, dict[str, np.ndarray]], blocks: dict[str, int],
+                     bench: Benchmark, level: str = "frames",
+                     ) -> dict[str, dict[str, tuple[float, np.ndarray]]]:
+    """Per sequence and ``COMBINED``: ``{metric: (value, jackknife replicates)}``.
+
+    ``counts``: per sequence the benchmark's per-frame additive counts (its
+    :meth:`~unitrack_env.benchmarks.base.Benchmark.frame_counts`). A sequence's metrics are
+    its ``metrics_of_counts`` of the counts summed over frames; each replicate sums them
+    leaving out one block of frames. ``COMBINED`` is the mean over sequences of each metric
+    where defined (NaN left out); its replicates swap one sequence's value for one of its
+    replicates (``level="frames"``) or leave the whole sequence out (``"sequences"``).
+    """
+    out: dict[str, dict[str, tuple[float, np.ndarray]]] = {}
+    for name, table in counts.items():
+        keep = jackknife_weights(len(next(iter(table.values()))), blocks[name])
+        sums = {key: keep @ np.asarray(v, np.float64) for key, v in table.items()}
+        point = bench.metrics_of_counts({key: v.sum() for key, v in table.items()})
+        reps = [bench.metrics_of_counts({key: s[j] for key, s in sums.items()})
+                for j in range(len(keep))]
+        out[name] = {m: (point[m], np.array([r[m] for r in reps], np.float64)) for m in point}
+    names = list(counts)
+    combined = {}
+    for metric in out[names[0]] if names else ():
+        values = np.array([out[n][metric][0] for n in names], np.float64)
+        reps = []
+        for i, name in enumerate(names):
+            if level == "frames":
+                for rep in out[name][metric][1]:
+                    reps.append(_mean_defined(np.concatenate([values[:i], [rep],
+                                                              values[i + 1:]])))
+            else:
+                reps.append(_mean_defined(np.delete(values, i)))
+        combined[metric] = (_mean_defined(values), np.array(reps, np.float64))
+    out[COMBINED] = combined
+    return out
+
+
+def _mean_defined(values: np.ndarray) -> float:
+    """The mean of the values that are not NaN (NaN if none is)."""
+    values = values[~np.isnan(values)]
+    return float(values.mean()) if len(values) else float("nan")
+
+
+def _run_counts(run: str | os.PathLike, bench: Benchmark,
+                sequences: list[str]) -> dict[str, dict[str, np.ndarray]]:
+    return {name: bench.frame_counts(Path(run) / "data", name) for name in sequences}
+
+
+def _count_intervals(run: Path, bench: Benchmark) -> dict[str, tuple[float, float]]:
+    counts = _run_counts(run, bench, run_sequences(run))
+    blocks = {n: frame_block_length(len(next(iter(c.values())))) for n, c in counts.items()}
+    return {metric: jackknife_interval(*pair) for metric, pair in
+            count_replicates(counts, blocks, bench)[COMBINED].items()}
+
+
+def compare_counts(run_a: str | os.PathLike, run_b: str | os.PathLike, bench: Benchmark,
+                   sequences: list[str], *, level: str = "frames", block: int | None = None
+                   ) -> tuple[dict[str, dict[str, MetricDiff]], dict[str, int], dict[str, int]]:
+    """Paired jackknife rows of two runs scored from per-frame counts (``intervals="counts"``).
+
+    Both runs' metrics are recomputed from the counts (:func:`count_replicates`); the same
+    blocks of frames are left out of both. Returns ``(rows, frames, block lengths)``.
+    """
+    ca, cb = _run_counts(run_a, bench, sequences), _run_counts(run_b, bench, sequences)
+    frames, blocks = {}, {}
+    for name in sequences:
+        frames[name] = len(next(iter(ca[name].values())))
+        if len(next(iter(cb[name].values()))) != frames[name]:
+            raise ValueError(f"{run_a} and {run_b} scored different frames of {name}")
+        blocks[name] = frame_block_length(frames[name]) if block is None else max(
+            1, min(int(block), frames[name]))
+    ra, rb = (count_replicates(c, blocks, bench, level) for c in (ca, cb))
+    rows: dict[str, dict[str, MetricDiff]] = {}
+    for name in [*sequences, COMBINED]:
+        for metric, (a, reps_a) in ra[name].items():
+            b, reps_b = rb[name][metric]
+            low, high = jackknife_interval(a - b, reps_a - reps_b)
+            rows.setdefault(name, {})[metric] = MetricDiff(a, b, a - b, low, high)
+    return rows, frames, blocks
+
+
 def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resamples: int = 1000,
                  seed: int = 0, level: str = "frames", block: int | None = None,
                  method: str = "jackknife") -> Comparison:
@@ -163,7 +246,9 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
 
     The runs' benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the
     metrics from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) compares per-frame
-    metrics (:func:`compare_frames`, jackknife only); otherwise it refuses with the
+    metrics (:func:`compare_frames`, jackknife only); ``"counts"`` recomputes per-sequence
+    metrics from per-frame counts (:func:`compare_counts`, jackknife only); otherwise it
+    refuses with the
     benchmark's ``no_intervals``. Both runs' result files must still match their records and
     their data must be the same (:func:`~.integrity.check_pair`: StaleRun / DifferentData
     otherwise).
@@ -174,7 +259,7 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
     if not common:
         raise ValueError(f"{run_a} and {run_b} have no scored sequence in common")
     check_pair(run_a, run_benchmark(run_a), run_b, run_benchmark(run_b), common)
-    pooled = bench.intervals == "frames"
+    pooled = bench.intervals in ("frames", "counts")
     if not pooled:
         stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
         rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
@@ -186,8 +271,8 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
         if method != "jackknife":
             raise ValueError(f"--interval {method} is for box MOT runs; {bench.task} runs are "
                              "compared with the block jackknife")
-        rows, frames, blocks = compare_frames(run_a, run_b, bench, common, level=level,
-                                              block=block)
+        compare = compare_frames if bench.intervals == "frames" else compare_counts
+        rows, frames, blocks = compare(run_a, run_b, bench, common, level=level, block=block)
     notes = few_data_notes(frames, blocks, level, pooled=pooled)
     for name in unreliable_rows(frames, blocks, pooled=pooled):
         for d in rows[name].values():
@@ -201,7 +286,7 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
 
 def comparable(bench: Benchmark) -> bool:
     """Whether ``compare`` can compare runs of ``bench`` (its ``intervals`` are stated)."""
-    return bench.intervals in ("stats", "frames")
+    return bench.intervals in ("stats", "frames", "counts")
 
 
 def _common_benchmark(run_a: str | os.PathLike, run_b: str | os.PathLike) -> Benchmark:
@@ -229,6 +314,8 @@ def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
         return _mot_intervals(run)
     if bench.intervals == "frames":
         return _frame_intervals(run, bench)
+    if bench.intervals == "counts":
+        return _count_intervals(run, bench)
     return {}
 
 

@@ -1,4 +1,4 @@
-"""TAP-Vid everywhere a task shows up: `unitrack events`, `compare` (an honest refusal),
+"""TAP-Vid everywhere a task shows up: `unitrack events`, `compare` (paired intervals),
 `report` and the scorecard (an opt-in column), on the synthetic TAP-Vid default."""
 
 from __future__ import annotations
@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 
 from unitrack_env.evaluation.cli import main
+from unitrack_env.evaluation.compare import COMBINED, jackknife_interval
 from unitrack_env.evaluation.events import load_events
+from unitrack_env.evaluation.intervals import compare_runs, count_replicates, run_intervals
 from unitrack_env.evaluation.scorecard import _checked_request
 from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
-from unitrack_env.metrics.points import THRESHOLDS
+from unitrack_env.metrics.points import COLUMNS, THRESHOLDS
 
 ENV = "UniTrack/TAPVid-DAVIS-v0"
 
@@ -57,12 +59,56 @@ def test_events_give_back_the_scored_metrics(runs, capsys) -> None:
                     np.mean([np.mean(here < d) for d in THRESHOLDS]), abs=0.02)
 
 
-def test_compare_refuses_saying_why(runs, capsys) -> None:
-    code = main(["compare", str(runs["static-points"]), str(runs["lk-points"])])
-    err = capsys.readouterr().err
-    assert code != 0
-    assert "cannot compare points runs" in err and "ratios of sums" in err
-    assert "Traceback" not in err
+def test_compare_recomputes_the_scored_metrics(runs, capsys) -> None:
+    a, b = runs["static-points"], runs["lk-points"]
+    comparison = compare_runs(a, b)
+    for run, side in ((a, "a"), (b, "b")):
+        scored = json.loads((run / "metrics.json").read_text())
+        for name, row in comparison.rows.items():
+            expected = scored["combined"] if name == COMBINED else scored["per_sequence"][name]
+            for metric, diff in row.items():  # the point estimate is the scored number, exactly
+                assert getattr(diff, side) == expected[metric], (run, name, metric)
+    for row in comparison.rows.values():
+        assert set(row) == set(COLUMNS)
+        for diff in row.values():
+            assert diff.low <= diff.diff <= diff.high
+    assert main(["compare", str(a), str(b)]) == 0
+    out = capsys.readouterr().out
+    assert COMBINED in out and "AJ" in out
+    assert run_intervals(a).keys() == set(COLUMNS)
+
+
+class _Share:
+    """A hand-built benchmark: per sequence the share of hits, then the mean over sequences."""
+
+    @staticmethod
+    def metrics_of_counts(counts) -> dict[str, float]:
+        total = float(counts["trials"])
+        return {"share": float(counts["hits"]) / total if total else float("nan")}
+
+
+def _counts(p: float, frames: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    trials = np.full(frames, 10)
+    return {"hits": rng.binomial(trials, p), "trials": trials}
+
+
+def test_count_jackknife_on_a_known_difference() -> None:
+    rng = np.random.default_rng(3)
+    a = {f"s{i}": _counts(0.8, 200, rng) for i in range(3)}
+    b = {f"s{i}": _counts(0.6, 200, rng) for i in range(3)}
+    empty = {"hits": np.zeros(200, int), "trials": np.zeros(200, int)}
+    a["none"], b["none"] = empty, empty  # no trials: NaN, left out of the mean
+    blocks = dict.fromkeys(a, 40)
+    ra, rb = (count_replicates(c, blocks, _Share()) for c in (a, b))
+    share = [c["hits"].sum() / c["trials"].sum() for n, c in a.items() if n != "none"]
+    assert ra[COMBINED]["share"][0] == pytest.approx(np.mean(share), abs=1e-12)
+    assert len(ra[COMBINED]["share"][1]) == 4 * 5  # one replicate per block of each
+    (pa, reps_a), (pb, reps_b) = ra[COMBINED]["share"], rb[COMBINED]["share"]
+    low, high = jackknife_interval(pa - pb, reps_a - reps_b)
+    assert low < 0.2 < high  # the true difference (0.8 - 0.6)
+    assert 0.005 < (high - low) / 2 < 0.05  # about 1.96 * sqrt(2 * .2 / 6000 + ...) * t
+    same = count_replicates(a, blocks, _Share())[COMBINED]["share"]
+    assert jackknife_interval(0.0, same[1] - reps_a) == (0.0, 0.0)  # identical runs
 
 
 def test_report_draws_a_curve_per_sequence(runs, tmp_path, capsys) -> None:

@@ -198,7 +198,10 @@ class Benchmark(ABC):
     scorecard: ClassVar[ScorecardColumn | None] = None
     #: How ``compare`` and ``scorecard --ci`` get intervals: ``"stats"`` (metrics recomputed
     #: from per-frame statistics, :meth:`frame_stats`), ``"frames"`` (metrics that are means
-    #: over frames, :attr:`frame_metrics`) or ``""`` (none: :attr:`no_intervals` says why).
+    #: over frames, :attr:`frame_metrics`), ``"counts"`` (each sequence's metrics are a
+    #: function, :meth:`metrics_of_counts`, of per-frame additive counts, :meth:`frame_counts`,
+    #: and the combined score is their mean over sequences) or ``""`` (none:
+    #: :attr:`no_intervals` says why).
     intervals: ClassVar[str] = ""
     #: Why the task's metrics get no interval (``compare``'s refusal).
     no_intervals: ClassVar[str] = "its metrics are not means over frames"
@@ -217,6 +220,18 @@ class Benchmark(ABC):
     def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
         """With ``intervals="stats"``: one sequence's per-frame statistics of its results."""
         raise NotImplementedError(f"{type(self).__name__} has no per-frame statistics")
+
+    def frame_counts(self, folder: str | os.PathLike, sequence: str) -> dict[str, np.ndarray]:
+        """With ``intervals="counts"``: ``{count: (frames,) per-frame values}`` of one sequence.
+
+        Each count is additive over frames; summed over all frames, they give the sequence's
+        metrics through :meth:`metrics_of_counts`.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no per-frame counts")
+
+    def metrics_of_counts(self, counts: Mapping[str, float]) -> dict[str, float]:
+        """With ``intervals="counts"``: a sequence's metrics from its summed counts."""
+        raise NotImplementedError(f"{type(self).__name__} has no per-frame counts")
 
     def combine_weights(self, events: pd.DataFrame,
                         sequences: list[str]) -> dict[str, float] | None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import os
 import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,8 @@ from unitrack_env.metrics.points import (
     event_rows,
     frame_values,
     mean_over_videos,
+    metrics_from_counts,
+    pair_counts,
     video_metrics,
 )
 from unitrack_env.metrics.report import COMBINED, ScoreReport
@@ -109,9 +112,9 @@ class TAPVidBenchmark(Benchmark):
     #: The report's curve: each frame's ``<δ^x_avg`` over its points visible in the ground
     #: truth (the ``pck`` column of its ``"frame"`` event).
     report_view = ReportView(value=("pck", "<δx visible"), value_type="frame")
-    no_intervals = ("AJ, <δ^x_avg and OA are ratios of sums over a video's (query, frame) "
-                    "pairs, then means over videos; a mean of per-frame values is not these "
-                    "metrics, and `compare` has no interval from per-frame sums for them")
+    #: AJ, <δ^x_avg and OA are ratios of sums over a video's (query, frame) pairs, then means
+    #: over videos: ``compare`` recomputes them from per-frame sums (:meth:`frame_counts`).
+    intervals = "counts"
     #: Opt-in (``--tasks points``): the default scorecard stays the paper's Table 2 tasks.
     scorecard = ScorecardColumn(
         "Points", ("UniTrack/TAPVid-DAVIS-v0",),
@@ -232,6 +235,21 @@ class TAPVidBenchmark(Benchmark):
                      object=q, x=x, y=y, tx=tx, ty=ty,
                      distance=float("nan") if error is None else float(error))
         return rows
+
+    def frame_counts(self, folder: str | os.PathLike, sequence: str) -> dict[str, np.ndarray]:
+        """Per frame the counts of one video's evaluated pairs (:func:`pair_counts`)."""
+        path = Path(folder) / f"{sequence}.npz"
+        results = read_results(path, self.load(sequence).num_frames)
+        truth = self._checked_queries(sequence, results, path)
+        evaluated = evaluated_pairs(truth.query_frames, truth.occluded.shape[1],
+                                    self.query_mode)
+        return pair_counts(results["tracks"], results["occluded"], truth.tracks,
+                           truth.occluded, evaluated, axis=0)
+
+    def metrics_of_counts(self, counts: Mapping[str, float]) -> dict[str, float]:
+        """The headline metrics (:data:`COLUMNS`) of one video's summed counts."""
+        metrics = metrics_from_counts(dict(counts))
+        return {name: metrics[name] for name in COLUMNS}
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<video>.npz`` files: per video, and their mean."""
