@@ -35,11 +35,11 @@ def draw_scatter(rows: list[dict[str, Any]], stem: Path) -> list[Path]:
         return []
     figure, panels = plt.subplots(1, len(rows), figsize=(3.0 * len(rows), 3.2), squeeze=False)
     for ax, row in zip(panels[0], rows, strict=True):
-        xs = [p["x"] for p in row["points"]]
-        ys = [100 * p["y"] for p in row["points"]]
+        xs = [p["x"] for p in row["scatter"]]
+        ys = [100 * p["y"] for p in row["scatter"]]
         hollow = row["source"] == "synthetic"
         ax.scatter(xs, ys, s=22, color="tab:blue", facecolors="white" if hollow else None)
-        for point, x, y in zip(row["points"], xs, ys, strict=True):
+        for point, x, y in zip(row["scatter"], xs, ys, strict=True):
             ax.annotate(point["model"], (x, y), fontsize=6, xytext=(3, 2),
                         textcoords="offset points")
         ax.text(0.03, 0.03, _coefficients(row), transform=ax.transAxes, fontsize=8,

@@ -156,7 +156,7 @@ def study(card: dict[str, Any], externals: dict[str, dict[str, float]], *,
             results.append({"metric": name, "metric_name": plain, "lower_is_better": lower,
                             "task": task, "head": head, "tracking_metric": metric,
                             "title": title, "source": card["sources"][task]["kind"],
-                            "points": points, **found.to_dict()})
+                            "scatter": points, **found.to_dict()})
     return {"version": 1, "models": models, "metrics": names,
             "unmatched": sorted(set(externals) - set(models)),
             "without_values": {name: [m for m in models if name not in externals.get(m, {})]
