@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
-from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
+from unitrack_env.benchmarks.views import Curve, Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.lasot import (
     GOT10K_SYNTHETIC,
@@ -32,6 +32,9 @@ from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.metrics.sot import (
+    NORM_PRECISION_THRESHOLDS,
+    OTB_CENTER_THRESHOLDS,
+    OTB_OVERLAP_THRESHOLDS,
     SOTScores,
     aggregate_sot,
     center_error_per_frame,
@@ -207,6 +210,26 @@ class OTBBenchmark(Benchmark):
             combined = scores[COMBINED].as_dict()
         return ScoreReport(self.name, per_sequence, combined, scores)
 
+    def curves(self, folder: str | os.PathLike, sequences: list[str]) -> list[Curve]:
+        """Success and precision plots (and normalized precision when the protocol has it).
+
+        The curves of the combined row of :meth:`score_files`: its AUC and precision.
+        """
+        combined = self.score_files(folder, sequences).scores.get(COMBINED)
+        if combined is None:
+            return []
+        plots = [Curve("Success plot", "Overlap threshold", tuple(OTB_OVERLAP_THRESHOLDS),
+                       tuple(combined.success_curve), ("AUC", combined.auc)),
+                 Curve("Precision plot", "Location error threshold (px)",
+                       tuple(OTB_CENTER_THRESHOLDS), tuple(combined.precision_curve),
+                       ("Precision@20px", combined.precision_20px))]
+        if combined.norm_precision_curve is not None:
+            plots.append(Curve("Normalized precision plot", "Normalized location error threshold",
+                               tuple(NORM_PRECISION_THRESHOLDS),
+                               tuple(combined.norm_precision_curve),
+                               ("NormPrecision", float(combined.norm_precision or 0.0))))
+        return plots
+
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """One ``"frame"`` event per frame: its IoU, centre error, true and tracked box."""
         gt = self.load(sequence).boxes
@@ -293,6 +316,10 @@ class GOT10kBenchmark(OTBBenchmark):
             pooled.append(overlaps)
         combined = got10k_scores(np.concatenate(pooled)) if pooled else {}
         return ScoreReport(self.name, per_sequence, combined)
+
+    def curves(self, folder: str | os.PathLike, sequences: list[str]) -> list[Curve]:
+        """None drawn: GOT-10k's scores pool frames (OTB's plots would be another protocol)."""
+        return []
 
     def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
         """Visible frames after the first: GOT-10k pools frames."""
