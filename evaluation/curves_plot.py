@@ -29,18 +29,24 @@ def plot_stem(title: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-")
 
 
-def draw_curves(runs: list[Path], out: Path) -> list[Path]:
-    """Write ``out/<plot>.png`` and ``.svg`` per plot of the runs; return the files written.
+def draw_curves(runs: list[Path], out: Path, *, prefix: str = "") -> list[Path]:
+    """Write ``out/<prefix><plot>.png`` and ``.svg`` per plot of the runs; return the files.
 
     Raises ValueError when no run's benchmark has such plots; [] without matplotlib.
     """
     labelled = [run_curves(run) for run in runs]
+    if not any(curves for _, curves in labelled):
+        raise ValueError(f"no success or precision plots for {', '.join(map(str, runs))}: "
+                         "their benchmarks draw none (only SOT runs have them)")
+    return draw_labelled(labelled, out, prefix=prefix)
+
+
+def draw_labelled(labelled: list[tuple[str, list[Any]]], out: Path, *,
+                  prefix: str = "") -> list[Path]:
+    """Draw ``(legend label, curves)`` of runs: one figure per plot title, PNG then SVG."""
     titles: list[str] = []
     for _, curves in labelled:
         titles += [c.title for c in curves if c.title not in titles]
-    if not titles:
-        raise ValueError(f"no success or precision plots for {', '.join(map(str, runs))}: "
-                         "their benchmarks draw none (only SOT runs have them)")
     try:
         import matplotlib
 
@@ -57,7 +63,7 @@ def draw_curves(runs: list[Path], out: Path) -> list[Path]:
         figure = _figure(plt, title, lines)
         with matplotlib.rc_context({"svg.hashsalt": "unitrack-curves"}):
             for suffix in (".png", ".svg"):
-                path = out / f"{plot_stem(title)}{suffix}"
+                path = out / f"{prefix}{plot_stem(title)}{suffix}"
                 figure.savefig(path, dpi=120, bbox_inches="tight",
                                metadata={"Date": None} if suffix == ".svg" else None)
                 written.append(path)
@@ -82,4 +88,4 @@ def _figure(plt: Any, title: str, lines: list[tuple[str, Any]]) -> Any:
     return figure
 
 
-__all__ = ["draw_curves", "plot_stem", "run_curves"]
+__all__ = ["draw_curves", "draw_labelled", "plot_stem", "run_curves"]

@@ -68,3 +68,15 @@ def test_plot_of_runs_without_curves_is_one_clear_error(tmp_path, capsys) -> Non
     assert not (tmp_path / "out").exists()
     assert main(["plot", str(tmp_path / "nothing"), "--out", str(tmp_path / "out")]) == 2
     assert "no run.json" in capsys.readouterr().err
+
+
+def test_report_shows_the_plots_of_sot_runs(lasot_runs, tmp_path) -> None:
+    from unitrack_env.evaluation.report.build import build_report
+
+    a, b = lasot_runs
+    index = build_report([a, b], tmp_path / "report", thumbnails=1, resamples=20)
+    html = index.read_text()
+    for stem in ("success-plot", "precision-plot", "normalized-precision-plot"):
+        assert f'<img src="curves-{stem}.svg"' in html
+        assert (tmp_path / "report" / f"curves-{stem}.svg").is_file()
+    assert build_report([a], tmp_path / "report", thumbnails=1) == index  # ours: replaced
