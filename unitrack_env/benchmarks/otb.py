@@ -5,7 +5,7 @@ from __future__ import annotations
 import inspect
 import os
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -35,6 +35,7 @@ from unitrack_env.metrics.sot import (
     NORM_PRECISION_THRESHOLDS,
     OTB_CENTER_THRESHOLDS,
     OTB_OVERLAP_THRESHOLDS,
+    PRECISION_THRESHOLD_PX,
     SOTScores,
     aggregate_sot,
     center_error_per_frame,
@@ -43,6 +44,7 @@ from unitrack_env.metrics.sot import (
     got10k_scores,
     overlap_per_frame,
     repair_predictions,
+    valid_ground_truth,
 )
 
 if TYPE_CHECKING:
@@ -101,10 +103,6 @@ class OTBBenchmark(Benchmark):
     columns = ("AUC", "Precision@20px", "AverageOverlap")
     report_view = ReportView(value=("iou", "IoU"))
     intervals = "frames"  # success AUC and precision are means over frames
-    frame_metrics = MappingProxyType({
-        "AUC": lambda d: np.mean(d["iou"].to_numpy()[:, None] > np.linspace(0, 1, 21)[None, :],
-                                 axis=1),
-        "Precision@20px": lambda d: (d["center_error"] <= 20).to_numpy(float)})
     scorecard = ScorecardColumn(
         "SOT", ("UniTrack/OTB-v0",),
         (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
@@ -241,6 +239,34 @@ class OTBBenchmark(Benchmark):
                      **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
                      **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
         return rows
+
+    @property
+    def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
+        """Per-frame AUC and Precision@20px of one sequence's ``"frame"`` events.
+
+        Their means over frames are the official scores: a frame whose ground truth the
+        toolkit deems invalid fails every overlap and passes every distance, an absent frame
+        of the format's absent rule (LaSOT) fails both, as :func:`evaluate_sot_sequence` says.
+        """
+        return MappingProxyType({"AUC": self._frame_auc, "Precision@20px": self._frame_precision})
+
+    def _frame_rules(self, d: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """``(absent, invalid)`` of each event row's frame, from the ground truth."""
+        loaded = self.load(str(d["sequence"].iloc[0]))
+        rows = d["frame"].to_numpy(int) - 1
+        absent = (np.asarray(loaded.absent, bool)[rows] if self.sot_format.absent_fails
+                  else np.zeros(len(rows), bool))
+        return absent, ~valid_ground_truth(loaded.boxes)[rows]
+
+    def _frame_auc(self, d: pd.DataFrame) -> np.ndarray:
+        absent, invalid = self._frame_rules(d)
+        hits = np.mean(d["iou"].to_numpy()[:, None] > OTB_OVERLAP_THRESHOLDS[None, :], axis=1)
+        return np.where(absent | invalid, 0.0, hits)
+
+    def _frame_precision(self, d: pd.DataFrame) -> np.ndarray:
+        absent, invalid = self._frame_rules(d)
+        hits = (d["center_error"] <= PRECISION_THRESHOLD_PX).to_numpy(float)
+        return np.where(absent, 0.0, np.where(invalid, 1.0, hits))
 
     def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
         """1 per sequence: OTB's combined scores are means of the sequences' scores."""
