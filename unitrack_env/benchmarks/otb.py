@@ -38,6 +38,7 @@ from unitrack_env.metrics.sot import (
     PRECISION_THRESHOLD_PX,
     SOTScores,
     aggregate_sot,
+    bounded_overlap,
     center_error_per_frame,
     evaluate_sot_sequence,
     got10k_overlaps,
@@ -231,7 +232,7 @@ class OTBBenchmark(Benchmark):
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """One ``"frame"`` event per frame: its IoU, centre error, true and tracked box."""
         gt = self.load(sequence).boxes
-        pred = repair_predictions(self.read(folder, sequence), gt, init_from_gt=True)
+        pred = self._event_predictions(self.read(folder, sequence), gt)
         iou, err = overlap_per_frame(pred, gt), center_error_per_frame(pred, gt)
         rows = EventRows(sequence)
         for t in range(len(gt)):
@@ -239,6 +240,10 @@ class OTBBenchmark(Benchmark):
                      **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
                      **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
         return rows
+
+    def _event_predictions(self, results: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        """The boxes the events record: the toolkit's repaired ones (as scored)."""
+        return repair_predictions(results, gt, init_from_gt=True)
 
     @property
     def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
@@ -294,9 +299,32 @@ class GOT10kBenchmark(OTBBenchmark):
     """
 
     columns = ("AO", "SR0.5", "SR0.75")
-    intervals = ""
-    no_intervals = "GOT-10k's AO and SR pool the visible frames of all sequences"
-    frame_metrics = MappingProxyType({})
+
+    @property
+    def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
+        """Per-frame AO, SR0.5 and SR0.75 (NaN for frames not scored: the first, absent ones).
+
+        Weighted by visible frames (:meth:`combine_weights`) their means pool the frames, as
+        the score does; the events hold repetition 1 (what ``unitrack evaluate`` writes).
+        """
+        def at(threshold: float | None) -> Callable[[pd.DataFrame], np.ndarray]:
+            def per_frame(d: pd.DataFrame) -> np.ndarray:
+                o = self._frame_overlaps(d)
+                return o if threshold is None else np.where(np.isnan(o), np.nan, o > threshold)
+            return per_frame
+
+        return MappingProxyType({"AO": at(None), "SR0.5": at(0.5), "SR0.75": at(0.75)})
+
+    def _frame_overlaps(self, d: pd.DataFrame) -> np.ndarray:
+        loaded = self.load(str(d["sequence"].iloc[0]))
+        rows = d["frame"].to_numpy(int) - 1
+        pred = d[["tx", "ty", "tw", "th"]].to_numpy(float)
+        overlaps = bounded_overlap(pred, loaded.boxes[rows], loaded.image_size)
+        return np.where((rows == 0) | np.asarray(loaded.absent, bool)[rows], np.nan, overlaps)
+
+    def _event_predictions(self, results: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        """The boxes as written: GOT-10k scores them unrepaired."""
+        return np.asarray(results, dtype=np.float64)
 
     def _result_path(self, folder: str | os.PathLike, sequence: str, repetition: int = 1,
                      ) -> Path:
