@@ -394,6 +394,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_tune import add_parser as add_tune_parser
 
     add_tune_parser(sub)  # unitrack tune
+    from .cli_plot import add_parser as add_plot_parser
+
+    add_plot_parser(sub)  # unitrack plot
     return parser
 
 

@@ -52,6 +52,20 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
             "to sort.</p>" + table(["run", "sequence", *columns], rows, table_id="metrics-table"))
 
 
+def curves_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
+    """The runs' success and precision plots, when their benchmarks draw any ("" if none)."""
+    from ..curves_plot import draw_labelled
+
+    labelled = [(label, bench.curves(run / "data", list(metrics.get("per_sequence", {}))))
+                for label, run, bench, metrics in runs]
+    if not any(curves for _, curves in labelled):
+        return ""
+    images = "".join(f'<img src="{p.name}" alt="{esc(p.stem)}" style="max-width:460px">'
+                     for p in draw_labelled(labelled, out, prefix="curves-")
+                     if p.suffix == ".svg")
+    return '<h2 id="curves">Success and precision plots</h2><p>' + images + "</p>"
+
+
 def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
     """The paired comparison of two runs (whose benchmark states intervals) with 95% intervals."""
     comp = compare_runs(run_a, run_b, resamples=resamples)
@@ -192,7 +206,7 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
         loaded.append((label, run, bench, metrics))
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
-            metrics_section(loaded)]
+            metrics_section(loaded), curves_section(loaded, out)]
     if (len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task
             and comparable(loaded[0][2])):
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
@@ -226,7 +240,8 @@ def check_report_folder(out: Path) -> None:
         refuse_link(path)
     head = index.read_text(encoding="utf-8", errors="replace")[:4000] if index.is_file() else ""
     written = [index, out / "scorecard.svg", out / "scorecard.png",  # and the pages' files:
-               *sorted(out.glob("seq*-*.html")), *sorted(out.glob("img*-*"))]
+               *sorted(out.glob("seq*-*.html")), *sorted(out.glob("img*-*")),
+               *sorted(out.glob("curves-*"))]
     theirs = [p.name for p in written if p.exists() and not any(mark in head for mark in OURS)]
     if theirs:
         raise FileExistsError(f"{out} holds {', '.join(theirs)}, which no report of ours wrote "

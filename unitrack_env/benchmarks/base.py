@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
 
-from unitrack_env.benchmarks.views import ReportView, ScorecardColumn
+from unitrack_env.benchmarks.views import Curve, ReportView, ScorecardColumn
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.roots import resolve_root
@@ -216,6 +216,13 @@ class Benchmark(ABC):
         Default None: the task has no per-frame events (``unitrack events`` says so).
         """
         return None
+
+    def curves(self, folder: str | os.PathLike, sequences: list[str]) -> list[Curve]:
+        """The plots of the combined scores of ``folder``'s result files (``unitrack plot``).
+
+        Default []: the task has no such plots.
+        """
+        return []
 
     def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
         """With ``intervals="stats"``: one sequence's per-frame statistics of its results."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import inspect
 import os
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
-from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
+from unitrack_env.benchmarks.views import Curve, Head, ReportView, ScorecardColumn
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.lasot import (
     GOT10K_SYNTHETIC,
@@ -32,14 +32,20 @@ from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 from unitrack_env.metrics.sot import (
+    NORM_PRECISION_THRESHOLDS,
+    OTB_CENTER_THRESHOLDS,
+    OTB_OVERLAP_THRESHOLDS,
+    PRECISION_THRESHOLD_PX,
     SOTScores,
     aggregate_sot,
+    bounded_overlap,
     center_error_per_frame,
     evaluate_sot_sequence,
     got10k_overlaps,
     got10k_scores,
     overlap_per_frame,
     repair_predictions,
+    valid_ground_truth,
 )
 
 if TYPE_CHECKING:
@@ -98,10 +104,6 @@ class OTBBenchmark(Benchmark):
     columns = ("AUC", "Precision@20px", "AverageOverlap")
     report_view = ReportView(value=("iou", "IoU"))
     intervals = "frames"  # success AUC and precision are means over frames
-    frame_metrics = MappingProxyType({
-        "AUC": lambda d: np.mean(d["iou"].to_numpy()[:, None] > np.linspace(0, 1, 21)[None, :],
-                                 axis=1),
-        "Precision@20px": lambda d: (d["center_error"] <= 20).to_numpy(float)})
     scorecard = ScorecardColumn(
         "SOT", ("UniTrack/OTB-v0",),
         (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
@@ -207,10 +209,30 @@ class OTBBenchmark(Benchmark):
             combined = scores[COMBINED].as_dict()
         return ScoreReport(self.name, per_sequence, combined, scores)
 
+    def curves(self, folder: str | os.PathLike, sequences: list[str]) -> list[Curve]:
+        """Success and precision plots (and normalized precision when the protocol has it).
+
+        The curves of the combined row of :meth:`score_files`: its AUC and precision.
+        """
+        combined = self.score_files(folder, sequences).scores.get(COMBINED)
+        if combined is None:
+            return []
+        plots = [Curve("Success plot", "Overlap threshold", tuple(OTB_OVERLAP_THRESHOLDS),
+                       tuple(combined.success_curve), ("AUC", combined.auc)),
+                 Curve("Precision plot", "Location error threshold (px)",
+                       tuple(OTB_CENTER_THRESHOLDS), tuple(combined.precision_curve),
+                       ("Precision@20px", combined.precision_20px))]
+        if combined.norm_precision_curve is not None:
+            plots.append(Curve("Normalized precision plot", "Normalized location error threshold",
+                               tuple(NORM_PRECISION_THRESHOLDS),
+                               tuple(combined.norm_precision_curve),
+                               ("NormPrecision", float(combined.norm_precision or 0.0))))
+        return plots
+
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """One ``"frame"`` event per frame: its IoU, centre error, true and tracked box."""
         gt = self.load(sequence).boxes
-        pred = repair_predictions(self.read(folder, sequence), gt, init_from_gt=True)
+        pred = self._event_predictions(self.read(folder, sequence), gt)
         iou, err = overlap_per_frame(pred, gt), center_error_per_frame(pred, gt)
         rows = EventRows(sequence)
         for t in range(len(gt)):
@@ -218,6 +240,38 @@ class OTBBenchmark(Benchmark):
                      **dict(zip(("x", "y", "w", "h"), map(float, gt[t]), strict=True)),
                      **dict(zip(("tx", "ty", "tw", "th"), map(float, pred[t]), strict=True)))
         return rows
+
+    def _event_predictions(self, results: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        """The boxes the events record: the toolkit's repaired ones (as scored)."""
+        return repair_predictions(results, gt, init_from_gt=True)
+
+    @property
+    def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
+        """Per-frame AUC and Precision@20px of one sequence's ``"frame"`` events.
+
+        Their means over frames are the official scores: a frame whose ground truth the
+        toolkit deems invalid fails every overlap and passes every distance, an absent frame
+        of the format's absent rule (LaSOT) fails both, as :func:`evaluate_sot_sequence` says.
+        """
+        return MappingProxyType({"AUC": self._frame_auc, "Precision@20px": self._frame_precision})
+
+    def _frame_rules(self, d: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        """``(absent, invalid)`` of each event row's frame, from the ground truth."""
+        loaded = self.load(str(d["sequence"].iloc[0]))
+        rows = d["frame"].to_numpy(int) - 1
+        absent = (np.asarray(loaded.absent, bool)[rows] if self.sot_format.absent_fails
+                  else np.zeros(len(rows), bool))
+        return absent, ~valid_ground_truth(loaded.boxes)[rows]
+
+    def _frame_auc(self, d: pd.DataFrame) -> np.ndarray:
+        absent, invalid = self._frame_rules(d)
+        hits = np.mean(d["iou"].to_numpy()[:, None] > OTB_OVERLAP_THRESHOLDS[None, :], axis=1)
+        return np.where(absent | invalid, 0.0, hits)
+
+    def _frame_precision(self, d: pd.DataFrame) -> np.ndarray:
+        absent, invalid = self._frame_rules(d)
+        hits = (d["center_error"] <= PRECISION_THRESHOLD_PX).to_numpy(float)
+        return np.where(absent, 0.0, np.where(invalid, 1.0, hits))
 
     def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
         """1 per sequence: OTB's combined scores are means of the sequences' scores."""
@@ -245,9 +299,32 @@ class GOT10kBenchmark(OTBBenchmark):
     """
 
     columns = ("AO", "SR0.5", "SR0.75")
-    intervals = ""
-    no_intervals = "GOT-10k's AO and SR pool the visible frames of all sequences"
-    frame_metrics = MappingProxyType({})
+
+    @property
+    def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
+        """Per-frame AO, SR0.5 and SR0.75 (NaN for frames not scored: the first, absent ones).
+
+        Weighted by visible frames (:meth:`combine_weights`) their means pool the frames, as
+        the score does; the events hold repetition 1 (what ``unitrack evaluate`` writes).
+        """
+        def at(threshold: float | None) -> Callable[[pd.DataFrame], np.ndarray]:
+            def per_frame(d: pd.DataFrame) -> np.ndarray:
+                o = self._frame_overlaps(d)
+                return o if threshold is None else np.where(np.isnan(o), np.nan, o > threshold)
+            return per_frame
+
+        return MappingProxyType({"AO": at(None), "SR0.5": at(0.5), "SR0.75": at(0.75)})
+
+    def _frame_overlaps(self, d: pd.DataFrame) -> np.ndarray:
+        loaded = self.load(str(d["sequence"].iloc[0]))
+        rows = d["frame"].to_numpy(int) - 1
+        pred = d[["tx", "ty", "tw", "th"]].to_numpy(float)
+        overlaps = bounded_overlap(pred, loaded.boxes[rows], loaded.image_size)
+        return np.where((rows == 0) | np.asarray(loaded.absent, bool)[rows], np.nan, overlaps)
+
+    def _event_predictions(self, results: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        """The boxes as written: GOT-10k scores them unrepaired."""
+        return np.asarray(results, dtype=np.float64)
 
     def _result_path(self, folder: str | os.PathLike, sequence: str, repetition: int = 1,
                      ) -> Path:
@@ -293,6 +370,10 @@ class GOT10kBenchmark(OTBBenchmark):
             pooled.append(overlaps)
         combined = got10k_scores(np.concatenate(pooled)) if pooled else {}
         return ScoreReport(self.name, per_sequence, combined)
+
+    def curves(self, folder: str | os.PathLike, sequences: list[str]) -> list[Curve]:
+        """None drawn: GOT-10k's scores pool frames (OTB's plots would be another protocol)."""
+        return []
 
     def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
         """Visible frames after the first: GOT-10k pools frames."""

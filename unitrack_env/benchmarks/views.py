@@ -77,3 +77,18 @@ def iou_baseline(metrics: tuple[str, ...]) -> Head:
 
 #: The network input of the association heads: the 1088 x 608 letterbox.
 LETTERBOX: tuple[int, int, int] = (1, 608, 1088)
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One plot of a run's combined scores (a success or precision plot).
+
+    ``x``: the thresholds; ``y``: the fraction of frames passing each; ``score``: what the
+    legend shows, ``(metric, value)`` (``("AUC", 0.61)``).
+    """
+
+    title: str
+    x_label: str
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    score: tuple[str, float]
