@@ -17,6 +17,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
+from PIL import Image
 
 from unitrack_env.benchmarks.views import Curve, ReportView, ScorecardColumn
 from unitrack_env.errors import DataFormatError
@@ -270,6 +271,19 @@ class Benchmark(ABC):
             return info.frame_path(int(getattr(info, "first_frame", 1)) + frame - 1)
         paths = tuple(getattr(info, "frame_paths", ()))
         return Path(paths[frame - 1]) if 1 <= frame <= len(paths) else None
+
+    def frame_array(self, sequence: str, frame: int) -> np.ndarray | None:
+        """1-based ``frame`` as uint8 RGB ``(H, W, 3)``, in the pixels its events are in.
+
+        What the report draws on. Default: the file :meth:`frame_image` names, opened; None
+        when there is none. A benchmark whose frames are not files (held in an archive or
+        pickle) overrides this.
+        """
+        path = self.frame_image(sequence, frame)
+        if path is None or not Path(path).is_file():
+            return None
+        with Image.open(path) as image:
+            return np.asarray(image.convert("RGB"))
 
     def frame_rate(self, sequence: str) -> float:
         """Frames per second of ``sequence`` (a clip's time of a frame).

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
 from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
@@ -148,6 +149,17 @@ class TAPVidBenchmark(Benchmark):
     def raster(self, name: str) -> tuple[int, int]:
         """``(width, height)`` of the evaluation raster of video ``name``."""
         return EVAL_SIZE if self.resolution == "256" else self.load(name).image_size
+
+    def frame_array(self, sequence: str, frame: int) -> np.ndarray | None:
+        """1-based ``frame`` of the pickle's video, resized to the evaluation raster."""
+        video = self.load(sequence)
+        if not 1 <= frame <= video.num_frames:
+            return None
+        image = video.frames[frame - 1]
+        size = self.raster(sequence)
+        if size == video.image_size:
+            return image
+        return np.asarray(Image.fromarray(image).resize(size, Image.BILINEAR))
 
     def queries(self, name: str) -> PointQueries:
         """The queries of video ``name`` with their ground truth, in raster pixels."""
