@@ -41,7 +41,9 @@ def legend() -> str:
                (_swatch(GT_COLOUR, False, True), "other ground truth"),
                (_swatch(OTHER_COLOUR, False), "other tracks (grey)")]
     return ('<p class="legend">Pictures: ' + "".join(f"{s}{esc(t)}" for s, t in entries)
-            + ". Numbers are ids; joints are circles.</p>")
+            + ". Numbers are ids; joints are circles. Points: the true position a green dot "
+            "and the predicted one a red dot, joined by a grey line; a hollow ring is a point "
+            "occluded (in the truth, or as predicted).</p>")
 
 
 def figure(picture: Picture, clip: Path | None = None) -> str:

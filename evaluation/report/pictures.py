@@ -2,9 +2,10 @@
 
 The choice asks the events, not the task: ``idsw`` rows give ID-switch pictures, ``fn`` rows
 bursts of misses, per-frame rows with a score below :data:`LOW` (SOT IoU, VOS J) bursts of
-failures. An event's picture is its frame with every box, joint or mask drawn (thumbs.py),
-plus the frames before and after it for the event's page. Frames are the benchmark's
-``frame_image(sequence, frame)``.
+failures, PCK: per-frame share of points within threshold). An event's picture is its frame
+with every box, joint, mask or true/predicted point pair drawn (thumbs.py), plus the frames
+before and after it for the event's page. Frames are the benchmark's
+``frame_array(sequence, frame)`` (by default its ``frame_image`` file, opened).
 """
 
 from __future__ import annotations
@@ -27,14 +28,22 @@ from .thumbs import (
     THUMB_WIDTH,
     draw_event,
     draw_labels,
+    draw_pairs,
     miss_bursts,
     overlay_masks,
+    point_pairs,
     sample,
 )
 
 #: A per-frame score below this is a failure worth a picture (IoU or J; the OTB success
 #: threshold most often quoted is 0.5).
 LOW = 0.5
+#: The quantile under which a per-frame score with no fixed bar counts as low.
+WORST = 0.25
+#: Per-frame scores pictured when low: ``(column, per-object column, name, bar)``; a bar of
+#: None means the sequence's worst frames (:data:`WORST`). PCK (the share of points near
+#: their truth) has no bar that suits every tracker and video.
+PER_FRAME = (("iou", None, "IoU", LOW), ("j", "object", "J", LOW), ("pck", None, "PCK", None))
 #: Width of the previous and next frames on an event's page.
 NEIGHBOUR_WIDTH = 470
 
@@ -72,11 +81,42 @@ def _int(value: Any) -> int | None:
     return None if value is None or value != value else int(value)
 
 
-def _low_bursts(rows: pd.DataFrame, column: str, by: str | None) -> list[tuple[Any, int, int]]:
-    """``(object, first frame, length)`` of each run of frames whose ``column`` < LOW."""
-    low = rows[rows[column] < LOW]
+def _low_bursts(rows: pd.DataFrame, column: str, by: str | None,
+                below: float | None) -> tuple[list[tuple[Any, int, int]], str]:
+    """``(object, first frame, length)`` of each run of frames low in ``column``, and the bar.
+
+    Low: under ``below``, or with ``below`` None the sequence's worst quarter of frames (at
+    most its :data:`WORST` quantile, and under 1).
+    """
+    if below is None:
+        cut = float(rows[column].quantile(WORST))
+        low = rows[(rows[column] <= cut) & (rows[column] < 1)]
+        bar = f"≤ {cut:.2f} (worst quarter of frames)"
+    else:
+        low, bar = rows[rows[column] < below], f"< {below}"
     ids = NO_ID if by is None else low[by].astype(int)
-    return miss_bursts(pd.DataFrame({"gt_id": ids, "frame": low["frame"]}))
+    return miss_bursts(pd.DataFrame({"gt_id": ids, "frame": low["frame"]})), bar
+
+
+def _low_items(frames: pd.DataFrame, limit: int) -> list[Item]:
+    """Bursts of frames whose per-frame score is low, at most ``limit`` of each score."""
+    items = []
+    for column, by, name, below in PER_FRAME:
+        if column not in frames or not frames[column].notna().any():
+            continue
+        if by is not None and (by not in frames or not frames[by].notna().any()):
+            continue
+        bursts, bar = _low_bursts(frames, column, by, below)
+        for ident, start, length in sample(sorted(bursts, key=lambda b: (b[1], b[0])), limit):
+            value = frames.loc[frames["frame"] == start, column]
+            if by is not None:
+                value = frames.loc[(frames["frame"] == start) & (frames[by] == ident), column]
+            what = f" object {ident}" if by is not None else ""
+            items.append(Item("low", start, f"{name} {bar}{what}, frames {start}-"
+                              f"{start + length - 1} ({name} {float(value.iloc[0]):.2f} at "
+                              f"frame {start})", NO_ID, NO_ID, None,
+                              ident if by is not None else None))
+    return items
 
 
 def choose(events: pd.DataFrame, limit: int) -> list[Item]:
@@ -92,23 +132,7 @@ def choose(events: pd.DataFrame, limit: int) -> list[Item]:
                                        limit):
         items.append(Item("miss", start, f"miss, frames {start}-{start + length - 1}: gt "
                           f"{gt_id}", gt_id))
-    frames = events[events["type"] == "frame"]
-    for column, by, name in (("iou", None, "IoU"), ("j", "object", "J")):
-        if column not in frames or not frames[column].notna().any():
-            continue
-        if by is not None and (by not in frames or not frames[by].notna().any()):
-            continue
-        bursts = sorted(_low_bursts(frames, column, by), key=lambda b: (b[1], b[0]))
-        for ident, start, length in sample(bursts, limit):
-            value = frames.loc[frames["frame"] == start, column]
-            if by is not None:
-                value = frames.loc[(frames["frame"] == start) & (frames[by] == ident), column]
-            what = f" object {ident}" if by is not None else ""
-            items.append(Item("low", start, f"{name} < {LOW}{what}, frames {start}-"
-                              f"{start + length - 1} ({name} {float(value.iloc[0]):.2f} at "
-                              f"frame {start})", NO_ID, NO_ID, None,
-                              ident if by is not None else None))
-    return items
+    return items + _low_items(events[events["type"] == "frame"], limit)
 
 
 #: Per frame (1-based): the ground-truth and result masks, ``{id: (H, W) bool}`` each.
@@ -140,34 +164,36 @@ def mask_tables(bench: Any, run: Path, sequence: str, info: Any) -> Masks | None
 
 
 def drawer(bench: Any, run: Path, sequence: str, events: pd.DataFrame, item: Item,
-           files: Callable[[int], Path | None], loaded: Any, masks: Masks | None = None
-           ) -> Drawer:
+           frames: Callable[[int], Image.Image | None], loaded: Any,
+           masks: Masks | None = None) -> Drawer:
     """How to draw ``item``'s frames.
 
-    Label maps for an object (VOS), else the events' boxes, over the masks of mask tables.
+    Label maps for an object (VOS), else true/predicted point pairs where the frame's rows
+    pair positions, else the events' boxes, over the masks of mask tables.
     """
     by_frame = {int(f): g for f, g in events.groupby("frame")}
     read_result = getattr(bench, "read_frame", None)
     if item.obj is not None and callable(read_result) and hasattr(loaded, "read_annotation"):
         def labels(frame: int) -> tuple[Image.Image, tuple] | None:
-            path = files(frame)
-            if path is None or not path.is_file():
+            image = frames(frame)
+            if image is None:
                 return None
             result = read_result(run / "data", loaded, frame - 1)
-            with Image.open(path) as image:
-                return draw_labels(image, loaded.read_annotation(frame - 1), result, item.obj)
+            return draw_labels(image, loaded.read_annotation(frame - 1), result, item.obj)
         return labels
 
     def boxes(frame: int) -> tuple[Image.Image, tuple] | None:
-        path = files(frame)
-        if path is None or not path.is_file():
+        picture = frames(frame)
+        if picture is None:
             return None
-        with Image.open(path) as image:
-            picture = image.convert("RGB")
+        rows = by_frame.get(frame, events.iloc[:0])
+        pairs = point_pairs(rows)
+        if len(pairs):
+            return draw_pairs(picture, pairs)
         if masks is not None:
             picture = overlay_masks(picture, *masks(frame), item.gt_id, item.track_id,
                                     item.prev_track_id)
-        return draw_event(picture, by_frame.get(frame, events.iloc[:0]), item.gt_id,
+        return draw_event(picture, rows, item.gt_id,
                           item.track_id, item.prev_track_id)
     return boxes
 
@@ -225,14 +251,15 @@ def event_pictures(bench: Any, run: Path, sequence: str, events: pd.DataFrame, f
     except (OSError, ValueError, KeyError, AttributeError):  # data moved or not ours to read
         return []
 
-    def files(frame: int) -> Path | None:
-        return bench.frame_image(sequence, frame)
+    def frames(frame: int) -> Image.Image | None:
+        array = bench.frame_array(sequence, frame) if frame >= 1 else None
+        return None if array is None else Image.fromarray(array)
     masks = mask_tables(bench, run, sequence, loaded)
     pictures = []
     for item in items:
         name = f"{item.kind}-f{item.frame:06d}-" + (
             f"o{item.obj}" if item.obj is not None else f"g{item.gt_id}")
-        picture = write_files(drawer(bench, run, sequence, events, item, files, loaded,
+        picture = write_files(drawer(bench, run, sequence, events, item, frames, loaded,
                                      masks), item, folder, name)
         if picture is not None:
             seconds = (item.frame - 1) / float(rate) if rate else None

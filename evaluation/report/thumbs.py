@@ -153,6 +153,57 @@ def draw_event(image: Image.Image, frame_events: pd.DataFrame, gt_id: int | None
     return img.convert("RGB"), _crop(focus, img.size)
 
 
+#: Frames narrower than this are enlarged (by a whole factor) before points are drawn.
+POINTS_WIDTH = 512
+#: Event type of a pair whose predicted occlusion flag is wrong.
+FLAG_ERROR = "occlusion_error"
+
+
+def point_pairs(frame_events: pd.DataFrame) -> pd.DataFrame:
+    """The rows of one frame that pair a true and a predicted position of an object, no size."""
+    cols = ("object", "x", "y", "tx", "ty")
+    if not all(c in frame_events for c in cols):
+        return frame_events.iloc[:0]
+    rows = frame_events.dropna(subset=list(cols))
+    if "w" in rows:
+        rows = rows[rows["w"].isna()]
+    return rows
+
+
+def draw_pairs(image: Image.Image, pairs: pd.DataFrame) -> tuple[Image.Image, tuple]:
+    """Each true point green and its prediction red, joined by a line and labelled with its id.
+
+    A point occluded in the ground truth (no ``distance``) is a hollow green ring; a prediction
+    that says occluded (its flag the truth's, or the other one in a ``FLAG_ERROR`` row) is a
+    hollow red ring. A small frame is enlarged first (to at least :data:`POINTS_WIDTH`), so
+    that the marks and ids stay legible. Also the crop around all the points.
+    """
+    scale = max(1, POINTS_WIDTH // max(1, image.width))
+    img = image.convert("RGB").resize((image.width * scale, image.height * scale))
+    draw = ImageDraw.Draw(img)
+    r, width = max(3, round(img.width / 90)), max(1, round(img.width / 200))
+    font = _font(max(10, round(img.width / 30)))
+    focus = []
+    for row in pairs.itertuples():  # the lines first, under every dot
+        draw.line([(row.x * scale, row.y * scale), (row.tx * scale, row.ty * scale)],
+                  fill=OTHER_COLOUR, width=width)
+    for row in pairs.itertuples():
+        truth, guess = (row.x * scale, row.y * scale), (row.tx * scale, row.ty * scale)
+        hidden = "distance" in pairs and row.distance != row.distance
+        said_hidden = hidden != (row.type == FLAG_ERROR)
+        for (px, py), colour, hollow, size in ((truth, GT_COLOUR, hidden, r + 2),
+                                               (guess, TRACK_COLOUR, said_hidden, r)):
+            box = [px - size, py - size, px + size, py + size]  # a hit: red inside green
+            if hollow:
+                draw.ellipse(box, outline=colour, width=width)
+            else:
+                draw.ellipse(box, fill=colour, outline=(0, 0, 0))
+        _label(draw, (truth[0] + r, truth[1] - r), str(int(row.object)), GT_COLOUR, font)
+        focus.append((min(truth[0], guess[0]), min(truth[1], guess[1]),
+                      abs(truth[0] - guess[0]), abs(truth[1] - guess[1])))
+    return img, _crop(focus, img.size)
+
+
 def _outline(mask: np.ndarray, width: int) -> np.ndarray:
     """The pixels of ``mask`` within ``width`` of its border."""
     inner = Image.fromarray(mask.astype(np.uint8) * 255).filter(

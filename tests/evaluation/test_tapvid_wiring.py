@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from unitrack_env.evaluation.cli import main
 from unitrack_env.evaluation.compare import COMBINED, jackknife_interval
@@ -120,6 +121,24 @@ def test_report_draws_a_curve_per_sequence(runs, tmp_path, capsys) -> None:
         text = page.read_text(encoding="utf-8")
         assert "δx visible per frame" in text and "<polyline" in text
         assert "No per-frame events" not in text
+
+
+def test_report_pictures_the_worst_frames_with_their_points(runs, tmp_path) -> None:
+    out = tmp_path / "report"
+    assert main(["report", str(runs["static-points"]), "--out", str(out)]) == 0
+    thumbs = sorted(p for p in out.glob("img*/low-*.jpg")
+                    if not p.stem.endswith(("-full", "-prev", "-next")))
+    assert thumbs, "no pictures of low-PCK frames"
+    full = sorted(out.glob("img*/low-*-full.jpg"))
+    pixels = np.asarray(Image.open(full[0]).convert("RGB"), int)
+    red = (pixels[..., 0] > 200) & (pixels[..., 1] < 60) & (pixels[..., 2] < 60)
+    green = (pixels[..., 1] > 180) & (pixels[..., 0] < 60) & (pixels[..., 2] < 60)
+    assert red.sum() > 20 and green.sum() > 20  # predicted and true points drawn
+    pages = sorted(out.glob("img*/low-*.html"))
+    assert pages
+    text = pages[0].read_text(encoding="utf-8")
+    assert "PCK ≤" in text and "worst quarter of frames" in text
+    assert full[0].name in text
 
 
 def test_the_scorecard_column_is_opt_in() -> None:
