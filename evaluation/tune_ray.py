@@ -69,7 +69,7 @@ def _history(grid: Any, names: list[str]) -> list[dict[str, Any]]:
         metrics = r.metrics or {}
         state = "FAIL" if r.error else "COMPLETE" if "value" in metrics else "STOPPED"
         rows.append({"number": number, "state": state,
-                     "params": {n: r.config.get(n) for n in names},
+                     "params": {n: (r.config or {}).get(n) for n in names},
                      **{k: metrics.get(k) for k in keys}})
     return rows
 
