@@ -42,6 +42,13 @@ def add_parser(sub: Any) -> None:
     tp.add_argument("--trials", type=positive_int, default=20,
                     help="complete trials in all, counting those of an earlier, interrupted "
                     "run in --out (default: 20)")
+    tp.add_argument("--backend", choices=("optuna", "ray"), default="optuna",
+                    help="optuna: trials one after another, study in --out/optuna.db; ray: "
+                    "trials as Ray Tune trials (OptunaSearch), experiment in --out/ray "
+                    "(default: optuna)")
+    tp.add_argument("--address", help="with --backend ray: the cluster to join, auto or "
+                    "ray://host:port (default: a local Ray); --out must be on a file system "
+                    "every node sees")
     tp.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
     tp.add_argument("--out", required=True, help="the search's folder: optuna.db, one run "
                     "folder per trial, validation runs, tune.json (an existing search resumes)")
@@ -71,6 +78,8 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack tune``."""
     from .tune import tune
 
+    if args.address is not None and args.backend != "ray":
+        raise ValueError("--address goes with --backend ray")
     spec = _spec(args)
     log = Console(stderr=True, highlight=False, soft_wrap=True)
 
@@ -81,7 +90,15 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
         if row["feature_cache"]:
             log.print(f"  {row['feature_cache']}", markup=False)
 
-    result = tune(spec, out=args.out, trials=args.trials, seed=args.seed, on_trial=on_trial)
+    if args.backend == "ray":
+        from .tune_ray import check_ray_tune, ray_search
+
+        search = {"search": ray_search(args.address), "backend": "ray",
+                  "check": check_ray_tune}
+    else:
+        search = {}
+    result = tune(spec, out=args.out, trials=args.trials, seed=args.seed, on_trial=on_trial,
+                  **search)
     _print_result(console, spec, result)
     console.print(f"wrote {args.out}/tune.json", markup=False)
     return 0

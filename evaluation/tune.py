@@ -229,32 +229,41 @@ def _study(optuna: Any, out: Path, direction: str, seed: int) -> Any:
     return study
 
 
-def _objective(spec: TuneSpec, space: list[Dimension], base: dict[str, Any], out: Path,
-               on_trial: Callable[[dict[str, Any]], None] | None) -> Callable[[Any], float]:
+def play_trial(spec: TuneSpec, base: dict[str, Any], params: dict[str, Any],
+               out: Path) -> dict[str, Any]:
+    """Play one setting on the tuning split in ``<out>/trials/<digest>`` (both backends).
+
+    Returns its value, seconds, CPU seconds, sequences played, cache summary and folder. A
+    folder finished before is read back, not played again (``played`` is then 0).
+    """
     from .runner import run
 
+    folder = out / "trials" / setting_digest(params)
+    started, cpu = time.monotonic(), time.process_time()
+    with _cache_tracking(base) as cache_summary:
+        report = run(spec.env_id, spec.agent, out=folder, env_kwargs=spec.env_kwargs,
+                     agent_kwargs=apply(base, params), sequences=spec.tune_sequences,
+                     progress=False)
+    seconds, cpu = time.monotonic() - started, time.process_time() - cpu
+    value = (report.scores.combined if report.scores else {}).get(spec.metric)
+    if value is None or not math.isfinite(value):
+        raise ValueError(f"{spec.metric} is undefined on the tuning split for {params}")
+    return {"value": float(value), "seconds": seconds, "cpu_seconds": cpu,
+            "played": len(report.records) - len(report.skipped),
+            "feature_cache": cache_summary(), "folder": str(folder.relative_to(out))}
+
+
+def _objective(spec: TuneSpec, space: list[Dimension], base: dict[str, Any], out: Path,
+               on_trial: Callable[[dict[str, Any]], None] | None) -> Callable[[Any], float]:
     def objective(trial: Any) -> float:
         params = {d.name: d.suggest(trial) for d in space}
-        folder = out / "trials" / setting_digest(params)
-        trial.set_user_attr("folder", str(folder.relative_to(out)))
-        started, cpu = time.monotonic(), time.process_time()
-        with _cache_tracking(base) as cache_summary:
-            report = run(spec.env_id, spec.agent, out=folder, env_kwargs=spec.env_kwargs,
-                         agent_kwargs=apply(base, params), sequences=spec.tune_sequences,
-                         progress=False)
-        seconds, cpu = time.monotonic() - started, time.process_time() - cpu
-        played = len(report.records) - len(report.skipped)
-        for name, value in (("seconds", seconds), ("cpu_seconds", cpu), ("played", played),
-                            ("feature_cache", cache_summary())):
-            trial.set_user_attr(name, value)
-        value = (report.scores.combined if report.scores else {}).get(spec.metric)
-        if value is None or not math.isfinite(value):
-            raise ValueError(f"{spec.metric} is undefined on the tuning split for {params}")
+        trial.set_user_attr("folder", str(Path("trials", setting_digest(params))))
+        row = play_trial(spec, base, params, out)
+        for name in ("seconds", "cpu_seconds", "played", "feature_cache"):
+            trial.set_user_attr(name, row[name])
         if on_trial is not None:
-            on_trial({"number": trial.number, "params": params, "value": value,
-                      "seconds": seconds, "cpu_seconds": cpu, "played": played,
-                      "feature_cache": cache_summary()})
-        return float(value)
+            on_trial({"number": trial.number, "params": params, **row})
+        return row["value"]
 
     return objective
 
@@ -299,7 +308,8 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     """
     from unitrack_env.benchmarks import benchmark_for
 
-    from .compare import COMBINED, COMPARE_TASKS, compare_runs
+    from .compare import COMBINED
+    from .intervals import compare_runs
     from .runner import run
 
     folders = {"defaults": out / "validation" / "defaults",
@@ -313,9 +323,9 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     result: dict[str, Any] = {"sequences": spec.validation_sequences, "metric": spec.metric,
                               **values, "folders": {k: str(v.relative_to(out))
                                                     for k, v in folders.items()}}
-    task = benchmark_for(spec.env_id, **spec.env_kwargs).task
-    if task not in COMPARE_TASKS:
-        result["note"] = f"no interval: `compare` does not support {task} runs"
+    bench = benchmark_for(spec.env_id, **spec.env_kwargs)
+    if not bench.intervals:
+        result["note"] = f"no interval: `compare` refuses {bench.task} runs ({bench.no_intervals})"
         return result
     comparison = compare_runs(folders["best"], folders["defaults"])
     diff = comparison.rows[COMBINED].get(spec.metric)
@@ -328,12 +338,35 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     return result
 
 
+#: A search: (spec, space, base options, out, trials, seed, on_trial) -> (best, history).
+Search = Callable[[TuneSpec, list[Dimension], dict[str, Any], Path, int, int,
+                   Callable[[dict[str, Any]], None] | None],
+                  tuple[dict[str, Any], list[dict[str, Any]]]]
+
+
+def optuna_search(spec: TuneSpec, space: list[Dimension], base: dict[str, Any], out: Path,
+                  trials: int, seed: int, on_trial: Callable[[dict[str, Any]], None] | None
+                  ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The study in ``<out>/optuna.db``, run until ``trials`` trials are complete."""
+    study = _study(_optuna(), out, spec.direction, seed)
+    complete = sum(t.state.name == "COMPLETE" for t in study.trials)
+    if complete < trials:
+        study.optimize(_objective(spec, space, base, out, on_trial),
+                       n_trials=trials - complete, catch=())
+    best = study.best_trial
+    return {"number": best.number, "params": best.params, "value": best.value}, history(study)
+
+
 def tune(spec: TuneSpec, *, out: str | os.PathLike, trials: int, seed: int = 0,
-         on_trial: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+         on_trial: Callable[[dict[str, Any]], None] | None = None,
+         search: Search = optuna_search, backend: str = "optuna",
+         check: Callable[[], Any] = _optuna) -> dict[str, Any]:
     """Search, validate, write ``<out>/tune.json``; return its content.
 
-    Resumable: the same call on the same ``out`` continues the study until ``trials``
+    Resumable: the same call on the same ``out`` continues the search until ``trials``
     trials are complete (those done are kept, an interrupted one resumes in its folder).
+    ``search`` is Optuna's by default (``backend`` names it in the result; ``check``
+    refuses a missing library before anything runs).
     """
     from .ownership import hold_folder
     from .runner import check_out_folder
@@ -342,23 +375,17 @@ def tune(spec: TuneSpec, *, out: str | os.PathLike, trials: int, seed: int = 0,
     _check_sequences(spec.env_id, spec.env_kwargs, spec.metric, spec.tune_sequences,
                      spec.validation_sequences)
     check_space(spec.agent, space, spec.agent_kwargs)
-    optuna = _optuna()
-    out = Path(out)
+    check()
+    out = Path(out).resolve()
     check_out_folder(out)
     out.mkdir(parents=True, exist_ok=True)
     with hold_folder(out, f"tune {spec.agent} on {spec.env_id}"):
         spec.check_against(out)
         base = _cache_option(spec.agent, spec.agent_kwargs, out)
-        study = _study(optuna, out, spec.direction, seed)
-        complete = sum(t.state.name == "COMPLETE" for t in study.trials)
-        if complete < trials:
-            study.optimize(_objective(spec, space, base, out, on_trial),
-                           n_trials=trials - complete, catch=())
-        rows = history(study)
-        best = study.best_trial
+        best, rows = search(spec, space, base, out, trials, seed, on_trial)
         result = {"spec": json.loads(json.dumps(asdict(spec), default=repr)),
-                  "best": {"number": best.number, "params": best.params, "value": best.value},
-                  "history": rows, "cost": trial_cost(rows),
-                  "validation": validate(spec, base, best.params, out)}
+                  "backend": backend, "best": best, "history": rows,
+                  "cost": trial_cost(rows), "validation": validate(spec, base, best["params"],
+                                                                   out)}
         atomic_write_text(out / "tune.json", json.dumps(result, indent=2, default=repr))
     return result

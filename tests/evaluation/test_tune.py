@@ -147,3 +147,54 @@ def test_tune_resumes_after_ctrl_c_and_validates(tmp_path):
     validation = result["validation"]
     assert validation["low"] <= validation["diff"] <= validation["high"]
     print(again.stdout)
+
+
+def test_ray_domains_keep_the_bounds_of_the_space():
+    """Ray's integer upper bound is exclusive: the space's is inclusive."""
+    pytest.importorskip("ray.tune")
+    from unitrack_env.evaluation.tune_ray import _domain
+
+    ints = _domain(parse_dimension("max_age=10..60"))
+    assert (ints.lower, ints.upper) == (10, 61)
+    floats = _domain(parse_dimension("lr=1e-4..1e-1:log"))
+    assert (floats.lower, floats.upper) == (1e-4, 0.1)
+    assert "LogUniform" in type(floats.get_sampler()).__name__
+    assert _domain(parse_dimension("use_motion=True|False")).categories == [True, False]
+
+
+@pytest.mark.slow
+def test_tune_on_ray_runs_trial_folders_and_restores_after_ctrl_c(tmp_path):
+    """Ray Tune trials on a local Ray, Ctrl-C after the first finished trial, then the same
+    command: the experiment is restored, the finished trial is not played again."""
+    pytest.importorskip("ray.tune")
+    out = tmp_path / "tune"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "COLUMNS": "160"}
+    command = [*_command(out, 2), "--backend", "ray"]
+    first = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    deadline = time.monotonic() + 900
+    while time.monotonic() < deadline and first.poll() is None and not list(
+            out.glob("trials/*/metrics.json")):
+        time.sleep(0.5)
+    first.send_signal(signal.SIGINT)
+    _, err = first.communicate(timeout=300)
+    assert first.returncode == 130, err
+    stamps = {p: p.stat().st_mtime_ns for p in out.glob("trials/*/metrics.json")}
+    assert stamps  # the finished trial is kept
+    again = subprocess.run(command, env=env, capture_output=True, text=True, timeout=1800)
+    assert again.returncode == 0, again.stderr
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps  # not played again
+    result = json.loads((out / "tune.json").read_text())
+    assert result["backend"] == "ray"
+    rows = result["history"]
+    assert [r["state"] for r in rows] == ["COMPLETE", "COMPLETE"]
+    for row in rows:  # ordinary run folders named by their setting, scored by the runner
+        assert row["folder"] == f"trials/{setting_digest(row['params'])}"
+        assert (out / row["folder"] / "metrics.json").is_file()
+    assert "72 computed" in rows[0]["feature_cache"]  # the first trial ran the backbone
+    assert "0 computed" in rows[1]["feature_cache"]  # the second read it from the cache
+    assert result["best"]["value"] == max(r["value"] for r in rows)
+    validation = result["validation"]
+    assert validation["low"] <= validation["diff"] <= validation["high"]
+    assert "best: trial" in again.stdout and "95% interval" in again.stdout
+    print(again.stdout)
