@@ -299,7 +299,7 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     """
     from unitrack_env.benchmarks import benchmark_for
 
-    from .compare import COMBINED, COMPARE_TASKS, compare_runs
+    from .analysis.compare import COMBINED, COMPARE_TASKS, compare_runs
     from .runner import run
 
     folders = {"defaults": out / "validation" / "defaults",

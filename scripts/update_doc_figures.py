@@ -377,7 +377,7 @@ def run_source(command: str, work: Path) -> dict[str, dict[str, str]]:
 
 def evaluate_rows(folder: Path) -> dict[str, dict[str, str]]:
     """The rows (each sequence and ``COMBINED``) of the ``metrics.json`` a run wrote."""
-    from unitrack_env.evaluation.tables import format_cell
+    from unitrack_env.evaluation.analysis.tables import format_cell
 
     payload = json.loads((folder / "metrics.json").read_text())
     rows = {**payload["per_sequence"], "COMBINED": payload["combined"]}

@@ -124,7 +124,7 @@ def agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 def print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
                    columns: tuple, fmt: str, fps: dict | None = None, coverage: str = "") -> None:
     """Print metrics as a table fitted to the console, JSON or CSV (``fmt``)."""
-    from ..tables import metrics_csv, metrics_json, metrics_table
+    from ..analysis.tables import metrics_csv, metrics_json, metrics_table
 
     if fmt == "json":
         console.print(metrics_json(per_sequence, combined), markup=False, soft_wrap=True)

@@ -57,7 +57,7 @@ def comparison_lines(comp: Any) -> list[str]:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack compare``."""
-    from ..intervals import compare_runs
+    from ..analysis.intervals import compare_runs
 
     comp = compare_runs(args.runs[0], args.runs[1], resamples=args.resamples, seed=args.seed,
                         level=args.level, block=args.block, method=args.interval)

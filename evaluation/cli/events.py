@@ -33,7 +33,7 @@ TABLE_COLUMNS = ("sequence", "frame", "type", "object", "gt_id", "track_id", "pr
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack events``."""
-    from ..events import event_counts, load_events
+    from ..analysis.events import event_counts, load_events
 
     df = load_events(args.run, sequence=args.sequence, type=args.type)
     if args.format == "csv":

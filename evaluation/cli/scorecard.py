@@ -98,7 +98,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
                                     console, label, result))
         files = sorted(out.glob("scorecard.*"))
     if args.ci:
-        from ..intervals import write_card_intervals
+        from ..analysis.intervals import write_card_intervals
 
         files += write_card_intervals(out, card)
     if any(externals.values()):

@@ -14,8 +14,8 @@ import pytest
 import unitrack_env
 from unitrack_env.agents.primitives import label_propagation
 from unitrack_env.benchmarks import task_columns
+from unitrack_env.evaluation.analysis.tables import metrics_table
 from unitrack_env.evaluation.cli import build_parser, doctor, main
-from unitrack_env.evaluation.tables import metrics_table
 
 ENV = "UniTrack/MOT16-v0"
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from unitrack_env.evaluation.analysis.events import load_events
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.events import load_events
 from unitrack_env.evaluation.scorecard import _checked_request
 from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
 from unitrack_env.metrics.points import THRESHOLDS
