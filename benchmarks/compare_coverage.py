@@ -6,7 +6,7 @@ scene (paired) and differ in their miss rate (misses come in bursts: a two-state
 chain), their ID-switch rate, their false positives and their box jitter. The true difference
 of each metric is the mean difference over ``--truth`` independent data sets of the same size;
 then ``--reps`` fresh data sets each get a paired interval per method and block length
-(:func:`unitrack_env.evaluation.compare.compare_stats`: the block jackknife, or the block
+(:func:`unitrack_env.evaluation.analysis.compare.compare_stats`: the block jackknife, or the block
 bootstrap's percentile/bc/basic intervals), and the script prints how often the interval holds
 the true difference (it should be close to 95%), with the mean width.
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import t as STUDENT
 
-from unitrack_env.evaluation.compare import COMBINED, block_length, compare_stats
+from unitrack_env.evaluation.analysis.compare import COMBINED, block_length, compare_stats
 from unitrack_env.metrics.events_mot import preprocessed_frames
 from unitrack_env.metrics.mot_stats import (
     MOT_STAT_METRICS,

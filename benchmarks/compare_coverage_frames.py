@@ -8,7 +8,7 @@ of a sequence are correlated within and across runs. The metric is SOT's AUC (ea
 share of the success curve), combined over sequences with equal weights as OTB does.
 
 The true difference is the mean difference over ``--truth`` data sets; ``--reps`` fresh data
-sets each get the interval of :func:`unitrack_env.evaluation.intervals.frame_replicates`
+sets each get the interval of :func:`unitrack_env.evaluation.analysis.intervals.frame_replicates`
 (the code ``unitrack compare`` runs) and the script prints how often it holds the true
 difference, with its mean width, per number of sequences and frames.
 
@@ -24,13 +24,13 @@ import time
 
 import numpy as np
 
-from unitrack_env.evaluation.compare import (
+from unitrack_env.evaluation.analysis.compare import (
     COMBINED,
     block_length,
     frame_block_length,
     jackknife_interval,
 )
-from unitrack_env.evaluation.intervals import frame_replicates
+from unitrack_env.evaluation.analysis.intervals import frame_replicates
 
 THRESHOLDS = np.linspace(0, 1, 21)
 

@@ -130,7 +130,7 @@ def generate(code: Path, env: dict[str, str]) -> tuple[float, float, int]:
 
 TWO_ESTIMATES = """
 import os, sys, time
-from unitrack_env.evaluation import cli_scorecard
+from unitrack_env.evaluation.cli import scorecard as cli_scorecard
 from unitrack_env.evaluation.cli import main
 seen = []
 def estimate(self, seconds):

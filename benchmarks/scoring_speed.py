@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.motchallenge import read_seqinfo
-from unitrack_env.evaluation.crosscheck import motmetrics_summary
+from unitrack_env.evaluation.analysis.crosscheck import motmetrics_summary
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.mot_preprocess import gt_frames_from_rows, tracker_frames_from_rows
 from unitrack_env.metrics.mot_results import read_result_file
@@ -69,7 +69,8 @@ def main() -> None:
         print(f"  {key:6s} TrackEval {te[key]:.6f}   motmetrics {mm[key]:.6f}")
     if any(abs(te[k] - mm[k]) > 1e-9 for k in ("MOTA", "IDF1", "IDSW")):
         print("  (the libraries match differently after a gap and in crowded overlaps; see the "
-              "unitrack_env.evaluation.crosscheck docstring. TrackEval is the official scorer.)")
+              "unitrack_env.evaluation.analysis.crosscheck docstring. TrackEval is the official "
+              "scorer.)")
 
 
 if __name__ == "__main__":

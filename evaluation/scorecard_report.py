@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .tables import COUNT_METRICS
+from .analysis.tables import COUNT_METRICS
 
 #: Header marks of the data sources.
 MARKS = {"benchmark": "", "fixture": "*", "synthetic": "†"}

@@ -308,8 +308,8 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     """
     from unitrack_env.benchmarks import benchmark_for
 
-    from .compare import COMBINED
-    from .intervals import compare_runs
+    from .analysis.compare import COMBINED
+    from .analysis.intervals import compare_runs
     from .runner import run
 
     folders = {"defaults": out / "validation" / "defaults",

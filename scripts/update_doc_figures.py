@@ -377,7 +377,7 @@ def run_source(command: str, work: Path) -> dict[str, dict[str, str]]:
 
 def evaluate_rows(folder: Path) -> dict[str, dict[str, str]]:
     """The rows (each sequence and ``COMBINED``) of the ``metrics.json`` a run wrote."""
-    from unitrack_env.evaluation.tables import format_cell
+    from unitrack_env.evaluation.analysis.tables import format_cell
 
     payload = json.loads((folder / "metrics.json").read_text())
     rows = {**payload["per_sequence"], "COMBINED": payload["combined"]}
@@ -394,7 +394,8 @@ def dry_parse(command: str) -> None:
     """Check a source's options without running it (argparse, and unitrack's own checks)."""
     words = shlex.split(command)
     if words[0] == "unitrack":
-        from unitrack_env.evaluation.cli import _agent_kwargs, _env_kwargs, build_parser
+        from unitrack_env.evaluation.cli import build_parser
+        from unitrack_env.evaluation.cli.common import agent_kwargs, env_kwargs
 
         with contextlib.redirect_stderr(io.StringIO()) as err:
             try:
@@ -403,8 +404,8 @@ def dry_parse(command: str) -> None:
                 raise ValueError(f"{command}: {err.getvalue().strip().splitlines()[-1]}") \
                     from None
         if words[1] in ("evaluate", "render"):
-            _env_kwargs(args)
-            _agent_kwargs(args)
+            env_kwargs(args)
+            agent_kwargs(args)
         return
     if words[0] != "python" or not (REPO / words[1]).is_file():
         raise ValueError(f"{command}: not `unitrack ...` or `python <file in the repository>`")

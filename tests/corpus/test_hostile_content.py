@@ -34,8 +34,8 @@ from unitrack_env.agents.appearance import (
     content_key,
 )
 from unitrack_env.errors import CheckpointError, DataFormatError
+from unitrack_env.evaluation.analysis.events import events_path
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.events import events_path
 from unitrack_env.evaluation.runner import run
 
 MOT = "UniTrack/MOT17-v0"

@@ -14,9 +14,8 @@ import pytest
 import unitrack_env
 from unitrack_env.agents.primitives import label_propagation
 from unitrack_env.benchmarks import task_columns
-from unitrack_env.evaluation import doctor
-from unitrack_env.evaluation.cli import build_parser, main
-from unitrack_env.evaluation.tables import metrics_table
+from unitrack_env.evaluation.analysis.tables import metrics_table
+from unitrack_env.evaluation.cli import build_parser, doctor, main
 
 ENV = "UniTrack/MOT16-v0"
 
@@ -266,3 +265,16 @@ def test_a_run_folder_given_as_results_points_to_its_data(one_missing, form, cap
         assert f"is the folder of a run; its result files are in {data}" in err
         assert "no result file" not in err and "nothing to score" not in err
 
+
+
+def test_a_mistyped_command_gets_the_closest_and_help_imports_no_command():
+    done = subprocess.run([sys.executable, "-m", "unitrack_env.evaluation.cli", "evaulate"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "did you mean evaluate?" in done.stderr, done.stderr
+    script = ("import sys\nfrom unitrack_env.evaluation.cli import COMMANDS, main\n"
+              "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+              "print([m for m, _ in COMMANDS.values()\n"
+              "       if f'unitrack_env.evaluation.cli.{m}' in sys.modules])\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr

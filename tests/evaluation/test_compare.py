@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.compare import (
+from unitrack_env.evaluation.analysis.compare import (
     COMBINED,
     block_length,
     block_weights,
     compare_stats,
     jackknife_weights,
 )
-from unitrack_env.evaluation.intervals import compare_runs
+from unitrack_env.evaluation.analysis.intervals import compare_runs
+from unitrack_env.evaluation.cli import main
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.events_mot import preprocessed_frames
 from unitrack_env.metrics.mot_stats import mot_stats
@@ -58,7 +58,7 @@ def test_jackknife_weights_leave_out_one_block_each() -> None:
 def test_interval_methods() -> None:
     from scipy.stats import t as student
 
-    from unitrack_env.evaluation.compare import interval, jackknife_interval
+    from unitrack_env.evaluation.analysis.compare import interval, jackknife_interval
 
     boot = np.random.default_rng(0).normal(1.0, 0.1, 4000)
     for method in ("bc", "percentile", "basic"):
@@ -113,11 +113,11 @@ def test_too_little_data_is_said_plainly(two_runs, tmp_path) -> None:
     sb = {"tiny": mot_stats(preprocessed_frames(gt, trk, frames, "MOT15"))}
     rows, blocks = compare_stats(sa, sb, resamples=200)
     assert rows["tiny"]["MOTA"].diff > 0
-    from unitrack_env.evaluation.compare import few_data_notes
+    from unitrack_env.evaluation.analysis.compare import few_data_notes
 
     notes = few_data_notes({"tiny": frames}, blocks, "frames")
     assert any("too little data" in n for n in notes)
-    from unitrack_env.evaluation.compare import unreliable_rows
+    from unitrack_env.evaluation.analysis.compare import unreliable_rows
 
     assert unreliable_rows({"tiny": frames}, blocks) == ["tiny", COMBINED]
     assert any("tiny: only 4 frames" in n for n in notes)
@@ -135,7 +135,7 @@ def _pair(frames: int, switch_at: int) -> tuple[dict, dict]:
 
 
 def test_enough_frames_give_a_reliable_interval_around_the_difference() -> None:
-    from unitrack_env.evaluation.compare import unreliable_rows
+    from unitrack_env.evaluation.analysis.compare import unreliable_rows
 
     (a1, b1), (a2, b2) = _pair(120, 30), _pair(150, 100)
     sa, sb = {"s1": a1, "s2": a2}, {"s1": b1, "s2": b2}
@@ -186,7 +186,7 @@ def test_compare_command(two_runs, capsys, tmp_path) -> None:
 
 
 def test_run_and_scorecard_intervals(two_runs, tmp_path) -> None:
-    from unitrack_env.evaluation.intervals import run_intervals, write_card_intervals
+    from unitrack_env.evaluation.analysis.intervals import run_intervals, write_card_intervals
 
     a, _ = two_runs
     combined = json.loads((a / "metrics.json").read_text())["combined"]

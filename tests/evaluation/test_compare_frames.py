@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from unitrack_env.evaluation.analysis.compare import COMBINED, jackknife_interval
+from unitrack_env.evaluation.analysis.events import run_benchmark
+from unitrack_env.evaluation.analysis.intervals import compare_runs, frame_replicates, run_intervals
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.compare import COMBINED, jackknife_interval
-from unitrack_env.evaluation.events import run_benchmark
-from unitrack_env.evaluation.intervals import compare_runs, frame_replicates, run_intervals
 from unitrack_env.evaluation.runner import run
 
 
@@ -116,7 +116,7 @@ def test_report_compares_two_sot_runs(sot_runs, tmp_path) -> None:
 
 
 def test_frame_blocks_are_long_and_the_combined_row_needs_five_of_them() -> None:
-    from unitrack_env.evaluation.compare import frame_block_length, unreliable_rows
+    from unitrack_env.evaluation.analysis.compare import frame_block_length, unreliable_rows
 
     assert [frame_block_length(n) for n in (30, 100, 120, 199, 400)] == [15, 50, 50, 50, 80]
     otb = {"Crossing": 120, "Human3": 199}

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from unitrack_env.evaluation.events import run_benchmark
-from unitrack_env.evaluation.intervals import compare_runs
+from unitrack_env.evaluation.analysis.events import run_benchmark
+from unitrack_env.evaluation.analysis.intervals import compare_runs
 from unitrack_env.evaluation.runner import run
 
 sys.path.insert(0, str(Path(__file__).parent))

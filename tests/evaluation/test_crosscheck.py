@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from unitrack_env.evaluation.crosscheck import iou_distance, motmetrics_summary
+from unitrack_env.evaluation.analysis.crosscheck import iou_distance, motmetrics_summary
 from unitrack_env.metrics.mot_preprocess import (
     GtFrame,
     TrackerFrame,
@@ -160,7 +160,11 @@ def test_iou_tracker_on_pets09_differs_by_the_continuation_rule(tmp_path: Path) 
     # The `iou` agent's real output on PETS09-S2L1: motmetrics continues gt 1's match to
     # tracker 57 from frame 303 at frame 306 (TrackEval only continues frame 305's record,
     # where gt 1 was missed), so it counts one more TP and a higher MOTA.
-    from unitrack_env.evaluation.crosscheck import CONTINUATION, DISPLACED, crosscheck_sequence
+    from unitrack_env.evaluation.analysis.crosscheck import (
+        CONTINUATION,
+        DISPLACED,
+        crosscheck_sequence,
+    )
     from unitrack_env.evaluation.runner import run
 
     if not (PETS / "gt" / "gt.txt").is_file():
@@ -183,7 +187,7 @@ def test_iou_tracker_on_pets09_differs_by_the_continuation_rule(tmp_path: Path) 
 
 
 def test_agreement_is_reported_as_such() -> None:
-    from unitrack_env.evaluation.crosscheck import crosscheck_frames
+    from unitrack_env.evaluation.analysis.crosscheck import crosscheck_frames
 
     box = np.array([[0.0, 0.0, 10.0, 10.0]])
     gt = [GtFrame(np.array([1]), box, np.array([1]), np.array([1]))] * 2

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from unitrack_env.evaluation.analysis.events import event_counts, events_path, load_events
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.events import event_counts, events_path, load_events
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.events_mot import clear_events, preprocessed_frames
 from unitrack_env.metrics.mot_stats import metrics_from_sums, mot_stats, weighted_sums
@@ -53,7 +53,7 @@ def test_events_written_again_are_the_same_bytes(iou_run: Path, tmp_path, monkey
     """Scoring a stored run again (a committed scorecard) does not rewrite its event files."""
     import time
 
-    from unitrack_env.evaluation.events import run_benchmark, write_sequence_events
+    from unitrack_env.evaluation.analysis.events import run_benchmark, write_sequence_events
 
     first = events_path(iou_run, "SYN-01").read_bytes()
     again = tmp_path / "again"

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from unitrack_env.datasets.posetrack_json import read_posetrack_json
+from unitrack_env.evaluation.analysis.events import event_counts, load_events, run_benchmark
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.events import event_counts, load_events, run_benchmark
 from unitrack_env.evaluation.runner import run
 from unitrack_env.metrics.events_mot import EventRows, mots_sequence_events
 from unitrack_env.metrics.events_pose import posetrack_sequence_events
@@ -174,7 +174,7 @@ def test_report_shows_timelines_of_the_new_tasks(runs: dict[str, Path], tmp_path
 
 
 def test_compare_refuses_a_task_whose_metrics_are_not_frame_means(runs) -> None:
-    from unitrack_env.evaluation.intervals import compare_runs
+    from unitrack_env.evaluation.analysis.intervals import compare_runs
 
     for name, reason in (("MOTS", "not recomputed"), ("PoseTrack", "per-joint"),
                          ("VIS", "whole tracks")):

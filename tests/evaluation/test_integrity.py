@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from unitrack_env.datasets.synthetic import ensure_synthetic
-from unitrack_env.evaluation.events import run_benchmark
+from unitrack_env.evaluation.analysis.events import run_benchmark
 from unitrack_env.evaluation.integrity import (
     DifferentData,
     StaleRun,

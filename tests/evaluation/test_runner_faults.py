@@ -345,11 +345,11 @@ def test_an_output_path_through_a_file_is_refused_before_any_work(tmp_path, caps
 
 def test_error_text_is_printed_literally(monkeypatch, capsys):
     # rich would read "[nan, 1.0, ...]" as markup and print nothing of it
-    from unitrack_env.evaluation import cli
+    from unitrack_env.evaluation.cli import listing
 
     def boom(args, console):
         raise ValueError("track 1 has a non-finite box [nan, 1.0, 2.0, 3.0]")
 
-    monkeypatch.setattr(cli, "_cmd_list", boom)
+    monkeypatch.setattr(listing, "run", boom)
     assert main(["list"]) == 2
     assert "[nan, 1.0, 2.0, 3.0]" in capsys.readouterr().err

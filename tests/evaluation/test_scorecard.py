@@ -354,7 +354,7 @@ def test_the_cell_progress_bar_draws(capsys):
     """The bar the scorecard shows without --quiet (rich's own API, any rich >= 13)."""
     from types import SimpleNamespace
 
-    from unitrack_env.evaluation.cli_scorecard import cell_progress
+    from unitrack_env.evaluation.cli.scorecard import cell_progress
 
     with cell_progress(enabled=True) as update:
         update(0, 2, None)

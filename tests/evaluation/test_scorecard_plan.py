@@ -60,7 +60,7 @@ def test_the_first_eta_comes_before_torch_is_imported_then_the_exact_one(tmp_pat
     """The real command line, in a fresh interpreter: the bar's first two estimates."""
     script = textwrap.dedent(f"""
         import os, sys
-        from unitrack_env.evaluation import cli_scorecard
+        from unitrack_env.evaluation.cli import scorecard as cli_scorecard
         from unitrack_env.evaluation.cli import main
         seen = []
         def estimate(self, seconds):

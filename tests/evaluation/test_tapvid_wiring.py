@@ -10,10 +10,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from unitrack_env.evaluation.analysis.compare import COMBINED, jackknife_interval
+from unitrack_env.evaluation.analysis.events import load_events
+from unitrack_env.evaluation.analysis.intervals import (
+    compare_runs,
+    count_replicates,
+    run_intervals,
+)
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.compare import COMBINED, jackknife_interval
-from unitrack_env.evaluation.events import load_events
-from unitrack_env.evaluation.intervals import compare_runs, count_replicates, run_intervals
 from unitrack_env.evaluation.scorecard import _checked_request
 from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
 from unitrack_env.metrics.points import COLUMNS, THRESHOLDS

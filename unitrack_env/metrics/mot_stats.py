@@ -1,8 +1,8 @@
 """Per-frame sufficient statistics of MOTA, IDF1 and HOTA, and the metrics on reweighted frames.
 
-:mod:`unitrack_env.evaluation.compare` recomputes the metrics on many resamples (frame
-weights); the tables are built once and a ``(B, frames)`` weight matrix is evaluated with a
-few matrix products. More in docs/module-notes.md.
+:mod:`unitrack_env.evaluation.analysis.compare` recomputes the metrics on many resamples
+(frame weights); the tables are built once and a ``(B, frames)`` weight matrix is evaluated
+with a few matrix products. More in docs/module-notes.md.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ from typing import Any
 
 from rich.console import Console
 
-from .cli_types import names, positive_int
+from .common import agent_kwargs, env_kwargs, env_options, names, positive_int
 
 EXAMPLES = """examples:
   unitrack tune --env UniTrack/MOT16-v0 --agent unitrack --tune-sequences SYN-01 \\
@@ -17,16 +17,9 @@ EXAMPLES = """examples:
 """
 
 
-def add_parser(sub: Any) -> None:
-    """Register ``unitrack tune``."""
-    from .cli import _env_options
-
-    text = ("search a head's options for the best value of a metric on a tuning split (on "
-            "Optuna, resumable), then compare the best setting with the defaults on a "
-            "validation split")
-    tp = sub.add_parser("tune", help=text, description=text, epilog=EXAMPLES,
-                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    _env_options(tp)
+def add_arguments(tp: argparse.ArgumentParser) -> None:
+    """The options of ``unitrack tune``."""
+    env_options(tp)
     tp.add_argument("--space", action="append", required=True,
                     metavar="NAME=LOW..HIGH[:log] | NAME=A|B",
                     help="an option to search (repeatable): a range (float when a bound has "
@@ -52,21 +45,19 @@ def add_parser(sub: Any) -> None:
     tp.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
     tp.add_argument("--out", required=True, help="the search's folder: optuna.db, one run "
                     "folder per trial, validation runs, tune.json (an existing search resumes)")
-    tp.set_defaults(func=run_command)
 
 
 def _spec(args: argparse.Namespace) -> Any:
     from dataclasses import asdict
 
-    from .cli import _agent_kwargs, _env_kwargs
-    from .tune import TuneSpec, parse_dimension
+    from ..tune import TuneSpec, parse_dimension
 
     space = [asdict(parse_dimension(text)) for text in args.space]
     for d in space:
         d["choices"] = list(d["choices"])
     return TuneSpec(args.env, args.agent, space, args.metric,
                     "minimize" if args.minimize else "maximize", list(args.tune_sequences),
-                    list(args.validation_sequences), _env_kwargs(args), _agent_kwargs(args))
+                    list(args.validation_sequences), env_kwargs(args), agent_kwargs(args))
 
 
 def _setting(params: dict[str, Any]) -> str:
@@ -74,9 +65,9 @@ def _setting(params: dict[str, Any]) -> str:
                      for k, v in params.items())
 
 
-def run_command(args: argparse.Namespace, console: Console) -> int:
+def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack tune``."""
-    from .tune import tune
+    from ..tune import tune
 
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address goes with --backend ray")

@@ -12,10 +12,10 @@ from typing import Any
 
 from rich.console import Console
 
-from .cli_types import positive_int
+from .common import positive_int
 
 
-def add_options(card: argparse.ArgumentParser) -> None:
+def add_arguments(card: argparse.ArgumentParser) -> None:
     """The options of ``unitrack scorecard``."""
     card.add_argument("--model", action="append",
                       metavar="WEIGHTS[,arch=A][,layer=L][,stride=S][,label=N][,KIND:NAME=V]",
@@ -54,7 +54,6 @@ def add_options(card: argparse.ArgumentParser) -> None:
     card.add_argument("--quiet", action="store_true", help="no progress bar")
     card.add_argument("--ci", action="store_true", help="also write each cell's 95%% bootstrap "
                       "interval (scorecard_ci.md/.json; see docs/report.md)")
-    card.set_defaults(func=run_command)
 
 
 def _print_restamp(console: Console, label: str, result: list[str] | str) -> None:
@@ -66,12 +65,12 @@ def _print_restamp(console: Console, label: str, result: list[str] | str) -> Non
                       markup=False, soft_wrap=True)
 
 
-def run_command(args: argparse.Namespace, console: Console) -> int:
+def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
-    from . import scorecard as sc
-    from .correlation_study import merge_externals, read_external_csv, split_model_text
-    from .scorecard_plan import ModelSpec
-    from .scorecard_report import merge_cards
+    from .. import scorecard as sc
+    from ..correlation_study import merge_externals, read_external_csv, split_model_text
+    from ..scorecard_plan import ModelSpec
+    from ..scorecard_report import merge_cards
 
     out = Path(args.out)
     split = [split_model_text(text) for text in args.model or ()]
@@ -99,11 +98,11 @@ def run_command(args: argparse.Namespace, console: Console) -> int:
                                     console, label, result))
         files = sorted(out.glob("scorecard.*"))
     if args.ci:
-        from .intervals import write_card_intervals
+        from ..analysis.intervals import write_card_intervals
 
         files += write_card_intervals(out, card)
     if any(externals.values()):
-        from .correlation_study import write_correlation
+        from ..correlation_study import write_correlation
 
         files += write_correlation(out, card, externals)
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)

@@ -7,6 +7,7 @@ there is a problem.
 
 from __future__ import annotations
 
+import argparse
 import importlib.metadata
 import importlib.util
 import os
@@ -14,6 +15,8 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+
+from rich.console import Console
 
 #: Free space below which the data cache folder is reported (synthetic data and features).
 MIN_FREE_BYTES = 2 * 1024**3
@@ -165,3 +168,21 @@ def diagnose() -> list[Finding]:
             findings.append(Finding(check.__name__.removeprefix("check_"), "problem",
                                     f"{type(exc).__name__}: {exc}"))
     return findings + check_optional()
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``unitrack doctor`` has no options."""
+
+
+def run(args: argparse.Namespace, console: Console) -> int:
+    """Run ``unitrack doctor``."""
+    findings = diagnose()
+    marks = {"ok": "ok     ", "warn": "note   ", "problem": "PROBLEM"}
+    for finding in findings:
+        console.print(f"{marks[finding.status]} {finding.check}: {finding.detail}", markup=False,
+                      soft_wrap=True)
+        if finding.fix and finding.status != "ok":
+            console.print(f"        fix: {finding.fix}", markup=False, soft_wrap=True)
+    problems = sum(f.status == "problem" for f in findings)
+    console.print(f"{problems} problem(s)" if problems else "no problems found", markup=False)
+    return 1 if problems else 0

@@ -1,6 +1,6 @@
 """95% intervals of one run's combined metrics, and of every scorecard cell (``--ci``).
 
-:mod:`~unitrack_env.evaluation.compare`'s delete-a-block jackknife with a t interval. The
+:mod:`~unitrack_env.evaluation.analysis.compare`'s delete-a-block jackknife with a t interval. The
 run's benchmark says how (its ``intervals``): ``"stats"`` (box MOT) recomputes the metrics
 from per-frame statistics; ``"frames"`` (SOT, VOS, JHMDB) takes the per-frame values of its
 ``frame_metrics`` from the events (means over frames), sequences combined as the official
@@ -24,6 +24,7 @@ from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
+from ..integrity import check_pair
 from .compare import (
     COMBINED,
     Comparison,
@@ -38,7 +39,6 @@ from .compare import (
     unreliable_rows,
 )
 from .events import load_events, run_benchmark, run_sequences
-from .integrity import check_pair
 
 
 def _mot_intervals(run: Path) -> dict[str, tuple[float, float]]:
@@ -322,7 +322,7 @@ def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
 def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                    resamples: int = 1000) -> dict[tuple[str, str, str], dict]:
     """Intervals of every (model, task, head) row of a scorecard made in ``out``."""
-    from .scorecard_plan import Cell
+    from ..scorecard_plan import Cell
 
     result = {}
     for row in card["rows"]:
@@ -337,8 +337,8 @@ def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
 def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                          resamples: int = 1000) -> list[Path]:
     """``scorecard_ci.md`` and ``scorecard_ci.json``: each cell's value with its interval."""
-    from .scorecard_plan import BASELINE, TASKS
-    from .scorecard_report import columns, value
+    from ..scorecard_plan import BASELINE, TASKS
+    from ..scorecard_report import columns, value
 
     found = card_intervals(out, card, resamples=resamples)
     lines = ["| model | task | head | metric | value | 95% interval |", "|---|---|---|---|---|---|"]

@@ -28,16 +28,16 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+#: ``unitrack cache --help`` opens with this (``unitrack --help`` shows the command's summary).
+DESCRIPTION = "The on-disk feature cache of the UniTrack heads (on by default)."
 
-def add_parser(subparsers: Any) -> argparse.ArgumentParser:
-    """Add the ``cache`` command (with ``info``, ``prune``, ``clear``) to ``subparsers``."""
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The actions of ``unitrack cache``: ``info``, ``prune``, ``clear``."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--dir", help="cache folder (default: $UNITRACK_FEATURE_CACHE, else "
                                       "$UNITRACK_CACHE/features, else the user cache "
                                       "folder; Linux: ~/.cache/unitrack-env/features)")
-    parser = subparsers.add_parser(
-        "cache", help="inspect, prune or clear the feature cache",
-        description="The on-disk feature cache of the UniTrack heads (on by default).")
     sub = parser.add_subparsers(dest="cache_command", required=True, metavar="ACTION",
                                 help="info, prune or clear")
     info = sub.add_parser("info", parents=[common],
@@ -49,8 +49,6 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     prune.add_argument("--max-size", help="e.g. 5GiB or 500MB (default: the cap, "
                                           "$UNITRACK_FEATURE_CACHE_MAX or 10 GiB)")
     sub.add_parser("clear", parents=[common], help="remove every entry and statistic")
-    parser.set_defaults(func=run_cache_command)
-    return parser
 
 
 @contextlib.contextmanager
@@ -188,7 +186,7 @@ def _print_info(cache: Any, console: Console, runs: int) -> None:
         console.print("  empty: nothing cached yet")
 
 
-def run_cache_command(args: argparse.Namespace, console: Console) -> int:
+def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack cache <info|prune|clear>``."""
     from unitrack_env.agents.appearance.cache_config import format_size
 

@@ -1,0 +1,114 @@
+"""``unitrack evaluate``: run an agent on every sequence of an environment and score it."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from rich.console import Console
+
+from ..watchdog import DEFAULT_STEP_TIMEOUT
+from .common import (
+    agent_kwargs,
+    console,
+    env_kwargs,
+    env_options,
+    format_option,
+    names,
+    non_negative_float,
+    positive_int,
+    print_metrics,
+)
+
+EXAMPLES = """examples:
+  unitrack evaluate --env UniTrack/MOT16-v0 --agent iou --out runs/quickstart
+  unitrack evaluate --env UniTrack/MOT17-v0 --root data/MOT17 --agent unitrack \\
+      --agent-arg weights=moco_v2.pth --workers 2 --out runs/mot17
+  unitrack evaluate --env UniTrack/MOT16-v0 --agent my_trackers:Nearest --out runs/mine
+  unitrack evaluate --env UniTrack/OTB-v0 --agent trackers/sot.py:MySOT --out runs/sot
+"""
+
+
+def add_arguments(ev: argparse.ArgumentParser) -> None:
+    """The options of ``unitrack evaluate``."""
+    env_options(ev)
+    ev.add_argument("--out", required=True, help="output folder: results in the official "
+                    "format, per-sequence records, metrics.json (an existing run is resumed)")
+    ev.add_argument("--sequences", type=names,
+                    help="comma-separated sequence names (default: all)")
+    ev.add_argument("--workers", type=positive_int, default=1,
+                    help="parallel worker processes, one sequence each (default: 1)")
+    ev.add_argument("--overwrite", action="store_true",
+                    help="discard a previous run in --out instead of resuming it (deletes only "
+                    "the files runs of ours wrote, listed in <out>/manifest.json)")
+    ev.add_argument("--restamp", action="store_true",
+                    help="keep finished sequences whose only change is the agent's code (you "
+                    "vouch the edit cannot change them: a comment, a rename); each is checked, "
+                    "and the changed files are printed")
+    ev.add_argument("--step-timeout", type=non_negative_float, default=DEFAULT_STEP_TIMEOUT,
+                    metavar="SECONDS", help="a step (the agent's act() and the env's step) "
+                    "longer than this fails its sequence (default: %(default)g; 0: no limit)")
+    ev.add_argument("--in-process", action="store_true", help="with --workers 1, play here "
+                    "(for a debugger), not in a supervised child process that can be stopped")
+    ev.add_argument("--backend", choices=("local", "ray"), default="local", help="where "
+                    "sequences play: local processes (--workers) or Ray tasks, one each")
+    ev.add_argument("--address", help="with --backend ray: the cluster to join, auto or "
+                    "ray://host:port (default: start a local Ray with --workers CPUs)")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    format_option(ev)
+
+
+def _defined(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and value != value)
+
+
+def run(args: argparse.Namespace, out: Console) -> int:
+    """Run ``unitrack evaluate``."""
+    from unitrack_env.benchmarks import benchmark_class
+
+    from ..runner import run as play
+
+    env_given = env_kwargs(args)
+    agent_given = agent_kwargs(args)
+    from .cache import feature_cache_report
+
+    with feature_cache_report(args.agent, agent_given) as cache_summary:
+        report = play(args.env, args.agent, out=args.out, env_kwargs=env_given,
+                      agent_kwargs=agent_given, sequences=args.sequences,
+                      workers=args.workers, overwrite=args.overwrite, isolate=not args.in_process,
+                      progress=not args.quiet and args.format == "table",
+                      step_timeout=args.step_timeout, restamp=args.restamp,
+                      backend=args.backend, address=args.address)
+    log = out if args.format == "table" else console(stderr=True)
+    if cache_summary():
+        log.print(cache_summary(), markup=False)
+    if report.skipped:
+        log.print(f"resumed: kept {len(report.skipped)} finished sequence(s): "
+                  f"{', '.join(report.skipped)}", markup=False)
+    for name, why in report.replayed.items():
+        log.print(f"replayed {name}: {why}", markup=False, soft_wrap=True)
+    for name, files in report.restamped.items():
+        log.print(f"re-stamped {name}: kept across your edit of {', '.join(files)}",
+                  markup=False, soft_wrap=True)
+    if report.scores is None:
+        log.print(f"{len(report.records)} sequence(s) written to {report.out / 'data'} "
+                  "(no ground truth in this split, nothing to score)", markup=False)
+    else:
+        fps = {name: record.fps for name, record in report.records.items()}
+        print_metrics(out, report.scores.per_sequence, report.scores.combined,
+                       f"{args.agent} on {args.env}", benchmark_class(args.env).columns,
+                       args.format, fps, coverage=report.scores.coverage)
+        undefined = sorted(name for name, values in report.scores.per_sequence.items()
+                           if any(not _defined(v) for v in values.values()))
+        if undefined:
+            log.print(f"(undefined metrics, shown as - or nan, in {', '.join(undefined)}: "
+                      "nothing there to score under the benchmark's rules; the environment's "
+                      "page in docs/envs/ says when)", markup=False)
+    log.print(f"metrics: {report.out / 'metrics.json'}", markup=False)
+    others = sorted({p.stem for p in (report.out / "sequences").glob("*.json")}
+                    - set(args.sequences or ()))
+    if args.sequences and others:
+        log.print(f"(metrics.json covers the {len(args.sequences)} sequence(s) asked for; "
+                  f"{len(others)} other finished sequence(s) in {report.out} are kept but not "
+                  "in it: run without --sequences to score them all)", markup=False)
+    return 0
