@@ -63,9 +63,13 @@ def draw_scatter(rows: list[dict[str, Any]], stem: Path) -> list[Path]:
     return written
 
 
+def figure_stem(name: str) -> str:
+    """A file-name-safe form of a metric name (``probe:imagenet`` -> ``probe-imagenet``)."""
+    return "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in name)
+
+
 def report_section(folder: Path, out: Path) -> str:
     """The HTML of a scorecard folder's correlation study ("" when it has none)."""
-    from .correlation_study import figure_stem
     from .report.html import esc, table
 
     path = folder / "correlation.json"

@@ -25,6 +25,7 @@ from typing import Any
 from unitrack_env.io import atomic_write_text
 
 from .correlation import correlate
+from .correlation_plot import draw_scatter, figure_stem
 
 #: Direction suffixes of a metric name.
 DIRECTIONS = ("lower", "higher")
@@ -200,8 +201,6 @@ def markdown(result: dict[str, Any]) -> str:
 def write_correlation(out: Path, card: dict[str, Any],
                       externals: dict[str, dict[str, float]]) -> list[Path]:
     """``correlation.json``, ``correlation.md`` and a scatter figure per metric (PNG, SVG)."""
-    from .correlation_plot import draw_scatter
-
     result = study(card, externals)
     atomic_write_text(out / "correlation.json", json.dumps(result, indent=2, allow_nan=False))
     atomic_write_text(out / "correlation.md", markdown(result))
@@ -211,7 +210,3 @@ def write_correlation(out: Path, card: dict[str, Any],
         written += draw_scatter(rows, out / f"correlation-{figure_stem(name)}")
     return written
 
-
-def figure_stem(name: str) -> str:
-    """A file-name-safe form of a metric name (``probe:imagenet`` -> ``probe-imagenet``)."""
-    return "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in name)

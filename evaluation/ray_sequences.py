@@ -19,11 +19,13 @@ from typing import Any
 
 from unitrack_env.io import atomic_write_bytes
 
+from .backends import ray_backend
+from .episode import OutputError, SequenceRecord
+from .workers import SequenceFailure, _play_one
+
 
 def play_remote(item: tuple[Any, str, Any], threads: int) -> dict[str, Any]:
     """A Ray task: play one sequence in a scratch folder; its outcome and files as bytes."""
-    from .workers import _play_one
-
     spec, sequence, stamp = item
     if threads:
         import torch
@@ -48,11 +50,6 @@ def play_on_ray(spec: Any, out: Path, todo: list[str], stamps: dict[str, Any],
                 lengths: dict[str, int], *, workers: int, address: str | None,
                 bar: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """Play ``todo`` as Ray tasks; return (records, failures) as the local workers do."""
-    from .backends import ray_backend
-    from .episode import SequenceRecord
-    from .runner import OutputError
-    from .workers import SequenceFailure
-
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     items = [(spec, name, stamps[name]) for name in todo]
