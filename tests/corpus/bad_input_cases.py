@@ -1614,11 +1614,11 @@ def _probe_csv(scratch: Path) -> Path:
 
 
 CASES = CASES + (
-    _c("CLI-tune-mistyped-space", "unitrack tune --space association.appearance_treshold=0.5..0.9",
+    _c("CLI-tune-mistyped-space", "unitrack tune --space appearance_treshold=0.5..0.9",
        cli("tune", "--env", "UniTrack/MOT16-v0", "--agent", "unitrack", "--space",
-           "association.appearance_treshold=0.5..0.9", "--tune-sequences", "SYN-01",
+           "appearance_treshold=0.5..0.9", "--tune-sequences", "SYN-01",
            "--validation-sequences", "SYN-02", "--metric", "IDF1", "--out", "{out}"),
-       "exit 2:", "appearance_treshold", "valid fields", "appearance_threshold",
+       "exit 2:", "no option 'appearance_treshold'", "valid options", "appearance_threshold",
        error="CLIFailed"),
     _c("CLI-tune-overlapping-splits", "unitrack tune with a sequence in both splits",
        cli("tune", "--env", "UniTrack/MOT16-v0", "--agent", "unitrack", "--space",

@@ -473,7 +473,7 @@ def test_disk_full_while_a_result_is_written(run_copy: Path, monkeypatch: pytest
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
     monkeypatch.setattr(motchallenge, "atomic_write_text", full)
-    code, printed = _evaluate(run_copy, "--overwrite")
+    code, printed = _evaluate(run_copy, "--overwrite", "--in-process")  # the patch is here
     assert code == 2, printed
     assert (f"cannot write the results of '{MOT_SEQ}' to {run_copy / 'data' / MOT_SEQ}.txt: "
             "No space left on device; finished sequences are kept") in printed

@@ -315,7 +315,7 @@ def test_cli_reports_user_errors_in_one_line(tmp_path, capsys):
         ("--env", ENV, "--agent", "iou", "--env-arg", "colour=red"): "has no option 'colour'",
         ("--env", ENV, "--agent", "iou", "--root", str(tmp_path / "nope")): "is not a folder",
         ("--env", "UniTrack/OTB-v0", "--agent", "repeat-box", "--split", "train"):
-            "'UniTrack/OTB-v0' has no option 'split'",
+            "data_format 'otb' has no option 'split'",
     }
     for args, expected in cases.items():
         code = main(["evaluate", *args, "--out", str(tmp_path / "x"), "--quiet"])

@@ -142,7 +142,7 @@ def test_out_inside_root_resumes_instead_of_replaying(tmp_path, where):
 
 
 def test_a_killed_run_leaves_its_claim(tmp_path, monkeypatch):
-    from unitrack_env.evaluation import episode, runner
+    from unitrack_env.evaluation import episode, runner, serial
 
     out = tmp_path / "run"
     calls = []
@@ -152,7 +152,7 @@ def test_a_killed_run_leaves_its_claim(tmp_path, monkeypatch):
         calls.append(record.sequence)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(episode, "save_episode", crash)
+    monkeypatch.setattr(serial, "save_episode", crash)  # where the sequences are played
     monkeypatch.setattr(runner, "settle", lambda *args: None)  # killed: no bookkeeping
     with pytest.raises(KeyboardInterrupt):
         run(ENV, "iou", out=out, progress=False)

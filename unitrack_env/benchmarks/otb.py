@@ -129,7 +129,9 @@ class OTBBenchmark(Benchmark):
         options = {k: v for k, v in (("split", split), ("variant", variant)) if v is not None}
         unknown = set(options) - set(inspect.signature(chosen.reader).parameters)
         if unknown:
-            raise ValueError(f"data_format {data_format!r} takes no {', '.join(sorted(unknown))}=")
+            names = " or ".join(repr(name) for name in sorted(unknown))
+            raise ValueError(f"data_format {data_format!r} has no option {names} (its reader "
+                             "reads every sequence of its folder)")
         kind = chosen.synthetic
         if kind is None:
             path, synthetic = data_root(root, chosen.folder, "OTB", "otb")

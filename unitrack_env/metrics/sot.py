@@ -102,7 +102,7 @@ def normalized_center_error(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """Centre distance with x divided by the true width and y by the true height (LaSOT).
 
     >>> normalized_center_error(np.array([[2, 0, 10, 10]]), np.array([[0, 0, 20, 10]]))
-    array([0.4])
+    array([0.15])
     """
     p, g = _check_pair(pred, gt)
     dc = (p[:, :2] + p[:, 2:] / 2.0) - (g[:, :2] + g[:, 2:] / 2.0)
