@@ -196,7 +196,7 @@ def test_lasot_splits(tmp_path):
     (tmp_path / "training_set.txt").unlink()
     with pytest.raises(DataFormatError, match="training_set.txt"):
         LaSOTDataset(tmp_path, "train")
-    with pytest.raises(ValueError, match="takes no variant"):
+    with pytest.raises(ValueError, match="has no option 'variant'"):
         benchmark_for("UniTrack/LaSOT-v0", variant="10fps")
 
 

@@ -130,8 +130,7 @@ class OTBBenchmark(Benchmark):
         unknown = set(options) - set(inspect.signature(chosen.reader).parameters)
         if unknown:
             names = " or ".join(repr(name) for name in sorted(unknown))
-            raise ValueError(f"data_format {data_format!r} has no option {names} (its reader "
-                             "reads every sequence of its folder)")
+            raise ValueError(f"data_format {data_format!r} has no option {names}")
         kind = chosen.synthetic
         if kind is None:
             path, synthetic = data_root(root, chosen.folder, "OTB", "otb")
