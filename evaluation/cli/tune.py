@@ -82,7 +82,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
             log.print(f"  {row['feature_cache']}", markup=False)
 
     if args.backend == "ray":
-        from .tune_ray import check_ray_tune, ray_search
+        from ..tune_ray import check_ray_tune, ray_search
 
         search = {"search": ray_search(args.address), "backend": "ray",
                   "check": check_ray_tune}

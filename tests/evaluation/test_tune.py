@@ -179,8 +179,13 @@ def test_tune_on_ray_runs_trial_folders_and_restores_after_ctrl_c(tmp_path):
     first.send_signal(signal.SIGINT)
     _, err = first.communicate(timeout=300)
     assert first.returncode == 130, err
-    stamps = {p: p.stat().st_mtime_ns for p in out.glob("trials/*/metrics.json")}
-    assert stamps  # the finished trial is kept
+    assert list(out.glob("trials/*/metrics.json"))  # the finished trial is kept
+    # Its played sequences' records and result files: a trial Ray had not yet recorded as
+    # complete when Ctrl-C came runs again, but resumes its folder (it is scored again, so
+    # its metrics.json may be rewritten) without playing a kept sequence again.
+    stamps = {p: p.stat().st_mtime_ns for p in out.glob("trials/*/sequences/*.json")}
+    stamps |= {p: p.stat().st_mtime_ns for p in out.glob("trials/*/data/*")}
+    assert stamps
     again = subprocess.run(command, env=env, capture_output=True, text=True, timeout=1800)
     assert again.returncode == 0, again.stderr
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps  # not played again
