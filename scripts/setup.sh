@@ -7,7 +7,7 @@
 #     libGL), which would overwrite opencv-python-headless's cv2. Its real needs are our own
 #     dependencies, so it is installed last with --no-deps. pip would then call that missing
 #     opencv-python a red "ERROR" on every later install, so installs skip pip's conflict
-#     warning and `pip check` runs at the end instead, saying every conflict but that one.
+#     warning and `pip check` runs at the end instead, saying every conflict but its known ones.
 # Usage: bash scripts/setup.sh          # runtime only (editable install of this checkout)
 #        bash scripts/setup.sh test     # + test tools (pytest, ruff, scikit-image, video)
 #        UNITRACK_WHEEL=dist/unitrack_env-0.1.0-py3-none-any.whl bash scripts/setup.sh
@@ -27,7 +27,8 @@ if [ -n "$extras" ]; then
 fi
 "${pip[@]}" --no-warn-conflicts "${target[@]}"
 "${pip[@]}" --no-deps "trackeval==1.3.0"
-known="^trackeval [0-9.]* requires opencv-python[^,]*, which is not installed"
-conflicts="$("$python" -m pip check 2>&1 | grep -v -e "$known" -e "^No broken requirements" || true)"
+# trackeval also declares matplotlib, used only for its plots (off here; the `plots` extra)
+known="^trackeval [0-9.]* requires (opencv-python|matplotlib)[^,]*, which is not installed"
+conflicts="$("$python" -m pip check 2>&1 | grep -v -E -e "$known" -e "^No broken requirements" || true)"
 [ -z "$conflicts" ] || printf 'pip check found these conflicts:\n%s\n' "$conflicts" >&2
 (cd / && "$python" -c "import unitrack_env.agents, unitrack_env.evaluation, trackeval, torch; print('unitrack-env ready:', unitrack_env.__version__, '| torch', torch.__version__)")
