@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unitrack_env.benchmarks.base import Benchmark, rounded_digest
+from unitrack_env.benchmarks.base import Benchmark, data_root, rounded_digest
 from unitrack_env.benchmarks.kitti import flat_metrics
 from unitrack_env.datasets.bdd100k import (
     CLASSES,
@@ -16,10 +16,9 @@ from unitrack_env.datasets.bdd100k import (
     BDD100KDataset,
     read_bdd_frames,
 )
-from unitrack_env.errors import DataFormatError
+from unitrack_env.datasets.synthetic.bdd100k import KIND
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.report import ScoreReport
-from unitrack_env.roots import resolve_root
 
 #: Result rows: ``frame (0-based), id, class id (1 + index in CLASSES), x1, y1, x2, y2, score``.
 RESULT_COLUMNS = 8
@@ -53,14 +52,15 @@ class BDD100KBenchmark(Benchmark):
                "cls_comb_cls_av/MOTA", "IDF1", "cls_comb_cls_av/IDF1", "IDSW")
 
     @classmethod
-    def build(cls, root: str | os.PathLike | None = None,
-              split: str = "val") -> BDD100KBenchmark:
-        """The benchmark of the BDD100K folder ``root`` (holding ``labels/box_track_20``)."""
-        path = resolve_root(root, "BDD100K")
-        if path is None:
-            raise DataFormatError(Path("BDD100K"), "no data: pass root= (the folder holding "
-                                  "labels/box_track_20/<split>) or set $UNITRACK_DATA")
-        return cls(BDD100KDataset(path, split))
+    def build(cls, root: str | os.PathLike | None = None, split: str = "val",
+              detections: str | os.PathLike | None = None) -> BDD100KBenchmark:
+        """The benchmark of ``BDD100KEnv(root=, split=, detections=)``.
+
+        ``root`` holds ``labels/box_track_20/<split>``; default ``$UNITRACK_DATA/BDD100K``,
+        else the synthetic split.
+        """
+        path, synthetic = data_root(root, "BDD100K", "BDD100K", KIND)
+        return cls(BDD100KDataset(path, split, detections), synthetic=synthetic)
 
     @property
     def name(self) -> str:
@@ -120,3 +120,11 @@ class BDD100KBenchmark(Benchmark):
                         for seq in sequences}
         return ScoreReport(self.name, per_sequence, flat_metrics(combined),
                            scores={"per_class": combined})
+
+    def frame_image(self, sequence: str, frame: int) -> Path:
+        """``images/track/<split>/<video>/<video>-<frame>.jpg`` (``frame`` from 1)."""
+        return self.dataset.frame_path(sequence, frame - 1)
+
+    def frame_rate(self, sequence: str) -> float:
+        """BDD100K's box-track annotation rate, 5 fps."""
+        return 5.0
