@@ -1637,3 +1637,69 @@ CASES = CASES + (
        "exit 2:", "probe.csv, line 3, column probe:imagenet", "'n/a' is not a number",
        error="CLIFailed"),
 )
+
+
+# ------------------------------------------------------------------------------ BDD100K
+BDD_VIDEO = "5y7e71c0-00000001"
+BDD_LABELS = f"labels/box_track_20/val/{BDD_VIDEO}.json"
+BDD_DETS = f"detections/box_track_20/val/{BDD_VIDEO}.json"
+
+
+def _bdd_copy(scratch: Path, change: Callable[[Path], None]) -> Path:
+    from unitrack_env.datasets.synthetic.bdd100k import KIND
+
+    root = clone(synthetic(KIND, "BDD100K"), scratch / "BDD100K")  # type: ignore[arg-type]
+    change(root)
+    return root
+
+
+def bdd(change: Callable[[Path], None]) -> Callable[[Path], None]:
+    """A BDD100K case: ``change`` breaks a copy of the synthetic split (the folder holding
+    ``images/``, ``labels/`` and ``detections/``), opened on its first video."""
+    return lambda scratch: open_env("UniTrack/BDD100K-v0", _bdd_copy(scratch, change),
+                                    BDD_VIDEO)
+
+
+def _bdd_label(rel: str, key: str, value: Any) -> Callable[[Path], None]:
+    """Set ``key`` (``category`` or a ``box2d`` corner) of the first label of frame 0."""
+    def change(root: Path) -> None:
+        def apply(frames: list) -> None:
+            label = frames[0]["labels"][0]
+            (label["box2d"] if key in ("x1", "y1", "x2", "y2") else label)[key] = value
+        edit_json(root / rel, apply)
+    return change
+
+
+def _bdd_results_with_nan(scratch: Path) -> Path:
+    """A results folder: the synthetic ground truth given back, one box corner NaN."""
+    from unitrack_env.datasets.synthetic.bdd100k import KIND
+
+    labels = synthetic(KIND, "BDD100K") / "labels" / "box_track_20" / "val"
+    out = scratch / "results"
+    for path in labels.glob("*.json"):
+        write(out / path.name, path.read_text())
+    _bdd_label(f"{BDD_VIDEO}.json", "x2", float("nan"))(out)
+    return out
+
+
+CASES = CASES + (
+    _c("BDD100K-no-detections", "BDD100K data without detections/ and no detections=",
+       bdd(lambda root: shutil.rmtree(root / "detections")), f"{BDD_DETS}",
+       "no detections", "detections="),
+    _c("BDD100K-no-frames", "BDD100K labels without images/track (as the real sample)",
+       bdd(lambda root: shutil.rmtree(root / "images")), f"images/track/val/{BDD_VIDEO}",
+       "missing", "`unitrack score` scores result files without them"),
+    _c("BDD100K-label-malformed-json", "a box-track label file cut in half",
+       bdd(lambda root: truncate(root / BDD_LABELS)), BDD_LABELS, "unreadable JSON"),
+    _c("BDD100K-label-unknown-class", "a ground-truth label of category 'plane'",
+       bdd(_bdd_label(BDD_LABELS, "category", "plane")), BDD_LABELS,
+       "frame [0].labels[0].category", "'plane' is not one of"),
+    _c("BDD100K-det-nan-box", "a detection whose box2d.x1 is NaN",
+       bdd(_bdd_label(BDD_DETS, "x1", float("nan"))), BDD_DETS,
+       "frame [0].labels[0].box2d.x1", "a finite number is required, got nan"),
+    _c("CLI-score-BDD100K-nan-result", "unitrack score on BDD100K results with a NaN x2",
+       cli("score", "--env", "UniTrack/BDD100K-v0", "--results", "{data}",
+           data=_bdd_results_with_nan),
+       "exit 2:", f"{BDD_VIDEO}.json", "frame [0].labels[0].box2d.x2",
+       "a finite number is required, got nan", error="CLIFailed"),
+)
