@@ -162,6 +162,7 @@ def test_real_ground_truth_given_back_scores_hota_100(shared_data, tmp_path, cap
     shutil.copy(gt, tmp_path / "res" / gt.name)
     combined = json.loads(_score_cli(capsys, root, tmp_path / "res", "json"))["combined"]
     assert combined["HOTA"] == 1.0 and combined["cls_comb_det_av/HOTA"] == 1.0
+    assert combined["cls_comb_cls_av/HOTA"] == 0.75  # train and bicycle absent: 0 (the page)
     assert all(combined[f"{c}/HOTA"] == 1.0 for c in ("car", "pedestrian", "rider", "bus",
                                                      "truck", "motorcycle", "HUMAN", "BIKE"))
     csv = _score_cli(capsys, root, tmp_path / "res", "csv").splitlines()
