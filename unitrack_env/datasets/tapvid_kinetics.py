@@ -13,7 +13,9 @@ scoring the videos still available (tapnet issue #121): ``missing_clips="skip"``
 Clips are decoded with OpenCV and brought to 25 fps as the reference's ``ffmpeg -vf fps=25``
 does (output frame ``k`` shows the last source frame whose timestamp, in 1/25 s rounded to
 nearest, is at most ``k``; exact for constant-frame-rate clips), cut at 250 frames; a
-shorter clip keeps its annotations' first frames only, as ``generate_tapvid.py`` does. Points
+shorter clip keeps its annotations' first frames only, as ``generate_tapvid.py`` does, unless
+they show a point visible more than 2 frames past its end (then it is not the clip that
+was annotated: a partial download or another cut, refused naming it). Points
 are moved by half a source pixel, ``(x W - 0.5) / W``, exactly as ``generate_tapvid.py``
 writes them into its pickles, so that scores match those measured on the pickles.
 """
@@ -45,6 +47,9 @@ ROW_FIELDS = 3 + 3 * FRAMES_PER_ROW
 LENGTH_SLACK_S = 1.0
 #: ``missing_clips=`` values.
 MISSING_CLIPS: tuple[str, ...] = ("error", "skip")
+#: Frames an annotated visible point may lie past the clip's end (rounding at the clip's
+#: end in the 25 fps conversion); further out, the clip is not the one annotated.
+END_SLACK_FRAMES = 2
 #: Other containers a user's downloader may produce (named in the missing-clip error).
 OTHER_SUFFIXES: tuple[str, ...] = (".mkv", ".webm", ".avi", ".mov")
 
@@ -147,14 +152,16 @@ def fps_slots(timestamps_s: np.ndarray, end_s: float, fps: int = FPS) -> np.ndar
     """Source frame shown at each output frame of ``ffmpeg -vf fps=<fps>`` (round to nearest).
 
     ``timestamps_s``: each source frame's time from the first; ``end_s``: the end of the
-    last frame. Output frame ``k`` shows the last source frame whose rounded slot is <= k.
+    last frame. There are ``round(end_s * fps)`` output frames (at least one); output frame
+    ``k`` shows the last source frame whose time, in output frames rounded to nearest, is
+    at most ``k``.
 
     >>> fps_slots(np.arange(6) / 30, 6 / 30).tolist()  # 30 fps -> 25 fps drops one frame
-    [0, 1, 3, 4, 5]
+    [0, 1, 2, 4, 5]
     """
     slots = np.floor(np.asarray(timestamps_s) * fps + 0.5 + 1e-6).astype(np.int64)
-    count = max(int(math.floor(end_s * fps + 0.5 + 1e-6)), int(slots[-1]) + 1 if len(slots) else 0)
-    return np.searchsorted(slots, np.arange(count), side="right") - 1
+    count = max(int(math.floor(end_s * fps + 0.5 + 1e-6)), 1)
+    return np.maximum(np.searchsorted(slots, np.arange(count), side="right") - 1, 0)
 
 
 def _resized(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
@@ -306,9 +313,9 @@ class KineticsDataset(SequenceDataset[PointVideo]):
         clip, path = self.clips[name], self._paths[name]
         frames, (width, height) = decode_clip(path, self.size, clip.segment_s)
         count = len(frames)
-        late = np.argwhere(~clip.occluded[:, count + FPS:])
+        late = np.argwhere(~clip.occluded[:, count + END_SLACK_FRAMES:])
         if len(late):
-            track, frame = int(late[0, 0]), int(late[0, 1]) + count + FPS
+            track, frame = int(late[0, 0]), int(late[0, 1]) + count + END_SLACK_FRAMES
             raise DataFormatError(path, f"decodes to {count} frames at {FPS} fps, but "
                                         f"{self.csv_path.name} shows track {track} visible "
                                         f"at frame {frame}: a partial download or another "

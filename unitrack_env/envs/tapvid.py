@@ -134,8 +134,8 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
       construction, naming the path expected) or ``"skip"`` (play the clips found, as the
       authors advise since Kinetics videos get taken down; the dataset's ``missing`` lists
       the others). A clip OpenCV cannot decode, one longer than its segment by more than
-      1 s (untrimmed), or one that ends more than 1 s before an annotated visible point is
-      refused when its episode is reset, before its first frame.
+      1 s (untrimmed), or one that ends more than 2 frames before an annotated visible point
+      is refused when its episode is reset, before its first frame.
     - ``query_mode``: ``"first"`` (default) or ``"strided"``.
     - ``resolution``: ``"256"`` (default) or ``"full"``.
     - ``sequences``: restrict to these video names.
