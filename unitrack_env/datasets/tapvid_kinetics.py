@@ -82,6 +82,25 @@ def _number(path: Path, line: int, field: str, text: str, kind: type) -> float:
     return value
 
 
+def _frame_values(path: Path, line: int, cells: list[str]) -> np.ndarray:
+    """``(250, 3)`` x, y, occluded of a row's frame cells (a bad cell names its field)."""
+    try:
+        values = np.array(cells, dtype=np.float64).reshape(FRAMES_PER_ROW, 3)
+        if set(cells[2::3]) <= {"0", "1"} and np.isfinite(values).all():
+            return values
+    except ValueError:
+        pass
+    values = np.empty((FRAMES_PER_ROW, 3))  # the slow way, to name the first bad cell
+    for frame in range(FRAMES_PER_ROW):
+        x, y, occ = cells[3 * frame: 3 * frame + 3]
+        if occ.strip() not in ("0", "1"):
+            raise DataFormatError(path, f"frame {frame}: {occ!r} is not 0 or 1", line=line,
+                                  field=f"occluded[{frame}]")
+        values[frame] = (_number(path, line, f"x[{frame}]", x, float),
+                         _number(path, line, f"y[{frame}]", y, float), occ.strip() == "1")
+    return values
+
+
 def _parse_row(path: Path, line: int, row: list[str]) -> tuple[str, int, np.ndarray, np.ndarray]:
     """One row: its clip name, segment length (s), points ``(250, 2)`` and flags ``(250,)``."""
     if len(row) != ROW_FIELDS:
@@ -96,14 +115,7 @@ def _parse_row(path: Path, line: int, row: list[str]) -> tuple[str, int, np.ndar
     if not 0 <= start < end:
         raise DataFormatError(path, f"segment {start}..{end} s is not 0 <= start < end",
                               line=line, field="end_time_sec")
-    values = np.empty((FRAMES_PER_ROW, 3))
-    for frame in range(FRAMES_PER_ROW):
-        x, y, occ = row[3 + 3 * frame: 6 + 3 * frame]
-        if occ.strip() not in ("0", "1"):
-            raise DataFormatError(path, f"frame {frame}: {occ!r} is not 0 or 1", line=line,
-                                  field=f"occluded[{frame}]")
-        values[frame] = (_number(path, line, f"x[{frame}]", x, float),
-                         _number(path, line, f"y[{frame}]", y, float), occ.strip() == "1")
+    values = _frame_values(path, line, row[3:])
     occluded = values[:, 2] > 0
     outside = ~occluded & ((values[:, :2] < 0) | (values[:, :2] > 1)).any(axis=1)
     if outside.any():
