@@ -160,6 +160,11 @@ def index_clips(video_root: Path) -> dict[str, list[Path]]:
     return found
 
 
+def _slots(times_s: np.ndarray | float, fps: int = FPS) -> np.ndarray:
+    """Times in output frames, rounded to nearest (halves up), as ffmpeg's fps filter does."""
+    return np.floor(np.asarray(times_s, np.float64) * fps + 0.5 + 1e-6).astype(np.int64)
+
+
 def fps_slots(timestamps_s: np.ndarray, end_s: float, fps: int = FPS) -> np.ndarray:
     """Source frame shown at each output frame of ``ffmpeg -vf fps=<fps>`` (round to nearest).
 
@@ -171,9 +176,9 @@ def fps_slots(timestamps_s: np.ndarray, end_s: float, fps: int = FPS) -> np.ndar
     >>> fps_slots(np.arange(6) / 30, 6 / 30).tolist()  # 30 fps -> 25 fps drops one frame
     [0, 1, 2, 4, 5]
     """
-    slots = np.floor(np.asarray(timestamps_s) * fps + 0.5 + 1e-6).astype(np.int64)
-    count = max(int(math.floor(end_s * fps + 0.5 + 1e-6)), 1)
-    return np.maximum(np.searchsorted(slots, np.arange(count), side="right") - 1, 0)
+    count = max(int(_slots(end_s, fps)), 1)
+    picks = np.searchsorted(_slots(timestamps_s, fps), np.arange(count), side="right") - 1
+    return np.maximum(picks, 0)
 
 
 def _resized(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
@@ -186,29 +191,50 @@ def _resized(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
                       else cv2.INTER_LINEAR)
 
 
-def _read_all(capture: cv2.VideoCapture, size: tuple[int, int] | None, limit_s: float
-              ) -> tuple[list[np.ndarray], list[float], tuple[int, int], float]:
-    """Frames (RGB at ``size``), their times (s), the source (w, h) and frame rate.
+@dataclass
+class _Decoded:
+    """What :func:`_read_all` kept of a clip.
 
-    Stops past ``limit_s`` seconds (the caller refuses such a clip).
+    Frames that 25 fps output can show, their times (s from the first frame), the end of
+    the last frame read (s) and the source size (w, h).
+    """
+
+    images: list[np.ndarray]
+    times: list[float]
+    end_s: float = 0.0
+    source: tuple[int, int] = (0, 0)
+
+
+def _read_all(capture: cv2.VideoCapture, size: tuple[int, int] | None,
+              limit_s: float) -> _Decoded:
+    """Read the clip, keeping only frames that 25 fps output can show (within 250 frames).
+
+    A frame whose 25 fps slot the next frame takes too is never shown (ffmpeg shows the
+    last one): it is replaced, so memory holds at most 250 frames. Stops past ``limit_s``.
     """
     fps = capture.get(cv2.CAP_PROP_FPS) or FPS
-    images: list[np.ndarray] = []
-    stamps: list[float] = []
-    source = (0, 0)
+    kept, first, last = _Decoded([], []), None, None
     while True:
         ok, image = capture.read()
         if not ok:
             break
-        if not images:
-            source = (int(image.shape[1]), int(image.shape[0]))
         stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
-        # a backend without timestamps: fall back to the stated frame rate
-        stamps.append(stamp if not stamps or stamp > stamps[-1] else stamps[-1] + 1.0 / fps)
-        images.append(_resized(image, size))
-        if stamps[-1] - stamps[0] > limit_s:
+        if first is None:
+            first, kept.source = stamp, (int(image.shape[1]), int(image.shape[0]))
+        elif stamp <= last:  # a backend without timestamps: the stated frame rate
+            stamp = last + 1.0 / fps
+        last = stamp
+        slot = int(_slots(stamp - first))
+        if kept.times and int(_slots(kept.times[-1])) == slot:
+            kept.images[-1], kept.times[-1] = _resized(image, size), stamp - first
+        elif slot < FRAMES_PER_ROW:
+            kept.images.append(_resized(image, size))
+            kept.times.append(stamp - first)
+        if stamp - first > limit_s:
             break
-    return images, stamps, source, fps
+    if last is not None:
+        kept.end_s = last - first + 1.0 / fps
+    return kept
 
 
 def decode_clip(path: Path, size: tuple[int, int] | None,
@@ -225,20 +251,18 @@ def decode_clip(path: Path, size: tuple[int, int] | None,
             raise DataFormatError(path, "OpenCV cannot open this clip (is it a video file? "
                                         f"this cv2 {cv2.__version__} reads H.264, HEVC, VP9, "
                                         "AV1 and MPEG-4 Part 2 through its FFmpeg backend)")
-        images, stamps, source, fps = _read_all(capture, size, segment_s + LENGTH_SLACK_S)
+        kept = _read_all(capture, size, segment_s + LENGTH_SLACK_S)
     finally:
         capture.release()
-    if not images:
+    if not kept.images:
         raise DataFormatError(path, "OpenCV decodes no frame from this clip (unsupported "
                                     "codec or a broken download)")
-    times = np.asarray(stamps) - stamps[0]
-    length_s = float(times[-1]) + 1.0 / fps
-    if length_s > segment_s + LENGTH_SLACK_S:
-        raise DataFormatError(path, f"the clip runs {length_s:.1f} s or more, its segment "
+    if kept.end_s > segment_s + LENGTH_SLACK_S:
+        raise DataFormatError(path, f"the clip runs {kept.end_s:.1f} s or more, its segment "
                                     f"{segment_s} s: an untrimmed video? TAP-Vid-Kinetics "
                                     "annotates the trimmed Kinetics clip (named _start_end)")
-    picks = fps_slots(times, length_s)[:FRAMES_PER_ROW]
-    return np.stack([images[i] for i in picks]), source
+    picks = fps_slots(np.asarray(kept.times), kept.end_s)[:FRAMES_PER_ROW]
+    return np.stack([kept.images[i] for i in picks]), kept.source
 
 
 class KineticsDataset(SequenceDataset[PointVideo]):
