@@ -107,6 +107,8 @@ VARIANTS: tuple[Variant, ...] = (
             folder="TAPVid", scoring=_TAPVID_SCORING),
     Variant("RoboTAP", _TAPVID, {"benchmark": "RoboTAP"}, folder="RoboTAP",
             scoring=_TAPVID_SCORING),
+    Variant("TAPVid-Kinetics", _TAPVID, {"benchmark": "TAPVid-Kinetics"},
+            folder="TAPVid-Kinetics", scoring=_TAPVID_SCORING),
 )
 
 #: Rows added at run time by :func:`register_variant` (a user's own tasks).

@@ -1608,6 +1608,67 @@ CASES = CASES + (
        "frame 0: query 0:", "must be finite", error="InvalidActionError"),
 )
 
+# --------------------------------------------------------------- TAP-Vid-Kinetics CSV + clips
+KINETICS_CLIP = "synkinetic0_000000_000010"
+
+
+def kinetics(change: Callable[[Path], None], **kwargs: Any) -> Callable[[Path], None]:
+    """A TAP-Vid-Kinetics case: the synthetic CSV and clips changed by ``change(folder)``,
+    opened on the first clip."""
+    def run(scratch: Path) -> None:
+        clone(synthetic("tapvid", "TAPVid-Kinetics"), scratch)
+        change(scratch)
+        open_env("UniTrack/TAPVid-Kinetics-v0", scratch, KINETICS_CLIP, **kwargs)
+    return run
+
+
+def _kinetics_row(line: int, change: Callable[[list[str]], None]) -> Callable[[Path], None]:
+    def run(folder: Path) -> None:
+        def rewrite(text: str) -> str:
+            rows = text.splitlines()
+            cells = rows[line - 1].split(",")
+            change(cells)
+            rows[line - 1] = ",".join(cells)
+            return "\n".join(rows) + "\n"
+        edit(folder / "tapvid_kinetics.csv", rewrite)
+    return run
+
+
+def _kinetics_clip(folder: Path) -> Path:
+    return folder / "synthetic_motion" / f"{KINETICS_CLIP}.mp4"
+
+
+def _short_clip(folder: Path) -> None:
+    import cv2
+
+    path = _kinetics_clip(folder)
+    path.unlink()
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 25, (320, 180))
+    for _ in range(3):
+        writer.write(np.zeros((180, 320, 3), np.uint8))
+    writer.release()
+
+
+CASES = CASES + (
+    _c("TAPVid-kinetics-clip-missing", "a Kinetics clip the CSV annotates is not downloaded",
+       kinetics(lambda folder: _kinetics_clip(folder).unlink()),
+       f"{KINETICS_CLIP}.mp4",
+       "not found", "tapvid_kinetics.csv line 1", "missing_clips='skip'"),
+    _c("TAPVid-kinetics-row-short", "a tapvid_kinetics.csv row cut by one frame (750 fields)",
+       kinetics(_kinetics_row(2, lambda cells: cells.__delitem__(slice(-3, None)))),
+       "tapvid_kinetics.csv, line 2", "750 fields, expected 753"),
+    _c("TAPVid-kinetics-occluded-flag", "an occlusion flag 'yes' in tapvid_kinetics.csv",
+       kinetics(_kinetics_row(1, lambda cells: cells.__setitem__(5, "yes"))),
+       "tapvid_kinetics.csv, line 1, field 'occluded[0]'", "'yes' is not 0 or 1"),
+    _c("TAPVid-kinetics-clip-not-video", "a clip file that holds no video",
+       kinetics(lambda folder: write(_kinetics_clip(folder), b"not a video" * 8)),
+       f"{KINETICS_CLIP}.mp4:", "OpenCV"),
+    _c("TAPVid-kinetics-clip-short", "a clip of 3 frames where the CSV annotates 20",
+       kinetics(_short_clip), f"{KINETICS_CLIP}.mp4:", "decodes to 3 frames at 25 fps",
+       "visible at frame"),
+)
+
+
 def _probe_csv(scratch: Path) -> Path:
     write(scratch / "probe.csv", "model,probe:imagenet\nrandom,4\nlite,n/a\n")
     return scratch

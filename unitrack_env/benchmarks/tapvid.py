@@ -20,7 +20,8 @@ from PIL import Image
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
 from unitrack_env.benchmarks.views import Head, ReportView, ScorecardColumn
-from unitrack_env.datasets.tapvid import PICKLE_PATTERNS, PointVideo, TAPVidDataset
+from unitrack_env.datasets.tapvid import PointVideo, TAPVidDataset
+from unitrack_env.datasets.tapvid_kinetics import KINETICS, KineticsDataset
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_bytes
 from unitrack_env.metrics.events_mot import EventRows
@@ -50,7 +51,7 @@ RESULT_KEYS: tuple[str, ...] = ("query_points", "tracks", "occluded")
 RESOLUTIONS: tuple[str, ...] = ("256", "full")
 #: Folder of each data set under ``$UNITRACK_DATA``.
 FOLDERS: dict[str, str] = {"TAPVid-DAVIS": "TAPVid", "TAPVid-RGBStacking": "TAPVid",
-                           "RoboTAP": "RoboTAP"}
+                           "RoboTAP": "RoboTAP", KINETICS: "TAPVid-Kinetics"}
 #: Query points of a result file may differ from the ground truth's by this much (pixels).
 QUERY_TOLERANCE = 1e-3
 #: A fixed zip timestamp, so equal results are equal bytes.
@@ -123,7 +124,7 @@ class TAPVidBenchmark(Benchmark):
         Head("static-points", "static-points", COLUMNS, appearance=False),
         ("UniTrack", "AJ"), order=8, input_size=(1, 256, 256), opt_in=True)
 
-    def __init__(self, dataset: TAPVidDataset, query_mode: str = "first",
+    def __init__(self, dataset: TAPVidDataset | KineticsDataset, query_mode: str = "first",
                  resolution: str = "256", *, synthetic: bool = False) -> None:
         super().__init__(dataset, synthetic=synthetic)
         self.query_mode = check_query_mode(query_mode)
@@ -131,11 +132,27 @@ class TAPVidBenchmark(Benchmark):
 
     @classmethod
     def build(cls, root: str | os.PathLike | None = None, benchmark: str = "TAPVid-DAVIS",
-              query_mode: str = "first", resolution: str = "256") -> TAPVidBenchmark:
-        """The benchmark of ``TAPVidEnv(root=, benchmark=, query_mode=, resolution=)``."""
-        one_of("TAP-Vid data set", benchmark, PICKLE_PATTERNS)
+              query_mode: str = "first", resolution: str = "256",
+              video_root: str | os.PathLike | None = None,
+              missing_clips: str = "error") -> TAPVidBenchmark:
+        """The benchmark of ``TAPVidEnv(root=, benchmark=, query_mode=, resolution=, ...)``.
+
+        ``video_root`` and ``missing_clips`` concern TAP-Vid-Kinetics only (its clips are
+        decoded straight to the evaluation raster).
+        """
+        one_of("TAP-Vid data set", benchmark, FOLDERS)
+        resolution = one_of("resolution", str(resolution), RESOLUTIONS)
         path, synthetic = data_root(root, FOLDERS[benchmark], benchmark, kind="tapvid")
-        return cls(TAPVidDataset(path, benchmark), query_mode, resolution, synthetic=synthetic)
+        if benchmark == KINETICS:
+            size = EVAL_SIZE if resolution == "256" else None
+            dataset: TAPVidDataset | KineticsDataset = KineticsDataset(
+                path, video_root, size, missing_clips)
+        else:
+            if video_root is not None or missing_clips != "error":
+                raise ValueError(f"video_root= and missing_clips= are TAP-Vid-Kinetics "
+                                 f"options; {benchmark} reads its videos from its pickle")
+            dataset = TAPVidDataset(path, benchmark)
+        return cls(dataset, query_mode, resolution, synthetic=synthetic)
 
     @property
     def name(self) -> str:

@@ -200,6 +200,10 @@ class TAPVidDataset(SequenceDataset[PointVideo]):
         """The pickle that holds video ``name``."""
         return self._entries[name][0]
 
+    def inputs_of(self, name: str) -> list[Path]:
+        """The files video ``name`` is read from: its pickle."""
+        return [self.file_of(name)]
+
     def load(self, name: str) -> PointVideo:
         """Video ``name``, validated (once)."""
         if name not in self._entries:

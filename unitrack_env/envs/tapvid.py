@@ -1,4 +1,4 @@
-"""Point tracking on TAP-Vid (DAVIS, RGB-Stacking) and RoboTAP: the official pickles."""
+"""Point tracking on TAP-Vid (DAVIS, RGB-Stacking, Kinetics) and RoboTAP."""
 
 from __future__ import annotations
 
@@ -21,10 +21,10 @@ from unitrack_env.render import joint_colours
 
 #: Default capacity of the padded query arrays (``max_queries``).
 DEFAULT_MAX_QUERIES = 1024
-#: Frames per second of each data set's videos where known (DAVIS is shot at 24 fps); the
-#: pickles do not state it, so the others report None.
+#: Frames per second of each data set's videos where known (DAVIS is shot at 24 fps, the
+#: Kinetics clips are resampled to 25 fps); the other pickles do not state it: None.
 FRAME_RATES: dict[str, int | None] = {"TAPVid-DAVIS": 24, "TAPVid-RGBStacking": None,
-                                      "RoboTAP": None}
+                                      "RoboTAP": None, "TAPVid-Kinetics": 25}
 
 
 class _InMemoryFrames:
@@ -42,9 +42,15 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
     (``tapvid_davis.pkl``), RGB-Stacking (``tapvid_rgb_stacking.pkl``) or RoboTAP
     (``robotap_split*.pkl``), read from the official pickles through a restricted unpickler
     (only numpy arrays, dtypes and scalars; anything else is refused naming the file and the
-    global). The queries are sampled as the reference samples them (``query_mode``):
-    ``"first"``, one query per track at its first visible frame; ``"strided"``, every 5th
-    frame, one query per track visible there, in track order.
+    global), or TAP-Vid-Kinetics: the official ``tapvid_kinetics.csv`` of point tracks with
+    the Kinetics-700-2020 validation clips the user downloads
+    (``{youtube_id}_{start:06}_{end:06}.mp4`` in any sub-folder of ``video_root``), decoded
+    with OpenCV (this build reads H.264, HEVC, VP9, AV1 and MPEG-4 Part 2) and brought to
+    25 fps and 250 frames as the reference's ``generate_tapvid.py`` does
+    (:mod:`unitrack_env.datasets.tapvid_kinetics`). The queries are sampled as the
+    reference samples them (``query_mode``): ``"first"``, one query per track at its first
+    visible frame; ``"strided"``, every 5th frame, one query per track visible there, in
+    track order.
 
     The episode is causal: a query is revealed at its own frame, and the agent then answers
     it in every later frame. ``"strided"`` queries are also scored on the frames *before*
@@ -62,7 +68,9 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
     the same pickle layout is generated once into the user cache: textured objects crossing
     and passing behind an occluder, points fixed on their texture and on the background,
     with exact tracks; a point is occluded when the pixel under it shows another object or
-    it is outside the frame.
+    it is outside the frame. For Kinetics the synthetic default is the CSV and two short
+    MPEG-4 clips written with OpenCV (``mp4v``; this cv2 has no H.264 encoder). No real
+    Kinetics clip ships with this project: its only test data are these synthetic clips.
 
     Which setting matches which published table: the tables of the TAP-Vid paper and of
     the trackers evaluated on it (TAPIR, CoTracker, BootsTAP, ...) are measured on the
@@ -115,10 +123,19 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
     position there, flagged occluded.
 
     ## Arguments
-    - ``root``: a folder holding the data set's pickle(s), or a ``.pkl`` file (default:
-      ``$UNITRACK_DATA/TAPVid`` (``RoboTAP`` for RoboTAP), else the synthetic data).
-    - ``benchmark``: ``"TAPVid-DAVIS"``, ``"TAPVid-RGBStacking"`` or ``"RoboTAP"`` (set by
-      the id).
+    - ``root``: a folder holding the data set's pickle(s), or a ``.pkl`` file; for Kinetics
+      the folder of ``tapvid_kinetics.csv`` or that file (default: ``$UNITRACK_DATA/TAPVid``
+      (``RoboTAP`` for RoboTAP, ``TAPVid-Kinetics`` for Kinetics), else the synthetic data).
+    - ``benchmark``: ``"TAPVid-DAVIS"``, ``"TAPVid-RGBStacking"``, ``"TAPVid-Kinetics"`` or
+      ``"RoboTAP"`` (set by the id).
+    - ``video_root`` (Kinetics): the folder searched at any depth for the clips (default:
+      the CSV's folder).
+    - ``missing_clips`` (Kinetics): ``"error"`` (default: a clip not found is refused at
+      construction, naming the path expected) or ``"skip"`` (play the clips found, as the
+      authors advise since Kinetics videos get taken down; the dataset's ``missing`` lists
+      the others). A clip OpenCV cannot decode, one longer than its segment by more than
+      1 s (untrimmed), or one that ends more than 2 frames before an annotated visible point
+      is refused when its episode is reset, before its first frame.
     - ``query_mode``: ``"first"`` (default) or ``"strided"``.
     - ``resolution``: ``"256"`` (default) or ``"full"``.
     - ``sequences``: restrict to these video names.
@@ -129,7 +146,7 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
       occluded), one colour per query.
 
     ## Version history
-    - v0: initial version.
+    - v0: initial version (TAPVid-Kinetics-v0 added later, same version).
     """
 
     frame_size_source = "the evaluation raster"
@@ -142,11 +159,14 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
         resolution: str = "256",
         sequences: list[str] | tuple[str, ...] | None = None,
         max_queries: int = DEFAULT_MAX_QUERIES,
+        video_root: str | os.PathLike | None = None,
+        missing_clips: str = "error",
         **options: Unpack[EpisodeOptions],
     ) -> None:
         options.setdefault("prefetch", False)  # frames are in memory already
         super().__init__(**options)
-        bench = TAPVidBenchmark.build(root, benchmark, query_mode, str(resolution))
+        bench = TAPVidBenchmark.build(root, benchmark, query_mode, str(resolution),
+                                      video_root, missing_clips)
         self._use_benchmark(bench, sequences, bench.dataset.root)
         self.query_mode = bench.query_mode
         self.max_queries = int(max_queries)
@@ -197,8 +217,8 @@ class TAPVidEnv(SequenceEnv[PointVideo]):
         return _InMemoryFrames()
 
     def sequence_inputs(self, name: str) -> list[Any]:
-        """The pickle holding video ``name``."""
-        return [self.dataset.file_of(name)]
+        """The files of video ``name``: its pickle (Kinetics: the CSV and the clip)."""
+        return self.dataset.inputs_of(name)
 
     def _frame_info(self, t: int) -> dict[str, Any]:
         frame, reverse = self._schedule[t]

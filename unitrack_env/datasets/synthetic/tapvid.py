@@ -2,11 +2,13 @@
 
 :func:`write_tapvid` renders textured-object scenes (:func:`render_scene`) and writes
 ``tapvid_davis.pkl`` / ``robotap_split0.pkl`` (a dict by video name) or
-``tapvid_rgb_stacking.pkl`` (a list). A tracked point is fixed on an object's texture (or on
-the static background): at frame ``t`` it is at ``x0 + u w, y0 + v h`` of the object's
-placement box ``(x0, y0, w, h)``, which is exactly where the renderer draws that texel (pixel
-``i`` of the sprite shows texture coordinate ``(i + 0.5) / w``). It is occluded when the
-pixel under it shows another object or the background, or lies outside the frame.
+``tapvid_rgb_stacking.pkl`` (a list); for TAP-Vid-Kinetics, ``tapvid_kinetics.csv`` and
+MPEG-4 clips written with OpenCV (:func:`write_kinetics`). A tracked point is fixed on an
+object's texture (or on the static background): at frame ``t`` it is at ``x0 + u w,
+y0 + v h`` of the object's placement box ``(x0, y0, w, h)``, which is exactly where the
+renderer draws that texel (pixel ``i`` of the sprite shows texture coordinate
+``(i + 0.5) / w``). It is occluded when the pixel under it shows another object or the
+background, or lies outside the frame.
 """
 
 from __future__ import annotations
@@ -27,7 +29,11 @@ FILES: dict[str, tuple[str, type]] = {
     "TAPVid-RGBStacking": ("tapvid_rgb_stacking.pkl", list),
     "RoboTAP": ("robotap_split0.pkl", dict),
 }
-BENCHMARKS: tuple[str, ...] = tuple(FILES)
+#: The Kinetics layout: annotations, and the folder (a Kinetics action label) of the clips.
+KINETICS_CSV, KINETICS_LABEL = "tapvid_kinetics.csv", "synthetic_motion"
+#: Annotated frames per CSV row and their rate (the official 10 s at 25 fps).
+KINETICS_FRAMES, KINETICS_FPS = 250, 25
+BENCHMARKS: tuple[str, ...] = (*FILES, "TAPVid-Kinetics")
 #: Points per object and on the background.
 POINTS_PER_OBJECT = 6
 BACKGROUND_POINTS = 6
@@ -61,6 +67,10 @@ SPECS: dict[str, tuple[PointVideoSpec, ...]] = {
                            PointVideoSpec("1", _scene(72, 256, 256, 20))),
     "RoboTAP": (PointVideoSpec("syn-robot-0", _scene(81, 320, 180, 20)),
                 PointVideoSpec("syn-robot-1", _scene(82, 320, 180, 20))),
+    # Clip names as Kinetics names them (youtube id, segment start and end): each clip is
+    # shorter than its 10 s segment, so the reader keeps its annotations' first frames.
+    "TAPVid-Kinetics": (PointVideoSpec("synkinetic0_000000_000010", _scene(91, 320, 180, 20)),
+                        PointVideoSpec("synkinetic1_000010_000020", _scene(92, 320, 180, 16))),
 }
 
 
@@ -122,11 +132,60 @@ def video_entry(spec: PointVideoSpec) -> dict[str, np.ndarray]:
     return {"video": frames, "points": (xy / size).astype(np.float32), "occluded": occluded}
 
 
+def _csv_rows(name: str, xy: np.ndarray, occluded: np.ndarray, size: np.ndarray) -> list[str]:
+    """The CSV rows of one clip: its key, then x, y, occluded for 250 frames.
+
+    The CSV is half a pixel off the pickles (``generate_tapvid.py`` writes ``(x W - 0.5) / W``):
+    the rows hold ``(x + 0.5) / W`` so that the reader gives back the exact track. Frames past
+    the clip's end are occluded; a visible point whose value would leave 0..1 (in the last
+    half pixel of the frame) is written occluded.
+    """
+    key = name.rsplit("_", 2)
+    values = (xy + 0.5) / size
+    occluded = occluded | ((values < 0) | (values > 1)).any(axis=-1)
+    rows = []
+    for track in range(len(xy)):
+        cells = [key[0], str(int(key[1])), str(int(key[2]))]
+        for t in range(KINETICS_FRAMES):
+            if t < xy.shape[1] and not occluded[track, t]:
+                cells += [repr(float(values[track, t, 0])), repr(float(values[track, t, 1])), "0"]
+            else:
+                cells += ["0.0", "0.0", "1"]
+        rows.append(",".join(cells))
+    return rows
+
+
+def write_kinetics(root: str | Path) -> None:
+    """Write ``tapvid_kinetics.csv`` and each clip as ``<label>/<name>.mp4`` (MPEG-4 Part 2).
+
+    This cv2 has no H.264 encoder; MPEG-4 Part 2 (``mp4v``) is one it both writes and reads.
+    """
+    root = Path(root)
+    (root / KINETICS_LABEL).mkdir(parents=True, exist_ok=True)
+    rows = []
+    for spec in SPECS["TAPVid-Kinetics"]:
+        frames, xy, occluded = point_tracks(render_scene(spec.scene), spec.scene.seed)
+        size = np.array([spec.scene.width, spec.scene.height], np.float64)
+        rows += _csv_rows(spec.name, xy, occluded, size)
+        path = root / KINETICS_LABEL / f"{spec.name}.mp4"
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), KINETICS_FPS,
+                                 (spec.scene.width, spec.scene.height))
+        if not writer.isOpened():
+            raise RuntimeError(f"OpenCV cannot write the MPEG-4 clip {path}")
+        for frame in frames:
+            writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        writer.release()
+    (root / KINETICS_CSV).write_text("\n".join(rows) + "\n")
+
+
 def write_tapvid(root: str | Path, benchmark: str = "TAPVid-DAVIS") -> None:
-    """Write the synthetic ``benchmark`` pickle under ``root``."""
+    """Write the synthetic ``benchmark`` pickle (Kinetics: CSV and clips) under ``root``."""
+    if benchmark == "TAPVid-Kinetics":
+        write_kinetics(root)
+        return
     if benchmark not in FILES:
         raise ValueError(f"no synthetic TAP-Vid data set {benchmark!r}; valid: "
-                         f"{', '.join(FILES)}")
+                         f"{', '.join(BENCHMARKS)}")
     name, container = FILES[benchmark]
     entries = [(spec.name, video_entry(spec)) for spec in SPECS[benchmark]]
     data = dict(entries) if container is dict else [entry for _, entry in entries]
