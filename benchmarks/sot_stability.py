@@ -19,12 +19,12 @@ clips), the clip is played by ``unitrack_env.evaluation.runner.run`` (the API be
   change is one unit of the uint8 input (one ulp of the frame), not noise on the
   normalised tensor.
 
-``--exact-crops`` is an experiment, not the library's method: it replaces the heads' crop
-sampling (``cv2.warpAffine``: positions on a 1/32-pixel fixed-point grid, output rounded to
-uint8) by an exact float64 bilinear sampling kept in float32, so a crop is a continuous
-function of the box; it tests whether that rounding is what turns float-level differences
-of the box into input-sized ones (a centre moved by 1e-6 px changes about 40% of the uint8
-crops by one grey level).
+``--uint8-crops`` replays the heads as they were before the stability fix (issue 38): crops
+sampled by ``cv2.warpAffine`` (positions on a 1/32-pixel fixed-point grid, output rounded to
+uint8) instead of the library's exact float bilinear crops. With those, a box centre moved
+by 1e-6 px (float noise of the previous step) changed about 40% of the crops by one grey
+level, and a tracker carried that input-sized change on; the two settings side by side show
+how much of the spread that rounding made.
 
 The SOT heads have no feature cache (every crop is new), so each run really computes.
 Printed per head and clip: the AUC (percent) of each run, then min, max and range; the
@@ -84,43 +84,27 @@ def instrumented(head: type, seed: int | None, pixels: int) -> type:
                 {"reset": reset, "act": act, "trace": []})
 
 
-def exact_crops() -> None:
-    """Patch the heads' crop sampling to exact float bilinear (the ``--exact-crops`` study)."""
-    import torch
-    import torch.nn.functional as F
+def uint8_crops() -> None:
+    """Patch the heads' crop sampling back to cv2's uint8 one (``--uint8-crops``)."""
+    import cv2
 
-    from unitrack_env.agents.appearance.model import AppearanceModel
     from unitrack_env.agents.primitives import box_propagation
 
     def crop(image: np.ndarray, centre: tuple[float, float], windows: np.ndarray,
              out_size: int, *, fill: Any = None) -> np.ndarray:
-        img = torch.from_numpy(np.ascontiguousarray(image)).double().permute(2, 0, 1)[None]
-        colour = image.reshape(-1, 3).mean(0) if fill is None else np.asarray(fill)
-        colour_t = torch.as_tensor(np.asarray(colour, np.float64)).view(1, 3, 1, 1)
-        height, width = image.shape[:2]
-        u = torch.arange(out_size, dtype=torch.float64) + 0.5 - out_size / 2
+        colour = tuple(float(v) for v in (image.reshape(-1, 3).mean(0) if fill is None
+                                          else fill))
         out = []
         for win_w, win_h in np.asarray(windows, np.float64).reshape(-1, 2):
-            gx = (2 * (centre[0] + u * win_w / out_size) / width - 1)[None].expand(out_size, -1)
-            gy = (2 * (centre[1] + u * win_h / out_size) / height - 1)[:, None].expand(
-                -1, out_size)
-            grid = torch.stack([gx, gy], -1)[None]
-            inside = F.grid_sample(torch.ones_like(img[:, :1]), grid, align_corners=False)
-            sampled = F.grid_sample(img, grid, align_corners=False)
-            out.append((sampled + (1 - inside) * colour_t)[0].permute(1, 2, 0).float().numpy())
+            ax, ay = win_w / out_size, win_h / out_size
+            matrix = np.array([[ax, 0.0, centre[0] + (0.5 - out_size / 2) * ax - 0.5],
+                               [0.0, ay, centre[1] + (0.5 - out_size / 2) * ay - 0.5]])
+            out.append(cv2.warpAffine(image, matrix, (out_size, out_size),
+                                      flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                      borderMode=cv2.BORDER_CONSTANT, borderValue=colour))
         return np.stack(out)
 
-    plain = AppearanceModel.preprocess
-
-    def preprocess(self: Any, images: Any) -> Any:
-        if isinstance(images, np.ndarray) and images.dtype == np.float32:
-            x = torch.from_numpy(np.ascontiguousarray(images.reshape(-1, *images.shape[-3:])))
-            x = x.to(self.device).permute(0, 3, 1, 2).div(255.0)
-            return (x - self._mean_t) / self._std_t
-        return plain(self, images)
-
     box_propagation.crop_windows = crop
-    AppearanceModel.preprocess = preprocess
 
 
 def _boxes(out: Path, clip: str) -> np.ndarray:
@@ -224,11 +208,11 @@ def main() -> None:
     p.add_argument("--crop-size", type=int, default=None,
                    help="the heads' crop_size (default: the paper's 520; the goldens use 256)")
     p.add_argument("--json", type=Path, default=None, help="also write the table here")
-    p.add_argument("--exact-crops", action="store_true",
-                   help="experiment: exact float bilinear crops instead of cv2's uint8 ones")
+    p.add_argument("--uint8-crops", action="store_true",
+                   help="the crops before the stability fix (cv2's, rounded to uint8)")
     a = p.parse_args()
-    if a.exact_crops:
-        exact_crops()
+    if a.uint8_crops:
+        uint8_crops()
     out = a.out or Path(tempfile.mkdtemp(prefix="sot-stability-"))
     wanted = set(filter(None, a.clips.split(",")))
     table = {f"{name} {clip}": study(name, clip, env_kwargs, a, out)

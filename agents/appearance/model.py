@@ -173,9 +173,11 @@ class AppearanceModel:
             yield
 
     def preprocess(self, images: np.ndarray | Sequence[np.ndarray] | torch.Tensor) -> torch.Tensor:
-        """Turn uint8 RGB images (one, a batch or a list) into a normalised ``(B, 3, H, W)`` batch.
+        """Turn RGB images (one, a batch or a list) into a normalised ``(B, 3, H, W)`` batch.
 
-        A float ``(B, 3, H, W)`` or ``(3, H, W)`` tensor is taken as normalised and only moved.
+        Images are uint8, or float32 arrays of unrounded pixel values in ``[0, 255]`` (e.g.
+        the SOT heads' exact bilinear crops). A float ``(B, 3, H, W)`` or ``(3, H, W)``
+        tensor is taken as normalised and only moved.
         """
         if isinstance(images, torch.Tensor) and images.is_floating_point():
             x = images if images.ndim == 4 else images.unsqueeze(0)
@@ -199,13 +201,15 @@ class AppearanceModel:
             batch = np.stack([np.asarray(i) for i in items])
         if batch.ndim == 3:
             batch = batch[None]
-        if batch.ndim != 4 or batch.shape[3] != 3 or batch.dtype != np.uint8:
+        if batch.ndim != 4 or batch.shape[3] != 3 or batch.dtype not in (np.uint8, np.float32):
             raise ValueError(
-                f"images must be uint8 RGB (H, W, 3) or (B, H, W, 3); got {batch.dtype} "
-                f"{batch.shape}. Float inputs must be normalised torch tensors (B, 3, H, W)."
+                f"images must be uint8 or float32 (pixel values) RGB (H, W, 3) or (B, H, W, 3); "
+                f"got {batch.dtype} {batch.shape}. Normalised inputs must be torch tensors "
+                "(B, 3, H, W)."
             )
         x = torch.from_numpy(np.ascontiguousarray(batch)).to(self.device)
-        x = x.permute(0, 3, 1, 2).to(torch.float32).div_(255.0)
+        # not in place: a float32 batch shares memory with the caller's array
+        x = x.permute(0, 3, 1, 2).to(torch.float32).div(255.0)
         return (x - self._mean_t) / self._std_t
 
     def features(self, images: np.ndarray | Sequence[np.ndarray] | torch.Tensor) -> torch.Tensor:

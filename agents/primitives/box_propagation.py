@@ -34,10 +34,28 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+
+def _axis_taps(
+    first: float, step: float, count: int, length: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Bilinear taps of ``count`` samples along one axis, over the pixels they read.
+
+    Sample ``k`` at pixel-centre coordinate ``first + k * step`` (pixel ``j``'s centre at
+    ``j``) blends pixels ``lo`` and ``lo + 1`` with weights ``1 - frac`` and ``frac``.
+    Returns the pixels read (sorted, possibly outside ``[0, length)``), whether each is in
+    the image, each sample's two taps as indices into those pixels, and their weights.
+    """
+    pos = first + step * np.arange(count, dtype=np.float64)
+    lo = np.floor(pos)
+    frac = pos - lo
+    taps = lo.astype(np.int64)[:, None] + np.array([0, 1])
+    read = np.unique(taps)
+    inside = (read >= 0) & (read < length)
+    return read, inside, np.searchsorted(read, taps), np.stack([1.0 - frac, frac], axis=1)
 
 
 def crop_windows(
@@ -50,6 +68,12 @@ def crop_windows(
 ) -> np.ndarray:
     """Crop axis-aligned windows around one centre and resize each to ``out_size`` squared.
 
+    Exact bilinear sampling, computed in float64 and returned unrounded: a crop is a
+    continuous function of the box. (Integer resamplers such as ``cv2.warpAffine`` put sample
+    positions on a 1/32-pixel grid and round the output to uint8, so a box moved by 1e-6 px,
+    float noise of the previous step, changes whole grey levels of the next crop; a tracker
+    then carries that input-sized change on. ``benchmarks/sot_stability.py`` measures it.)
+
     Args:
         image: uint8 RGB ``(H, W, 3)``.
         centre: ``(cx, cy)`` in continuous coordinates (pixel ``j`` covers ``[j, j + 1)``).
@@ -58,26 +82,32 @@ def crop_windows(
         fill: Colour outside the image (default: the image's mean colour, as SiamFC).
 
     Returns:
-        ``(n, out_size, out_size, 3)`` uint8 crops (bilinear sampling).
+        ``(n, out_size, out_size, 3)`` float32 crops, pixel values in ``[0, 255]``; output
+        pixel ``u`` samples image position ``c + (u + 0.5 - out_size / 2) * window / out_size``
+        and a tap outside the image reads ``fill``.
     """
-    if fill is None:
-        fill = tuple(float(v) for v in image.reshape(-1, 3).mean(0))
+    height, width = image.shape[:2]
+    if fill is None:  # an exact integer sum: the same colour on every machine
+        fill = image.reshape(-1, 3).sum(0, dtype=np.int64) / (height * width)
+    colour = np.asarray(fill, dtype=np.float64).reshape(3)
     cx, cy = centre
-    crops = []
-    for win_w, win_h in np.asarray(windows, dtype=np.float64).reshape(-1, 2):
+    crops = np.empty((len(np.reshape(windows, (-1, 2))), out_size, out_size, 3), np.float32)
+    for i, (win_w, win_h) in enumerate(np.asarray(windows, dtype=np.float64).reshape(-1, 2)):
         ax, ay = win_w / out_size, win_h / out_size
-        # Output pixel u (centre u + 0.5) samples image position cx + (u + 0.5 - S/2) * a,
-        # i.e. OpenCV coordinate (pixel centres at integers) that minus 0.5.
-        matrix = np.array([
-            [ax, 0.0, cx + (0.5 - out_size / 2) * ax - 0.5],
-            [0.0, ay, cy + (0.5 - out_size / 2) * ay - 0.5],
-        ])
-        crops.append(cv2.warpAffine(
-            image, matrix, (out_size, out_size),
-            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-            borderMode=cv2.BORDER_CONSTANT, borderValue=fill,
-        ))
-    return np.stack(crops)
+        # Pixel-centre coordinates: continuous position minus 0.5.
+        rows, in_y, ty, wy = _axis_taps(cy + (0.5 - out_size / 2) * ay - 0.5, ay,
+                                        out_size, height)
+        cols, in_x, tx, wx = _axis_taps(cx + (0.5 - out_size / 2) * ax - 0.5, ax,
+                                        out_size, width)
+        # The pixels the crop reads; those outside the image read the fill colour.
+        block = np.empty((len(rows), len(cols), 3))
+        block[...] = colour
+        block[np.ix_(in_y, in_x)] = image[np.ix_(rows[in_y], cols[in_x])]
+        # Explicit products and sums: IEEE-exact on every machine (no BLAS, no FMA).
+        blended = wy[:, 0, None, None] * block[ty[:, 0]] + wy[:, 1, None, None] * block[ty[:, 1]]
+        crops[i] = (wx[None, :, 0, None] * blended[:, tx[:, 0]]
+                    + wx[None, :, 1, None] * blended[:, tx[:, 1]])
+    return crops
 
 
 def hann_window(size: int) -> torch.Tensor:
@@ -364,7 +394,8 @@ class BoxPropagationConfig:
 
 # ---------------------------------------------------------------------- tracker
 FeatureFn = Callable[[np.ndarray], torch.Tensor]
-"""``(n, S, S, 3)`` uint8 crops -> ``(n, C, s, s)`` features (one batched backbone pass)."""
+"""``(n, S, S, 3)`` float32 crops (pixel values 0..255) -> ``(n, C, s, s)`` features (one
+batched backbone pass)."""
 
 
 @dataclass
@@ -381,7 +412,7 @@ class BoxPropagator:
     """Propagate one box through a video with XCorr or DCF on stride-8 features.
 
     Args:
-        features: Callable turning a batch of uint8 crops into feature maps.
+        features: Callable turning a batch of float32 crops (pixel values) into feature maps.
         config: Hyper-parameters.
         stride: Pixels of the crop per feature pixel (the appearance model's stride).
 
