@@ -150,9 +150,12 @@ def rows_csv(tables: list[RunAttributes]) -> str:
     return buffer.getvalue()
 
 
-def write_attributes(runs: list[Path], out: Path) -> tuple[list[Path], str]:
-    """Write ``attributes.md``, ``attributes.csv`` and the radar; return them and the table."""
-    tables, without = load_attributes(runs)
+def write_attributes(tables: list[RunAttributes], without: list[Path], out: Path,
+                     ) -> tuple[list[Path], str]:
+    """Write ``attributes.md``, ``attributes.csv`` and the radar; return them and the table.
+
+    ``tables`` and ``without``: :func:`load_attributes`'s.
+    """
     out.mkdir(parents=True, exist_ok=True)
     text = markdown_table(tables, without)
     atomic_write_text(out / "attributes.md", text)

@@ -31,11 +31,13 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from ..curves_plot import draw_curves
 
     runs = [Path(r) for r in args.runs]
+    if args.attributes:  # read (and refused if bad) before any figure is written
+        from ..attributes_plot import load_attributes, write_attributes
+
+        tables, without = load_attributes(runs)
     written = draw_curves(runs, Path(args.out))
     if args.attributes:
-        from ..attributes_plot import write_attributes
-
-        files, table = write_attributes(runs, Path(args.out))
+        files, table = write_attributes(tables, without, Path(args.out))
         console.print(table, markup=False)
         written += files
     for path in written:

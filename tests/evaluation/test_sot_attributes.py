@@ -125,3 +125,19 @@ def test_otb_fixture_rows_follow_the_published_list(shared_data, tmp_path) -> No
     # the table in the docs, replayed
     documented = DOC.read_text().split("<!-- attributes-table")[1].split("<!-- /attributes")[0]
     assert documented.splitlines()[1:] == markdown_table([table]).splitlines()[:9]
+
+
+def test_a_bad_attribute_file_is_refused_before_any_figure_is_written(lasot_runs, tmp_path,
+                                                                     capsys) -> None:
+    a, _ = lasot_runs
+    spec = json.loads((a / "run.json").read_text())
+    att = Path(spec["env_kwargs"]["root"]) / "att" / "walker-2.txt"
+    good = att.read_text()
+    att.write_text("1,0,2\n")
+    try:
+        assert main(["plot", str(a), "--out", str(tmp_path / "out"), "--attributes"]) == 2
+    finally:
+        att.write_text(good)
+    err = capsys.readouterr().err
+    assert "walker-2.txt, line 1: expected 14 flags 0 or 1" in err and "'1 0 2'" in err
+    assert not (tmp_path / "out").exists()
