@@ -109,3 +109,12 @@ def test_benchmarks_without_attributes_say_none(env_id) -> None:
 def test_synthetic_otb_sequences_are_in_no_published_list() -> None:
     bench = benchmark_for("UniTrack/OTB-v0")
     assert bench.synthetic and bench.sequence_attributes(bench.sequence_names) is None
+
+
+def test_attribute_sources_pickle_with_their_format() -> None:
+    import pickle
+
+    from unitrack_env.benchmarks.otb import SOT_FORMATS
+
+    for key in ("otb", "lasot", "uav123"):
+        assert pickle.loads(pickle.dumps(SOT_FORMATS[key])) == SOT_FORMATS[key]

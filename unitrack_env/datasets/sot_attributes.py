@@ -117,20 +117,25 @@ def read_attribute_flags(path: Path, codes: tuple[str, ...]) -> frozenset[str]:
     return frozenset(code for code, flag in zip(codes, tokens, strict=True) if flag == "1")
 
 
-def attribute_file_reader(*folders: Callable[[Any], Path], codes: tuple[str, ...],
-                          ) -> Callable[[Any, str], frozenset[str] | None]:
+@dataclass(frozen=True)
+class AttributeFiles:
     """A ``read`` of :class:`AttributeSource`: ``<folder>/<sequence>.txt``, the first found.
 
-    Each of ``folders`` gives a folder from the dataset (its root, its variant).
+    ``folders`` are templates formatted with the dataset's ``root`` (and ``folder``, the
+    UAV123 variant's); ``codes``: the flags' order. A value, so environments still pickle.
     """
-    def read(dataset: Any, sequence: str) -> frozenset[str] | None:
-        for folder in folders:
-            path = folder(dataset) / f"{sequence}.txt"
-            if path.is_file():
-                return read_attribute_flags(path, codes)
-        return None
 
-    return read
+    folders: tuple[str, ...]
+    codes: tuple[str, ...]
+
+    def __call__(self, dataset: Any, sequence: str) -> frozenset[str] | None:
+        """The codes of ``sequence`` from its file (None: no folder has one)."""
+        for template in self.folders:
+            folder = template.format(root=dataset.root, folder=getattr(dataset, "folder", ""))
+            path = Path(folder) / f"{sequence}.txt"
+            if path.is_file():
+                return read_attribute_flags(path, self.codes)
+        return None
 
 
 OTB2015 = AttributeSource(
@@ -145,7 +150,7 @@ LASOT_NAMES = ("Illumination Variation", "Partial Occlusion", "Deformation", "Mo
                "Low Resolution", "Aspect Ratio Change")
 LASOT = AttributeSource(
     LASOT_CODES, LASOT_NAMES,
-    attribute_file_reader(lambda d: Path(d.root) / "att", codes=LASOT_CODES),
+    AttributeFiles(("{root}/att",), LASOT_CODES),
     "LaSOT evaluation toolkit's annos/att/<seq>.txt, read from <root>/att/")
 
 UAV123_CODES = ("SV", "ARC", "LR", "FM", "FOC", "POC", "OV", "BC", "IV", "VC", "CM", "SOB")
@@ -154,10 +159,8 @@ UAV123_NAMES = ("Scale Variation", "Aspect Ratio Change", "Low Resolution", "Fas
                 "Illumination Variation", "Viewpoint Change", "Camera Motion", "Similar Object")
 UAV123 = AttributeSource(
     UAV123_CODES, UAV123_NAMES,
-    attribute_file_reader(lambda d: Path(d.root) / "anno" / d.folder / "att",
-                          lambda d: Path(d.root) / "anno" / "UAV123" / "att",
-                          codes=UAV123_CODES),
+    AttributeFiles(("{root}/anno/{folder}/att", "{root}/anno/UAV123/att"), UAV123_CODES),
     "UAV123's anno/<UAV123 or UAV123_10fps>/att/<seq>.txt")
 
-__all__ = ["LASOT", "OTB2015", "OTB2015_ATTRIBUTES", "UAV123", "AttributeSource",
-           "attribute_file_reader", "parse_attribute_table", "read_attribute_flags"]
+__all__ = ["LASOT", "OTB2015", "OTB2015_ATTRIBUTES", "UAV123", "AttributeFiles",
+           "AttributeSource", "parse_attribute_table", "read_attribute_flags"]
