@@ -37,8 +37,9 @@ class _Tasks(Mapping[str, Task]):
     """The scorecard's tasks, in column order, read from the registration table.
 
     Every registered benchmark that declares a ``scorecard`` column, rows registered at run
-    time included. Iterating gives the default task set; an ``opt_in`` column is left out
-    of it but found by name (``TASKS[name]``, ``name in TASKS``; all: :meth:`every`).
+    time included, under the column's ``task`` name (default: the benchmark's task).
+    Iterating gives the default task set; an ``opt_in`` column is left out of it but found by
+    name (``TASKS[name]``, ``name in TASKS``; all: :meth:`every`).
     """
 
     _rows: tuple = ()
@@ -55,10 +56,11 @@ class _Tasks(Mapping[str, Task]):
         found: dict[str, Task] = {}
         for row in rows:
             cls = benchmark_class(row) if row.scoring else None
-            if cls is not None and cls.scorecard is not None and cls.task not in found:
-                column = cls.scorecard
-                found[cls.task] = Task(**{f.name: getattr(column, f.name)
-                                          for f in fields(column)}, name=cls.task)
+            column = cls.scorecard if cls is not None else None
+            name = column and (column.task or cls.task)
+            if column is not None and name not in found:
+                found[name] = Task(**{f.name: getattr(column, f.name)
+                                      for f in fields(column)}, name=name)
         return dict(sorted(found.items(), key=lambda item: item[1].order))
 
     def __getitem__(self, name: str) -> Task:

@@ -84,7 +84,7 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("OTB", "unitrack_env.envs.otb:OTBEnv", {}, folder="OTB",
             scoring=_B + "otb:OTBBenchmark"),
     Variant("LaSOT", "unitrack_env.envs.otb:OTBEnv", {"data_format": "lasot"}, folder="LaSOT",
-            scoring=_B + "otb:SOTProtocolBenchmark"),
+            scoring=_B + "otb:LaSOTBenchmark"),
     Variant("UAV123", "unitrack_env.envs.otb:OTBEnv", {"data_format": "uav123"},
             folder="UAV123", scoring=_B + "otb:SOTProtocolBenchmark"),
     Variant("GOT10k", "unitrack_env.envs.otb:OTBEnv", {"data_format": "got10k"},

@@ -10,6 +10,7 @@ from rich.console import Console
 EXAMPLES = """examples:
   unitrack plot runs/otb-xcorr --out plots/
   unitrack plot runs/lasot-xcorr runs/lasot-repeat --out plots/   # both runs on each figure
+  unitrack plot runs/otb-xcorr runs/otb-dcf --out plots/ --attributes   # + per-attribute table
 """
 
 
@@ -19,13 +20,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "evaluate` (scored)")
     parser.add_argument("--out", required=True, help="folder of the figures "
                         "(success-plot.png/.svg, precision-plot.png/.svg, ...)")
+    parser.add_argument("--attributes", action="store_true", help="also score each "
+                        "challenge attribute of the benchmark (OTB-2015, LaSOT, UAV123) over "
+                        "the sequences having it: attributes.md/.csv and the radar "
+                        "attributes-radar.png/.svg")
 
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack plot``."""
     from ..curves_plot import draw_curves
 
-    written = draw_curves([Path(r) for r in args.runs], Path(args.out))
+    runs = [Path(r) for r in args.runs]
+    if args.attributes:  # read (and refused if bad) before any figure is written
+        from ..attributes_plot import load_attributes, write_attributes
+
+        tables, without = load_attributes(runs)
+    written = draw_curves(runs, Path(args.out))
+    if args.attributes:
+        files, table = write_attributes(tables, without, Path(args.out))
+        console.print(table, markup=False)
+        written += files
     for path in written:
         console.print(str(path), markup=False)
     return 0 if written else 1

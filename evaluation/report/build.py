@@ -66,6 +66,34 @@ def curves_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
     return '<h2 id="curves">Success and precision plots</h2><p>' + images + "</p>"
 
 
+def attributes_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
+    """Each run's scores per challenge attribute and their radar ("" if no run has any)."""
+    from ..attributes_plot import NoAttributes, draw_attribute_radar, load_attributes
+
+    if not any(bench.sequence_attributes(list(metrics.get("per_sequence", {})))
+               for _, _, bench, metrics in runs):
+        return ""  # most tasks
+    try:
+        tables, without = load_attributes([run for _, run, _, _ in runs])
+    except NoAttributes:
+        return ""
+    except ValueError as exc:  # two benchmarks' different attributes
+        return f'<h2 id="attributes">Attributes</h2><p class="note">{esc(str(exc))}</p>'
+    metrics = list(dict.fromkeys(m for t in tables for m in t.metrics))
+    rows = [f'<tr><td class="text">{esc(t.label)}</td><td class="text">{esc(r.code)}</td>'
+            f'<td data-value="{r.sequences}">{r.sequences}</td>'
+            + "".join(number_cell(r.values.get(m), percent=True) for m in metrics) + "</tr>"
+            for t in tables for r in t.rows]
+    images = "".join(f'<img src="{p.name}" alt="attribute radar" style="max-width:460px">'
+                     for p in draw_attribute_radar(tables, out / "attributes-radar")
+                     if p.suffix == ".svg")
+    note = f"Attributes: {tables[0].source}." + (
+        f" No attributes: {', '.join(p.name for p in without)}." if without else "")
+    return ('<h2 id="attributes">Attributes</h2><p>Each row scores the sequences having the '
+            f"attribute. {esc(note)}</p>" + images
+            + table(["run", "attribute", "sequences", *metrics], rows, table_id="attributes-table"))
+
+
 def compare_section(run_a: Path, run_b: Path, resamples: int) -> str:
     """The paired comparison of two runs (whose benchmark states intervals) with 95% intervals."""
     comp = compare_runs(run_a, run_b, resamples=resamples)
@@ -206,7 +234,8 @@ def build_report(runs: list[Path], out: Path, *, thumbnails: int = 24,
         loaded.append((label, run, bench, metrics))
     body = [f"<h1>unitrack report: {esc(', '.join(r.name for r in runs))}</h1>",
             "<p>" + esc(", ".join(f"{lab}: {b.name}" for lab, _, b, _ in loaded)) + "</p>",
-            metrics_section(loaded), curves_section(loaded, out)]
+            metrics_section(loaded), curves_section(loaded, out),
+            attributes_section(loaded, out)]
     if (len(loaded) >= 2 and loaded[0][2].task == loaded[1][2].task
             and comparable(loaded[0][2])):
         common = set(loaded[0][3]["per_sequence"]) & set(loaded[1][3]["per_sequence"])
@@ -241,7 +270,7 @@ def check_report_folder(out: Path) -> None:
     head = index.read_text(encoding="utf-8", errors="replace")[:4000] if index.is_file() else ""
     written = [index, out / "scorecard.svg", out / "scorecard.png",  # and the pages' files:
                *sorted(out.glob("seq*-*.html")), *sorted(out.glob("img*-*")),
-               *sorted(out.glob("curves-*"))]
+               *sorted(out.glob("curves-*")), *sorted(out.glob("attributes-radar.*"))]
     theirs = [p.name for p in written if p.exists() and not any(mark in head for mark in OURS)]
     if theirs:
         raise FileExistsError(f"{out} holds {', '.join(theirs)}, which no report of ours wrote "

@@ -1764,3 +1764,28 @@ CASES = CASES + (
        "exit 2:", f"{BDD_VIDEO}.json", "frame [0].labels[0].box2d.x2",
        "a finite number is required, got nan", error="CLIFailed"),
 )
+
+
+def _lasot_run_with_short_att(scratch: Path) -> Path:
+    """A repeat-box run of a copy of LaSOT's synthetic default whose ``att/walker-1.txt``
+    holds 3 flags instead of the toolkit's 14."""
+    from unitrack_env.datasets.lasot import LASOT_SYNTHETIC
+    from unitrack_env.datasets.synthetic.cache import ensure_synthetic
+    from unitrack_env.evaluation.runner import run
+
+    data = scratch / "LaSOT"
+    shutil.copytree(ensure_synthetic("LaSOT", LASOT_SYNTHETIC), data)
+    write(data / "att" / "walker-1.txt", "0,1,0\n")
+    run("UniTrack/LaSOT-v0", "repeat-box", out=scratch / "run",
+        env_kwargs={"root": str(data)}, progress=False)
+    return scratch
+
+
+CASES = CASES + (
+    _c("CLI-plot-attribute-file-short", "unitrack plot --attributes on a LaSOT run whose "
+       "att/walker-1.txt has 3 flags, not 14",
+       cli("plot", "{data}/run", "--out", "{out}", "--attributes",
+           data=_lasot_run_with_short_att),
+       "exit 2:", "att/walker-1.txt, line 1", "expected 14 flags 0 or 1",
+       error="CLIFailed"),
+)

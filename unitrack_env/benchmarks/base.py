@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 import numpy as np
 from PIL import Image
 
-from unitrack_env.benchmarks.views import Curve, ReportView, ScorecardColumn
+from unitrack_env.benchmarks.views import Attributes, Curve, ReportView, ScorecardColumn
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.roots import resolve_root
@@ -224,6 +224,13 @@ class Benchmark(ABC):
         Default []: the task has no such plots.
         """
         return []
+
+    def sequence_attributes(self, sequences: list[str]) -> Attributes | None:
+        """The challenge attributes of ``sequences`` (``unitrack plot --attributes``).
+
+        Default None: the benchmark tags no attributes (or none of these sequences).
+        """
+        return None
 
     def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
         """With ``intervals="stats"``: one sequence's per-frame statistics of its results."""

@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
-from unitrack_env.benchmarks.views import Curve, Head, ReportView, ScorecardColumn
+from unitrack_env.benchmarks.sot_columns import GOT10K_COLUMN, LASOT_COLUMN, OTB_COLUMN
+from unitrack_env.benchmarks.views import Attributes, Curve, ReportView
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.lasot import (
     GOT10K_SYNTHETIC,
@@ -24,6 +25,7 @@ from unitrack_env.datasets.lasot import (
 )
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
+from unitrack_env.datasets.sot_attributes import LASOT, OTB2015, UAV123, AttributeSource
 from unitrack_env.datasets.synthetic.cache import SyntheticKind
 from unitrack_env.datasets.trackingnet import TRACKINGNET_SYNTHETIC, TrackingNetDataset
 from unitrack_env.datasets.uav123 import UAV123_SYNTHETIC, UAV123Dataset
@@ -70,7 +72,8 @@ class SOTFormat:
     LaSOT toolkit's rule (removed, the rates still divided by every frame);
     ``normalized``: the scores add LaSOT's normalized precision (the benchmark is then a
     :class:`SOTProtocolBenchmark`, whose columns include it); ``benchmark="got10k"``: the
-    GOT-10k protocol (:class:`GOT10kBenchmark`).
+    GOT-10k protocol (:class:`GOT10kBenchmark`), ``"lasot"``: :class:`LaSOTBenchmark` (its
+    own scorecard column); ``attributes``: where its sequences' attributes are (None: none).
     """
 
     reader: Callable[..., SequenceDataset[SOTSequence]]
@@ -80,6 +83,7 @@ class SOTFormat:
     absent_fails: bool = False
     normalized: bool = False
     benchmark: str = "otb"
+    attributes: AttributeSource | None = None
 
 
 def format_box_value(value: float) -> str:
@@ -104,12 +108,7 @@ class OTBBenchmark(Benchmark):
     columns = ("AUC", "Precision@20px", "AverageOverlap")
     report_view = ReportView(value=("iou", "IoU"))
     intervals = "frames"  # success AUC and precision are means over frames
-    scorecard = ScorecardColumn(
-        "SOT", ("UniTrack/OTB-v0",),
-        (Head("unitrack-xcorr", "XCorr", ("AUC", "Precision@20px")),
-         Head("unitrack-dcf", "DCF", ("AUC", "Precision@20px"))),
-        Head("repeat-box", "repeat-box", ("AUC", "Precision@20px"), appearance=False),
-        ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02)
+    scorecard = OTB_COLUMN
 
     def __init__(self, dataset: SequenceDataset[SOTSequence], *, synthetic: bool = False,
                  rules: str = BENCHMARK, sot_format: SOTFormat | None = None) -> None:
@@ -137,8 +136,8 @@ class OTBBenchmark(Benchmark):
         else:
             path, synthetic = data_root(root, chosen.folder, kind.benchmarks[0], kind)
         reader = OTBDataset if synthetic and kind is None else chosen.reader
-        klass = (GOT10kBenchmark if chosen.benchmark == "got10k" else
-                 SOTProtocolBenchmark if chosen.normalized else OTBBenchmark)
+        klass = {"got10k": GOT10kBenchmark, "lasot": LaSOTBenchmark}.get(
+            chosen.benchmark, SOTProtocolBenchmark if chosen.normalized else OTBBenchmark)
         dataset = reader(path, **options) if reader is chosen.reader else reader(path)
         return klass(dataset, synthetic=synthetic, rules=chosen.name, sot_format=chosen)
 
@@ -230,6 +229,19 @@ class OTBBenchmark(Benchmark):
                                ("NormPrecision", float(combined.norm_precision or 0.0))))
         return plots
 
+    def sequence_attributes(self, sequences: list[str]) -> Attributes | None:
+        """The format's attributes of those ``sequences`` that have a record (None: none has).
+
+        Reported per attribute: the result columns but the average overlap.
+        """
+        source = self.sot_format.attributes
+        found = {} if source is None else {
+            name: codes for name in sequences
+            if (codes := source.read(self.dataset, self.dataset.resolve(name))) is not None}
+        metrics = tuple(c for c in self.columns if c != "AverageOverlap")
+        return Attributes(source.codes, source.names, found, metrics, source.source) \
+            if source is not None and found else None
+
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """One ``"frame"`` event per frame: its IoU, centre error, true and tracked box."""
         gt = self.load(sequence).boxes
@@ -289,6 +301,12 @@ class SOTProtocolBenchmark(OTBBenchmark):
     columns = ("AUC", "Precision@20px", "NormPrecision", "AverageOverlap")
 
 
+class LaSOTBenchmark(SOTProtocolBenchmark):
+    """LaSOT: :class:`SOTProtocolBenchmark` with its own (opt-in) scorecard column."""
+
+    scorecard = LASOT_COLUMN
+
+
 class GOT10kBenchmark(OTBBenchmark):
     """GOT-10k's protocol: AO, SR0.5 and SR0.75 over the visible frames after the first.
 
@@ -300,6 +318,7 @@ class GOT10kBenchmark(OTBBenchmark):
     """
 
     columns = ("AO", "SR0.5", "SR0.75")
+    scorecard = GOT10K_COLUMN
 
     @property
     def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
@@ -385,10 +404,11 @@ class GOT10kBenchmark(OTBBenchmark):
 #: format of the task is one row here (or added by a project at run time) beside its reader;
 #: without ``root=`` and data it plays its own synthetic default, else the task's (OTB layout).
 SOT_FORMATS: dict[str, SOTFormat] = {
-    "otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK),
+    "otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK, attributes=OTB2015),
     "lasot": SOTFormat(LaSOTDataset, "LaSOT", "LaSOT", LASOT_SYNTHETIC, absent_fails=True,
-                       normalized=True),
-    "uav123": SOTFormat(UAV123Dataset, "UAV123", "UAV123", UAV123_SYNTHETIC, normalized=True),
+                       normalized=True, benchmark="lasot", attributes=LASOT),
+    "uav123": SOTFormat(UAV123Dataset, "UAV123", "UAV123", UAV123_SYNTHETIC, normalized=True,
+                        attributes=UAV123),
     "got10k": SOTFormat(GOT10kDataset, "GOT-10k", "GOT-10k", GOT10K_SYNTHETIC,
                         benchmark="got10k"),
     "trackingnet": SOTFormat(TrackingNetDataset, "TrackingNet", "TrackingNet",

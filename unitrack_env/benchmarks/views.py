@@ -8,6 +8,7 @@ on a task's name.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 #: Every lane of box MOT's event timeline, in the order drawn.
@@ -50,7 +51,9 @@ class ScorecardColumn:
     ``order``: the column's place (the paper's Table 2 order); ``input_size``: the network
     input per frame of its appearance head, ``(images, height, width)``; ``head_seconds``:
     the head's own seconds per frame besides the backbone (None: the association heads');
-    ``opt_in``: left out of the default task set, played only when asked for by name.
+    ``opt_in``: left out of the default task set, played only when asked for by name;
+    ``task``: the column's name in the scorecard (``--tasks``), default the benchmark's task
+    (a second column of a task, on another benchmark, needs its own).
     """
 
     title: str
@@ -63,6 +66,7 @@ class ScorecardColumn:
     input_size: tuple[int, int, int] = (1, 512, 512)
     head_seconds: float | None = None
     opt_in: bool = False
+    task: str = ""
 
 
 def association_head(metrics: tuple[str, ...]) -> Head:
@@ -92,3 +96,20 @@ class Curve:
     x: tuple[float, ...]
     y: tuple[float, ...]
     score: tuple[str, float]
+
+
+@dataclass(frozen=True)
+class Attributes:
+    """The challenge attributes of a benchmark's sequences (``unitrack plot --attributes``).
+
+    ``codes`` and ``names``: every attribute, in the benchmark's order; ``of``: the codes of
+    each sequence that has any record (a sequence missing here is in no attribute's row);
+    ``metrics``: the result columns reported per attribute; ``source``: where the tags are
+    from, said under the tables.
+    """
+
+    codes: tuple[str, ...]
+    names: tuple[str, ...]
+    of: Mapping[str, frozenset[str]]
+    metrics: tuple[str, ...]
+    source: str
