@@ -281,3 +281,22 @@ def test_cli_evaluate_and_score_print_and_store_each_class(folder, tmp_path, cap
     assert main(["events", str(out), "--format", "csv"]) == 0
     events = capsys.readouterr().out
     assert "class" in events.splitlines()[0] and ",car" in events and ",pedestrian" in events
+    assert main(["report", str(out), "--out", str(tmp_path / "report")]) == 0
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert "car/HOTA" in page and "pedestrian/HOTA" in page
+
+
+def test_compare_recomputes_each_class_and_the_detection_average(folder, tmp_path):
+    from unitrack_env.evaluation.analysis.intervals import compare_runs
+
+    out = tmp_path / "run"
+    assert main(["evaluate", "--env", ENV, "--root", str(folder), "--env-arg",
+                 f"classes={CLASSES}", "--env-arg", "distractors=[7]", "--env-arg",
+                 "ignore=[9]", "--agent", "iou", "--out", str(out), "--quiet"]) == 0
+    ours = json.loads((out / "metrics.json").read_text())
+    rows = compare_runs(out, out).rows
+    for key in ("HOTA", "MOTA", "IDF1", "car/HOTA", "car/MOTA", "pedestrian/HOTA",
+                "pedestrian/IDF1", "pedestrian/AssA"):
+        assert rows["COMBINED"][key].a == pytest.approx(ours["combined"][key], abs=1e-12), key
+        assert rows["CAM-01"][key].a == pytest.approx(ours["per_sequence"]["CAM-01"][key],
+                                                      abs=1e-12), key

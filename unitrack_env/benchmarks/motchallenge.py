@@ -202,21 +202,29 @@ class MOTChallengeBenchmark(Benchmark):
                                    self.read(folder, sequence), self.sequence_length(sequence),
                                    self.name)
 
-    def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
+    def frame_stats(self, folder: str | os.PathLike, sequence: str,
+                    cls: str | None = None) -> MotStats:
         """Per-frame CLEAR and identity statistics of the results in ``folder``.
 
-        With a class map, of the classes together (their detection average).
+        With a class map, of class ``cls``, or (None) of the classes together (their
+        detection average).
         """
         from unitrack_env.metrics.mot_stats import mot_stats
 
         if self.class_map is not None:
             from unitrack_env.metrics.mot_classes import merged_frames
 
-            return mot_stats(merged_frames(self._class_frames(folder, sequence)))
-
+            frames = self._class_frames(folder, sequence)
+            return mot_stats(merged_frames(frames) if cls is None else frames[cls])
+        if cls is not None:
+            raise ValueError(f"{self.name} scores no classes (asked for {cls!r})")
         return mot_stats(preprocessed_frames(read_gt_rows(self.dataset.split_dir / sequence),
                                              self.read(folder, sequence),
                                              self.sequence_length(sequence), self.name))
+
+    def stat_classes(self) -> tuple[str, ...]:
+        """The class map's classes (none without one)."""
+        return self.class_map.names if self.class_map is not None else ()
 
     def frame_image(self, sequence: str, frame: int) -> Path:
         """``<sequence>/img1/<frame>.jpg`` (as its seqinfo.ini names it)."""
