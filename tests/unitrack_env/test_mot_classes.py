@@ -157,6 +157,13 @@ def test_per_class_scores_equal_a_direct_trackeval_run(folder, tmp_path):
     assert assert_parity(report.combined, theirs["COMBINED_SEQ"]) >= 24
     for seq in ("CAM-01", "CAM-02"):
         assert assert_parity(report.per_sequence[seq], theirs[seq]) >= 12
+        events = bench.sequence_events(results, seq).columns  # each names its class
+        for cls in CLASSES:
+            kinds = [k for k, c in zip(events["type"], events["class"], strict=True)
+                     if c == cls]
+            clear = theirs[seq][cls]["CLEAR"]
+            assert [kinds.count(k) for k in ("tp", "fp", "fn", "idsw", "frag")] == [
+                clear[k] for k in ("CLR_TP", "CLR_FP", "CLR_FN", "IDSW", "Frag")], (seq, cls)
     c = report.combined  # unprefixed: the detection average, as KITTI's
     assert c["HOTA"] == c["cls_comb_det_av/HOTA"]
     assert 0.3 < c["car/HOTA"] < 1 and 0.3 < c["pedestrian/HOTA"] < 1
@@ -223,10 +230,14 @@ def test_data_the_map_does_not_cover_is_refused_at_reset(folder, tmp_path):
                                               r"pedestrian: 1, 2; distractors: 7\)"):
         read_ground_truth(gt, "MOT17", class_map=ClassMap.parse(CLASSES, [7]))
     (tmp_path / "det.txt").write_text("1,-1,1,1,10,20,0.9\n")
-    with pytest.raises(DataFormatError, match=r"det.txt, line 1: has 7 columns, "
-                                              r"expected at least 8 \(.*,score,class\)"):
+    with pytest.raises(DataFormatError, match="det.txt, line 1, field 'class': 7 columns: with "
+                                              "a class map each detection carries its class"):
         read_detections(tmp_path / "det.txt", class_map=ClassMap.parse(CLASSES))
     results = perturbed_results(folder, tmp_path / "res")
+    with pytest.raises(DataFormatError, match=r"CAM-01/gt/gt.txt, line \d+, field 'class': "
+                                              "ground truth class 9 is not in the class map"):
+        benchmark_for(ENV, root=str(folder), classes=CLASSES, distractors=[7]).score_folder(
+            results)  # scoring alone (unitrack score) checks the ground truth as well
     text = (results / "CAM-01.txt").read_text().replace(",1,-1,-1\n", ",-1,-1,-1\n", 1)
     (results / "CAM-01.txt").write_text(text)
     bench = benchmark_for(ENV, root=str(folder), **MAP)

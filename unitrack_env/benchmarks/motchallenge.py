@@ -27,7 +27,12 @@ from unitrack_env.benchmarks.views import (
 )
 from unitrack_env.datasets.mot_classes import ClassMap, class_map
 from unitrack_env.datasets.mot_signatures import check_signature
-from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
+from unitrack_env.datasets.motchallenge import (
+    BENCHMARKS,
+    MOTChallengeDataset,
+    read_ground_truth,
+    read_seqinfo,
+)
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import (
     EventRows,
@@ -175,19 +180,25 @@ class MOTChallengeBenchmark(Benchmark):
         return score_folder(self.dataset.split_dir, folder, benchmark=self.name,
                             sequences=sequences)
 
+    def _class_gt(self, sequence: str) -> np.ndarray:
+        """``gt.txt`` rows of ``sequence``, every class id checked against the class map."""
+        seq_dir = self.dataset.split_dir / sequence
+        read_ground_truth(seq_dir / "gt" / "gt.txt", self.name, self.sequence_length(sequence),
+                          self.class_map)
+        return read_gt_rows(seq_dir)
+
     def _class_raw(self, sequence: str, results: np.ndarray) -> dict:
         """TrackEval's raw per-class results of one sequence's checked rows."""
         from unitrack_env.metrics.mot_classes import class_raw_scores
 
-        return class_raw_scores(read_gt_rows(self.dataset.split_dir / sequence), results,
-                                self.class_map, sequence, self.sequence_length(sequence))
+        return class_raw_scores(self._class_gt(sequence), results, self.class_map, sequence,
+                                self.sequence_length(sequence))
 
     def _class_frames(self, folder: str | os.PathLike, sequence: str) -> dict:
         from unitrack_env.metrics.mot_classes import class_frames
 
-        return class_frames(read_gt_rows(self.dataset.split_dir / sequence),
-                            self.read(folder, sequence), self.class_map,
-                            self.sequence_length(sequence))
+        return class_frames(self._class_gt(sequence), self.read(folder, sequence),
+                            self.class_map, self.sequence_length(sequence))
 
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """Per-frame tp/fn/fp/idsw/frag events of the official CLEAR matching.

@@ -137,8 +137,11 @@ class ClassMap:
         if bad.any():
             i = int(np.argmax(bad))
             kind = "a scored class" if scored_only else "in the class map"
+            hint = ("; -1 is no class: with a class map each row carries its class id in "
+                    "column 8") if classes[i] == -1 else ""
             raise DataFormatError(path, f"{what} class {classes[i]:g} is not {kind} "
-                                  f"({self.describe()})", line=int(lines[i]), field="class")
+                                  f"({self.describe()}){hint}", line=int(lines[i]),
+                                  field="class")
 
     def pedestrian_rows(self, name: str, gt: np.ndarray, tracks: np.ndarray,
                         ) -> tuple[np.ndarray, np.ndarray]:

@@ -199,8 +199,11 @@ def read_detections(path: str | Path, length: int | None = None,
     With a ``class_map``, column 8 holds each detection's class id (one the map names).
     """
     path = Path(path)
-    columns = 8 if class_map is not None else 7
-    table, lines = parse_table(path, columns, (*DET_FIELDS, "class"))
+    table, lines = parse_table(path, 7, DET_FIELDS)
+    if class_map is not None and len(table) and table.shape[1] < 8:
+        raise DataFormatError(path, f"{table.shape[1]} columns: with a class map each "
+                              "detection carries its class id in column 8", line=int(lines[0]),
+                              field="class")
     check_rows(path, table, lines, length, "det")
     n = len(table)
     if not n:
