@@ -311,3 +311,19 @@ def test_compare_recomputes_each_class_and_the_detection_average(folder, tmp_pat
         assert rows["COMBINED"][key].a == pytest.approx(ours["combined"][key], abs=1e-12), key
         assert rows["CAM-01"][key].a == pytest.approx(ours["per_sequence"]["CAM-01"][key],
                                                       abs=1e-12), key
+
+
+def test_a_classes_json_beside_the_data_declares_the_map(folder, tmp_path):
+    import shutil
+
+    root = shutil.copytree(folder, tmp_path / "data")
+    (root / "classes.json").write_text(json.dumps(MAP))
+    results = perturbed_results(folder, tmp_path / "res")
+    declared = benchmark_for(ENV, root=str(root)).score_folder(results)
+    given = benchmark_for(ENV, root=str(folder), **MAP).score_folder(results)
+    assert declared.combined == given.combined and "car/HOTA" in declared.combined
+    only_cars = benchmark_for(ENV, root=str(root), classes={"car": [3]},
+                              distractors=[7], ignore=[1, 2, 9])  # arguments win
+    assert only_cars.columns[:3] == ("HOTA", "car/HOTA", "cls_comb_cls_av/HOTA")
+    cars = only_cars.score_folder(results).combined  # rows of ignored ids: not scored
+    assert cars["car/HOTA"] == given.combined["car/HOTA"] == cars["HOTA"]
