@@ -327,3 +327,14 @@ def test_a_classes_json_beside_the_data_declares_the_map(folder, tmp_path):
     assert only_cars.columns[:3] == ("HOTA", "car/HOTA", "cls_comb_cls_av/HOTA")
     cars = only_cars.score_folder(results).combined  # rows of ignored ids: not scored
     assert cars["car/HOTA"] == given.combined["car/HOTA"] == cars["HOTA"]
+
+
+def test_empty_frames_and_files_score_as_nothing(folder, tmp_path):
+    cmap = ClassMap.parse(**MAP)
+    gt, mine = cmap.pedestrian_rows("car", np.zeros((0, 9)), np.zeros((0, 6)))
+    assert gt.shape == (0, 9) and mine.shape == (0, 10)
+    results = perturbed_results(folder, tmp_path / "res")
+    (results / "CAM-02.txt").write_text("")  # a tracker that output nothing there
+    report = benchmark_for(ENV, root=str(folder), **MAP).score_folder(results)
+    assert report.per_sequence["CAM-02"]["car/HOTA"] == 0
+    assert report.per_sequence["CAM-02"]["CLR_FN"] > 0

@@ -152,12 +152,16 @@ class ClassMap:
         in the distractor matching only); the result rows are those of ``name``'s ids, their
         class column -1. Scored under :data:`VIEW_BENCHMARK`'s rules.
         """
-        gt = np.array(gt, dtype=np.float64, copy=True).reshape(len(gt), -1)
+        gt = np.array(gt, dtype=np.float64, copy=True, ndmin=2)
+        if not gt.size:
+            gt = np.zeros((0, 9))
         cls = gt[:, 7].copy()
         gt[:, 7] = VIEW_OTHER
         gt[np.isin(cls, self.distractors), 7] = VIEW_DISTRACTOR
         gt[np.isin(cls, self.ids_of(name)), 7] = VIEW_SCORED
         tracks = np.asarray(tracks, dtype=np.float64)
+        if not tracks.size:  # no rows (of any width)
+            tracks = np.zeros((0, 10))
         mine = tracks[np.isin(tracks[:, 7], self.ids_of(name))]
         mine[:, 7] = -1  # a copy: boolean indexing
         return gt, mine
