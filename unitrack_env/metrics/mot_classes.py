@@ -90,12 +90,13 @@ def class_frames(gt_rows: np.ndarray, tracks: np.ndarray, class_map: ClassMap,
 def merge_classes(frames: Sequence[PreprocessedFrame]) -> PreprocessedFrame:
     """The classes' frames of one time step as one frame (detection-averaged statistics).
 
-    Ids are made distinct per class (class ``k`` adds ``k * 2**40``) and the IoU between
-    classes is 0, so CLEAR, identity and HOTA matchings stay within each class.
+    Ids are made distinct per class (id ``i`` of class ``k`` of ``n`` becomes ``i * n + k``,
+    one to one for every id) and the IoU between classes is 0, so CLEAR, identity and HOTA
+    matchings stay within each class.
     """
-    offsets = [k * 2**40 for k in range(len(frames))]
-    gt_ids = np.concatenate([f.gt_ids + o for f, o in zip(frames, offsets, strict=True)])
-    trk_ids = np.concatenate([f.tracker_ids + o for f, o in zip(frames, offsets, strict=True)])
+    n = len(frames)
+    gt_ids = np.concatenate([f.gt_ids * n + k for k, f in enumerate(frames)])
+    trk_ids = np.concatenate([f.tracker_ids * n + k for k, f in enumerate(frames)])
     iou = np.zeros((len(gt_ids), len(trk_ids)))
     r = c = 0
     for f in frames:
