@@ -289,6 +289,8 @@ def test_cli_evaluate_and_score_print_and_store_each_class(folder, tmp_path, cap
     assert main(["score", *args, "--results", str(out / "data"), "--format", "json"]) == 0
     scored = json.loads(capsys.readouterr().out)
     assert scored["combined"] == ours["combined"]
+    with pytest.raises(DataFormatError, match="give the data's class map"):  # no map given
+        benchmark_for(ENV, root=str(folder)).score_folder(out / "data")
     assert main(["events", str(out), "--format", "csv"]) == 0
     events = capsys.readouterr().out
     assert "class" in events.splitlines()[0] and ",car" in events and ",pedestrian" in events
