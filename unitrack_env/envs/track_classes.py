@@ -1,7 +1,8 @@
 """The class of each track an agent answers with, from the detections it overlaps.
 
-Box MOT agents answer with ids and boxes only; environments that score classes (KITTI,
-MOTChallenge-layout data with a class map) give each track a class this one way.
+Box MOT agents answer with ids and boxes only; an environment that scores classes gives
+each track a class by this rule, KITTI's (``unitrack_env.envs.kitti``): MOTChallenge-layout
+data with a class map use it here.
 """
 
 from __future__ import annotations
