@@ -58,7 +58,6 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     - ``scores``: ``Box((max_detections,), float32)``, finite: detection scores as in the
       file (MOT15's are unbounded), or on 0..1 with ``detection_scores="unit"``.
     - ``num_detections``: ``Discrete(max_detections + 1)``, the number of valid rows.
-
     - ``classes`` (with a class map only): ``Box((max_detections,), int64)``, each
       detection's class id (``det.txt`` column 8); only the scored classes' detections are
       observed.
@@ -290,7 +289,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         """Return the tracks recorded so far as MOTChallenge result rows.
 
         Columns: ``frame, id, x, y, w, h, conf, -1, -1, -1`` (``conf`` = 1), the official
-        result format; write them with ``np.savetxt(..., delimiter=",")``.
+        result format; with a class map the 8th holds the track's class id. Write them with
+        ``np.savetxt(..., delimiter=",")``.
         """
         if not self._results:
             return np.zeros((0, 10))
