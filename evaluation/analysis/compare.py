@@ -258,16 +258,19 @@ def _diffs(point_a: dict, point_b: dict, boot_a: dict, boot_b: dict,
     return out
 
 
-def run_stats(run: str | os.PathLike, sequences: list[str]) -> dict[str, MotStats]:
+def run_stats(run: str | os.PathLike, sequences: list[str],
+              cls: str | None = None) -> dict[str, MotStats]:
     """Per-sequence statistics of a run folder, from its result files and ground truth.
 
     For a benchmark whose ``intervals`` are ``"stats"`` (box MOT):
-    :meth:`~unitrack_env.benchmarks.base.Benchmark.frame_stats`.
+    :meth:`~unitrack_env.benchmarks.base.Benchmark.frame_stats` (of one class ``cls``).
     """
     bench = run_benchmark(run)
     if bench.intervals != "stats":
         raise ValueError(f"{run}: the {bench.task} benchmark {bench.name} has no per-frame "
                          "statistics to recompute its metrics from")
+    if cls is not None:
+        return {name: bench.frame_stats(Path(run) / "data", name, cls) for name in sequences}
     return {name: bench.frame_stats(Path(run) / "data", name) for name in sequences}
 
 

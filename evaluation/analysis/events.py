@@ -19,7 +19,12 @@ from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_bytes, path_inside
-from unitrack_env.metrics.events_mot import EVENT_COLUMNS, ID_COLUMNS, EventRows
+from unitrack_env.metrics.events_mot import (
+    EVENT_COLUMNS,
+    ID_COLUMNS,
+    OPTIONAL_COLUMNS,
+    EventRows,
+)
 
 #: Sub-folder of a run folder holding the event tables.
 EVENTS_DIR: str = "events"
@@ -72,7 +77,8 @@ def sequence_events(bench: Benchmark, folder: str | os.PathLike, sequence: str) 
 
 def to_frame(rows: EventRows) -> pd.DataFrame:
     """An event table as a DataFrame with :data:`EVENT_COLUMNS`."""
-    df = pd.DataFrame(rows.columns, columns=list(EVENT_COLUMNS))
+    extra = [name for name in OPTIONAL_COLUMNS if name in rows.columns]
+    df = pd.DataFrame(rows.columns, columns=[*EVENT_COLUMNS, *extra])
     for col in ID_COLUMNS:
         df[col] = df[col].astype("Int64")
     return df
@@ -145,7 +151,8 @@ def load_events(run: str | os.PathLike, sequence: str | None = None,
 def read_events_file(run: str | os.PathLike, path: Path) -> pd.DataFrame:
     """One stored event table; a damaged file is a DataFormatError naming it and the cure."""
     try:
-        df = pd.read_csv(path, dtype={"sequence": str, "type": str}, keep_default_na=True)
+        df = pd.read_csv(path, dtype={"sequence": str, "type": str, "class": str},
+                         keep_default_na=True)
         for col in ID_COLUMNS:
             if col in df:
                 df[col].astype("Int64")

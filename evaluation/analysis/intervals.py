@@ -262,8 +262,13 @@ def compare_runs(run_a: str | os.PathLike, run_b: str | os.PathLike, *, resample
     pooled = bench.intervals in ("frames", "counts")
     if not pooled:
         stats_a, stats_b = run_stats(run_a, common), run_stats(run_b, common)
-        rows, blocks = compare_stats(stats_a, stats_b, resamples=resamples, seed=seed,
-                                     level=level, block=block, method=method)
+        options = dict(resamples=resamples, seed=seed, level=level, block=block, method=method)
+        rows, blocks = compare_stats(stats_a, stats_b, **options)
+        for cls in bench.stat_classes():  # classes scored one by one: their rows too
+            by_class, _ = compare_stats(run_stats(run_a, common, cls),
+                                        run_stats(run_b, common, cls), **options)
+            for row, diffs in by_class.items():
+                rows[row].update({f"{cls}/{name}": diff for name, diff in diffs.items()})
         frames = {s: stats_a[s].num_frames for s in common}
     else:
         if level not in ("frames", "sequences"):

@@ -37,17 +37,18 @@ def add_arguments(cp: argparse.ArgumentParser) -> None:
 
 def comparison_lines(comp: Any) -> list[str]:
     """A plain-text table of a :class:`~.compare.Comparison`, in percent points."""
+    width = max([6, *(len(m) for row in comp.rows.values() for m in row)])  # car/HOTA too
     lines = [f"A = {comp.run_a}", f"B = {comp.run_b}",
              (f"paired block jackknife ({comp.level})" if comp.method == "jackknife" else
               f"paired block bootstrap ({comp.level}), {comp.resamples} resamples")
              + "; 95% interval of A - B",
-             f"{'sequence':<18} {'metric':<6} {'A':>7} {'B':>7} {'A-B':>7} "
+             f"{'sequence':<18} {'metric':<{width}} {'A':>7} {'B':>7} {'A-B':>7} "
              f"{'95% interval':>17}  frames"]
     for name, row in comp.rows.items():
         frames = comp.frames.get(name, sum(comp.frames.values()))
         for metric, d in row.items():
             star = " *" if d.significant else "" if d.reliable else " (too little data)"
-            lines.append(f"{name:<18} {metric:<6} {100 * d.a:7.1f} {100 * d.b:7.1f} "
+            lines.append(f"{name:<18} {metric:<{width}} {100 * d.a:7.1f} {100 * d.b:7.1f} "
                          f"{100 * d.diff:+7.1f} [{100 * d.low:+6.1f}, {100 * d.high:+6.1f}]"
                          f"  {frames}{star}")
     lines.append("* the interval excludes 0 (and rests on enough frames to say so)")

@@ -64,8 +64,6 @@ def _defined(value: Any) -> bool:
 
 def run(args: argparse.Namespace, out: Console) -> int:
     """Run ``unitrack evaluate``."""
-    from unitrack_env.benchmarks import benchmark_class
-
     from ..runner import run as play
 
     env_given = env_kwargs(args)
@@ -96,7 +94,7 @@ def run(args: argparse.Namespace, out: Console) -> int:
     else:
         fps = {name: record.fps for name, record in report.records.items()}
         print_metrics(out, report.scores.per_sequence, report.scores.combined,
-                       f"{args.agent} on {args.env}", benchmark_class(args.env).columns,
+                       f"{args.agent} on {args.env}", _columns(args.env, env_given),
                        args.format, fps, coverage=report.scores.coverage)
         undefined = sorted(name for name, values in report.scores.per_sequence.items()
                            if any(not _defined(v) for v in values.values()))
@@ -112,3 +110,10 @@ def run(args: argparse.Namespace, out: Console) -> int:
                   f"{len(others)} other finished sequence(s) in {report.out} are kept but not "
                   "in it: run without --sequences to score them all)", markup=False)
     return 0
+
+
+def _columns(env_id: str, env_given: dict[str, Any]) -> tuple[str, ...]:
+    """The table columns of the run's benchmark instance (a MOT class map adds its classes)."""
+    from unitrack_env.benchmarks import benchmark_for
+
+    return benchmark_for(env_id, **env_given).columns

@@ -26,9 +26,9 @@ def add_arguments(ev: argparse.ArgumentParser) -> None:
 
 
 #: Columns ``unitrack events`` prints as a table (``--format csv`` prints them all).
-TABLE_COLUMNS = ("sequence", "frame", "type", "object", "gt_id", "track_id", "prev_track_id",
-                 "joint", "iou", "center_error", "j", "f", "pck", "distance", "score",
-                 "track_iou")
+TABLE_COLUMNS = ("sequence", "frame", "type", "class", "object", "gt_id", "track_id",
+                 "prev_track_id", "joint", "iou", "center_error", "j", "f", "pck", "distance",
+                 "score", "track_iou")
 
 
 def run(args: argparse.Namespace, console: Console) -> int:

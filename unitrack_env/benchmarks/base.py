@@ -232,9 +232,20 @@ class Benchmark(ABC):
         """
         return None
 
-    def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
-        """With ``intervals="stats"``: one sequence's per-frame statistics of its results."""
+    def frame_stats(self, folder: str | os.PathLike, sequence: str,
+                    cls: str | None = None) -> MotStats:
+        """With ``intervals="stats"``: one sequence's per-frame statistics of its results.
+
+        ``cls``: one of :meth:`stat_classes` only (None: every class together).
+        """
         raise NotImplementedError(f"{type(self).__name__} has no per-frame statistics")
+
+    def stat_classes(self) -> tuple[str, ...]:
+        """With ``intervals="stats"``: the classes :meth:`frame_stats` also gives one by one.
+
+        Default (): the metrics have no classes.
+        """
+        return ()
 
     def frame_counts(self, folder: str | os.PathLike, sequence: str) -> dict[str, np.ndarray]:
         """With ``intervals="counts"``: ``{count: (frames,) per-frame values}`` of one sequence.

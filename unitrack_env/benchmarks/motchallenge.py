@@ -16,6 +16,7 @@ from unitrack_env.benchmarks.base import (
     refuse_run_folder,
     rounded_digest,
 )
+from unitrack_env.benchmarks.kitti import flat_metrics
 from unitrack_env.benchmarks.views import (
     ALL_LANES,
     LETTERBOX,
@@ -24,8 +25,14 @@ from unitrack_env.benchmarks.views import (
     association_head,
     iou_baseline,
 )
+from unitrack_env.datasets.mot_classes import ClassMap, class_map
 from unitrack_env.datasets.mot_signatures import check_signature
-from unitrack_env.datasets.motchallenge import BENCHMARKS, MOTChallengeDataset, read_seqinfo
+from unitrack_env.datasets.motchallenge import (
+    BENCHMARKS,
+    MOTChallengeDataset,
+    read_ground_truth,
+    read_seqinfo,
+)
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import (
     EventRows,
@@ -33,6 +40,7 @@ from unitrack_env.metrics.events_mot import (
     preprocessed_frames,
     read_gt_rows,
 )
+from unitrack_env.metrics.kitti import combine
 from unitrack_env.metrics.report import ScoreReport
 
 if TYPE_CHECKING:
@@ -79,14 +87,32 @@ class MOTChallengeBenchmark(Benchmark):
         iou_baseline(("IDF1", "HOTA", "MOTA", "IDSW")), ("UniTrack", "IDF1"),
         frozenset({"IDSW"}), order=3, input_size=LETTERBOX)
 
+    def __init__(self, dataset: MOTChallengeDataset, *, synthetic: bool = False) -> None:
+        super().__init__(dataset, synthetic=synthetic)
+        #: The data's class map (None: the rule set's pedestrian scoring).
+        self.class_map: ClassMap | None = dataset.class_map
+        if self.class_map is not None:  # per class and combined, as KITTI's
+            names = self.class_map.names
+            self.columns = tuple(f"{prefix}{metric}" for metric in ("HOTA", "MOTA", "IDF1")
+                                 for prefix in ("", *(f"{n}/" for n in names),
+                                                "cls_comb_cls_av/")) + ("IDSW", "DetA", "AssA")
+
     @classmethod
     def build(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
               split: str = "train", detections: str | os.PathLike = "public",
-              ) -> MOTChallengeBenchmark:
-        """The benchmark of ``MOTChallengeEnv(benchmark=, root=, split=, detections=)``."""
+              classes: dict[str, list[int]] | None = None, distractors: list[int] | None = None,
+              ignore: list[int] | None = None) -> MOTChallengeBenchmark:
+        """The benchmark of ``MOTChallengeEnv(benchmark=, root=, split=, detections=, ...)``.
+
+        ``classes``, ``distractors``, ``ignore``: the class map
+        (:mod:`unitrack_env.datasets.mot_classes`); without ``classes``, the map of
+        ``<root>/classes.json`` if there is one, else pedestrians under the rule set.
+        """
         one_of("benchmark", benchmark, sorted(BENCHMARKS))
         path, synthetic = data_root(root, benchmark, benchmark)
-        return cls(MOTChallengeDataset(path, benchmark, split, detections), synthetic=synthetic)
+        cmap = class_map(path, classes, distractors, ignore)
+        return cls(MOTChallengeDataset(path, benchmark, split, detections, cmap),
+                   synthetic=synthetic)
 
     @property
     def name(self) -> str:
@@ -106,10 +132,15 @@ class MOTChallengeBenchmark(Benchmark):
         atomic_write_text(Path(folder) / f"{sequence}.txt", format_mot_results(results))
 
     def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
-        """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows."""
+        """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows (checked classes)."""
         from unitrack_env.metrics.mot_results import read_result_file
 
-        return read_result_file(Path(folder) / f"{sequence}.txt")
+        path = Path(folder) / f"{sequence}.txt"
+        if self.class_map is not None:
+            from unitrack_env.metrics.mot_classes import read_class_results
+
+            return read_class_results(path, self.class_map, self.sequence_length(sequence))
+        return read_result_file(path)
 
     def digest(self, results: np.ndarray) -> str:
         """SHA-256 of the rows rounded to 1e-3."""
@@ -119,30 +150,92 @@ class MOTChallengeBenchmark(Benchmark):
         """TrackEval's metrics of one sequence's rows (it must have ground truth)."""
         from unitrack_env.metrics.motchallenge import score_sequence
 
+        if self.class_map is not None:
+            from unitrack_env.metrics.mot_classes import check_class_rows
+
+            path = Path(f"<results of {sequence}>")
+            check_class_rows(results, self.class_map, self.sequence_length(sequence), path)
+            return flat_metrics(combine({sequence: self._class_raw(sequence, results)},
+                                        self.class_map.names))
+
         score = score_sequence(self.dataset.split_dir / sequence, results,
                                benchmark=self.name, seq_length=self.sequence_length(sequence))
         return dict(score.summary)
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
-        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
+        """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity).
+
+        With a class map: per class, per sequence and combined, and the class combinations
+        (``<class>/HOTA``, ``cls_comb_cls_av/HOTA``; unprefixed: ``cls_comb_det_av``).
+        """
         from unitrack_env.metrics.motchallenge import score_folder
 
+        if self.class_map is not None:
+            names = self.class_map.names
+            raw = {seq: self._class_raw(seq, self.read(folder, seq)) for seq in sequences}
+            combined = combine(raw, names)
+            return ScoreReport(self.name, {seq: flat_metrics(combine({seq: raw[seq]}, names))
+                                           for seq in sequences},
+                               flat_metrics(combined), scores={"per_class": combined})
         return score_folder(self.dataset.split_dir, folder, benchmark=self.name,
                             sequences=sequences)
 
+    def _class_gt(self, sequence: str) -> np.ndarray:
+        """``gt.txt`` rows of ``sequence``, every class id checked against the class map."""
+        seq_dir = self.dataset.split_dir / sequence
+        read_ground_truth(seq_dir / "gt" / "gt.txt", self.name, self.sequence_length(sequence),
+                          self.class_map)
+        return read_gt_rows(seq_dir)
+
+    def _class_raw(self, sequence: str, results: np.ndarray) -> dict:
+        """TrackEval's raw per-class results of one sequence's checked rows."""
+        from unitrack_env.metrics.mot_classes import class_raw_scores
+
+        return class_raw_scores(self._class_gt(sequence), results, self.class_map, sequence,
+                                self.sequence_length(sequence))
+
+    def _class_frames(self, folder: str | os.PathLike, sequence: str) -> dict:
+        from unitrack_env.metrics.mot_classes import class_frames
+
+        return class_frames(self._class_gt(sequence), self.read(folder, sequence),
+                            self.class_map, self.sequence_length(sequence))
+
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
-        """Per-frame tp/fn/fp/idsw/frag events of the official CLEAR matching."""
+        """Per-frame tp/fn/fp/idsw/frag events of the official CLEAR matching.
+
+        With a class map, each class's (its ``class`` column names it).
+        """
+        if self.class_map is not None:
+            from unitrack_env.metrics.mot_classes import class_events
+
+            return class_events(sequence, self._class_frames(folder, sequence))
         return mot_sequence_events(sequence, read_gt_rows(self.dataset.split_dir / sequence),
                                    self.read(folder, sequence), self.sequence_length(sequence),
                                    self.name)
 
-    def frame_stats(self, folder: str | os.PathLike, sequence: str) -> MotStats:
-        """Per-frame CLEAR and identity statistics of the results in ``folder``."""
+    def frame_stats(self, folder: str | os.PathLike, sequence: str,
+                    cls: str | None = None) -> MotStats:
+        """Per-frame CLEAR and identity statistics of the results in ``folder``.
+
+        With a class map, of class ``cls``, or (None) of the classes together (their
+        detection average).
+        """
         from unitrack_env.metrics.mot_stats import mot_stats
 
+        if self.class_map is not None:
+            from unitrack_env.metrics.mot_classes import merged_frames
+
+            frames = self._class_frames(folder, sequence)
+            return mot_stats(merged_frames(frames) if cls is None else frames[cls])
+        if cls is not None:
+            raise ValueError(f"{self.name} scores no classes (asked for {cls!r})")
         return mot_stats(preprocessed_frames(read_gt_rows(self.dataset.split_dir / sequence),
                                              self.read(folder, sequence),
                                              self.sequence_length(sequence), self.name))
+
+    def stat_classes(self) -> tuple[str, ...]:
+        """The class map's classes (none without one)."""
+        return self.class_map.names if self.class_map is not None else ()
 
     def frame_image(self, sequence: str, frame: int) -> Path:
         """``<sequence>/img1/<frame>.jpg`` (as its seqinfo.ini names it)."""

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from unitrack_env.datasets.limits import MAX_FRAMES, check_image_size
+from unitrack_env.datasets.mot_classes import ClassMap
 from unitrack_env.datasets.mot_signatures import check_signature
 from unitrack_env.datasets.motchallenge_tables import DET_FIELDS, GT_FIELDS, check_rows, parse_table
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
@@ -191,30 +192,46 @@ def _annotations(table: np.ndarray, ids: np.ndarray, scores: np.ndarray,
     )
 
 
-def read_detections(path: str | Path, length: int | None = None) -> Annotations:
-    """Read a ``det.txt``-format file; rows past ``length`` frames are errors."""
+def read_detections(path: str | Path, length: int | None = None,
+                    class_map: ClassMap | None = None) -> Annotations:
+    """Read a ``det.txt``-format file; rows past ``length`` frames are errors.
+
+    With a ``class_map``, column 8 holds each detection's class id (one the map names).
+    """
     path = Path(path)
     table, lines = parse_table(path, 7, DET_FIELDS)
+    if class_map is not None and len(table) and table.shape[1] < 8:
+        raise DataFormatError(path, f"{table.shape[1]} columns: with a class map each "
+                              "detection carries its class id in column 8", line=int(lines[0]),
+                              field="class")
     check_rows(path, table, lines, length, "det")
     n = len(table)
     if not n:
         warnings.warn(f"{path}: contains no detections; every frame of the sequence will be "
                       "observed without any (and score zero)", stacklevel=2)
-    return _annotations(table, np.full(n, -1), table[:, 6], np.ones(n), np.ones(n))
+    classes = np.ones(n)
+    if class_map is not None:
+        classes = table[:, 7]
+        class_map.check_column(path, classes, lines, what="detection")
+    return _annotations(table, np.full(n, -1), table[:, 6], classes, np.ones(n))
 
 
-def read_ground_truth(path: str | Path, benchmark: str, length: int | None = None) -> Annotations:
+def read_ground_truth(path: str | Path, benchmark: str, length: int | None = None,
+                      class_map: ClassMap | None = None) -> Annotations:
     """Read a ``gt.txt`` file with the column rules of ``benchmark``.
 
     MOT16/17/20 files have ``flag, class, visibility`` in columns 7-9; MOT15 files have only
-    the flag (column 7), every row being a pedestrian.
+    the flag (column 7), every row being a pedestrian. With a ``class_map`` the class column
+    is required and every id in it must be one the map names (not necessarily 1..13).
     """
     path = Path(path)
     if benchmark not in BENCHMARKS:
         raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
-    has_class = benchmark in CLASS_COLUMN_BENCHMARKS
+    has_class = benchmark in CLASS_COLUMN_BENCHMARKS or class_map is not None
     table, lines = parse_table(path, 9 if has_class else 7, GT_FIELDS, official=True)
-    check_rows(path, table, lines, length, "gt", has_class=has_class)
+    check_rows(path, table, lines, length, "gt", has_class=has_class and class_map is None)
+    if class_map is not None:
+        class_map.check_column(path, table[:, 7], lines)
     n = len(table)
     classes = table[:, 7] if has_class else np.full(n, PEDESTRIAN_CLASS)
     visibility = table[:, 8] if has_class else np.ones(n)
@@ -263,8 +280,11 @@ class MOTChallengeDataset:
         benchmark: str,
         split: str = "train",
         detections: str | Path = "public",
+        class_map: ClassMap | None = None,
     ) -> None:
         self.root = Path(root)
+        #: The data's class map (None: MOTChallenge's pedestrian rules).
+        self.class_map = class_map
         self.benchmark = benchmark
         self.split = split
         self.detections = detections
@@ -341,9 +361,10 @@ class MOTChallengeDataset:
                     raise DataFormatError(
                         path, f"missing frame {frame} of {info.length} (seqinfo.ini "
                               f"seqLength){hint}")
-        detections = read_detections(self.detection_path(name), info.length)
+        detections = read_detections(self.detection_path(name), info.length, self.class_map)
         gt_path = seq_dir / "gt" / "gt.txt"
         ground_truth = (
-            read_ground_truth(gt_path, self.benchmark, info.length) if gt_path.is_file() else None
+            read_ground_truth(gt_path, self.benchmark, info.length, self.class_map)
+            if gt_path.is_file() else None
         )
         return MOTSequence(info, detections, ground_truth)

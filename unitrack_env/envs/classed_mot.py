@@ -22,8 +22,8 @@ from typing_extensions import Unpack
 from unitrack_env import spaces as ut_spaces
 from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv, SequenceT
+from unitrack_env.envs.track_classes import track_classes
 from unitrack_env.errors import DataFormatError
-from unitrack_env.geometry import box_iou
 from unitrack_env.render import draw_boxes
 
 #: Capacities of the padded arrays, those of the MOT envs (agents of the task assume them).
@@ -146,15 +146,12 @@ class ClassedMOTEnv(SequenceEnv[SequenceT]):
     def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
         ids, boxes = ut_spaces.unpack_tracks(action, self.max_tracks)
         det_boxes, _, det_classes = self._frame_detections(t)
-        overlap = box_iou(np.asarray(boxes, np.float64).reshape(-1, 4), det_boxes) \
-            if len(det_boxes) and len(ids) else np.zeros((len(ids), 0))
+        classes = track_classes(ids, boxes, det_boxes, det_classes, self._track_class,
+                                self.default_class)
         rows = np.empty((len(ids), RESULT_COLUMNS))
         for k, (track, box) in enumerate(zip(ids, boxes, strict=True)):
-            if overlap.shape[1] and overlap[k].max() > 0:
-                self._track_class[int(track)] = int(det_classes[int(overlap[k].argmax())])
             x, y, w, h = (float(v) for v in box)
-            rows[k] = (t, track, self._track_class.setdefault(int(track), self.default_class),
-                       x, y, x + w, y + h, 1.0)
+            rows[k] = (t, track, classes[k], x, y, x + w, y + h, 1.0)
         self._results.append(rows)
         self._answer = (ids, boxes)
         return 0.0, {}

@@ -18,7 +18,9 @@ from unitrack_env.datasets.motchallenge import (
     MOTSequence,
 )
 from unitrack_env.envs.base import EpisodeOptions, SequenceEnv
+from unitrack_env.envs.track_classes import track_classes
 from unitrack_env.metrics.clear_stream import StreamingClear
+from unitrack_env.metrics.mot_classes import class_frame
 from unitrack_env.metrics.mot_preprocess import preprocess_frame
 from unitrack_env.render import draw_boxes
 from unitrack_env.score_range import UNIT, ScoreRange, check_mode, declared_range
@@ -56,6 +58,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     - ``scores``: ``Box((max_detections,), float32)``, finite: detection scores as in the
       file (MOT15's are unbounded), or on 0..1 with ``detection_scores="unit"``.
     - ``num_detections``: ``Discrete(max_detections + 1)``, the number of valid rows.
+    - ``classes`` (with a class map only): ``Box((max_detections,), int64)``, each
+      detection's class id (``det.txt`` column 8); only the scored classes' detections are
+      observed.
 
     Ground truth never appears in observations. ``unitrack_env.spaces.unpack_detections``
     returns the valid rows.
@@ -67,6 +72,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     boxes, max_tracks)``; the unpadded form ``{"ids": (k,), "boxes": (k, 4)}`` is accepted
     too. Invalid actions (wrong shapes or dtypes, NaN or infinite boxes, negative sizes,
     ids < 1, duplicate ids) raise ``InvalidActionError`` before anything is recorded.
+    With a class map, each track takes the class of the detection it overlaps most in the
+    frame (IoU > 0), else the class it had last, else the first scored id (as KITTI's
+    tracks); the result rows carry it in column 8.
 
     ## Rewards
     ``TP - FP - IDSW`` of the frame under TrackEval's CLEAR matching (IoU >= 0.5, with
@@ -74,6 +82,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     pedestrians with a non-zero flag count). The episode return divided by the number of
     evaluated ground-truth boxes is exactly TrackEval's MOTA. ``info["clear"]`` has the
     frame's ``tp``, ``fp``, ``fn`` and ``idsw``. Splits without ground truth give reward 0.
+    With a class map, the sum over the classes, each scored on its own (the return divided
+    by the evaluated boxes is the detection-averaged MOTA).
 
     ## Starting state
     ``reset`` returns the first frame of the chosen sequence and its detections.
@@ -87,6 +97,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     is no truncation). The final ``info["metrics"]`` holds the sequence's official
     TrackEval metrics with TrackEval's names (``HOTA``, ``DetA``, ``AssA``, ``MOTA``,
     ``MOTP``, ``IDF1``, ``IDSW``, ``CLR_FP``, ``CLR_FN``, ``MT``, ``ML``, ...), as fractions.
+    With a class map: per class (``car/HOTA``, ...) and combined as TrackEval combines
+    classes (``cls_comb_cls_av/HOTA``, the class average; ``cls_comb_det_av/HOTA``, the
+    detection average, also unprefixed: ``HOTA``).
     The recorded tracks are available in the official result format via
     :meth:`episode_results`.
 
@@ -116,6 +129,16 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     - ``prefetch``: decode the next frame on a background thread.
     - ``shuffle``: visit sequences in a seeded random order.
     - ``render_mode``: ``"rgb_array"`` draws id-coloured track boxes on the frame.
+    - ``classes``, ``distractors``, ``ignore``: a class map for data of other classes than
+      pedestrians (``unitrack_env.datasets.mot_classes``), e.g.
+      ``classes={"car": [3], "pedestrian": [1, 2]}, distractors=[7], ignore=[9]``: the
+      ``gt.txt`` class ids (column 8) scored as each class, those whose matched tracks are
+      removed (as MOTChallenge's static persons), those neither scored nor removing. Each
+      class is scored with MOTChallenge's rules as if it were the pedestrians. Every class id
+      of the ground truth and detections must be in the map (refused at ``reset``, naming the
+      file, line and field); detections carry their class id in column 8. Without
+      ``classes``, ``<root>/classes.json`` (the same three keys) when present, else
+      pedestrians under ``benchmark``'s rules, as before.
 
     ## Version history
     - v0: initial version.
@@ -136,12 +159,18 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         score_range: tuple[float, float] | None = None,
         max_detections: int = DEFAULT_MAX_DETECTIONS,
         max_tracks: int = DEFAULT_MAX_TRACKS,
+        classes: dict[str, list[int]] | None = None,
+        distractors: list[int] | None = None,
+        ignore: list[int] | None = None,
         **options: Unpack[EpisodeOptions],
     ) -> None:
         super().__init__(**options)
         self.benchmark = benchmark
-        bench = MOTChallengeBenchmark.build(benchmark, root, split, detections)
+        bench = MOTChallengeBenchmark.build(benchmark, root, split, detections, classes,
+                                            distractors, ignore)
         self._use_benchmark(bench, sequences, bench.dataset.split_dir)
+        #: The data's class map (None: pedestrians under the rule set).
+        self.class_map = bench.class_map
         self.min_score = min_score
         self.detection_scores = check_mode(detection_scores)
         #: The declared range of the file's scores (``score_range``, else the benchmark's).
@@ -152,7 +181,11 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         self.observation_space = ut_spaces.detection_observation_space(
             self.max_detections, self.max_frame_size
         )
+        if self.class_map is not None:
+            self.observation_space.spaces["classes"] = spaces.Box(
+                0, max(self.class_map.scored_ids), (self.max_detections,), np.int64)
         self.action_space: spaces.Dict = ut_spaces.track_action_space(self.max_tracks)
+        self._track_class: dict[int, int] = {}
 
         self._detections: Annotations | None = None
         self._clear = StreamingClear()
@@ -169,6 +202,9 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
                 detections, scores=self.score_range.to_unit(detections.scores))
         if self.min_score is not None:
             detections = detections.filter(detections.scores >= self.min_score)
+        if self.class_map is not None:  # agents see the scored classes' detections only
+            detections = detections.filter(np.isin(detections.classes,
+                                                   self.class_map.scored_ids))
         most = int(detections.count_per_frame(info.length).max(initial=0))
         if most > self.max_detections:
             raise ValueError(
@@ -179,6 +215,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         self._detections = detections
         self._clear.reset()
         self._results = []
+        self._track_class = {}
         return dict(seq_length=info.length, frame_rate=info.frame_rate,
                     image_size=(info.height, info.width), benchmark=self.benchmark,
                     has_ground_truth=sequence.ground_truth is not None,
@@ -212,21 +249,35 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         scores = np.zeros(self.max_detections, dtype=np.float32)
         boxes[:n] = self._detections.boxes[rows]
         scores[:n] = self._detections.scores[rows]
-        return {"frame": image, "boxes": boxes, "scores": scores, "num_detections": n}
+        out = {"frame": image, "boxes": boxes, "scores": scores, "num_detections": n}
+        if self.class_map is not None:
+            out["classes"] = np.zeros(self.max_detections, dtype=np.int64)
+            out["classes"][:n] = self._detections.classes[rows]
+        return out
 
     def _record(self, action: dict[str, Any], t: int) -> tuple[float, dict[str, Any]]:
         """Record the tracks of frame ``t`` and score them (``info["clear"]``)."""
         ids, boxes = ut_spaces.unpack_tracks(action, self.max_tracks)
-        self._results.append(result_rows(t, ids, boxes))
+        results = result_rows(t, ids, boxes)
+        if self.class_map is not None:
+            rows = self._detections.rows(t)
+            results[:, 7] = track_classes(ids, boxes, self._detections.boxes[rows],
+                                          self._detections.classes[rows], self._track_class,
+                                          self.class_map.scored_ids[0])
+        self._results.append(results)
         self._answer = (ids, boxes)
         gt = self._sequence.ground_truth
         if gt is None:
             return 0.0, {}
         rows = gt.rows(t)
-        frame = preprocess_frame(
-            gt.ids[rows], gt.boxes[rows], gt.classes[rows], gt.scores[rows].astype(np.int64),
-            ids, boxes, self.benchmark,
-        )
+        if self.class_map is not None:
+            frame = class_frame(self.class_map, t, gt.ids[rows], gt.boxes[rows],
+                                gt.scores[rows], gt.classes[rows], results)
+        else:
+            frame = preprocess_frame(
+                gt.ids[rows], gt.boxes[rows], gt.classes[rows],
+                gt.scores[rows].astype(np.int64), ids, boxes, self.benchmark,
+            )
         counts = self._clear.update(
             frame.gt_ids, frame.gt_boxes, frame.tracker_ids, frame.tracker_boxes, iou=frame.iou
         )
@@ -238,7 +289,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         """Return the tracks recorded so far as MOTChallenge result rows.
 
         Columns: ``frame, id, x, y, w, h, conf, -1, -1, -1`` (``conf`` = 1), the official
-        result format; write them with ``np.savetxt(..., delimiter=",")``.
+        result format; with a class map the 8th holds the track's class id. Write them with
+        ``np.savetxt(..., delimiter=",")``.
         """
         if not self._results:
             return np.zeros((0, 10))

@@ -29,6 +29,9 @@ EVENT_COLUMNS: tuple[str, ...] = (
 
 #: Integer columns (nullable: NaN where a task leaves them empty).
 ID_COLUMNS: tuple[str, ...] = ("object", "gt_id", "track_id", "prev_track_id", "joint")
+#: Columns a table has only when some event names them, after :data:`EVENT_COLUMNS`
+#: (``class``: the scored class of MOT data with a class map).
+OPTIONAL_COLUMNS: tuple[str, ...] = ("class",)
 
 
 
@@ -39,15 +42,18 @@ class EventRows:
     sequence: str
     columns: dict[str, list] = field(default_factory=lambda: {c: [] for c in EVENT_COLUMNS})
 
-    def add(self, frame: int, kind: str, **values: float) -> None:
+    def add(self, frame: int, kind: str, **values: float | str) -> None:
         """Append one event; columns not given are NaN."""
-        unknown = set(values) - set(EVENT_COLUMNS)
+        unknown = set(values) - set(EVENT_COLUMNS) - set(OPTIONAL_COLUMNS)
         if unknown:
             raise ValueError(f"unknown event columns {sorted(unknown)}")
+        for name in OPTIONAL_COLUMNS:  # the first event naming one: earlier ones get NaN
+            if name in values and name not in self.columns:
+                self.columns[name] = [np.nan] * len(self)
         self.columns["sequence"].append(self.sequence)
         self.columns["frame"].append(int(frame))
         self.columns["type"].append(kind)
-        for name in EVENT_COLUMNS[3:]:
+        for name in (*EVENT_COLUMNS[3:], *(c for c in OPTIONAL_COLUMNS if c in self.columns)):
             self.columns[name].append(values.get(name, np.nan))
 
     def __len__(self) -> int:

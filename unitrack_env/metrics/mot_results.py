@@ -164,7 +164,9 @@ def validate_tracker_rows(
             raise _fail(
                 source,
                 f"TrackEval reads this column as a class id and accepts only <= "
-                f"{MAX_TRACKER_CLASS} (pedestrian); write -1 in the x, y, z columns of 2D results",
+                f"{MAX_TRACKER_CLASS} (pedestrian); write -1 in the x, y, z columns of 2D "
+                "results, or, for results of several classes, give the data's class map "
+                "(classes=, docs/evaluation.md)",
                 where(bad[0]),
                 "x",
             )
