@@ -55,10 +55,13 @@ class _Tasks(Mapping[str, Task]):
         found: dict[str, Task] = {}
         for row in rows:
             cls = benchmark_class(row) if row.scoring else None
-            if cls is not None and cls.scorecard is not None and cls.task not in found:
-                column = cls.scorecard
-                found[cls.task] = Task(**{f.name: getattr(column, f.name)
-                                          for f in fields(column)}, name=cls.task)
+            column = cls.scorecard if cls is not None else None
+            if column is None:
+                continue
+            key = column.key or cls.task
+            if key not in found:
+                found[key] = Task(**{f.name: getattr(column, f.name)
+                                     for f in fields(column)}, name=key)
         return dict(sorted(found.items(), key=lambda item: item[1].order))
 
     def __getitem__(self, name: str) -> Task:

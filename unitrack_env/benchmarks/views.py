@@ -50,7 +50,9 @@ class ScorecardColumn:
     ``order``: the column's place (the paper's Table 2 order); ``input_size``: the network
     input per frame of its appearance head, ``(images, height, width)``; ``head_seconds``:
     the head's own seconds per frame besides the backbone (None: the association heads');
-    ``opt_in``: left out of the default task set, played only when asked for by name.
+    ``opt_in``: left out of the default task set, played only when asked for by name;
+    ``key``: the column's task name on the scorecard (default: its benchmark's ``task``; a
+    second column of one task, such as MOT on DanceTrack, needs its own).
     """
 
     title: str
@@ -63,6 +65,7 @@ class ScorecardColumn:
     input_size: tuple[int, int, int] = (1, 512, 512)
     head_seconds: float | None = None
     opt_in: bool = False
+    key: str = ""
 
 
 def association_head(metrics: tuple[str, ...]) -> Head:
