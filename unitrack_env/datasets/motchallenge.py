@@ -338,9 +338,11 @@ class MOTChallengeDataset:
             return folder
         example = folder / f"{self.sequence_names[0]}.txt"
         raise DataFormatError(
-            example, f"{self.benchmark} ships no public detections: pass detections= (CLI: "
-                     "--detections), a folder with one <sequence>.txt per sequence in det.txt "
-                     "format (frame,-1,x,y,w,h,score), or put them in this folder")
+            example, f"{self.benchmark} ships no public detections and none were found here "
+                     "(the first file expected): pass detections= (CLI: --detections), a folder "
+                     "with one <sequence>.txt per sequence in det.txt format "
+                     f"(frame,-1,x,y,w,h,score), or put such files in "
+                     f"{DETECTIONS_FOLDER.format(split=self.split)}/ under root=")
 
     def __len__(self) -> int:
         return len(self.sequence_names)
