@@ -38,3 +38,14 @@ def test_cells_play_the_val_split_and_the_table_marks_dancetrack():
     table = markdown_table(card)
     assert "| DanceTrack† IDF1 ↑ |" in table
     assert f"- DanceTrack†: {DANCE}, synthetic" in table
+
+
+def test_real_layout_under_data_with_detections_is_planned(tmp_path):
+    from unitrack_env.datasets.synthetic.cache import ensure_synthetic
+    from unitrack_env.datasets.synthetic.dance_sports import KIND
+
+    (tmp_path / "DanceTrack").symlink_to(ensure_synthetic("DanceTrack", KIND))
+    cells, sources, pending = plan([ModelSpec.parse("random")], ["dancetrack"], tmp_path)
+    assert sources["dancetrack"].kind == "benchmark" and not pending
+    assert {(c.sequence, c.frames, c.env_kwargs["root"]) for c in cells} == {
+        ("dancetrack0004", 40, str((tmp_path / "DanceTrack").resolve()))}
