@@ -55,15 +55,15 @@ def _sports(num_frames: int, num_objects: int, seed: int) -> SceneConfig:
                        object_height_range=(70.0, 110.0))
 
 
-#: Benchmark -> (sequences, number of kits, frame-name digits). DanceTrack runs at 20 FPS,
-#: SportsMOT at 25 (their papers).
+#: Benchmark -> (sequences, number of kits). DanceTrack runs at 20 FPS, SportsMOT at 25
+#: (their papers).
 SPECS = MappingProxyType({
     "DanceTrack": ((SequenceSpec("dancetrack0001", "train", _dance(48, 6, 11), 20),
                     SequenceSpec("dancetrack0004", "val", _dance(40, 5, 12), 20),
-                    SequenceSpec("dancetrack0003", "test", _dance(36, 5, 13), 20)), 1, 8),
+                    SequenceSpec("dancetrack0003", "test", _dance(36, 5, 13), 20)), 1),
     "SportsMOT": ((SequenceSpec("v_SYNTHsports_c001", "train", _sports(48, 7, 21), 25),
                    SequenceSpec("v_SYNTHsports_c002", "val", _sports(40, 6, 22), 25),
-                   SequenceSpec("v_SYNTHsports_c003", "test", _sports(36, 6, 23), 25)), 2, 6),
+                   SequenceSpec("v_SYNTHsports_c003", "test", _sports(36, 6, 23), 25)), 2),
 })
 """The embedded defaults: one sequence per split (train and val annotated)."""
 
@@ -109,13 +109,13 @@ def write_dance_sports(root: str | Path, benchmark: str) -> None:
     _check(benchmark)
     root = Path(root)
     layout = LAYOUTS[benchmark]
-    sequences, kits, digits = SPECS[benchmark]
+    sequences, kits = SPECS[benchmark]
     params = [cv2.IMWRITE_JPEG_QUALITY, 90]
     for seq in sequences:
         rng = np.random.default_rng([seq.scene.seed, _STREAM_COSTUMES])
         video = costumes(render_scene(seq.scene), kits, rng)
         write_sequence(layout.split_dir(root, seq.split) / seq.name, seq, video, benchmark,
-                       DetectionNoise(), params, frame_digits=digits,
+                       DetectionNoise(), params, frame_digits=layout.frame_digits,
                        det_path=root / "detections" / seq.split / f"{seq.name}.txt")
     for split in layout.splits:
         seqmap = layout.seqmap_path(root, split)
