@@ -75,6 +75,11 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("MOT16", _MOT, {"benchmark": "MOT16"}, folder="MOT16", scoring=_MOT_SCORING),
     Variant("MOT17", _MOT, {"benchmark": "MOT17"}, folder="MOT17", scoring=_MOT_SCORING),
     Variant("MOT20", _MOT, {"benchmark": "MOT20"}, folder="MOT20", scoring=_MOT_SCORING),
+    # No public detections: give detections= (or <root>/detections/<split>/); val by default.
+    Variant("DanceTrack", _MOT, {"benchmark": "DanceTrack", "split": "val"},
+            folder="DanceTrack", scoring=_B + "motchallenge:DanceTrackBenchmark"),
+    Variant("SportsMOT", _MOT, {"benchmark": "SportsMOT", "split": "val"}, folder="SportsMOT",
+            scoring=_MOT_SCORING),
     # Custom data in the MOTChallenge layout; pass root= and the benchmark= rule set.
     Variant("MOTChallenge", _MOT, {"benchmark": "MOT17"}, scoring=_MOT_SCORING),
     Variant("KITTI", "unitrack_env.envs.kitti:KITTIEnv", {}, folder="KITTI",

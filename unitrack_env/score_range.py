@@ -94,6 +94,10 @@ DETECTION_SCORES: Mapping[str, ScoreRange] = MappingProxyType({
         "FRCNN/SDP confidences; MOT17-02/04/05/11-FRCNN (first 4-8 frames, 332 rows) run "
         "from 0.051 to 1; the *-DPM files were not measured here: pass score_range= for them"),
     "MOT20": ScoreRange(0.0, 1.0, True, f"MOT20's public detections: {_CONFIDENCE}"),
+    "DanceTrack": ScoreRange(0.0, 1.0, True, "DanceTrack ships no detections; yours are taken "
+                             f"as {_CONFIDENCE}: pass score_range= if they are not"),
+    "SportsMOT": ScoreRange(0.0, 1.0, True, "SportsMOT ships no detections; yours are taken "
+                            f"as {_CONFIDENCE}: pass score_range= if they are not"),
     "MOTS20": ScoreRange(0.0, 1.0, True, f"MOTS detections: {_CONFIDENCE}"),
     "YouTube-VIS-2019": ScoreRange(0.0, 1.0, True, f"VIS result files: {_CONFIDENCE}"),
     "PoseTrack2018": ScoreRange(0.0, 1.0, True, f"PoseTrack detected poses: {_CONFIDENCE}"),

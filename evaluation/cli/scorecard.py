@@ -30,7 +30,7 @@ def add_arguments(card: argparse.ArgumentParser) -> None:
     card.add_argument("--tasks", help="comma-separated subset of: sot, vos, mot, mots, "
                       "posetrack, pose-prop, vis (default: all of these), or an opt-in "
                       "column named on its own (points: TAP-Vid; sot-lasot, sot-got10k: "
-                      "SOT on LaSOT, GOT-10k val)")
+                      "SOT on LaSOT, GOT-10k val; dancetrack: MOT on DanceTrack)")
     card.add_argument("--out", required=True, help="output folder (finished cells are reused)")
     card.add_argument("--backend", choices=("pool", "ray"), default="pool",
                       help="where cells run: local processes (default) or Ray")

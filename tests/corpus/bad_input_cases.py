@@ -1813,3 +1813,35 @@ CASES = CASES + (
        "exit 2:", "att/walker-1.txt, line 1", "expected 14 flags 0 or 1",
        error="CLIFailed"),
 )
+
+
+# ------------------------------------------- issue 40: DanceTrack and SportsMOT
+def _dance_sports(benchmark: str) -> Path:
+    from unitrack_env.datasets.synthetic.dance_sports import KIND
+
+    return synthetic(KIND, benchmark)  # type: ignore[arg-type]
+
+
+def _dancetrack_as_custom(scratch: Path) -> None:
+    """A DanceTrack sequence in a custom MOTChallenge root, under MOT17's rules."""
+    root = scratch / "custom"
+    clone(_dance_sports("DanceTrack") / "val" / "dancetrack0004",
+          root / "train" / "dancetrack0004")
+    open_env("UniTrack/MOTChallenge-v0", root, "dancetrack0004")
+
+
+def _dancetrack_without_detections(scratch: Path) -> None:
+    """The DanceTrack layout as it ships: no detections anywhere, none given."""
+    root = clone(_dance_sports("DanceTrack"), scratch / "DanceTrack")
+    shutil.rmtree(root / "detections")
+    open_env("UniTrack/DanceTrack-v0", root, "dancetrack0004")
+
+
+CASES = CASES + (
+    _c("MOT-dancetrack-under-MOT17", "a DanceTrack sequence (dancetrack0004) in custom data "
+       "under MOT17's rules (its frames are named with 8 digits, not 6)", _dancetrack_as_custom,
+       "dancetrack0004", "named like a DanceTrack sequence", "use UniTrack/DanceTrack-v0"),
+    _c("DanceTrack-no-detections", "DanceTrack as it ships (no detections) without "
+       "detections=", _dancetrack_without_detections, "detections/val/dancetrack0004.txt",
+       "DanceTrack ships no public detections", "detections="),
+)

@@ -1,4 +1,4 @@
-"""The MOTChallenge benchmark (MOT15, MOT16, MOT17, MOT20): TrackEval's HOTA, CLEAR, Identity."""
+"""MOTChallenge-layout benchmarks (MOT15/16/17/20, DanceTrack, SportsMOT): TrackEval's metrics."""
 
 from __future__ import annotations
 
@@ -30,9 +30,11 @@ from unitrack_env.datasets.mot_signatures import check_signature
 from unitrack_env.datasets.motchallenge import (
     BENCHMARKS,
     MOTChallengeDataset,
+    SequenceInfo,
     read_ground_truth,
     read_seqinfo,
 )
+from unitrack_env.datasets.synthetic.dance_sports import KIND as DANCE_SPORTS
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import (
     EventRows,
@@ -69,10 +71,12 @@ def result_rows(frame: int, ids: np.ndarray, boxes: np.ndarray) -> np.ndarray:
 
 
 class MOTChallengeBenchmark(Benchmark):
-    """MOTChallenge scoring under one rule set (``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``).
+    """MOTChallenge scoring under one rule set (``MOT15/16/17/20``, ``DanceTrack``, ``SportsMOT``).
 
     ``results`` of one sequence: the ``(k, 10)`` rows ``frame, id, x, y, w, h, conf, -1, -1,
-    -1`` (see :func:`result_rows`), written as ``<folder>/<sequence>.txt``.
+    -1`` (see :func:`result_rows`), written as ``<folder>/<sequence>.txt``; on DanceTrack's
+    test split as ``<folder>/tracker/<sequence>.txt``, the folder its server wants zipped
+    (:meth:`~unitrack_env.datasets.mot_layouts.MOTLayout.result_dir`).
     """
 
     task = "mot"
@@ -99,7 +103,7 @@ class MOTChallengeBenchmark(Benchmark):
 
     @classmethod
     def build(cls, benchmark: str = "MOT17", root: str | os.PathLike | None = None,
-              split: str = "train", detections: str | os.PathLike = "public",
+              split: str = "train", detections: str | os.PathLike | None = "public",
               classes: dict[str, list[int]] | None = None, distractors: list[int] | None = None,
               ignore: list[int] | None = None) -> MOTChallengeBenchmark:
         """The benchmark of ``MOTChallengeEnv(benchmark=, root=, split=, detections=, ...)``.
@@ -109,7 +113,8 @@ class MOTChallengeBenchmark(Benchmark):
         ``<root>/classes.json`` if there is one, else pedestrians under the rule set.
         """
         one_of("benchmark", benchmark, sorted(BENCHMARKS))
-        path, synthetic = data_root(root, benchmark, benchmark)
+        kind = DANCE_SPORTS if benchmark in DANCE_SPORTS.benchmarks else "motchallenge"
+        path, synthetic = data_root(root, benchmark, benchmark, kind)
         cmap = class_map(path, classes, distractors, ignore)
         return cls(MOTChallengeDataset(path, benchmark, split, detections, cmap),
                    synthetic=synthetic)
@@ -119,9 +124,15 @@ class MOTChallengeBenchmark(Benchmark):
         """The rule set (``"MOT17"``, ...)."""
         return self.dataset.benchmark
 
+    def _seqinfo(self, name: str) -> SequenceInfo:
+        return read_seqinfo(self.dataset.split_dir / name, self.dataset.layout.frame_digits)
+
+    def _results(self, folder: str | os.PathLike) -> Path:
+        return self.dataset.layout.result_dir(Path(folder), self.dataset.split)
+
     def sequence_length(self, name: str) -> int:
         """Number of frames of ``name`` (reads only its seqinfo.ini)."""
-        return read_seqinfo(self.dataset.split_dir / name).length
+        return self._seqinfo(name).length
 
     def has_ground_truth(self, name: str) -> bool:
         """Whether ``name`` has a ``gt/gt.txt``."""
@@ -129,13 +140,13 @@ class MOTChallengeBenchmark(Benchmark):
 
     def write(self, folder: str | os.PathLike, sequence: str, results: np.ndarray) -> None:
         """Write ``<folder>/<sequence>.txt`` in the official MOTChallenge result format."""
-        atomic_write_text(Path(folder) / f"{sequence}.txt", format_mot_results(results))
+        atomic_write_text(self._results(folder) / f"{sequence}.txt", format_mot_results(results))
 
     def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
         """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows (checked classes)."""
         from unitrack_env.metrics.mot_results import read_result_file
 
-        path = Path(folder) / f"{sequence}.txt"
+        path = self._results(folder) / f"{sequence}.txt"
         if self.class_map is not None:
             from unitrack_env.metrics.mot_classes import read_class_results
 
@@ -177,8 +188,8 @@ class MOTChallengeBenchmark(Benchmark):
             return ScoreReport(self.name, {seq: flat_metrics(combine({seq: raw[seq]}, names))
                                            for seq in sequences},
                                flat_metrics(combined), scores={"per_class": combined})
-        return score_folder(self.dataset.split_dir, folder, benchmark=self.name,
-                            sequences=sequences)
+        return score_folder(self.dataset.split_dir, self._results(folder),
+                            benchmark=self.name, sequences=sequences)
 
     def _class_gt(self, sequence: str) -> np.ndarray:
         """``gt.txt`` rows of ``sequence``, every class id checked against the class map."""
@@ -239,11 +250,29 @@ class MOTChallengeBenchmark(Benchmark):
 
     def frame_image(self, sequence: str, frame: int) -> Path:
         """``<sequence>/img1/<frame>.jpg`` (as its seqinfo.ini names it)."""
-        return read_seqinfo(self.dataset.split_dir / sequence).frame_path(frame)
+        return self._seqinfo(sequence).frame_path(frame)
 
     def frame_rate(self, sequence: str) -> float:
         """The seqinfo.ini's frame rate."""
-        return float(read_seqinfo(self.dataset.split_dir / sequence).frame_rate)
+        return float(self._seqinfo(sequence).frame_rate)
+
+
+class DanceTrackBenchmark(MOTChallengeBenchmark):
+    """DanceTrack, scored as every MOTChallenge-layout benchmark; its own scorecard column.
+
+    DanceTrack's dancers look alike and move unpredictably: the appearance question of the
+    UniTrack paper in its sharpest form. Its column, ``dancetrack``, is opt-in
+    (``unitrack scorecard --tasks ...,dancetrack``): the default scorecard stays the paper's
+    Table 2. It plays ``<data>/DanceTrack`` (val split) when ``--data`` has it, with
+    detections from ``<data>/DanceTrack/detections/val/`` (DanceTrack ships none), else the
+    embedded synthetic DanceTrack.
+    """
+
+    scorecard = ScorecardColumn(
+        "DanceTrack", ("UniTrack/DanceTrack-v0",),
+        (association_head(("IDF1", "HOTA", "MOTA", "IDSW")),),
+        iou_baseline(("IDF1", "HOTA", "MOTA", "IDSW")), ("UniTrack", "IDF1"),
+        frozenset({"IDSW"}), order=3.5, input_size=LETTERBOX, opt_in=True, task="dancetrack")
 
 
 def score_split_folder(gt: str | os.PathLike, results: str | os.PathLike, benchmark: str,

@@ -1,13 +1,13 @@
 """What each MOTChallenge benchmark's data look like, and data of another benchmark refused.
 
-Every rule set (MOT15, MOT16, MOT17, MOT20) states its :class:`DataSignature`: how its
-sequences are named, the columns and class ids of its ``gt.txt`` and the range of its
-detection scores. :func:`check_signature` compares a split's sequences with it
-before anything is played: data that contradict the rule set (MOT17 sequences under MOT15's
-rules, which read every ground-truth row as a pedestrian) are refused with one line naming
-the benchmark the data look like and the id to use; data that are merely unusual (detection
-scores far off the declared range) give a warning. Custom names (``SYN-01``, ``cam3``, ...)
-match no benchmark and are judged by their files only.
+Every rule set (MOT15, MOT16, MOT17, MOT20, DanceTrack, SportsMOT) states its
+:class:`DataSignature`: how its sequences are named, the columns and class ids of its
+``gt.txt`` and the range of its detection scores. :func:`check_signature` compares a split's
+sequences with it before anything is played: data that contradict the rule set (MOT17
+sequences under MOT15's rules, which read every ground-truth row as a pedestrian) are
+refused with one line naming the benchmark the data look like and the id to use; data that
+are merely unusual (detection scores far off the declared range) give a warning. Custom
+names (``SYN-01``, ``cam3``, ...) match no benchmark and are judged by their files only.
 """
 
 from __future__ import annotations
@@ -67,6 +67,13 @@ SIGNATURES: MappingProxyType[str, DataSignature] = MappingProxyType({
                            "MOT17-NN-{DPM,FRCNN,SDP}", 9, _MOTCHALLENGE_CLASSES),
     "MOT20": DataSignature("MOT20", "UniTrack/MOT20-v0", r"MOT20-\d\d", "MOT20-NN", 9,
                            _MOTCHALLENGE_CLASSES),
+    # DanceTrack README: dancetrack0001 ...; SportsMOT README: v_-6Os86HzwCs_c001 (a YouTube
+    # id and a clip number). Both write class 1 and visibility 1 in gt.txt columns 8, 9.
+    "DanceTrack": DataSignature("DanceTrack", "UniTrack/DanceTrack-v0", r"dancetrack\d{4}",
+                                "dancetrackNNNN", 9, _MOTCHALLENGE_CLASSES),
+    "SportsMOT": DataSignature("SportsMOT", "UniTrack/SportsMOT-v0",
+                               r"v_[A-Za-z0-9_-]{6,16}_c\d{3}", "v_<YouTube id>_cNNN", 9,
+                               _MOTCHALLENGE_CLASSES),
 })
 """Rule set -> what its data look like (read-only)."""
 

@@ -1,7 +1,8 @@
-"""Reader for the MOTChallenge layout (MOT15, MOT16, MOT17, MOT20 and custom data).
+"""Reader for the MOTChallenge layout (MOT15/16/17/20, DanceTrack, SportsMOT, custom data).
 
 Reads ``<root>/<split>/<sequence>/`` with ``seqinfo.ini``, ``img1/``, ``det/det.txt`` and
-``gt/gt.txt`` (train splits). More in docs/module-notes.md.
+``gt/gt.txt`` (train splits); where each benchmark keeps them is its
+:class:`~unitrack_env.datasets.mot_layouts.MOTLayout`. More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -16,14 +17,19 @@ import numpy as np
 
 from unitrack_env.datasets.limits import MAX_FRAMES, check_image_size
 from unitrack_env.datasets.mot_classes import ClassMap
+from unitrack_env.datasets.mot_layouts import LAYOUTS, MOTLayout, read_seqmap
 from unitrack_env.datasets.mot_signatures import check_signature
 from unitrack_env.datasets.motchallenge_tables import DET_FIELDS, GT_FIELDS, check_rows, parse_table
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
 #: Benchmarks whose ground truth has the 9-column class/visibility layout.
-CLASS_COLUMN_BENCHMARKS = frozenset({"MOT16", "MOT17", "MOT20"})
+CLASS_COLUMN_BENCHMARKS = frozenset(name for name, layout in LAYOUTS.items()
+                                    if layout.class_column)
 #: All benchmark rule sets understood by the reader and the official scorer.
-BENCHMARKS = frozenset({"MOT15"}) | CLASS_COLUMN_BENCHMARKS
+BENCHMARKS = frozenset(LAYOUTS)
+#: Where a benchmark without public detections finds the user's, below its root (``{split}``
+#: filled in): unitrack's convention, not the benchmark's; the embedded default ships there.
+DETECTIONS_FOLDER = "detections/{split}"
 #: Class id of pedestrians in MOT16/17/20 ground truth (the evaluated class).
 PEDESTRIAN_CLASS = 1
 #: Keys every ``seqinfo.ini`` needs.
@@ -55,10 +61,11 @@ class SequenceInfo:
     height: int
     image_dir: str = "img1"
     image_ext: str = ".jpg"
+    frame_digits: int = 6
 
     def frame_path(self, frame: int) -> Path:
-        """Return the image file of a 1-based frame index."""
-        return self.path / self.image_dir / f"{frame:06d}{self.image_ext}"
+        """Return the image file of a 1-based frame index (``000001.jpg``; DanceTrack: 8 digits)."""
+        return self.path / self.image_dir / f"{frame:0{self.frame_digits}d}{self.image_ext}"
 
 
 @dataclass(frozen=True)
@@ -128,8 +135,11 @@ def _read_ini(path: Path) -> configparser.ConfigParser:
     return parser
 
 
-def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
-    """Read ``<seq_dir>/seqinfo.ini``; DataFormatError names a missing file, section or field."""
+def read_seqinfo(seq_dir: str | Path, frame_digits: int = 6) -> SequenceInfo:
+    """Read ``<seq_dir>/seqinfo.ini``; DataFormatError names a missing file, section or field.
+
+    ``frame_digits``: of the frame files' names, which seqinfo.ini does not state.
+    """
     seq_dir = Path(seq_dir)
     path = seq_dir / "seqinfo.ini"
     if not path.is_file():
@@ -176,6 +186,7 @@ def read_seqinfo(seq_dir: str | Path) -> SequenceInfo:
         height=height,
         image_dir=values["imDir"],
         image_ext=ext if ext.startswith(".") else f".{ext}",
+        frame_digits=frame_digits,
     )
 
 
@@ -252,8 +263,8 @@ class MOTSequence:
         return self.info.path.name
 
 
-def _root_hint(root: Path, split: str, benchmark: str) -> str:
-    """Where ``root`` probably should point when it has no ``split`` folder."""
+def _root_hint(root: Path, split: Path, benchmark: str) -> str:
+    """Where ``root`` probably should point when it has no ``split`` folder (relative path)."""
     if not root.is_dir():
         return ""
     present = sorted(p for p in root.iterdir() if p.is_dir())
@@ -270,8 +281,12 @@ def _root_hint(root: Path, split: str, benchmark: str) -> str:
 class MOTChallengeDataset:
     """The sequences of one split of a MOTChallenge-layout data set.
 
-    ``benchmark`` is the rule set; ``detections`` is ``"public"`` (``det/det.txt``) or a folder
-    of ``<sequence>.txt`` (or ``<sequence>/det/det.txt``) files.
+    ``benchmark`` is the rule set, whose :class:`~unitrack_env.datasets.mot_layouts.MOTLayout`
+    says where the split's folders are and which file lists its sequences; ``detections`` is
+    ``"public"`` (``det/det.txt``) or a folder of ``<sequence>.txt`` (or
+    ``<sequence>/det/det.txt``) files. A benchmark without public detections (DanceTrack,
+    SportsMOT) takes the folder given, else ``<root>/detections/<split>/``
+    (:data:`DETECTIONS_FOLDER`, where the embedded default ships its), else refuses.
     """
 
     def __init__(
@@ -279,7 +294,7 @@ class MOTChallengeDataset:
         root: str | Path,
         benchmark: str,
         split: str = "train",
-        detections: str | Path = "public",
+        detections: str | Path | None = "public",
         class_map: ClassMap | None = None,
     ) -> None:
         self.root = Path(root)
@@ -287,29 +302,67 @@ class MOTChallengeDataset:
         self.class_map = class_map
         self.benchmark = benchmark
         self.split = split
-        self.detections = detections
         if benchmark not in BENCHMARKS:
             raise ValueError(f"unknown benchmark '{benchmark}'; valid: {sorted(BENCHMARKS)}")
-        self.split_dir = self.root / split
+        self.layout: MOTLayout = LAYOUTS[benchmark]
+        self.split_dir = self.layout.split_dir(self.root, split)
         if not self.split_dir.is_dir():
+            rel = self.split_dir.relative_to(self.root)
+            splits = "/ and ".join(str(self.layout.split_dir(Path(), s)) for s in
+                                   self.layout.splits) + "/"
             raise DataFormatError(
                 self.split_dir,
                 f"split folder missing; root= should be the benchmark folder that holds "
-                f"train/ and test/{_root_hint(self.root, split, benchmark)}",
+                f"{splits}{_root_hint(self.root, rel, benchmark)}",
             )
-        self.sequence_names = sorted(
+        self.sequence_names = self._sequence_names()
+        check_signature(benchmark, self.split_dir, self.sequence_names)
+        self.detections = self._detections_source(detections)
+        if self.detections != "public" and Path(self.detections).is_dir():
+            stray = sorted(p.name for p in Path(self.detections).glob("*.txt")
+                           if p.stem not in self.sequence_names)
+            if stray:  # a misspelt name leaves its sequence without detections
+                warnings.warn(f"{self.detections}: {', '.join(stray)} match no sequence of "
+                              f"{self.split_dir} and are not read", stacklevel=2)
+
+    def _sequence_names(self) -> list[str]:
+        """The split's sequences, in its seqmap's order where there is one, else sorted.
+
+        As TrackEval reads them: a layout's seqmap, when the file exists; else every folder
+        with a seqinfo.ini or img1/.
+        """
+        seqmap = self.layout.seqmap_path(self.root, self.split)
+        if seqmap is not None and seqmap.is_file():
+            names = read_seqmap(seqmap)
+            for line, name in names:
+                if not (self.split_dir / name).is_dir():
+                    raise DataFormatError(seqmap, f"lists '{name}', which has no folder in "
+                                                  f"{self.split_dir}", line=line)
+            return list(dict.fromkeys(name for _, name in names))
+        names = sorted(
             p.name for p in self.split_dir.iterdir()
             if p.is_dir() and ((p / "seqinfo.ini").exists() or (p / "img1").is_dir())
         )
-        if not self.sequence_names:
+        if not names:
             raise DataFormatError(self.split_dir, "contains no sequence folders with seqinfo.ini")
-        check_signature(benchmark, self.split_dir, self.sequence_names)
-        if detections != "public" and Path(detections).is_dir():
-            stray = sorted(p.name for p in Path(detections).glob("*.txt")
-                           if p.stem not in self.sequence_names)
-            if stray:  # a misspelt name leaves its sequence without detections
-                warnings.warn(f"{detections}: {', '.join(stray)} match no sequence of "
-                              f"{self.split_dir} and are not read", stacklevel=2)
+        return names
+
+    def _detections_source(self, detections: str | Path | None) -> str | Path:
+        """``detections``, or where a benchmark without public detections finds them."""
+        if self.layout.public_detections:
+            return "public" if detections is None else detections
+        if detections not in (None, "public"):
+            return detections
+        folder = self.root / DETECTIONS_FOLDER.format(split=self.split)
+        if folder.is_dir():
+            return folder
+        example = folder / f"{self.sequence_names[0]}.txt"
+        raise DataFormatError(
+            example, f"{self.benchmark} ships no public detections and none were found here "
+                     "(the first file expected): pass detections= (CLI: --detections), a folder "
+                     "with one <sequence>.txt per sequence in det.txt format "
+                     f"(frame,-1,x,y,w,h,score), or put such files in "
+                     f"{DETECTIONS_FOLDER.format(split=self.split)}/ under root=")
 
     def __len__(self) -> int:
         return len(self.sequence_names)
@@ -341,7 +394,7 @@ class MOTChallengeDataset:
                 f"{', '.join(self.sequence_names)}"
             )
         seq_dir = self.split_dir / name
-        info = read_seqinfo(seq_dir)
+        info = read_seqinfo(seq_dir, self.layout.frame_digits)
         if info.name != name:
             warnings.warn(
                 f"{seq_dir / 'seqinfo.ini'}: name={info.name} differs from the folder name "

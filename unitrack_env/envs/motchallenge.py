@@ -1,4 +1,4 @@
-"""Multi-object tracking on MOTChallenge data (MOT15, MOT16, MOT17, MOT20, custom)."""
+"""Multi-object tracking on MOTChallenge-layout data (MOT15/16/17/20, DanceTrack, SportsMOT)."""
 
 from __future__ import annotations
 
@@ -36,11 +36,11 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
 
     ## Description
     Each episode is one video sequence of a MOTChallenge benchmark (MOT15, MOT16, MOT17,
-    MOT20, or custom data in that layout). At every step the agent sees one frame and that
-    frame's detections (the benchmark's public detections, or a user-given detection
-    folder), and answers with its tracks for that frame: an id and a box per tracked
-    object. The environment scores the answer against the ground truth with the official
-    MOTChallenge rules and, at the end of the episode, reports the official TrackEval
+    MOT20, DanceTrack, SportsMOT, or custom data in that layout). At every step the agent
+    sees one frame and that frame's detections (the benchmark's public detections, or a
+    user-given detection folder), and answers with its tracks for that frame: an id and a
+    box per tracked object. The environment scores the answer against the ground truth with
+    the official MOTChallenge rules and, at the end of the episode, reports the official TrackEval
     metrics (HOTA, CLEAR, Identity) of the whole sequence.
 
     With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
@@ -104,15 +104,25 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
     :meth:`episode_results`.
 
     ## Arguments
-    - ``benchmark``: rule set, one of ``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``.
-    - ``root``: the benchmark folder holding ``train/`` and ``test/`` (default:
+    - ``benchmark``: rule set, one of ``MOT15``, ``MOT16``, ``MOT17``, ``MOT20``,
+      ``DanceTrack``, ``SportsMOT``. DanceTrack and SportsMOT are scored by TrackEval's
+      MOTChallenge code under their own names (MOT17's rules), as their official kits do.
+    - ``root``: the benchmark folder holding ``train/`` and ``test/`` (DanceTrack: the
+      ``dancetrack`` folder with ``{train,val,test}/`` and ``*_seqmap.txt``; SportsMOT: the
+      folder with ``dataset/`` and ``splits_txt/``; the split's sequences are its seqmap's
+      when it has one) (default:
       ``$UNITRACK_DATA/<benchmark>`` if that variable is set, else the synthetic default).
       Data of another benchmark (sequences named like its own, or MOT16/17/20 class columns
       under MOT15) are refused before the first frame, naming the id to use
       (``unitrack_env.datasets.mot_signatures``).
-    - ``split``: sub-folder to read (``"train"`` or ``"test"``).
+    - ``split``: sub-folder to read (``"train"`` or ``"test"``; DanceTrack and SportsMOT
+      also ``"val"``, their ids' default). The test split has no ground truth: its results
+      are written for the test server (DanceTrack: in a ``tracker/`` folder to zip).
     - ``sequences``: restrict to these sequence names (default: all of the split).
     - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
+      DanceTrack and SportsMOT ship no public detections: give your detector's folder, or
+      put it at ``<root>/detections/<split>/``; otherwise the env refuses at ``make``,
+      naming that path. Their embedded defaults ship simulated detections there.
     - ``detection_scores``: ``"raw"`` (default) passes the file's scores through;
       ``"unit"`` maps the benchmark's declared range to 0..1 (``(score - low) / (high -
       low)``, clipped), for trackers whose thresholds assume confidences in 0..1. Declared
@@ -141,7 +151,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
       pedestrians under ``benchmark``'s rules, as before.
 
     ## Version history
-    - v0: initial version.
+    - v0: initial version (DanceTrack and SportsMOT added in v0, issue 40).
     """
 
     requires = ("trackeval",)
@@ -153,7 +163,7 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
         root: str | os.PathLike | None = None,
         split: str = "train",
         sequences: list[str] | tuple[str, ...] | None = None,
-        detections: str | os.PathLike = "public",
+        detections: str | os.PathLike | None = "public",
         min_score: float | None = None,
         detection_scores: str = "raw",
         score_range: tuple[float, float] | None = None,

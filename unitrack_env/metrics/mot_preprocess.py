@@ -37,7 +37,10 @@ DISTRACTOR_CLASSES: tuple[int, ...] = tuple(
     for name in ("person_on_vehicle", "static_person", "distractor", "reflection")
 )
 MOT20_DISTRACTOR_CLASSES: tuple[int, ...] = (*DISTRACTOR_CLASSES, MOT_CLASS_IDS["non_mot_vehicle"])
-BENCHMARKS: tuple[str, ...] = ("MOT15", "MOT16", "MOT17", "MOT20")  # TrackEval's BENCHMARK
+#: TrackEval's BENCHMARK values: DanceTrack and SportsMOT are scored by TrackEval's
+#: MotChallenge2DBox under their own names, which it treats as MOT17 (class columns read,
+#: MOT16/17 distractors removed), as their official kits run it.
+BENCHMARKS: tuple[str, ...] = ("MOT15", "MOT16", "MOT17", "MOT20", "DanceTrack", "SportsMOT")
 CLASSLESS_BENCHMARK: str = "MOT15"  # no class column, no distractor removal
 MATCH_IOU_THRESHOLD: float = 0.5  # to match a tracker box (preprocessing and CLEAR)
 EPS: float = float(np.finfo(float).eps)  # TrackEval's tolerance on every threshold
@@ -49,8 +52,8 @@ def normalize_benchmark(benchmark: str) -> str:
     >>> normalize_benchmark("mot17")
     'MOT17'
     """
-    name = str(benchmark).strip().upper()
-    if name not in BENCHMARKS:
+    name = {b.upper(): b for b in BENCHMARKS}.get(str(benchmark).strip().upper())
+    if name is None:
         raise ValueError(
             f"unknown MOTChallenge benchmark {benchmark!r}; expected one of {', '.join(BENCHMARKS)}"
         )

@@ -35,12 +35,15 @@ MOT_CLASSES = MappingProxyType({
 })
 #: Roles written to MOT15 ground truth (which has no classes; flag 1).
 MOT15_ROLES = frozenset({ObjectRole.PEDESTRIAN, ObjectRole.STATIC_PERSON})
+#: Benchmarks whose gt.txt lists only the tracked people, each ``1,1,1`` (flag, class 1,
+#: visibility 1), in frame order: DanceTrack's and SportsMOT's READMEs show such rows.
+TARGETS_ONLY_BENCHMARKS = frozenset({"DanceTrack", "SportsMOT"})
 #: Roles a simulated person detector fires on.
 DETECTABLE_ROLES = frozenset({ObjectRole.PEDESTRIAN, ObjectRole.STATIC_PERSON})
 #: MOT15 detection scores are the [0, 1] score times this (PETS-like unbounded range).
 MOT15_SCORE_SCALE = 100.0
 #: Splits that ship ground truth.
-SPLITS_WITH_GROUND_TRUTH = frozenset({"train"})
+SPLITS_WITH_GROUND_TRUTH = frozenset({"train", "val"})
 #: Seed-stream index of the detection noise (the scene uses 0 and 1).
 _STREAM_DETECTIONS = 2
 
@@ -82,7 +85,7 @@ class DetectionNoise:
 
 @dataclass(frozen=True)
 class SequenceSpec:
-    """One synthetic sequence (``split``: ``"train"`` with gt, ``"test"`` without)."""
+    """One synthetic sequence (``split``: ``"train"``, ``"val"`` with gt, ``"test"`` without)."""
 
     name: str
     split: str
@@ -90,8 +93,8 @@ class SequenceSpec:
     frame_rate: int = 30
 
     def __post_init__(self) -> None:
-        if self.split not in ("train", "test"):
-            raise ValueError(f"SequenceSpec.split={self.split!r}: use 'train' or 'test'")
+        if self.split not in ("train", "val", "test"):
+            raise ValueError(f"SequenceSpec.split={self.split!r}: use 'train', 'val' or 'test'")
         if not self.name or "/" in self.name or "\\" in self.name:
             raise ValueError(f"SequenceSpec.name={self.name!r}: must be a plain folder name")
         if self.frame_rate <= 0:
@@ -274,7 +277,10 @@ def _gt_lines(
         for obj in objects:
             x, y, w, h = (int(v) for v in obj.box)
             prefix = f"{t + 1},{obj.id},{x + 1},{y + 1},{w},{h}"
-            if benchmark in CLASS_COLUMN_BENCHMARKS:
+            if benchmark in TARGETS_ONLY_BENCHMARKS:
+                if obj.role is ObjectRole.PEDESTRIAN:
+                    rows.append((obj.id, t, f"{prefix},1,1,1"))
+            elif benchmark in CLASS_COLUMN_BENCHMARKS:
                 flag_class = MOT_CLASSES.get(obj.role)
                 if flag_class is None:
                     continue
@@ -327,14 +333,19 @@ def write_motchallenge(
 
 def write_sequence(
     seq_dir: Path, seq: SequenceSpec, frames: Iterable[SyntheticFrame], benchmark: str,
-    noise: DetectionNoise, jpeg_params: list[int],
+    noise: DetectionNoise, jpeg_params: list[int], *, frame_digits: int = 6,
+    det_path: Path | None = None,
 ) -> None:
-    """Write one sequence's frames, ``seqinfo.ini``, ground truth and detections."""
+    """Write one sequence's frames, ``seqinfo.ini``, ground truth and detections.
+
+    Frames are ``img1/<frame>.jpg`` with ``frame_digits`` digits; detections go to
+    ``det_path`` (default: the public ``det/det.txt``).
+    """
     image_dir = seq_dir / "img1"
     image_dir.mkdir(parents=True, exist_ok=True)
     annotations: list[tuple[ObjectAnnotation, ...]] = []
     for frame in frames:
-        path = image_dir / f"{frame.index + 1:06d}.jpg"
+        path = image_dir / f"{frame.index + 1:0{frame_digits}d}.jpg"
         if not cv2.imwrite(str(path), frame.image[:, :, ::-1], jpeg_params):
             raise OSError(f"{path}: cv2.imwrite failed to write the JPEG frame")
         annotations.append(frame.objects)
@@ -347,4 +358,4 @@ def write_sequence(
         noise,
         np.random.default_rng([seq.scene.seed, _STREAM_DETECTIONS]),
     )
-    _write_lines(seq_dir / "det" / "det.txt", _det_lines(benchmark, detections))
+    _write_lines(det_path or seq_dir / "det" / "det.txt", _det_lines(benchmark, detections))
