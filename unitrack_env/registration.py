@@ -89,6 +89,8 @@ VARIANTS: tuple[Variant, ...] = (
             folder="GOT-10k", scoring=_B + "otb:GOT10kBenchmark"),
     Variant("TrackingNet", "unitrack_env.envs.otb:OTBEnv", {"data_format": "trackingnet"},
             folder="TrackingNet", scoring=_B + "otb:SOTProtocolBenchmark"),
+    Variant("NfS", "unitrack_env.envs.otb:OTBEnv", {"data_format": "nfs"}, folder="NfS",
+            scoring=_B + "otb:OTBBenchmark"),
     Variant("DAVIS", "unitrack_env.envs.davis:DAVISEnv", {}, folder="DAVIS",
             scoring=_B + "davis:DAVISBenchmark"),
     Variant("MOTS", "unitrack_env.envs.mots:MOTSEnv", {"benchmark": "MOTS20"},

@@ -22,6 +22,7 @@ from unitrack_env.datasets.lasot import (
     GOT10kDataset,
     LaSOTDataset,
 )
+from unitrack_env.datasets.nfs import NFS_SYNTHETIC, NfSDataset
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.datasets.synthetic.cache import SyntheticKind
@@ -393,6 +394,7 @@ SOT_FORMATS: dict[str, SOTFormat] = {
                         benchmark="got10k"),
     "trackingnet": SOTFormat(TrackingNetDataset, "TrackingNet", "TrackingNet",
                              TRACKINGNET_SYNTHETIC, normalized=True),
+    "nfs": SOTFormat(NfSDataset, "NfS", "NfS", NFS_SYNTHETIC),
 }
 
 
