@@ -86,7 +86,7 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("UAV123", "unitrack_env.envs.otb:OTBEnv", {"data_format": "uav123"},
             folder="UAV123", scoring=_B + "otb:SOTProtocolBenchmark"),
     Variant("GOT10k", "unitrack_env.envs.otb:OTBEnv", {"data_format": "got10k"},
-            folder="GOT-10k", scoring=_B + "otb:GOT10kBenchmark"),
+            folder="GOT-10k", scoring=_B + "got10k:GOT10kBenchmark"),
     Variant("TrackingNet", "unitrack_env.envs.otb:OTBEnv", {"data_format": "trackingnet"},
             folder="TrackingNet", scoring=_B + "otb:SOTProtocolBenchmark"),
     Variant("NfS", "unitrack_env.envs.otb:OTBEnv", {"data_format": "nfs"}, folder="NfS",

@@ -54,6 +54,11 @@ def add_arguments(ev: argparse.ArgumentParser) -> None:
                     "sequences play: local processes (--workers) or Ray tasks, one each")
     ev.add_argument("--address", help="with --backend ray: the cluster to join, auto or "
                     "ray://host:port (default: start a local Ray with --workers CPUs)")
+    ev.add_argument("--repeats", type=positive_int, default=1, metavar="K",
+                    help="play each sequence K times in a row (GOT-10k's protocol asks for 3): "
+                    "each repetition is written (GOT-10k: <seq>_00k.txt; others: "
+                    "data/repeat-00k/) and the metrics' mean, min and max over them are "
+                    "printed and stored in metrics.json (default: 1)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     format_option(ev)
 
@@ -78,7 +83,7 @@ def run(args: argparse.Namespace, out: Console) -> int:
                       workers=args.workers, overwrite=args.overwrite, isolate=not args.in_process,
                       progress=not args.quiet and args.format == "table",
                       step_timeout=args.step_timeout, restamp=args.restamp,
-                      backend=args.backend, address=args.address)
+                      backend=args.backend, address=args.address, repeats=args.repeats)
     log = out if args.format == "table" else console(stderr=True)
     if cache_summary():
         log.print(cache_summary(), markup=False)
@@ -98,6 +103,8 @@ def run(args: argparse.Namespace, out: Console) -> int:
         print_metrics(out, report.scores.per_sequence, report.scores.combined,
                        f"{args.agent} on {args.env}", benchmark_class(args.env).columns,
                        args.format, fps, coverage=report.scores.coverage)
+        if report.repetitions is not None and args.format == "table":
+            out.print(spread_table(report.repetitions, benchmark_class(args.env).columns))
         undefined = sorted(name for name, values in report.scores.per_sequence.items()
                            if any(not _defined(v) for v in values.values()))
         if undefined:
@@ -112,3 +119,26 @@ def run(args: argparse.Namespace, out: Console) -> int:
                   f"{len(others)} other finished sequence(s) in {report.out} are kept but not "
                   "in it: run without --sequences to score them all)", markup=False)
     return 0
+
+
+def spread_table(repeated: dict[str, Any], columns: tuple[str, ...]) -> Any:
+    """A table of each metric's mean [min, max] over the repetitions, per sequence."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from ..analysis.tables import format_cell, table_columns
+
+    spread = repeated["spread"]
+    rows = {**spread["per_sequence"], "COMBINED": spread["combined"]}
+    shown = table_columns(columns, list(rows.values()))
+    table = Table(title=escape(f"spread over {repeated['repeats']} repetitions: mean [min, max]"),
+                  title_justify="left")
+    table.add_column("sequence", no_wrap=True)
+    for name in shown:
+        table.add_column(name, justify="right", no_wrap=True)
+    for label, stats in rows.items():
+        table.add_row(label, *(escape(
+            f"{format_cell(m, stats[m]['mean'])} [{format_cell(m, stats[m]['min'])}, "
+            f"{format_cell(m, stats[m]['max'])}]") if m in stats else "-" for m in shown),
+            style="bold" if label == "COMBINED" else None)
+    return table
