@@ -107,7 +107,8 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     ``split="val"`` by default, ``"test"`` has the first box only) and reports its AO, SR0.5
     and SR0.75 over the frames after the first with ``cover > 0``, boxes clipped to the
     image, frames pooled over sequences; results are written in the evaluation server's
-    layout ``<seq>/<seq>_001.txt``. No real GOT-10k sample is in the project's fixtures: it
+    layout ``<seq>/<seq>_001.txt`` (a run adds ``<seq>_time.txt`` and, with ``--repeats``,
+    ``<seq>_002.txt`` ...). No real GOT-10k sample is in the project's fixtures: it
     is tested on its synthetic default only. ``UniTrack/TrackingNet-v0`` reads TrackingNet
     (``TRAIN_<k>/`` and ``TEST/``, each with ``frames/<seq>/<i>.jpg`` and
     ``anno/<seq>.txt``; ``split="train"`` by default, ``"TRAIN_<k>"`` or ``"test"``, whose
