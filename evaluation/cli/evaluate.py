@@ -104,7 +104,8 @@ def run(args: argparse.Namespace, out: Console) -> int:
                        f"{args.agent} on {args.env}", benchmark_class(args.env).columns,
                        args.format, fps, coverage=report.scores.coverage)
         if report.repetitions is not None and args.format == "table":
-            out.print(spread_table(report.repetitions, benchmark_class(args.env).columns))
+            out.print(spread_table(report.repetitions, benchmark_class(args.env).columns,
+                                   out.width))
         undefined = sorted(name for name, values in report.scores.per_sequence.items()
                            if any(not _defined(v) for v in values.values()))
         if undefined:
@@ -121,8 +122,11 @@ def run(args: argparse.Namespace, out: Console) -> int:
     return 0
 
 
-def spread_table(repeated: dict[str, Any], columns: tuple[str, ...]) -> Any:
-    """A table of each metric's mean [min, max] over the repetitions, per sequence."""
+def spread_table(repeated: dict[str, Any], columns: tuple[str, ...], width: int) -> Any:
+    """A table of each metric's mean [min, max] over the repetitions, per sequence.
+
+    The leading columns that fit in ``width``; the title counts those left to metrics.json.
+    """
     from rich.markup import escape
     from rich.table import Table
 
@@ -130,15 +134,23 @@ def spread_table(repeated: dict[str, Any], columns: tuple[str, ...]) -> Any:
 
     spread = repeated["spread"]
     rows = {**spread["per_sequence"], "COMBINED": spread["combined"]}
-    shown = table_columns(columns, list(rows.values()))
-    table = Table(title=escape(f"spread over {repeated['repeats']} repetitions: mean [min, max]"),
-                  title_justify="left")
+    cells = {label: {m: f"{format_cell(m, v['mean'])} [{format_cell(m, v['min'])}, "
+                        f"{format_cell(m, v['max'])}]" for m, v in stats.items()}
+             for label, stats in rows.items()}
+    shown, used = [], max(len(label) for label in rows) + 4
+    for name in table_columns(columns, list(rows.values())):
+        used += max(len(name), *(len(c.get(name, "-")) for c in cells.values())) + 3
+        if used > width and shown:
+            break
+        shown.append(name)
+    left = len(table_columns(columns, list(rows.values()))) - len(shown)
+    title = f"spread over {repeated['repeats']} repetitions: mean [min, max]" + (
+        f" ({left} more column(s) in metrics.json)" if left else "")
+    table = Table(title=escape(title), title_justify="left")
     table.add_column("sequence", no_wrap=True)
     for name in shown:
         table.add_column(name, justify="right", no_wrap=True)
-    for label, stats in rows.items():
-        table.add_row(label, *(escape(
-            f"{format_cell(m, stats[m]['mean'])} [{format_cell(m, stats[m]['min'])}, "
-            f"{format_cell(m, stats[m]['max'])}]") if m in stats else "-" for m in shown),
-            style="bold" if label == "COMBINED" else None)
+    for label, row in cells.items():
+        table.add_row(label, *(escape(row.get(m, "-")) for m in shown),
+                      style="bold" if label == "COMBINED" else None)
     return table

@@ -125,3 +125,17 @@ def test_got10k_toolkit_report_reads_the_run_folder_and_agrees(tmp_path, monkeyp
     assert np.isfinite(overall["speed_fps"]) and overall["speed_fps"] > 0
     spread_ao = report.repetitions["spread"]["combined"]["AO"]
     assert spread_ao["min"] < spread_ao["max"]
+
+
+def test_cli_repeats_prints_the_spread_table(tmp_path, capsys):
+    from unitrack_env.evaluation.cli import main
+
+    out = str(tmp_path / "c")
+    assert main(["evaluate", "--env", "UniTrack/OTB-v0", "--agent", f"{__name__}:JitterBox",
+                 "--sequences", "SynWalker", "--repeats", "2", "--out", out, "--quiet",
+                 "--in-process"]) == 0
+    printed = capsys.readouterr().out
+    assert "spread over 2 repetitions: mean [min, max]" in printed
+    stats = _metrics(tmp_path / "c")["repetitions"]["spread"]["combined"]["AUC"]
+    assert f"{100 * stats['mean']:.1f} [{100 * stats['min']:.1f}, {100 * stats['max']:.1f}]" \
+        in printed
