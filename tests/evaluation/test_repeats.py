@@ -61,6 +61,10 @@ def test_got10k_repeats_write_the_servers_files_and_a_deterministic_agent_has_no
         assert values["min"] == values["max"] == pytest.approx(values["mean"]), metric
     assert report.repetitions["spread"]["combined"]["AO"]["mean"] == pytest.approx(
         report.combined["AO"])
+    # the stored run (its run.json says repeats=3) is checked as such, and nothing is stale
+    from unitrack_env.evaluation.resume import stale_sequences
+
+    assert stale_sequences("UniTrack/GOT10k-v0", "repeat-box", tmp_path / "r") == {}
 
 
 def test_a_seeded_random_agent_spreads_and_each_repetition_is_scored_alone(tmp_path):
