@@ -64,11 +64,19 @@ class OutputError(OSError):
 
 
 def save_episode(out: Path, env: gym.Env, record: SequenceRecord,
-                 benchmark: Benchmark) -> None:
-    """Write the finished episode's results, then its record (the record marks it done)."""
+                 benchmark: Benchmark, played: Played | None = None) -> None:
+    """Write the finished episode's results, then its record (the record marks it done).
+
+    ``played``: every repetition's results and times (:func:`play_repetitions`), written by
+    the benchmark's ``write_repetitions``; None: the environment's last episode, by ``write``.
+    """
     base = env.unwrapped
     try:
-        benchmark.write(out / "data", record.sequence, recorded_results(env))
+        if played is None:
+            benchmark.write(out / "data", record.sequence, recorded_results(env))
+        else:
+            benchmark.write_repetitions(out / "data", record.sequence, played.runs,
+                                        played.seconds)
         record.results = result_digest(out / "data", record.sequence, base.sequence_names)
         atomic_write_text(out / "sequences" / f"{record.sequence}.json",
                           json.dumps(record.to_json(), indent=2))
@@ -91,24 +99,30 @@ def play_episode(
     benchmark: Benchmark | None = None,
     on_frame: Callable[[], None] | None = None,
     on_reset: Callable[[dict[str, Any]], None] | None = None,
+    frame_seconds: list[float] | None = None,
 ) -> tuple[SequenceRecord, dict[str, Any]]:
     """Play one sequence; return its record and the final info (results stay in the env).
 
     The record's digest is ``benchmark``'s digest of the recorded results (without a
     benchmark, the environment's own). ``on_reset`` gets the reset info; ``on_frame`` is
-    called after every step.
+    called after every step; ``frame_seconds``, when given, gets the agent's seconds for each
+    frame (its ``act``; the first frame's includes its ``reset``: a tracker's init and update
+    times, as the got10k toolkit records them).
     """
     start = time.perf_counter()
     with recording_runtimes() as runtimes:
         observation, info = env.reset(options={"sequence": sequence})
         if on_reset is not None:
             on_reset(info)
+        tick = time.perf_counter()
         agent.reset(observation, info)
         frames, total = 0, 0.0
         terminated = truncated = False
         while not (terminated or truncated):
             try:
                 action = agent.act(observation)
+                if frame_seconds is not None:
+                    frame_seconds.append(time.perf_counter() - tick)
             except Exception as exc:
                 raise RuntimeError(
                     f"agent '{getattr(agent, 'name', '') or type(agent).__name__}' failed on "
@@ -120,8 +134,40 @@ def play_episode(
             frames += 1
             if on_frame is not None:
                 on_frame()
+            tick = time.perf_counter()
     seconds = time.perf_counter() - start
     digest = (benchmark.digest(recorded_results(env)) if benchmark is not None
               else env.unwrapped.episode_digest())
     return SequenceRecord(sequence, frames, seconds, digest, total,
                           runtimes=sorted(runtimes)), info
+
+
+@dataclass
+class Played:
+    """Every repetition of one sequence: results (the benchmark's form) and per-frame times."""
+
+    runs: list[Any]
+    seconds: list[list[float]]
+
+
+def play_repetitions(env: gym.Env, agent: Any, sequence: str, *, benchmark: Benchmark,
+                     repeats: int = 1, on_frame: Callable[[], None] | None = None,
+                     ) -> tuple[SequenceRecord, Played]:
+    """Play ``sequence`` ``repeats`` times in a row with the same agent.
+
+    Returns the first repetition's record (what a run without repetitions records) and
+    every repetition's results and per-frame agent times. An agent whose episodes are
+    deterministic gives equal repetitions; one with randomness it does not reset gives
+    different ones (the spread ``unitrack evaluate --repeats`` reports).
+    """
+    played = Played([], [])
+    record = None
+    for _ in range(repeats):
+        seconds: list[float] = []
+        this, _ = play_episode(env, agent, sequence, benchmark=benchmark, on_frame=on_frame,
+                               frame_seconds=seconds)
+        record = record or this
+        played.runs.append(recorded_results(env))
+        played.seconds.append(seconds)
+    assert record is not None, "repeats must be at least 1"
+    return record, played

@@ -64,6 +64,8 @@ def _run_difference(previous: Any, spec: RunSpec) -> str:
             changes += option_changes(old, new, label)
         elif old != new:
             changes.append(f"{label}: {old!r} -> {new!r}")
+    if previous.get("repeats", 1) != now.get("repeats", 1):
+        changes.append(f"--repeats: {previous.get('repeats', 1)!r} -> {now.get('repeats', 1)!r}")
     return "; ".join(changes) or "another run.json format"
 
 
@@ -129,6 +131,16 @@ def stale_reason(out: Path, base: Any, name: str, stamp: Stamp) -> str | None:
     return None
 
 
+def _stored_repeats(out: Path) -> int:
+    """The ``repeats`` of the run stored in ``out`` (1 when it has none or no readable run.json)."""
+    try:
+        repeats = json.loads((out / "run.json").read_text()).get("repeats", 1)
+    except (OSError, ValueError, AttributeError):
+        return 1
+    return repeats if isinstance(repeats, int) and not isinstance(repeats, bool) and \
+        repeats >= 1 else 1
+
+
 @contextlib.contextmanager
 def _stored_run(env_id: str, agent: str | type, out: Path, env_kwargs: dict[str, Any] | None,
                 agent_kwargs: dict[str, Any] | None, sequences: Sequence[str] | None,
@@ -141,7 +153,8 @@ def _stored_run(env_id: str, agent: str | type, out: Path, env_kwargs: dict[str,
     agent_kwargs = dict(agent_kwargs or {})
     cls = agent_class(agent)
     name = agent if isinstance(agent, str) else (getattr(cls, "name", "") or cls.__qualname__)
-    spec = RunSpec(env_id, name, portable_reference(cls), dict(env_kwargs or {}), agent_kwargs)
+    spec = RunSpec(env_id, name, portable_reference(cls), dict(env_kwargs or {}), agent_kwargs,
+                   _stored_repeats(out))
     check_run_json(out, spec)
     env = spec.make_env()
     try:

@@ -73,6 +73,9 @@ class RunReport:
     replayed: dict[str, str] = field(default_factory=dict)
     restamped: dict[str, list[str]] = field(default_factory=dict)
     """Sequences kept across an edit of the agent's code (``restamp=True``), with the files."""
+    repetitions: dict[str, Any] | None = None
+    """With ``repeats > 1``: every repetition's scores and their spread
+    (:func:`.repetitions.repetition_scores`, also in ``metrics.json``)."""
 
     @property
     def combined(self) -> dict[str, float]:
@@ -158,7 +161,8 @@ def _sequence_lengths(bench: Benchmark, todo: list[str]
 
 
 def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str],
-                     records: dict[str, SequenceRecord]) -> ScoreReport | None:
+                     records: dict[str, SequenceRecord],
+                     ) -> tuple[ScoreReport | None, dict[str, Any] | None]:
     with_gt = bench.scorable(names)
     scores = bench.score_folder(out / "data", with_gt) if with_gt else None
     payload: dict[str, Any] = {
@@ -166,9 +170,16 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
         "agent": spec.agent,
         "sequences": {name: records[name].to_json() for name in names},
     }
+    repeated = None
     if scores is not None:
         payload |= {"benchmark": scores.benchmark, "per_sequence": scores.per_sequence,
                     "combined": scores.combined, "combined_covers": scores.coverage_json()}
+        if spec.repeats > 1:
+            from .repetitions import repetition_scores
+
+            repeated = repetition_scores(bench, out / "data", list(scores.per_sequence),
+                                         spec.repeats)
+            payload["repetitions"] = repeated
     else:
         payload["note"] = "this split has no ground truth; results were written, not scored"
     try:
@@ -184,7 +195,7 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
         from .analysis.events import write_run_events
 
         write_run_events(out, bench, with_gt)
-    return scores
+    return scores, repeated
 
 
 def run(
@@ -203,6 +214,7 @@ def run(
     isolate: bool = False,
     backend: str = "local",
     address: str | None = None,
+    repeats: int = 1,
 ) -> RunReport:
     """Evaluate an agent on every sequence of an environment.
 
@@ -215,8 +227,8 @@ def run(
     supervised child process (:func:`.serial.play_isolated`, the CLI's default): a step
     stuck in native code, a crash or a hung ``close()`` then ends only what it was doing.
     ``backend="ray"`` plays each sequence as a Ray task (:mod:`.ray_sequences`; ``address``:
-    a cluster, default a local Ray). Returns a :class:`RunReport`, the metrics also in
-    ``out/metrics.json``.
+    a cluster, default a local Ray). ``repeats``: plays per sequence (:mod:`.repetitions`).
+    Returns a :class:`RunReport`, the metrics also in ``out/metrics.json``.
 
     Raises:
         RunFailed: some sequences failed (the others are kept; rerun to resume).
@@ -228,9 +240,8 @@ def run(
                        address)
     sequences = [sequences] if isinstance(sequences, str) else sequences  # a name, not letters
     cls, name, reference = _resolve_agent(agent, agent_kwargs, options.elsewhere, env_id)
-    spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs)
-    out = Path(out)
-    check_out_folder(out)
+    spec = RunSpec(env_id, name, reference, dict(env_kwargs or {}), agent_kwargs, repeats)
+    check_out_folder(out := Path(out))
     env = spec.make_env()
     try:
         base = env.unwrapped
@@ -310,7 +321,7 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     causes: dict[str, BaseException] = {}
     manifest.claim(todo)
     try:
-        with RunProgress(sum(lengths.values()), enabled=options.progress) as bar:
+        with RunProgress(sum(lengths.values()) * spec.repeats, enabled=options.progress) as bar:
             if options.backend == "ray" and todo:
                 from .ray_sequences import play_on_ray
 
@@ -337,6 +348,6 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     from .analysis.events import events_path
 
     manifest.add(out / "metrics.json", *(events_path(out, name) for name in names))
-    scores = _score_and_write(out, spec, bench, names, records)
+    scores, repeated = _score_and_write(out, spec, bench, names, records)
     return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed,
-                     restamped)
+                     restamped, repeated)

@@ -20,7 +20,7 @@ import gymnasium as gym
 
 from unitrack_env.benchmarks.base import Benchmark
 
-from .episode import SequenceRecord, play_episode, save_episode
+from .episode import SequenceRecord, play_repetitions, save_episode
 from .identity import Stamp
 from .pool import SupervisedPool
 from .watchdog import StepTimeout, StepWatchdog, limit
@@ -55,8 +55,8 @@ def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Pa
                bar.start_sequence(name)
                watchdog.start(name)
                try:
-                   record, _ = play_episode(player, agent_obj, name, benchmark=bench,
-                                            on_frame=advance)
+                   record, played = play_repetitions(player, agent_obj, name, benchmark=bench,
+                                                     repeats=spec.repeats, on_frame=advance)
                except (*SEQUENCE_ERRORS, StepTimeout) as exc:
                    watchdog.stop()
                    failures[name], causes[name] = SequenceFailure.describe(exc), exc
@@ -68,7 +68,7 @@ def play_here(spec: Any, env: gym.Env, bench: Benchmark, agent_obj: Any, out: Pa
                    continue
                watchdog.stop()
                stamps[name].apply(record)
-               save_episode(out, player, record, bench)
+               save_episode(out, player, record, bench, played)
                records[name] = record
     finally:
         if player is not env:
@@ -106,8 +106,9 @@ def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None, e
     env = _KEPT["env"]
     beat(0)  # the episode starts: the parent's step clock runs from here
     try:
-        record, _ = play_episode(env, _KEPT["agent"], sequence,
-                                 benchmark=env.unwrapped.scoring, on_frame=beat)
+        record, played = play_repetitions(env, _KEPT["agent"], sequence,
+                                          benchmark=env.unwrapped.scoring,
+                                          repeats=spec.repeats, on_frame=beat)
     except SEQUENCE_ERRORS as exc:
         failure = ("error", SequenceFailure.describe(exc), traceback.format_exc())
         env.close()  # the next episode gets a fresh environment, as in this process
@@ -115,7 +116,7 @@ def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None, e
         return failure
     assert stamp is not None
     stamp.apply(record)
-    save_episode(Path(out), env, record, env.unwrapped.scoring)
+    save_episode(Path(out), env, record, env.unwrapped.scoring, played)
     return "ok", record.to_json()
 
 

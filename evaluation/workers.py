@@ -88,7 +88,7 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
     """
     from unitrack_env.agents.base import close_agent
 
-    from .episode import OutputError, play_episode, save_episode
+    from .episode import OutputError, play_repetitions, save_episode
     from .pool import CLOSING
 
     env = agent = None
@@ -98,9 +98,10 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
         bench = env.unwrapped.scoring
         if beat is not None:
             beat(0)  # the episode starts: the parent's step clock runs from here
-        record, _ = play_episode(env, agent, sequence, benchmark=bench, on_frame=beat)
+        record, played = play_repetitions(env, agent, sequence, benchmark=bench,
+                                          repeats=spec.repeats, on_frame=beat)
         stamp.apply(record)  # an identity.Stamp
-        save_episode(Path(out), env, record, bench)
+        save_episode(Path(out), env, record, bench, played)
         if beat is not None:
             beat(CLOSING)  # a close() that hangs is named as such
         return "ok", record.to_json()

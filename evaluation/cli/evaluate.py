@@ -54,6 +54,11 @@ def add_arguments(ev: argparse.ArgumentParser) -> None:
                     "sequences play: local processes (--workers) or Ray tasks, one each")
     ev.add_argument("--address", help="with --backend ray: the cluster to join, auto or "
                     "ray://host:port (default: start a local Ray with --workers CPUs)")
+    ev.add_argument("--repeats", type=positive_int, default=1, metavar="K",
+                    help="play each sequence K times in a row (GOT-10k's protocol asks for 3): "
+                    "each repetition is written (GOT-10k: <seq>_00k.txt; others: "
+                    "data/repeat-00k/) and the metrics' mean, min and max over them are "
+                    "printed and stored in metrics.json (default: 1)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     format_option(ev)
 
@@ -76,7 +81,7 @@ def run(args: argparse.Namespace, out: Console) -> int:
                       workers=args.workers, overwrite=args.overwrite, isolate=not args.in_process,
                       progress=not args.quiet and args.format == "table",
                       step_timeout=args.step_timeout, restamp=args.restamp,
-                      backend=args.backend, address=args.address)
+                      backend=args.backend, address=args.address, repeats=args.repeats)
     log = out if args.format == "table" else console(stderr=True)
     if cache_summary():
         log.print(cache_summary(), markup=False)
@@ -96,6 +101,9 @@ def run(args: argparse.Namespace, out: Console) -> int:
         print_metrics(out, report.scores.per_sequence, report.scores.combined,
                        f"{args.agent} on {args.env}", _columns(args.env, env_given),
                        args.format, fps, coverage=report.scores.coverage)
+        if report.repetitions is not None and args.format == "table":
+            out.print(spread_table(report.repetitions, _columns(args.env, env_given),
+                                   out.width))
         undefined = sorted(name for name, values in report.scores.per_sequence.items()
                            if any(not _defined(v) for v in values.values()))
         if undefined:
@@ -117,3 +125,37 @@ def _columns(env_id: str, env_given: dict[str, Any]) -> tuple[str, ...]:
     from unitrack_env.benchmarks import benchmark_for
 
     return benchmark_for(env_id, **env_given).columns
+
+
+def spread_table(repeated: dict[str, Any], columns: tuple[str, ...], width: int) -> Any:
+    """A table of each metric's mean [min, max] over the repetitions, per sequence.
+
+    The leading columns that fit in ``width``; the title counts those left to metrics.json.
+    """
+    from rich.markup import escape
+    from rich.table import Table
+
+    from ..analysis.tables import format_cell, table_columns
+
+    spread = repeated["spread"]
+    rows = {**spread["per_sequence"], "COMBINED": spread["combined"]}
+    cells = {label: {m: f"{format_cell(m, v['mean'])} [{format_cell(m, v['min'])}, "
+                        f"{format_cell(m, v['max'])}]" for m, v in stats.items()}
+             for label, stats in rows.items()}
+    shown, used = [], max(len(label) for label in rows) + 4
+    for name in table_columns(columns, list(rows.values())):
+        used += max(len(name), *(len(c.get(name, "-")) for c in cells.values())) + 3
+        if used > width and shown:
+            break
+        shown.append(name)
+    left = len(table_columns(columns, list(rows.values()))) - len(shown)
+    title = f"spread over {repeated['repeats']} repetitions: mean [min, max]" + (
+        f" ({left} more column(s) in metrics.json)" if left else "")
+    table = Table(title=escape(title), title_justify="left")
+    table.add_column("sequence", no_wrap=True)
+    for name in shown:
+        table.add_column(name, justify="right", no_wrap=True)
+    for label, row in cells.items():
+        table.add_row(label, *(escape(row.get(m, "-")) for m in shown),
+                      style="bold" if label == "COMBINED" else None)
+    return table

@@ -147,7 +147,7 @@ def test_a_killed_run_leaves_its_claim(tmp_path, monkeypatch):
     out = tmp_path / "run"
     calls = []
 
-    def crash(out_, env, record, bench):  # the first results are written, then a "kill"
+    def crash(out_, env, record, bench, *played):  # the first results are written, then a "kill"
         bench.write(out_ / "data", record.sequence, episode.recorded_results(env))
         calls.append(record.sequence)
         raise KeyboardInterrupt

@@ -146,6 +146,25 @@ class Benchmark(ABC):
     def read(self, folder: str | os.PathLike, sequence: str) -> Any:
         """Read one sequence's result file(s) back from ``folder``."""
 
+    def write_repetitions(self, folder: str | os.PathLike, sequence: str, runs: list[Any],
+                          seconds: list[list[float]] | None = None) -> None:
+        """Write every repetition of one sequence (``runs[0]`` is repetition 1), atomically.
+
+        ``seconds``: each repetition's per-frame times of the agent. Default: repetition 1 as
+        :meth:`write` writes it, repetition ``k`` the same way into
+        ``<folder>/repeat-<k:03d>/`` (:func:`repetition_folder`); the times are not written.
+        """
+        for k, results in enumerate(runs, start=1):
+            self.write(repetition_folder(folder, k), sequence, results)
+
+    def score_repetition(self, folder: str | os.PathLike, sequences: list[str],
+                         repetition: int) -> ScoreReport:
+        """Score repetition ``repetition`` (1-based) alone, as :meth:`write_repetitions` wrote it.
+
+        Default: :meth:`score_files` on :func:`repetition_folder`.
+        """
+        return self.score_files(repetition_folder(folder, repetition), sequences)
+
     @abstractmethod
     def digest(self, results: Any) -> str:
         """A stable SHA-256 digest of one sequence's results (the recorded actions)."""
@@ -309,6 +328,15 @@ class Benchmark(ABC):
         Default: the sequence info's ``frame_rate``, else 30.
         """
         return float(getattr(self.sequence_info(sequence), "frame_rate", 0) or 30.0)
+
+
+def repetition_folder(folder: str | os.PathLike, repetition: int) -> Path:
+    """Where repetition ``repetition`` (1-based) of a run's results is by default.
+
+    ``folder`` itself for the first, ``<folder>/repeat-<k:03d>`` (``repeat-002`` ...) for the
+    others.
+    """
+    return Path(folder) if repetition == 1 else Path(folder) / f"repeat-{repetition:03d}"
 
 
 def refuse_run_folder(folder: str | os.PathLike) -> None:

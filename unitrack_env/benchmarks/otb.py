@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import os
 import warnings
@@ -14,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from unitrack_env.benchmarks.base import Benchmark, data_root, one_of, rounded_digest
-from unitrack_env.benchmarks.sot_columns import GOT10K_COLUMN, LASOT_COLUMN, OTB_COLUMN
+from unitrack_env.benchmarks.sot_columns import LASOT_COLUMN, OTB_COLUMN
 from unitrack_env.benchmarks.views import Attributes, Curve, ReportView
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.lasot import (
@@ -23,6 +24,7 @@ from unitrack_env.datasets.lasot import (
     GOT10kDataset,
     LaSOTDataset,
 )
+from unitrack_env.datasets.nfs import NFS_SYNTHETIC, NfSDataset
 from unitrack_env.datasets.otb import OTBDataset
 from unitrack_env.datasets.sot import SOTSequence, read_box_file
 from unitrack_env.datasets.sot_attributes import LASOT, OTB2015, UAV123, AttributeSource
@@ -40,11 +42,8 @@ from unitrack_env.metrics.sot import (
     PRECISION_THRESHOLD_PX,
     SOTScores,
     aggregate_sot,
-    bounded_overlap,
     center_error_per_frame,
     evaluate_sot_sequence,
-    got10k_overlaps,
-    got10k_scores,
     overlap_per_frame,
     repair_predictions,
     valid_ground_truth,
@@ -71,9 +70,11 @@ class SOTFormat:
     the OTB reader). ``absent_fails``: frames the reader flags ``absent`` are scored by the
     LaSOT toolkit's rule (removed, the rates still divided by every frame);
     ``normalized``: the scores add LaSOT's normalized precision (the benchmark is then a
-    :class:`SOTProtocolBenchmark`, whose columns include it); ``benchmark="got10k"``: the
-    GOT-10k protocol (:class:`GOT10kBenchmark`), ``"lasot"``: :class:`LaSOTBenchmark` (its
-    own scorecard column); ``attributes``: where its sequences' attributes are (None: none).
+    :class:`SOTProtocolBenchmark`, whose columns include it); ``benchmark``: ``"otb"`` (one
+    of those two) or the ``"module:Class"`` of the format's own benchmark, a subclass of
+    :class:`OTBBenchmark` (GOT-10k's protocol:
+    :class:`unitrack_env.benchmarks.got10k.GOT10kBenchmark`; LaSOT's scorecard column:
+    :class:`LaSOTBenchmark`); ``attributes``: where its sequences' attributes are (None: none).
     """
 
     reader: Callable[..., SequenceDataset[SOTSequence]]
@@ -136,8 +137,10 @@ class OTBBenchmark(Benchmark):
         else:
             path, synthetic = data_root(root, chosen.folder, kind.benchmarks[0], kind)
         reader = OTBDataset if synthetic and kind is None else chosen.reader
-        klass = {"got10k": GOT10kBenchmark, "lasot": LaSOTBenchmark}.get(
-            chosen.benchmark, SOTProtocolBenchmark if chosen.normalized else OTBBenchmark)
+        klass = SOTProtocolBenchmark if chosen.normalized else OTBBenchmark
+        if chosen.benchmark != "otb":  # its own module imports this one: looked up here
+            module, _, name = chosen.benchmark.partition(":")
+            klass = getattr(importlib.import_module(module), name)
         dataset = reader(path, **options) if reader is chosen.reader else reader(path)
         return klass(dataset, synthetic=synthetic, rules=chosen.name, sot_format=chosen)
 
@@ -307,112 +310,21 @@ class LaSOTBenchmark(SOTProtocolBenchmark):
     scorecard = LASOT_COLUMN
 
 
-class GOT10kBenchmark(OTBBenchmark):
-    """GOT-10k's protocol: AO, SR0.5 and SR0.75 over the visible frames after the first.
-
-    Results are written as the evaluation server's layout, ``<folder>/<seq>/<seq>_001.txt``
-    (one ``x,y,w,h`` line per frame; ``_002``, ``_003`` for further repetitions, all pooled
-    when scoring, as the toolkit does). Frames the reader flags absent (``cover == 0``) are
-    left out and boxes are clipped to the image; the combined row pools the frames of every
-    sequence (not a mean of sequences).
-    """
-
-    columns = ("AO", "SR0.5", "SR0.75")
-    scorecard = GOT10K_COLUMN
-
-    @property
-    def frame_metrics(self) -> Mapping[str, Callable[[pd.DataFrame], np.ndarray]]:
-        """Per-frame AO, SR0.5 and SR0.75 (NaN for frames not scored: the first, absent ones).
-
-        Weighted by visible frames (:meth:`combine_weights`) their means pool the frames, as
-        the score does; the events hold repetition 1 (what ``unitrack evaluate`` writes).
-        """
-        def at(threshold: float | None) -> Callable[[pd.DataFrame], np.ndarray]:
-            def per_frame(d: pd.DataFrame) -> np.ndarray:
-                o = self._frame_overlaps(d)
-                return o if threshold is None else np.where(np.isnan(o), np.nan, o > threshold)
-            return per_frame
-
-        return MappingProxyType({"AO": at(None), "SR0.5": at(0.5), "SR0.75": at(0.75)})
-
-    def _frame_overlaps(self, d: pd.DataFrame) -> np.ndarray:
-        loaded = self.load(str(d["sequence"].iloc[0]))
-        rows = d["frame"].to_numpy(int) - 1
-        pred = d[["tx", "ty", "tw", "th"]].to_numpy(float)
-        overlaps = bounded_overlap(pred, loaded.boxes[rows], loaded.image_size)
-        return np.where((rows == 0) | np.asarray(loaded.absent, bool)[rows], np.nan, overlaps)
-
-    def _event_predictions(self, results: np.ndarray, gt: np.ndarray) -> np.ndarray:
-        """The boxes as written: GOT-10k scores them unrepaired."""
-        return np.asarray(results, dtype=np.float64)
-
-    def _result_path(self, folder: str | os.PathLike, sequence: str, repetition: int = 1,
-                     ) -> Path:
-        return Path(folder) / sequence / f"{sequence}_{repetition:03d}.txt"
-
-    def write(self, folder: str | os.PathLike, sequence: str, results: np.ndarray) -> None:
-        """Write ``<folder>/<seq>/<seq>_001.txt`` (the server's layout), atomically."""
-        atomic_write_text(self._result_path(folder, sequence), format_otb_results(results))
-
-    def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
-        """Read repetition 1; DataFormatError unless it has one box per frame."""
-        return self._read_run(self._result_path(folder, sequence), self.load(sequence))
-
-    def _read_run(self, path: Path, loaded: SOTSequence) -> np.ndarray:
-        if not path.is_file():
-            raise DataFormatError(path, f"no result file for sequence '{loaded.name}'")
-        boxes = read_box_file(path)
-        if len(boxes) != loaded.num_frames:
-            raise DataFormatError(path, f"has {len(boxes)} boxes but '{loaded.name}' has "
-                                        f"{loaded.num_frames} frames")
-        return boxes
-
-    def _overlaps(self, sequence: SOTSequence, results: np.ndarray) -> np.ndarray:
-        cover = (~np.asarray(sequence.absent)).astype(int)
-        return got10k_overlaps(results, sequence.boxes, cover, sequence.image_size)
-
-    def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
-        """AO, SR0.5 and SR0.75 of one run of a sequence."""
-        loaded = self.load(sequence)
-        return got10k_scores(self._overlaps(loaded, results))
-
-    def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
-        """Score every repetition ``<seq>/<seq>_<k>.txt`` found, frames pooled."""
-        per_sequence, pooled = {}, []
-        for name in sequences:
-            loaded = self.load(self.dataset.resolve(name))
-            runs = sorted((Path(folder) / loaded.name).glob(f"{loaded.name}_[0-9][0-9][0-9].txt"))
-            if not runs:
-                runs = [self._result_path(folder, loaded.name)]  # its error names it
-            overlaps = np.concatenate([self._overlaps(loaded, self._read_run(p, loaded))
-                                       for p in runs])
-            per_sequence[loaded.name] = got10k_scores(overlaps)
-            pooled.append(overlaps)
-        combined = got10k_scores(np.concatenate(pooled)) if pooled else {}
-        return ScoreReport(self.name, per_sequence, combined)
-
-    def curves(self, folder: str | os.PathLike, sequences: list[str]) -> list[Curve]:
-        """None drawn: GOT-10k's scores pool frames (OTB's plots would be another protocol)."""
-        return []
-
-    def combine_weights(self, events: pd.DataFrame, sequences: list[str]) -> dict[str, float]:
-        """Visible frames after the first: GOT-10k pools frames."""
-        return {s: float((~self.load(s).absent[1:]).sum()) for s in sequences}
-
-
 #: The data formats :class:`OTBBenchmark` reads (its and ``OTBEnv``'s ``data_format=``). A new
 #: format of the task is one row here (or added by a project at run time) beside its reader;
 #: without ``root=`` and data it plays its own synthetic default, else the task's (OTB layout).
 SOT_FORMATS: dict[str, SOTFormat] = {
     "otb": SOTFormat(OTBDataset, BENCHMARK_FOLDER, BENCHMARK, attributes=OTB2015),
     "lasot": SOTFormat(LaSOTDataset, "LaSOT", "LaSOT", LASOT_SYNTHETIC, absent_fails=True,
-                       normalized=True, benchmark="lasot", attributes=LASOT),
+                       normalized=True, benchmark="unitrack_env.benchmarks.otb:LaSOTBenchmark",
+                       attributes=LASOT),
     "uav123": SOTFormat(UAV123Dataset, "UAV123", "UAV123", UAV123_SYNTHETIC, normalized=True,
                         attributes=UAV123),
     "got10k": SOTFormat(GOT10kDataset, "GOT-10k", "GOT-10k", GOT10K_SYNTHETIC,
-                        benchmark="got10k"),
+                        benchmark="unitrack_env.benchmarks.got10k:GOT10kBenchmark"),
     "trackingnet": SOTFormat(TrackingNetDataset, "TrackingNet", "TrackingNet",
                              TRACKINGNET_SYNTHETIC, normalized=True),
+    "nfs": SOTFormat(NfSDataset, "NfS", "NfS", NFS_SYNTHETIC),
 }
 
 

@@ -1,4 +1,4 @@
-"""UAV123 reader (``data_seq/UAV123[_10fps]/<seq>/%06d.jpg``, ``anno/...``), synthetic default."""
+"""UAV123 and UAV20L reader (``data_seq/UAV123[_10fps]/<seq>/%06d.jpg``, ``anno/...``)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,13 @@ import numpy as np
 
 from unitrack_env.datasets.base import SequenceDataset
 from unitrack_env.datasets.otb import _check_boxes
-from unitrack_env.datasets.sot import SOTSequence, numbered_images, read_box_file, read_image_size
+from unitrack_env.datasets.sot import (
+    SOTSequence,
+    numbered_images,
+    read_box_file,
+    read_image_size,
+    select_frames,
+)
 from unitrack_env.datasets.synthetic.cache import SyntheticKind
 from unitrack_env.datasets.synthetic.otb import render_target, write_images
 from unitrack_env.datasets.synthetic.scene_model import SceneConfig
@@ -18,40 +24,93 @@ from unitrack_env.errors import DataFormatError, UnknownSequenceError
 
 #: ``variant=`` -> the release's folder name under ``data_seq/`` and ``anno/``.
 UAV123_VARIANTS = {"30fps": "UAV123", "10fps": "UAV123_10fps"}
-#: An annotation of a sub-sequence (``person12_1``): its frames are a range of the folder
-#: ``person12`` that only the toolkit's ``configSeqs.m`` gives, so such files are skipped.
+#: ``split=`` values: UAV123 (123 sequences) or UAV20L (20 long ones, ``anno/UAV20L/``, frames
+#: in ``data_seq/UAV123/``; no 10 fps release).
+UAV123_SPLITS = ("UAV123", "UAV20L")
+#: UAV123's sub-sequences ``<folder>_<k>``: the 30 fps frame range (first, last) of each part
+#: of a video folder, the facts of the UAV123 toolkit's ``configSeqs.m`` as the ``got10k``
+#: package's ``datasets/uav123.json`` and pytracking's ``uavdataset.py`` carry them. At 10 fps,
+#: 30 fps frame ``f`` is frame ``(f - 1) // 3 + 1`` (every bound is 1 modulo 3, and the
+#: UAV123_10fps lists give these numbers, e.g. person12_2 201-541, uav1_3 825-1157).
+UAV123_SUBSEQUENCES: dict[str, tuple[tuple[int, int], ...]] = {
+    "bird1": ((1, 253), (775, 1477), (1573, 2437)),
+    "car1": ((1, 751), (751, 1627), (1627, 2629)),
+    "car6": ((1, 487), (487, 1807), (1807, 2953), (2953, 3925), (3925, 4861)),
+    "car8": ((1, 1357), (1357, 2575)),
+    "car16": ((1, 415), (415, 1993)),
+    "group1": ((1, 1333), (1333, 2515), (2515, 3925), (3925, 4873)),
+    "group2": ((1, 907), (907, 1771), (1771, 2683)),
+    "group3": ((1, 1567), (1567, 2827), (2827, 4369), (4369, 5527)),
+    "person2": ((1, 1189), (1189, 2623)),
+    "person4": ((1, 1501), (1501, 2743)),
+    "person5": ((1, 877), (877, 2101)),
+    "person7": ((1, 1249), (1249, 2065)),
+    "person8": ((1, 1075), (1075, 1525)),
+    "person12": ((1, 601), (601, 1621)),
+    "person14": ((1, 847), (847, 1813), (1813, 2923)),
+    "person17": ((1, 1501), (1501, 2347)),
+    "person19": ((1, 1243), (1243, 2791), (2791, 4357)),
+    "truck4": ((1, 577), (577, 1261)),
+    "uav1": ((1, 1555), (1555, 2377), (2473, 3469)),
+}
+#: An annotation named like a sub-sequence (``<folder>_<k>``).
 _SUBSEQUENCE = re.compile(r"^(.+)_(\d+)$")
 
 
+def subsequence_range(name: str, folder: str) -> tuple[str, range] | None:
+    """``(video folder, frame numbers)`` of sub-sequence ``name`` in release ``folder``.
+
+    None when ``name`` is not one of :data:`UAV123_SUBSEQUENCES`' parts.
+    """
+    match = _SUBSEQUENCE.match(name)
+    parts = UAV123_SUBSEQUENCES.get(match.group(1), ()) if match else ()
+    if not match or not 1 <= int(match.group(2)) <= len(parts):
+        return None
+    first, last = parts[int(match.group(2)) - 1]
+    if folder == UAV123_VARIANTS["10fps"]:
+        first, last = (first - 1) // 3 + 1, (last - 1) // 3 + 1
+    return match.group(1), range(first, last + 1)
+
+
 class UAV123Dataset(SequenceDataset[SOTSequence]):
-    """UAV123: ``<root>/data_seq/<V>/<seq>/%06d.jpg`` and ``<root>/anno/<V>/<seq>.txt``.
+    """UAV123: ``<root>/data_seq/<V>/<seq>/%06d.jpg`` and ``<root>/anno/<A>/<seq>.txt``.
 
     ``<V>`` is ``UAV123`` (``variant="30fps"``, default) or ``UAV123_10fps`` (``"10fps"``);
-    when only one of them is present it is read. A NaN annotation row is a frame where the
-    target is absent (``absent``). An annotation file whose frame folder is missing and whose
-    name ends in ``_<k>`` (a sub-sequence of a longer video, ``person12_1``) is skipped with a
-    warning: its frame range is in the toolkit's ``configSeqs.m``, not in the release's files.
+    when only one of them is present it is read. ``<A>`` is ``<V>``, or ``UAV20L`` with
+    ``split="UAV20L"`` (frames from ``data_seq/UAV123``). A NaN annotation row is a frame where
+    the target is absent (``absent``). A sub-sequence (``person12_1``) plays its frame range
+    of its video's folder (:data:`UAV123_SUBSEQUENCES`); another annotation without a frame
+    folder whose name ends in ``_<k>`` is skipped with a warning.
     """
 
-    def __init__(self, root: str | Path, variant: str | None = None) -> None:
+    def __init__(self, root: str | Path, variant: str | None = None,
+                 split: str | None = None) -> None:
         self.root = Path(root)
         if not self.root.is_dir():
             raise DataFormatError(self.root, "UAV123 root folder missing")
-        self.folder = self._variant_folder(variant)
-        anno = self.root / "anno" / self.folder
-        frames = self.root / "data_seq" / self.folder
-        self._files: dict[str, Path] = {}
+        self.split = split or "UAV123"
+        if self.split not in UAV123_SPLITS:
+            raise ValueError(f"UAV123 split {split!r}; valid: {', '.join(UAV123_SPLITS)}")
+        if self.split == "UAV20L" and variant not in (None, "30fps"):
+            raise ValueError("UAV20L has no 10 fps release; drop variant= or use split=UAV123")
+        self.folder = "UAV123" if self.split == "UAV20L" else self._variant_folder(variant)
+        anno = self.root / "anno" / ("UAV20L" if self.split == "UAV20L" else self.folder)
+        self._files: dict[str, tuple[Path, Path, range | None]] = {}
         skipped = []
         for path in sorted(anno.glob("*.txt")):
-            if (frames / path.stem).is_dir():
-                self._files[path.stem] = path
-            elif _SUBSEQUENCE.match(path.stem):
+            frames, numbers = self.root / "data_seq" / self.folder / path.stem, None
+            known = subsequence_range(path.stem, self.folder)
+            if known is not None:
+                frames, numbers = frames.parent / known[0], known[1]
+            if frames.is_dir():
+                self._files[path.stem] = (path, frames, numbers)
+            elif known is None and _SUBSEQUENCE.match(path.stem):
                 skipped.append(path.stem)
             else:
-                raise DataFormatError(path, f"no frame folder {frames / path.stem}")
+                raise DataFormatError(path, f"no frame folder {frames}")
         if skipped:
-            warnings.warn(f"{anno}: sub-sequences {', '.join(skipped[:5])} skipped (their frame "
-                          "ranges are in the UAV123 toolkit's configSeqs.m)", stacklevel=2)
+            warnings.warn(f"{anno}: {', '.join(skipped[:5])} skipped (named like sub-sequences "
+                          "but not among UAV123's, and no frame folder)", stacklevel=2)
         if not self._files:
             raise DataFormatError(anno, "no <seq>.txt annotation with a frame folder found")
         self.sequence_names: list[str] = list(self._files)
@@ -71,17 +130,24 @@ class UAV123Dataset(SequenceDataset[SOTSequence]):
         """Read one sequence; DataFormatError naming the file when it cannot be played."""
         if name not in self._files:
             raise UnknownSequenceError(f"no UAV123 sequence '{name}' in {self.root}")
-        gt = self._files[name]
+        gt, folder, numbers = self._files[name]
         boxes = read_box_file(gt)
         _check_boxes(gt, boxes, 0)
-        images = numbered_images(self.root / "data_seq" / self.folder / name)
-        numbers = sorted(images)
-        if len(numbers) != len(boxes):
-            raise DataFormatError(gt, f"has {len(boxes)} rows but the frame folder holds "
-                                      f"{len(numbers)} frames")
-        frames = tuple(images[n] for n in numbers)
+        if numbers is None:
+            images = numbered_images(folder)
+            if len(images) != len(boxes):
+                raise DataFormatError(gt, f"has {len(boxes)} rows but the frame folder holds "
+                                          f"{len(images)} frames")
+            numbers = sorted(images)
+            frames = tuple(images[n] for n in numbers)
+        else:
+            if len(numbers) != len(boxes):
+                raise DataFormatError(gt, f"has {len(boxes)} rows but the sub-sequence is frames "
+                                          f"{numbers.start}-{numbers.stop - 1} of {folder}")
+            frames = select_frames(folder, numbers)
+        release = "UAV20L" if self.split == "UAV20L" else self.folder
         return SOTSequence(name, frames, tuple(numbers), boxes, read_image_size(frames[0]),
-                           np.isnan(boxes).any(axis=1), self.folder)
+                           np.isnan(boxes).any(axis=1), release)
 
 
 _SCENE = {"num_objects": 3, "num_crossings": 1, "num_static_persons": 0, "num_occluders": 1,

@@ -96,15 +96,19 @@ class OTBEnv(SequenceEnv[SOTSequence]):
     error over the true box's width and height) at 0.2. ``UniTrack/UAV123-v0`` reads UAV123
     (``data_seq/UAV123[_10fps]/<seq>/%06d.jpg``, ``anno/UAV123[_10fps]/<seq>.txt``, a NaN row
     = target absent, scored by the OTB toolkit's rule for invalid ground truth;
-    ``variant="10fps"``); annotations of sub-sequences (``person12_1``) are skipped with a
-    warning, their frame ranges being in the toolkit's ``configSeqs.m`` only. Both have a
-    synthetic default in their own layout (with absent frames), and report ``NormPrecision``.
+    ``variant="10fps"``; a sub-sequence such as ``person12_1`` plays its frame range of its
+    video's folder, from the toolkit's ``configSeqs.m``; ``split="UAV20L"`` reads UAV20L's
+    whole videos). ``UniTrack/NfS-v0`` reads NfS (``<seq>/<fps>/<seq>/%05d.jpg`` and
+    ``<seq>/<fps>/<seq>.txt`` VATIC rows, ``variant="30"`` or ``"240"``; a 30 fps file holding
+    the 240 fps rows keeps every eighth) scored by the OTB rules. All three have a
+    synthetic default in their own layout; LaSOT and UAV123 add ``NormPrecision``.
     ``UniTrack/GOT10k-v0`` reads GOT-10k (``<split>/list.txt``, ``<seq>/%08d.jpg``,
     ``groundtruth.txt``, ``absence.label``, ``cover.label``, ``cut_by_image.label``;
     ``split="val"`` by default, ``"test"`` has the first box only) and reports its AO, SR0.5
     and SR0.75 over the frames after the first with ``cover > 0``, boxes clipped to the
     image, frames pooled over sequences; results are written in the evaluation server's
-    layout ``<seq>/<seq>_001.txt``. No real GOT-10k sample is in the project's fixtures: it
+    layout ``<seq>/<seq>_001.txt`` (a run adds ``<seq>_time.txt`` and, with ``--repeats``,
+    ``<seq>_002.txt`` ...). No real GOT-10k sample is in the project's fixtures: it
     is tested on its synthetic default only. ``UniTrack/TrackingNet-v0`` reads TrackingNet
     (``TRAIN_<k>/`` and ``TEST/``, each with ``frames/<seq>/<i>.jpg`` and
     ``anno/<seq>.txt``; ``split="train"`` by default, ``"TRAIN_<k>"`` or ``"test"``, whose
@@ -165,7 +169,8 @@ class OTBEnv(SequenceEnv[SOTSequence]):
       :data:`unitrack_env.benchmarks.otb.SOT_FORMATS` (default ``"otb"``; a registered id of
       another SOT data set passes its own).
     - ``split``, ``variant``: passed to the format's reader (LaSOT: ``"test"``, ``"train"``,
-      ``"all"``, ``"ext"`` or a split file; UAV123: ``variant="10fps"``).
+      ``"all"``, ``"ext"`` or a split file; UAV123: ``variant="10fps"``, ``split="UAV20L"``;
+      NfS: ``variant="30"`` or ``"240"``).
     - ``max_frame_size``: bound ``(height, width)`` of the frame space.
     - ``decode_frames``: when False, ``frame`` is a 1x1 black placeholder (for agents that
       never look at pixels; saves the decode time).
