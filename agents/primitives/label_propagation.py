@@ -313,6 +313,23 @@ class MemorySearch(ABC):
         return [], []
 
 
+def window_offsets(tile: int, radius: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The ``(L,)`` row and column offsets of a tile's search window, within ``radius``.
+
+    Offsets are from the tile's top-left query minus ``floor(radius)`` (the padding), over
+    the ``tile + 2 pad`` square, kept where the nearest query of the tile is within the
+    radius: the tile square grown by the radius.
+    """
+    pad = int(math.floor(radius))
+    win = tile + 2 * pad
+    oy, ox = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
+    oy, ox = oy.reshape(-1), ox.reshape(-1)
+    gap_y = torch.clamp(torch.maximum(pad - oy, oy - (pad + tile - 1)), min=0)
+    gap_x = torch.clamp(torch.maximum(pad - ox, ox - (pad + tile - 1)), min=0)
+    keep = (gap_y * gap_y + gap_x * gap_x).double() <= radius * radius
+    return oy[keep], ox[keep]
+
+
 @dataclass(frozen=True)
 class LocalGeometry:
     """Layout of the tiled local search for one map size (``key``: what it was built for).
@@ -338,15 +355,7 @@ class LocalGeometry:
         pad = int(math.floor(radius))
         tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
         padded_h, padded_w = tiles_y * tile + 2 * pad, tiles_x * tile + 2 * pad
-        win = tile + 2 * pad
-        # Window positions (relative to the tile's top-left query, minus pad) within the
-        # radius of the nearest query of the tile: the tile square grown by the radius.
-        oy, ox = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
-        oy, ox = oy.reshape(-1), ox.reshape(-1)
-        gap_y = torch.clamp(torch.maximum(pad - oy, oy - (pad + tile - 1)), min=0)
-        gap_x = torch.clamp(torch.maximum(pad - ox, ox - (pad + tile - 1)), min=0)
-        keep = (gap_y * gap_y + gap_x * gap_x).double() <= radius * radius
-        oy, ox = oy[keep], ox[keep]  # (L,)
+        oy, ox = window_offsets(tile, radius)
         ty = torch.arange(tiles_y).repeat_interleave(tiles_x)  # (T,) row-major tiles
         tx = torch.arange(tiles_x).repeat(tiles_y)
         rows = ty.view(-1, 1) * tile + oy.view(1, -1)  # (T, L) padded-map rows
@@ -509,13 +518,7 @@ class WindowLayout:
         tiles_y, tiles_x = math.ceil(h / tile), math.ceil(w / tile)
         padded_w = tiles_x * tile + 2 * pad
         dummy = (tiles_y * tile + 2 * pad) * padded_w
-        win = tile + 2 * pad
-        oy, ox = torch.meshgrid(torch.arange(win), torch.arange(win), indexing="ij")
-        oy, ox = oy.reshape(-1), ox.reshape(-1)
-        gap_y = torch.clamp(torch.maximum(pad - oy, oy - (pad + tile - 1)), min=0)
-        gap_x = torch.clamp(torch.maximum(pad - ox, ox - (pad + tile - 1)), min=0)
-        keep = (gap_y * gap_y + gap_x * gap_x).double() <= radius * radius
-        oy, ox = oy[keep], ox[keep]  # (L,) offsets from the tile's corner, plus pad
+        oy, ox = window_offsets(tile, radius)
         # R x g layout: R near sqrt(slots L / k) balances the two top-k passes.
         rows = max(1, min(len(oy), round(math.sqrt(slots * len(oy) / topk))))
         width = math.ceil(len(oy) / rows)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -37,37 +38,31 @@ def error_text(exc: BaseException) -> str:
     return text if isinstance(exc, known) else f"{type(exc).__name__}: {text}"
 
 
+def _number(text: str, kind: type, ok: Callable[[float], bool], wanted: str) -> Any:
+    """``text`` read as ``kind``; ArgumentTypeError unless ``ok(value)`` (``wanted`` says it)."""
+    try:
+        value = kind(text)
+    except ValueError:
+        noun = "whole number" if kind is int else "number"
+        raise argparse.ArgumentTypeError(f"{text!r} is not a {noun}") from None
+    if not ok(value):
+        raise argparse.ArgumentTypeError(f"{text} is not {wanted}")
+    return value
+
+
 def positive_int(text: str) -> int:
     """An integer >= 1 (``--workers``)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not >= 1")
-    return value
+    return _number(text, int, lambda v: v >= 1, ">= 1")
 
 
 def positive_float(text: str) -> float:
     """A finite number > 0 (``--fps``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"{text} is not a positive number")
-    return value
+    return _number(text, float, lambda v: 0 < v < float("inf"), "a positive number")
 
 
 def non_negative_float(text: str) -> float:
     """A finite number >= 0 (``--step-timeout``, where 0 means no limit)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"{text} is not a number >= 0")
-    return value
+    return _number(text, float, lambda v: 0 <= v < float("inf"), "a number >= 0")
 
 
 def names(text: str) -> list[str]:
