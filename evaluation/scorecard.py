@@ -32,7 +32,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     Runs where the backend puts it (another process or machine); nothing is written to the
     driver's output folder from here.
     """
-    from .runner import run
+    from .run.runner import run
 
     started = time.monotonic()
     if threads:
@@ -79,7 +79,7 @@ def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     A stored cell is stale when its data or code changed since it was played; the runner
     would replay it while the card is scored, so it goes to the workers instead.
     """
-    from .resume import RunMismatch, stale_sequences
+    from .run.resume import RunMismatch, stale_sequences
 
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
@@ -103,7 +103,7 @@ def restamp_cells(out: Path, cells: Sequence[Cell]) -> dict[str, list[str] | str
     Returns, for each stale stored cell, the changed code files (kept) or why it cannot be
     kept (:mod:`.restamp`); nothing is played.
     """
-    from .resume import RunMismatch, restamp_sequences
+    from .run.resume import RunMismatch, restamp_sequences
 
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
@@ -128,8 +128,8 @@ def _finite(value: Any) -> float | None:
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from .resume import RunMismatch
-    from .runner import run
+    from .run.resume import RunMismatch
+    from .run.runner import run
 
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
@@ -265,10 +265,10 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
     ``on_estimate`` gets the seconds left (:class:`~.scorecard_eta.CellClock`) at the start
     and after every cell; ``gflop_per_mp`` is :func:`~.scorecard_eta.schedule`'s.
     """
-    from .backends import make_backend
-    from .runner import RunFailed
+    from .run.backends import make_backend
+    from .run.runner import RunFailed
+    from .run.workers import SequenceFailure
     from .scorecard_eta import schedule
-    from .workers import SequenceFailure
 
     todo, clock = schedule(cells_to_play(out, cells), BASELINE,
                            _slots(backend, workers), torch_runtime, gflop_per_mp)
@@ -337,16 +337,16 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     if on_estimate is not None:
         _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
                         motion=motion, runtime=runtime, on_estimate=on_estimate)
-    from .runner import check_out_folder
+    from .run.runner import check_out_folder
 
     gflops = _gflops(models, names)
     if backend == "pool" and workers > 1:
-        from .workers import refuse_unguarded_script
+        from .run.workers import refuse_unguarded_script
 
         refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime
 
-    from .ownership import hold_folder
+    from .run.ownership import hold_folder
 
     chosen = resolve_runtime(runtime)  # not installed: one error now, not one per cell
     check_out_folder(out)

@@ -24,7 +24,7 @@ from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
-from ..integrity import check_pair
+from ..run.integrity import check_pair
 from .compare import (
     COMBINED,
     Comparison,

@@ -20,7 +20,7 @@ from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
 
 from ..analysis.events import load_events, run_benchmark, run_sequences
 from ..analysis.intervals import comparable, compare_runs
-from ..integrity import DifferentData, check_current
+from ..run.integrity import DifferentData, check_current
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .pages import event_pages, figure, legend, sequence_page
 from .pictures import choose, event_pictures

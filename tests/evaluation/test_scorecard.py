@@ -14,7 +14,7 @@ import pytest
 from unitrack_env.evaluation import scorecard as sc
 from unitrack_env.evaluation.cli import main
 from unitrack_env.evaluation.radar import radii
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.evaluation.scorecard_plan import (
     BASELINE,
     TASKS,
@@ -111,8 +111,8 @@ def test_plan_gives_every_appearance_head_the_runtime_and_drops_motion():
 def test_restamp_keeps_cells_played_by_code_that_differs_only(tmp_path):
     """--restamp: a cell whose record is rebuilt exactly from its stored code manifest is
     kept (the changed file named); one whose data changed is played again."""
-    from unitrack_env.evaluation.identity import RunIdentity
-    from unitrack_env.evaluation.run_spec import RunSpec
+    from unitrack_env.evaluation.run.identity import RunIdentity
+    from unitrack_env.evaluation.run.run_spec import RunSpec
 
     cells = [Cell("m", "mot", "IoU", "iou", "UniTrack/MOT16-v0", name)
              for name in ("SYN-01", "SYN-02")]

@@ -156,7 +156,7 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], stamps: dict[str, Any
     """Play ``todo`` in ``workers`` supervised processes; return (records, failures).
 
     A worker that dies or overruns ``step_timeout`` fails only the sequence it was playing
-    (:mod:`unitrack_env.evaluation.pool`).
+    (:mod:`unitrack_env.evaluation.run.pool`).
     """
     from .episode import SequenceRecord
     from .pool import SupervisedPool

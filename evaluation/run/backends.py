@@ -3,7 +3,7 @@
 A backend is a context manager yielding ``run(fn, items)``, which calls ``fn(item,
 threads)`` somewhere and yields ``(item, result or exception)`` as they finish; results
 travel through the backend, so remote workers need no shared file system. ``pool``:
-``workers`` spawned local processes (:mod:`unitrack_env.evaluation.pool`); ``ray``: one
+``workers`` spawned local processes (:mod:`unitrack_env.evaluation.run.pool`); ``ray``: one
 ``num_cpus=1`` task per item, on a local Ray or a cluster (``address``; the ``ray`` extra).
 """
 

@@ -1,8 +1,8 @@
 """Sequences played one after the other (``workers=1``), here or in one supervised child.
 
-The counterpart of :mod:`unitrack_env.evaluation.workers`: a failed sequence keeps its
+The counterpart of :mod:`unitrack_env.evaluation.run.workers`: a failed sequence keeps its
 exception (with the agent's traceback) and the next one plays in a fresh environment; a step
-longer than the limit fails its sequence (:mod:`unitrack_env.evaluation.watchdog`).
+longer than the limit fails its sequence (:mod:`unitrack_env.evaluation.run.watchdog`).
 :func:`play_isolated` plays the same way in one child process that the parent watches (the
 CLI's default), so that a step stuck in native code, a crash or a ``close()`` that never
 returns ends only what it was doing.

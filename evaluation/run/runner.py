@@ -192,7 +192,7 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
                                      f"{out / 'data'}: free space and run the same command "
                                      "again to score them") from exc
     if scores is not None:  # per-frame error events beside the results (never fails the run)
-        from .analysis.events import write_run_events
+        from ..analysis.events import write_run_events
 
         write_run_events(out, bench, with_gt)
     return scores, repeated
@@ -345,7 +345,7 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
         raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(record_path(out, name).read_text()))
-    from .analysis.events import events_path
+    from ..analysis.events import events_path
 
     manifest.add(out / "metrics.json", *(events_path(out, name) for name in names))
     scores, repeated = _score_and_write(out, spec, bench, names, records)
