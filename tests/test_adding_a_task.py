@@ -127,7 +127,7 @@ def test_a_new_task_runs_through_every_command(project, monkeypatch, capsys):
     page = Path("report/index.html").read_text()
     assert 'id="compare"' in page and "error (px)" in page and "No per-frame events" not in page
 
-    from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
+    from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, plan
 
     cells, sources, _ = plan([ModelSpec.parse("random")], ["centroid"], Path("data"))
     assert TASKS["centroid"].title == "Centroid" and sources["centroid"].kind == "benchmark"

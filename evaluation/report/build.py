@@ -164,11 +164,11 @@ def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
 def scorecard_section(folder: Path, out: Path) -> str:
     """A scorecard folder's table (its Markdown as HTML) and radar chart."""
     from ..correlation_plot import report_section as correlation_section
-    from ..scorecard_report import columns, value
+    from ..scorecard.table import columns, value
 
     card = json.loads((folder / "scorecard.json").read_text(encoding="utf-8"))
     cols = columns(card)
-    from ..scorecard_plan import BASELINE
+    from ..scorecard.plan import BASELINE
 
     rows = []
     for model in [*card["models"], BASELINE]:

@@ -78,7 +78,7 @@ def test_verdicts_over_enough_models():
 
 def _card(values: dict[str, float]) -> dict:
     """A scorecard of synthetic pose propagation with the given PCK@0.1 per model."""
-    from unitrack_env.evaluation.scorecard_plan import BASELINE
+    from unitrack_env.evaluation.scorecard.plan import BASELINE
 
     source = {"kind": "synthetic", "root": None, "env_id": "UniTrack/JHMDB-v0"}
     rows = [{"model": m, "task": "pose-prop", "head": "UniTrack" if m != BASELINE else

@@ -11,11 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from unitrack_env.evaluation import scorecard as sc
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.radar import radii
 from unitrack_env.evaluation.run.runner import run
-from unitrack_env.evaluation.scorecard_plan import (
+from unitrack_env.evaluation.scorecard import card as sc
+from unitrack_env.evaluation.scorecard.plan import (
     BASELINE,
     TASKS,
     Cell,
@@ -24,6 +23,7 @@ from unitrack_env.evaluation.scorecard_plan import (
     data_source,
     plan,
 )
+from unitrack_env.evaluation.scorecard.radar import radii
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests"))
@@ -428,7 +428,7 @@ def test_radar_draws_bars_below_three_tasks(tmp_path, monkeypatch, tasks):
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
 
-    from unitrack_env.evaluation import radar
+    from unitrack_env.evaluation.scorecard import radar
 
     card = _card(tasks)
     assert radii(card, "rank")["a"] == [1.0] * len(tasks)
@@ -447,7 +447,7 @@ def test_radar_draws_bars_below_three_tasks(tmp_path, monkeypatch, tasks):
 
 def test_radar_shows_an_undefined_axis_as_a_gap(tmp_path):
     pytest.importorskip("matplotlib")
-    from unitrack_env.evaluation import radar
+    from unitrack_env.evaluation.scorecard import radar
 
     card = _card(["pose-prop", "sot", "vos"])
     for row in card["rows"]:
@@ -462,7 +462,7 @@ def test_the_same_card_draws_the_same_bytes(tmp_path):
     """A committed scorecard scored again rewrites its charts byte for byte (no date, no
     random SVG ids), so the repository stays clean."""
     pytest.importorskip("matplotlib")
-    from unitrack_env.evaluation import radar
+    from unitrack_env.evaluation.scorecard import radar
 
     card = _card(["pose-prop", "sot", "vos"])
     first = [f.read_bytes() for f in radar.draw_radar(card, tmp_path / "one")]

@@ -16,7 +16,7 @@ SOURCE_NOTES = {"benchmark": "", "fixture": "\n(fixture)", "synthetic": "\n[synt
 
 def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     """(task, head, metric, label) of every radar axis."""
-    from .scorecard_plan import TASKS
+    from .plan import TASKS
 
     out = []
     for task in card["tasks"]:
@@ -31,7 +31,7 @@ def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
 
 def radii(card: dict[str, Any], scale: str = "rank") -> dict[str, list[float | None]]:
     """Each polygon's radius on each axis (None: no value)."""
-    from .scorecard_report import polygon_values
+    from .table import polygon_values
 
     values = polygon_values(card, axes(card))
     if scale == "value":
@@ -83,7 +83,7 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
 
 def _style(plt: Any, name: str, index: int) -> dict[str, Any]:
     """Line style of one polygon: the baselines grey and dashed, the models in tab10."""
-    from .scorecard_plan import BASELINE
+    from .plan import BASELINE
 
     if name == BASELINE:
         return {"color": "0.5", "linestyle": "--", "linewidth": 1.2}
@@ -98,7 +98,7 @@ def _title(scale: str, better: str = "outer") -> str:
 def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
               data: dict[str, list[float | None]], scale: str) -> Any:
     """The radar proper (three axes or more)."""
-    from .scorecard_plan import BASELINE
+    from .plan import BASELINE
 
     angles = [2 * math.pi * i / len(spokes) for i in range(len(spokes))]
     figure, ax = plt.subplots(figsize=(6.4, 6.4), subplot_kw={"projection": "polar"})
@@ -141,7 +141,7 @@ def _bars(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]
     """One or two tasks: grouped bars (no radar polygon has fewer than three vertices)."""
     from matplotlib.patches import Patch
 
-    from .scorecard_plan import BASELINE
+    from .plan import BASELINE
 
     figure, ax = plt.subplots(figsize=(3.2 + 1.6 * len(spokes), 4.8))
     width = 0.8 / len(data)
