@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.curves_plot import run_curves
+from unitrack_env.evaluation.plots.curves import run_curves
 from unitrack_env.evaluation.run.runner import run
 
 

@@ -126,8 +126,8 @@ def merge_externals(*sources: dict[str, dict[str, float]]) -> dict[str, dict[str
 
 def _tracking_axes(card: dict[str, Any]) -> list[tuple[str, str, str, str, bool]]:
     """(task, head, metric, title, lower is better) of each task's radar axis."""
-    from .scorecard.plan import TASKS
-    from .scorecard.radar import axes
+    from .plan import TASKS
+    from .radar import axes
 
     return [(task, head, metric, f"{TASKS[task].title} {metric} ({head})",
              metric in TASKS[task].lower_is_better)
@@ -137,7 +137,7 @@ def _tracking_axes(card: dict[str, Any]) -> list[tuple[str, str, str, str, bool]
 def study(card: dict[str, Any], externals: dict[str, dict[str, float]], *,
           resamples: int = 2000) -> dict[str, Any]:
     """The correlation of every external metric with every task's axis, over the models."""
-    from .scorecard.table import value
+    from .table import value
 
     models = list(card["models"])
     names = sorted({name for metrics in externals.values() for name in metrics})
