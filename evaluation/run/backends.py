@@ -14,15 +14,15 @@ import os
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
+from .pool import SupervisedPool
+from .workers import init_worker
+
 Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]]
 
 
 @contextlib.contextmanager
 def pool_backend(workers: int = 1) -> Iterator[Runner]:
     """Local worker processes (``workers`` <= 1: in this process)."""
-    from .pool import SupervisedPool
-    from .workers import init_worker
-
     workers = max(1, int(workers))
     threads = max(1, (os.cpu_count() or 1) // workers)
 

@@ -22,7 +22,7 @@ from unitrack_env.benchmarks.base import Benchmark
 
 from .episode import SequenceRecord, play_repetitions, save_episode
 from .identity import Stamp
-from .pool import SupervisedPool
+from .pool import SupervisedPool, WorkerDied, WorkerTimedOut
 from .watchdog import StepTimeout, StepWatchdog, limit
 from .workers import RemoteTraceback, SequenceFailure, init_worker
 
@@ -171,8 +171,6 @@ def _closed(spec: Any, outcome: Any, step_timeout: float | None) -> None:
 
     Every sequence is already saved; an exception close() raised is raised, as in this process.
     """
-    from .pool import WorkerDied, WorkerTimedOut
-
     if isinstance(outcome, WorkerTimedOut):
         warnings.warn(f"agent '{spec.agent}': close() did not return within "
                       f"{limit(step_timeout):g} s; its process was stopped (the results are "
