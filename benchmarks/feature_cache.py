@@ -230,7 +230,7 @@ def _same(a: object, b: object) -> bool:
 
 
 def metrics(threads: int) -> None:
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     sets = [("MOT17 clips", "UniTrack/MOT17-v0", {"root": str(SHARED / "MOT17")}, {}),
             ("PETS09-S2L1", "UniTrack/MOT15-v0", {"root": str(SHARED / "MOT15")},

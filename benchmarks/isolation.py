@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from unitrack_env.evaluation.watchdog import StepWatchdog
+from unitrack_env.evaluation.run.watchdog import StepWatchdog
 
 
 def evaluate(env: str, agent: str, out: Path, in_process: bool, *extra: str) -> float:

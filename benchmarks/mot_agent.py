@@ -51,7 +51,7 @@ from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.association_config import AssociationConfig
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
 from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motchallenge
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.frames import read_rgb
 from unitrack_env.score_range import ScoreRange
 

@@ -16,8 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from unitrack_env.evaluation import scorecard as sc
-from unitrack_env.evaluation.scorecard_plan import ModelSpec
+from unitrack_env.evaluation.scorecard import card as sc
+from unitrack_env.evaluation.scorecard.plan import ModelSpec
 
 
 def _timed(backend: str, tasks: list[str], workers: int, models: list[ModelSpec]) -> tuple[

@@ -41,7 +41,7 @@ import termios
 import time
 from pathlib import Path
 
-from unitrack_env.evaluation.scorecard_eta import SYNTHETIC_FRAME_SECONDS
+from unitrack_env.evaluation.scorecard.eta import SYNTHETIC_FRAME_SECONDS
 
 ETA = re.compile(r"ETA\s+(\d+:\d\d:\d\d)")
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07")
@@ -118,7 +118,7 @@ def generate(code: Path, env: dict[str, str]) -> tuple[float, float, int]:
 
     Returns the seconds and CPU seconds that took and the annotated frames of those data.
     """
-    from unitrack_env.evaluation.scorecard_plan import TASKS
+    from unitrack_env.evaluation.scorecard.plan import TASKS
 
     ids = [task.env_ids[0] for task in TASKS.values()]
     done = subprocess.run([sys.executable, "-c", GENERATE, *ids], capture_output=True,
@@ -213,7 +213,7 @@ def main() -> None:
         wall, cpu, frames = generate(Path.cwd(), {**os.environ, "UNITRACK_CACHE": cache})
     print(f"writing the synthetic card's data: {wall:.1f} s ({cpu:.1f} s CPU) for {frames} "
           f"annotated frames, {cpu / frames:.4f} CPU s per frame "
-          f"(scorecard_eta.SYNTHETIC_FRAME_SECONDS: {SYNTHETIC_FRAME_SECONDS})")
+          f"(scorecard.eta.SYNTHETIC_FRAME_SECONDS: {SYNTHETIC_FRAME_SECONDS})")
     print(f"load average at end:   {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print("new: the end of the card as the first estimate and the exact one (when the cells "
           "start) predict it, seconds after the first")

@@ -67,7 +67,7 @@ def main() -> None:
 
     from unitrack_env.agents.appearance.architectures import network_gflops
     from unitrack_env.agents.appearance.weights import load_weights
-    from unitrack_env.evaluation.scorecard_plan import ModelSpec, plan
+    from unitrack_env.evaluation.scorecard.plan import ModelSpec, plan
 
     models = [ModelSpec.parse(m) for m in args.model or ["imagenet-lite0", "random"]]
     float32, bf16 = product_rate(torch.float32), product_rate(torch.bfloat16)

@@ -32,8 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 def _child(args: argparse.Namespace) -> None:
     """This checkout's scorecard, logging every ETA estimate (time, seconds left)."""
-    from unitrack_env.evaluation import scorecard as sc
-    from unitrack_env.evaluation.scorecard_plan import ModelSpec
+    from unitrack_env.evaluation.scorecard import card as sc
+    from unitrack_env.evaluation.scorecard.plan import ModelSpec
 
     start = time.monotonic()
     log: list[tuple[float, float]] = []

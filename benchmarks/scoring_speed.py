@@ -19,7 +19,7 @@ import numpy as np
 
 from unitrack_env.datasets.motchallenge import read_seqinfo
 from unitrack_env.evaluation.analysis.crosscheck import motmetrics_summary
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.metrics.mot_preprocess import gt_frames_from_rows, tracker_frames_from_rows
 from unitrack_env.metrics.mot_results import read_result_file
 from unitrack_env.metrics.motchallenge import score_sequence

@@ -7,7 +7,7 @@ Usage (from the repository root; slow: every run recomputes every frame)::
 
 For each SOT head (``unitrack-xcorr``, ``unitrack-dcf``) and each SOT fixture clip (the real
 OTB Crossing and Human3 under ``--data/OTB`` when present, and the synthetic OTB default's
-clips), the clip is played by ``unitrack_env.evaluation.runner.run`` (the API behind
+clips), the clip is played by ``unitrack_env.evaluation.run.runner.run`` (the API behind
 ``unitrack evaluate``) under conditions that differ only at float level:
 
 * ``torch-t1``, ``torch-t2``: the PyTorch backbone with 1 and 2 threads;
@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from unitrack_env.agents.heads.sot import UniTrackDCFAgent, UniTrackXCorrAgent
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 HEADS = {"unitrack-xcorr": UniTrackXCorrAgent, "unitrack-dcf": UniTrackDCFAgent}
 RUNTIMES = (("torch-t1", "torch", 1), ("torch-t2", "torch", 2),

@@ -1,1 +1,1 @@
-"""Evaluation: runners, official-format writers, scorers, reports and the CLI."""
+"""Evaluation: runs, scorecard, analysis, report, plots, tuning and the CLI, a sub-package each."""

@@ -132,7 +132,7 @@ def render_episode(
     import unitrack_env
     from unitrack_env.agents.base import close_agent, make_agent
 
-    from .episode import play_episode
+    from .run.episode import play_episode
 
     out = check_video_path(out)
     unitrack_env.register_all()

@@ -127,7 +127,7 @@ def test_a_new_task_runs_through_every_command(project, monkeypatch, capsys):
     page = Path("report/index.html").read_text()
     assert 'id="compare"' in page and "error (px)" in page and "No per-frame events" not in page
 
-    from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
+    from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, plan
 
     cells, sources, _ = plan([ModelSpec.parse("random")], ["centroid"], Path("data"))
     assert TASKS["centroid"].title == "Centroid" and sources["centroid"].kind == "benchmark"
@@ -198,7 +198,7 @@ def test_a_sot_data_format_is_a_reader_a_format_row_and_a_registration_row(
     from unitrack_env.benchmarks import benchmark_for
     from unitrack_env.benchmarks import otb as otb_benchmark
     from unitrack_env.evaluation.analysis.events import load_events
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     example = next(b for b in re.findall(r"```python\n(.*?)```", DOC.read_text(), re.S)
                    if "SOT_FORMATS" in b)

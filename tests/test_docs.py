@@ -83,7 +83,7 @@ def test_readme_quickstart_runs(capsys):
 
 def test_writing_an_agent_example_runs():
     from unitrack_env.agents.base import AGENTS
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     code = _python_blocks(REPO / "docs" / "writing-an-agent.md")[0]
     try:

@@ -45,7 +45,8 @@ SIBLINGS = ("unitrack_env/envs", "agents/heads")
 #: The package ``__init__`` files that define the public API (docs/architecture.md lists it).
 PUBLIC_API = ("unitrack_env/__init__.py", "agents/__init__.py", "agents/appearance/__init__.py",
               "unitrack_env/benchmarks/__init__.py", "unitrack_env/spaces/__init__.py",
-              "unitrack_env/datasets/synthetic/__init__.py", "evaluation/regression/__init__.py")
+              "unitrack_env/datasets/synthetic/__init__.py", "evaluation/regression/__init__.py",
+              "evaluation/scorecard/__init__.py")
 #: String tokens (Python 3.12 splits f-strings into three kinds).
 STRING_TOKENS = {tokenize.STRING} | {getattr(tokenize, name) for name in (
     "FSTRING_START", "FSTRING_MIDDLE", "FSTRING_END") if hasattr(tokenize, name)}

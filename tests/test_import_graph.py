@@ -133,9 +133,9 @@ def test_the_scan_sees_function_level_and_relative_imports():
 
 def test_the_graph_covers_the_library():
     graph = module_graph()
-    assert {"unitrack_env.evaluation.runner", "unitrack_env.agents.base",
+    assert {"unitrack_env.evaluation.run.runner", "unitrack_env.agents.base",
             "unitrack_env.benchmarks.base"} <= set(graph)
-    assert "unitrack_env.evaluation.analysis.events" in graph["unitrack_env.evaluation.runner"]
+    assert "unitrack_env.evaluation.analysis.events" in graph["unitrack_env.evaluation.run.runner"]
 
 
 def test_the_library_has_no_import_cycle():

@@ -24,7 +24,7 @@ from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
-from ..integrity import check_pair
+from ..run.integrity import check_pair
 from .compare import (
     COMBINED,
     Comparison,
@@ -327,7 +327,7 @@ def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
 def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                    resamples: int = 1000) -> dict[tuple[str, str, str], dict]:
     """Intervals of every (model, task, head) row of a scorecard made in ``out``."""
-    from ..scorecard_plan import Cell
+    from ..scorecard.plan import Cell
 
     result = {}
     for row in card["rows"]:
@@ -342,8 +342,8 @@ def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
 def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
                          resamples: int = 1000) -> list[Path]:
     """``scorecard_ci.md`` and ``scorecard_ci.json``: each cell's value with its interval."""
-    from ..scorecard_plan import BASELINE, TASKS
-    from ..scorecard_report import columns, value
+    from ..scorecard.plan import BASELINE, TASKS
+    from ..scorecard.table import columns, value
 
     found = card_intervals(out, card, resamples=resamples)
     lines = ["| model | task | head | metric | value | 95% interval |", "|---|---|---|---|---|---|"]

@@ -107,7 +107,7 @@ def metrics_table(
 
 def metrics_json(per_sequence: Rows, combined: Mapping[str, float] | None) -> str:
     """The metrics as JSON (NaN as null): ``{"per_sequence": ..., "combined": ...}``."""
-    from ..runner import json_safe
+    from ..run.runner import json_safe
 
     return json.dumps(json_safe({"per_sequence": dict(per_sequence),
                                  "combined": dict(combined or {})}), indent=2)

@@ -22,8 +22,8 @@ import traceback
 from collections.abc import Iterable, Sequence
 from types import ModuleType
 
-from ..progress import one_line_warnings
-from ..watchdog import Terminated, sigterm_stops
+from ..run.progress import one_line_warnings
+from ..run.watchdog import Terminated, sigterm_stops
 from .common import console, error_text
 
 #: Every ``unitrack`` command, in the order of ``unitrack --help``: name -> (module, summary).
@@ -120,7 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         errors = console(stderr=True)
         if args.debug:
             errors.print("".join(traceback.format_exception(exc)), markup=False)
-        from ..runner import RunFailed
+        from ..run.runner import RunFailed
 
         errors.print(f"error: {error_text(exc)}", markup=False)
         if not args.debug:

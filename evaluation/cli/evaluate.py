@@ -7,7 +7,7 @@ from typing import Any
 
 from rich.console import Console
 
-from ..watchdog import DEFAULT_STEP_TIMEOUT
+from ..run.watchdog import DEFAULT_STEP_TIMEOUT
 from .common import (
     agent_kwargs,
     console,
@@ -69,7 +69,7 @@ def _defined(value: Any) -> bool:
 
 def run(args: argparse.Namespace, out: Console) -> int:
     """Run ``unitrack evaluate``."""
-    from ..runner import run as play
+    from ..run.runner import run as play
 
     env_given = env_kwargs(args)
     agent_given = agent_kwargs(args)

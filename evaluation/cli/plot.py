@@ -28,11 +28,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack plot``."""
-    from ..curves_plot import draw_curves
+    from ..plots.curves import draw_curves
 
     runs = [Path(r) for r in args.runs]
     if args.attributes:  # read (and refused if bad) before any figure is written
-        from ..attributes_plot import load_attributes, write_attributes
+        from ..plots.attributes import load_attributes, write_attributes
 
         tables, without = load_attributes(runs)
     written = draw_curves(runs, Path(args.out))

@@ -67,7 +67,7 @@ def run(args: argparse.Namespace, out: Console) -> int:
     if args.out:
         from unitrack_env.io import atomic_write_text
 
-        from ..runner import json_safe
+        from ..run.runner import json_safe
 
         atomic_write_text(args.out, json.dumps(json_safe(json.loads(report.to_json())),
                                                indent=2))

@@ -68,10 +68,10 @@ def _print_restamp(console: Console, label: str, result: list[str] | str) -> Non
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
-    from .. import scorecard as sc
-    from ..correlation_study import merge_externals, read_external_csv, split_model_text
-    from ..scorecard_plan import ModelSpec
-    from ..scorecard_report import merge_cards
+    from ..scorecard import card as sc
+    from ..scorecard.correlation_study import merge_externals, read_external_csv, split_model_text
+    from ..scorecard.plan import ModelSpec
+    from ..scorecard.table import merge_cards
 
     out = Path(args.out)
     split = [split_model_text(text) for text in args.model or ()]
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
         files += write_card_intervals(out, card)
     if any(externals.values()):
-        from ..correlation_study import write_correlation
+        from ..scorecard.correlation_study import write_correlation
 
         files += write_correlation(out, card, externals)
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)

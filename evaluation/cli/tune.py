@@ -50,7 +50,7 @@ def add_arguments(tp: argparse.ArgumentParser) -> None:
 def _spec(args: argparse.Namespace) -> Any:
     from dataclasses import asdict
 
-    from ..tune import TuneSpec, parse_dimension
+    from ..tune.search import TuneSpec, parse_dimension
 
     space = [asdict(parse_dimension(text)) for text in args.space]
     for d in space:
@@ -67,7 +67,7 @@ def _setting(params: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack tune``."""
-    from ..tune import tune
+    from ..tune.search import tune
 
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address goes with --backend ray")
@@ -82,7 +82,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
             log.print(f"  {row['feature_cache']}", markup=False)
 
     if args.backend == "ray":
-        from ..tune_ray import check_ray_tune, ray_search
+        from ..tune.ray_trials import check_ray_tune, ray_search
 
         search = {"search": ray_search(args.address), "backend": "ray",
                   "check": check_ray_tune}

@@ -16,8 +16,8 @@ import unitrack_env
 from unitrack_env.agents.base import close_agent, make_agent
 from unitrack_env.io import atomic_write_text
 
-from ..episode import play_episode
-from ..identity import option_changes
+from ..run.episode import play_episode
+from ..run.identity import option_changes
 
 #: Default absolute tolerance on every metric (metrics are fractions or counts).
 DEFAULT_TOLERANCE = 1e-6

@@ -20,7 +20,7 @@ from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
 
 from ..analysis.events import load_events, run_benchmark, run_sequences
 from ..analysis.intervals import comparable, compare_runs
-from ..integrity import DifferentData, check_current
+from ..run.integrity import DifferentData, check_current
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .pages import event_pages, figure, legend, sequence_page
 from .pictures import choose, event_pictures
@@ -54,7 +54,7 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
 
 def curves_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
     """The runs' success and precision plots, when their benchmarks draw any ("" if none)."""
-    from ..curves_plot import draw_labelled
+    from ..plots.curves import draw_labelled
 
     labelled = [(label, bench.curves(run / "data", list(metrics.get("per_sequence", {}))))
                 for label, run, bench, metrics in runs]
@@ -68,7 +68,7 @@ def curves_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
 
 def attributes_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
     """Each run's scores per challenge attribute and their radar ("" if no run has any)."""
-    from ..attributes_plot import NoAttributes, draw_attribute_radar, load_attributes
+    from ..plots.attributes import NoAttributes, draw_attribute_radar, load_attributes
 
     if not any(bench.sequence_attributes(list(metrics.get("per_sequence", {})))
                for _, _, bench, metrics in runs):
@@ -163,12 +163,12 @@ def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
 
 def scorecard_section(folder: Path, out: Path) -> str:
     """A scorecard folder's table (its Markdown as HTML) and radar chart."""
-    from ..correlation_plot import report_section as correlation_section
-    from ..scorecard_report import columns, value
+    from ..scorecard.correlation_plot import report_section as correlation_section
+    from ..scorecard.table import columns, value
 
     card = json.loads((folder / "scorecard.json").read_text(encoding="utf-8"))
     cols = columns(card)
-    from ..scorecard_plan import BASELINE
+    from ..scorecard.plan import BASELINE
 
     rows = []
     for model in [*card["models"], BASELINE]:

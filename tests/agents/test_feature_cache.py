@@ -591,7 +591,7 @@ def _mot17_copy(mot17_root: Path, tmp_path: Path) -> Path:
 
 def test_a_renamed_copy_of_a_sequence_hits_the_cache_on_every_frame(
         mot17_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     root = _mot17_copy(mot17_root, tmp_path)
     monkeypatch.setenv(fc.CACHE_DIR_ENV, str(tmp_path / "features"))

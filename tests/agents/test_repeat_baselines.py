@@ -10,7 +10,7 @@ import pytest
 
 from unitrack_env.agents import available_agents, make_agent
 from unitrack_env.agents.base import agent_class
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 
 def test_registered_with_their_tasks():

@@ -478,7 +478,7 @@ def test_real_posetrack_frames_run_through_the_runner(tmp_path: Path, agent: str
     root = SHARED_DATA / "PoseTrack2018"
     if not root.is_dir():
         pytest.skip(f"real PoseTrack fixtures not found at {root}")
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     # One labelled frame per sequence and oracle poses: with poseval's last-frame drop
     # nothing would be scored, so keep it; every person is reported on the episode's first

@@ -198,7 +198,7 @@ PETS_PEERS = {"roboflow sort": {"HOTA": 0.363, "IDF1": 0.461, "MOTA": 0.631},
 
 @pytest.mark.slow
 def test_real_pets09_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path) -> None:
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     root = SHARED_DATA / "MOT15"
     if not (root / "train" / "PETS09-S2L1").is_dir():
@@ -247,7 +247,7 @@ def test_hard_synthetic_unitrack_beats_iou_and_the_roboflow_peers(tmp_path: Path
     # 3 x 300 frames at 1088 x 608 (crossings, occlusions, look-alikes, camera motion, 30 FPS):
     # about 5 minutes on OpenVINO. Not in CI's slow selection (see .ci/run); run it by hand.
     from unitrack_env.datasets.synthetic.hard_mot import write_hard_motchallenge
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     write_hard_motchallenge(tmp_path / "hard", "MOT17")
     env_kwargs = {"root": str(tmp_path / "hard")}

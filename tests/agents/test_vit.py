@@ -21,7 +21,7 @@ from unitrack_env.agents.primitives.box_propagation import (
     XCorrHead,
 )
 from unitrack_env.agents.primitives.label_propagation import LabelPropagationConfig
-from unitrack_env.evaluation.scorecard_plan import ModelSpec
+from unitrack_env.evaluation.scorecard.plan import ModelSpec
 
 LN_EPS = 1e-6
 

@@ -631,7 +631,7 @@ def _in_out(*files: str) -> Callable[[Path], Path]:
 
 def _while_held(scratch: Path) -> None:
     """``unitrack evaluate`` into a folder whose lock another run holds."""
-    from unitrack_env.evaluation.ownership import hold_folder
+    from unitrack_env.evaluation.run.ownership import hold_folder
 
     with hold_folder(scratch / "out", f"agent sort on {MOT17}"):
         cli(*EVALUATE)(scratch)
@@ -1795,7 +1795,7 @@ def _lasot_run_with_short_att(scratch: Path) -> Path:
     holds 3 flags instead of the toolkit's 14."""
     from unitrack_env.datasets.lasot import LASOT_SYNTHETIC
     from unitrack_env.datasets.synthetic.cache import ensure_synthetic
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     data = scratch / "LaSOT"
     shutil.copytree(ensure_synthetic("LaSOT", LASOT_SYNTHETIC), data)

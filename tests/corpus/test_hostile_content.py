@@ -36,7 +36,7 @@ from unitrack_env.agents.appearance import (
 from unitrack_env.errors import CheckpointError, DataFormatError
 from unitrack_env.evaluation.analysis.events import events_path
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 MOT = "UniTrack/MOT17-v0"
 SEQ = "SYN-01"

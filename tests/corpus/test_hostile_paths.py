@@ -419,7 +419,7 @@ def test_disk_full_while_metrics_are_written(run_copy: Path, monkeypatch: pytest
     """ENOSPC on metrics.json gave a bare "[Errno 28] No space left on device"."""
     import errno
 
-    from unitrack_env.evaluation import runner
+    from unitrack_env.evaluation.run import runner
 
     real = runner.atomic_write_text
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import unitrack_env.agents.baselines.iou  # noqa: F401  (module references resolve once imported)
 import unitrack_env.agents.heads.association  # noqa: F401
 import unitrack_env.agents.heads.sot  # noqa: F401
-from unitrack_env.evaluation.agent_code import agent_code, code_manifest
+from unitrack_env.evaluation.run.agent_code import agent_code, code_manifest
 
 
 def _names(paths: list[Path]) -> set[str]:

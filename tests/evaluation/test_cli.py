@@ -165,7 +165,7 @@ def test_the_commands_show_this_packages_warnings_as_one_line():
     import warnings
 
     import unitrack_env.benchmarks.otb as ours
-    from unitrack_env.evaluation.progress import one_line_warnings
+    from unitrack_env.evaluation.run.progress import one_line_warnings
 
     before = warnings.formatwarning
     with one_line_warnings():
@@ -181,7 +181,7 @@ def test_the_commands_show_each_warning_once():
     import warnings
 
     import unitrack_env.benchmarks.otb as ours
-    from unitrack_env.evaluation.progress import one_line_warnings
+    from unitrack_env.evaluation.run.progress import one_line_warnings
 
     with warnings.catch_warnings(record=True) as shown:  # what reaches the screen
         warnings.simplefilter("default")
@@ -206,7 +206,7 @@ def np_file() -> str:
 @pytest.fixture(scope="module")
 def one_missing(tmp_path_factory):
     """A finished iou run on synthetic MOT16 with SYN-02's result file deleted."""
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     out = tmp_path_factory.mktemp("score") / "run"
     full = run(ENV, "iou", out=out, progress=False)

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from unitrack_env.evaluation.cli import build_parser
-from unitrack_env.evaluation.scorecard import cells_to_play
-from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
+from unitrack_env.evaluation.scorecard.card import cells_to_play
+from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, plan
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests"))

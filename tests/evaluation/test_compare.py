@@ -18,7 +18,7 @@ from unitrack_env.evaluation.analysis.compare import (
 )
 from unitrack_env.evaluation.analysis.intervals import compare_runs
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.metrics.events_mot import preprocessed_frames
 from unitrack_env.metrics.mot_stats import mot_stats
 

@@ -14,7 +14,7 @@ from unitrack_env.evaluation.analysis.compare import COMBINED, jackknife_interva
 from unitrack_env.evaluation.analysis.events import run_benchmark
 from unitrack_env.evaluation.analysis.intervals import compare_runs, frame_replicates, run_intervals
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 
 def metrics(run_dir: Path) -> dict:
@@ -39,7 +39,7 @@ def sot_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 
 def _restamp_results(run_dir: Path) -> None:
-    from unitrack_env.evaluation.identity import result_digest
+    from unitrack_env.evaluation.run.identity import result_digest
 
     names = run_benchmark(run_dir).sequence_names
     for record in (run_dir / "sequences").glob("*.json"):

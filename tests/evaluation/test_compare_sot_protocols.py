@@ -13,7 +13,7 @@ import pytest
 
 from unitrack_env.evaluation.analysis.events import run_benchmark
 from unitrack_env.evaluation.analysis.intervals import compare_runs
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_compare_frames import _restamp_results  # noqa: E402  (tests/ is not a package)

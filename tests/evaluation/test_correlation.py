@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from unitrack_env.evaluation.correlation import (
+from unitrack_env.evaluation.scorecard.correlation import (
     MIN_TO_CONCLUDE,
     bootstrap_interval,
     correlate,
@@ -78,7 +78,7 @@ def test_verdicts_over_enough_models():
 
 def _card(values: dict[str, float]) -> dict:
     """A scorecard of synthetic pose propagation with the given PCK@0.1 per model."""
-    from unitrack_env.evaluation.scorecard_plan import BASELINE
+    from unitrack_env.evaluation.scorecard.plan import BASELINE
 
     source = {"kind": "synthetic", "root": None, "env_id": "UniTrack/JHMDB-v0"}
     rows = [{"model": m, "task": "pose-prop", "head": "UniTrack" if m != BASELINE else
@@ -89,7 +89,10 @@ def _card(values: dict[str, float]) -> dict:
 
 
 def test_model_text_carries_external_metrics():
-    from unitrack_env.evaluation.correlation_study import metric_direction, split_model_text
+    from unitrack_env.evaluation.scorecard.correlation_study import (
+        metric_direction,
+        split_model_text,
+    )
 
     assert split_model_text("moco.pth,label=MoCo-v2,probe:imagenet=71.1") == (
         "moco.pth,label=MoCo-v2", {"probe:imagenet": 71.1})
@@ -111,7 +114,7 @@ def test_model_text_carries_external_metrics():
     ("model,probe:imagenet\na,1\na,2\n", "line 3: model 'a' is listed twice"),
 ])
 def test_bad_external_csv_is_named_by_line(tmp_path, text, message):
-    from unitrack_env.evaluation.correlation_study import read_external_csv
+    from unitrack_env.evaluation.scorecard.correlation_study import read_external_csv
 
     path = tmp_path / "probe.csv"
     path.write_text(text)

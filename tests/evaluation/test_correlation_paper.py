@@ -16,8 +16,8 @@ import pytest
 from scipy import stats
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.radar import axes
-from unitrack_env.evaluation.scorecard_plan import BASELINE, TASKS
+from unitrack_env.evaluation.scorecard.plan import BASELINE, TASKS
+from unitrack_env.evaluation.scorecard.radar import axes
 
 DATA = json.loads((Path(__file__).parent / "data" / "paper_correlation.json").read_text())
 #: Table 2 column of each task's radar axis (the scorecard's tracking metric per task).

@@ -165,7 +165,7 @@ def test_iou_tracker_on_pets09_differs_by_the_continuation_rule(tmp_path: Path) 
         DISPLACED,
         crosscheck_sequence,
     )
-    from unitrack_env.evaluation.runner import run
+    from unitrack_env.evaluation.run.runner import run
 
     if not (PETS / "gt" / "gt.txt").is_file():
         pytest.skip(f"PETS09-S2L1 fixture not found under {PETS}")

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import RunFailed, run
+from unitrack_env.evaluation.run.runner import RunFailed, run
 
 ENV = "UniTrack/MOT17-v0"
 FIXTURES = Path(__file__).resolve().parents[3] / "shared" / "data" / "MOT17"

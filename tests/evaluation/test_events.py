@@ -13,7 +13,7 @@ import pytest
 
 from unitrack_env.evaluation.analysis.events import event_counts, events_path, load_events
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.metrics.events_mot import clear_events, preprocessed_frames
 from unitrack_env.metrics.mot_stats import metrics_from_sums, mot_stats, weighted_sums
 from unitrack_env.metrics.motchallenge import score_sequence

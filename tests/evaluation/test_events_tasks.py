@@ -14,7 +14,7 @@ import pytest
 from unitrack_env.datasets.posetrack_json import read_posetrack_json
 from unitrack_env.evaluation.analysis.events import event_counts, load_events, run_benchmark
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.metrics.events_mot import EventRows, mots_sequence_events
 from unitrack_env.metrics.events_pose import posetrack_sequence_events
 from unitrack_env.metrics.mots import score_sequence

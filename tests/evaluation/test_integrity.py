@@ -11,14 +11,14 @@ import pytest
 
 from unitrack_env.datasets.synthetic import ensure_synthetic
 from unitrack_env.evaluation.analysis.events import run_benchmark
-from unitrack_env.evaluation.integrity import (
+from unitrack_env.evaluation.run.integrity import (
     DifferentData,
     StaleRun,
     check_current,
     check_pair,
     data_fingerprint,
 )
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 ENV = "UniTrack/MOT17-v0"
 

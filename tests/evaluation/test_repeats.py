@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from unitrack_env.agents.base import Agent
-from unitrack_env.evaluation.repetitions import spread
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.repetitions import spread
+from unitrack_env.evaluation.run.runner import run
 
 
 class JitterBox(Agent):
@@ -62,7 +62,7 @@ def test_got10k_repeats_write_the_servers_files_and_a_deterministic_agent_has_no
     assert report.repetitions["spread"]["combined"]["AO"]["mean"] == pytest.approx(
         report.combined["AO"])
     # the stored run (its run.json says repeats=3) is checked as such, and nothing is stale
-    from unitrack_env.evaluation.resume import stale_sequences
+    from unitrack_env.evaluation.run.resume import stale_sequences
 
     assert stale_sequences("UniTrack/GOT10k-v0", "repeat-box", tmp_path / "r") == {}
 
@@ -86,7 +86,7 @@ def test_a_seeded_random_agent_spreads_and_each_repetition_is_scored_alone(tmp_p
 
 
 def test_a_run_with_other_repeats_is_refused_and_one_repeat_keeps_the_old_run_json(tmp_path):
-    from unitrack_env.evaluation.resume import RunMismatch
+    from unitrack_env.evaluation.run.resume import RunMismatch
 
     run("UniTrack/OTB-v0", "repeat-box", out=tmp_path / "one", sequences=["SynWalker"],
         progress=False)

@@ -13,7 +13,7 @@ import pytest
 
 from unitrack_env.evaluation.cli import main
 from unitrack_env.evaluation.report.thumbs import miss_bursts, sample
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 ENV = "UniTrack/MOT16-v0"
 

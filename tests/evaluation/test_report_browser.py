@@ -21,7 +21,7 @@ import pytest
 from PIL import Image
 
 from unitrack_env.evaluation.report.build import build_report
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
                   "--no-first-run", "--disable-background-networking",

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.run.runner import run
 from unitrack_env.metrics.mot_results import read_result_file
 
 ENV = "UniTrack/MOT16-v0"
@@ -37,7 +37,7 @@ def test_records_name_the_runtime_of_the_appearance_features(tmp_path):
     record = json.loads((tmp_path / "iou" / "sequences" / "SYN-01.json").read_text())
     assert record["runtimes"] == []
     del record["runtimes"]  # a record of an earlier version reads as unrecorded
-    from unitrack_env.evaluation.episode import SequenceRecord
+    from unitrack_env.evaluation.run.episode import SequenceRecord
 
     assert SequenceRecord.from_json(record).runtimes is None
 
@@ -113,7 +113,7 @@ def test_agent_errors_name_sequence_and_frame(tmp_path, monkeypatch):
 
 def test_an_agent_error_keeps_its_traceback(tmp_path, monkeypatch):
     from unitrack_env.agents.baselines.iou import IoUAgent
-    from unitrack_env.evaluation.runner import RunFailed
+    from unitrack_env.evaluation.run.runner import RunFailed
 
     def helper(observation):
         return observation["no such key"]
@@ -246,7 +246,7 @@ def test_a_class_workers_cannot_import_is_refused_up_front(tmp_path):
 
 def test_a_script_without_the_main_guard_is_refused_before_any_work(tmp_path):
     script = tmp_path / "unguarded.py"
-    script.write_text("from unitrack_env.evaluation.runner import run\n"
+    script.write_text("from unitrack_env.evaluation.run.runner import run\n"
                       f"run({ENV!r}, 'iou', out={str(tmp_path / 'run')!r}, workers=2)\n")
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                           timeout=300)

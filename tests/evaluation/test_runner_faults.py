@@ -15,7 +15,7 @@ import pytest
 
 from unitrack_env.datasets.synthetic import ensure_synthetic
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import OutputError, RunFailed, run
+from unitrack_env.evaluation.run.runner import OutputError, RunFailed, run
 
 ENV = "UniTrack/MOT16-v0"
 
@@ -275,7 +275,7 @@ def test_workers_die_with_their_parent(tmp_path):
     script = (
         "import time, numpy as np\n"
         "from unitrack_env.agents import Agent\n"
-        "from unitrack_env.evaluation.runner import run\n"
+        "from unitrack_env.evaluation.run.runner import run\n"
         "class Slow(Agent, name='slow-test', tasks=('mot',)):\n"
         "    def reset(self, observation, info): pass\n"
         "    def act(self, observation):\n"

@@ -17,8 +17,8 @@ import pytest
 
 from unitrack_env.datasets.synthetic import ensure_synthetic
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.ownership import LOCK, MANIFEST, OutputInUse, hold_folder
-from unitrack_env.evaluation.runner import OutputError, run
+from unitrack_env.evaluation.run.ownership import LOCK, MANIFEST, OutputInUse, hold_folder
+from unitrack_env.evaluation.run.runner import OutputError, run
 
 ENV = "UniTrack/MOT16-v0"
 
@@ -83,7 +83,7 @@ def _holder(out: Path) -> subprocess.Popen:
     """Another process holding ``out``'s lock until killed."""
     script = textwrap.dedent(f"""
         import sys, time
-        from unitrack_env.evaluation.ownership import hold_folder
+        from unitrack_env.evaluation.run.ownership import hold_folder
         with hold_folder({str(out)!r}, "agent other on {ENV}"):
             print("held", flush=True)
             time.sleep(120)
@@ -142,7 +142,7 @@ def test_out_inside_root_resumes_instead_of_replaying(tmp_path, where):
 
 
 def test_a_killed_run_leaves_its_claim(tmp_path, monkeypatch):
-    from unitrack_env.evaluation import episode, runner, serial
+    from unitrack_env.evaluation.run import episode, runner, serial
 
     out = tmp_path / "run"
     calls = []

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from unitrack_env.evaluation.pool import CLOSING, SupervisedPool, WorkerTimedOut, describe_exit
-from unitrack_env.evaluation.runner import RunFailed, run
-from unitrack_env.evaluation.watchdog import Terminated, sigterm_stops
-from unitrack_env.evaluation.workers import init_worker
+from unitrack_env.evaluation.run.pool import CLOSING, SupervisedPool, WorkerTimedOut, describe_exit
+from unitrack_env.evaluation.run.runner import RunFailed, run
+from unitrack_env.evaluation.run.watchdog import Terminated, sigterm_stops
+from unitrack_env.evaluation.run.workers import init_worker
 
 ENV = "UniTrack/MOT16-v0"
 
@@ -102,8 +102,8 @@ def test_a_step_that_cannot_be_interrupted_ends_the_process_with_a_line(tmp_path
     how = ("signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGALRM]); time.sleep(3600)")
     agent = _agent(tmp_path, how, bad="SYN-02")
     script = textwrap.dedent(f"""
-        import unitrack_env.evaluation.watchdog as watchdog
-        from unitrack_env.evaluation.runner import run
+        import unitrack_env.evaluation.run.watchdog as watchdog
+        from unitrack_env.evaluation.run.runner import run
         watchdog.GRACE = 1
         run({ENV!r}, {agent!r}, out={str(tmp_path / 'run')!r}, progress=False,
             step_timeout=1)
@@ -123,7 +123,7 @@ def test_a_step_in_c_code_holding_the_gil_is_stopped_in_this_process(tmp_path):
     # signals: the kernel timer's SIGALRM stops it on time, and the next sequence plays.
     agent = _agent(tmp_path, "import re; re.match(r'(a+)+$', 'a' * 40 + 'b')")
     script = textwrap.dedent(f"""
-        from unitrack_env.evaluation.runner import RunFailed, run
+        from unitrack_env.evaluation.run.runner import RunFailed, run
         try:
             run({ENV!r}, {agent!r}, out={str(tmp_path / 'run')!r}, progress=False,
                 step_timeout=1)

@@ -11,11 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from unitrack_env.evaluation import scorecard as sc
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.radar import radii
-from unitrack_env.evaluation.runner import run
-from unitrack_env.evaluation.scorecard_plan import (
+from unitrack_env.evaluation.run.runner import run
+from unitrack_env.evaluation.scorecard import card as sc
+from unitrack_env.evaluation.scorecard.plan import (
     BASELINE,
     TASKS,
     Cell,
@@ -24,6 +23,7 @@ from unitrack_env.evaluation.scorecard_plan import (
     data_source,
     plan,
 )
+from unitrack_env.evaluation.scorecard.radar import radii
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests"))
@@ -111,8 +111,8 @@ def test_plan_gives_every_appearance_head_the_runtime_and_drops_motion():
 def test_restamp_keeps_cells_played_by_code_that_differs_only(tmp_path):
     """--restamp: a cell whose record is rebuilt exactly from its stored code manifest is
     kept (the changed file named); one whose data changed is played again."""
-    from unitrack_env.evaluation.identity import RunIdentity
-    from unitrack_env.evaluation.run_spec import RunSpec
+    from unitrack_env.evaluation.run.identity import RunIdentity
+    from unitrack_env.evaluation.run.run_spec import RunSpec
 
     cells = [Cell("m", "mot", "IoU", "iou", "UniTrack/MOT16-v0", name)
              for name in ("SYN-01", "SYN-02")]
@@ -434,7 +434,7 @@ def test_radar_draws_bars_below_three_tasks(tmp_path, monkeypatch, tasks):
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
 
-    from unitrack_env.evaluation import radar
+    from unitrack_env.evaluation.scorecard import radar
 
     card = _card(tasks)
     assert radii(card, "rank")["a"] == [1.0] * len(tasks)
@@ -453,7 +453,7 @@ def test_radar_draws_bars_below_three_tasks(tmp_path, monkeypatch, tasks):
 
 def test_radar_shows_an_undefined_axis_as_a_gap(tmp_path):
     pytest.importorskip("matplotlib")
-    from unitrack_env.evaluation import radar
+    from unitrack_env.evaluation.scorecard import radar
 
     card = _card(["pose-prop", "sot", "vos"])
     for row in card["rows"]:
@@ -468,7 +468,7 @@ def test_the_same_card_draws_the_same_bytes(tmp_path):
     """A committed scorecard scored again rewrites its charts byte for byte (no date, no
     random SVG ids), so the repository stays clean."""
     pytest.importorskip("matplotlib")
-    from unitrack_env.evaluation import radar
+    from unitrack_env.evaluation.scorecard import radar
 
     card = _card(["pose-prop", "sot", "vos"])
     first = [f.read_bytes() for f in radar.draw_radar(card, tmp_path / "one")]

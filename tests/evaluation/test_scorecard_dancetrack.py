@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, Source, data_source, plan
-from unitrack_env.evaluation.scorecard_report import markdown_table
+from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, Source, data_source, plan
+from unitrack_env.evaluation.scorecard.table import markdown_table
 
 DANCE = "UniTrack/DanceTrack-v0"
 

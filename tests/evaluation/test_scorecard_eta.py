@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from unitrack_env.evaluation.scorecard_eta import (
+from unitrack_env.evaluation.scorecard.eta import (
     CellClock,
     cell_cost,
     longest_first,
@@ -63,7 +63,7 @@ def test_a_group_borrows_its_own_models_speed_before_the_others():
 
 def test_a_heavier_backbone_costs_more_and_schedules_first():
     from unitrack_env.agents.appearance.weights import load_weights
-    from unitrack_env.evaluation.scorecard_eta import megapixel_gflops
+    from unitrack_env.evaluation.scorecard.eta import megapixel_gflops
 
     flops = {}
     for name, arch in (("small", None), ("big", "resnet18")):

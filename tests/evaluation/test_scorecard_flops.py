@@ -12,8 +12,8 @@ from unitrack_env.agents.appearance.architectures import (
 )
 from unitrack_env.agents.appearance.vit import VIT_SPECS
 from unitrack_env.agents.appearance.weights import DEFAULT_WEIGHT_LOADERS, resolve_weights
-from unitrack_env.evaluation.scorecard_eta import LITE0_GFLOP_PER_MP, megapixel_gflops
-from unitrack_env.evaluation.scorecard_flops import (
+from unitrack_env.evaluation.scorecard.eta import LITE0_GFLOP_PER_MP, megapixel_gflops
+from unitrack_env.evaluation.scorecard.flops import (
     CNN_MACS,
     DEFAULT_CNN_LAYERS,
     NAMED_ARCHS,
@@ -22,7 +22,7 @@ from unitrack_env.evaluation.scorecard_flops import (
     reference_macs,
     vit_shape,
 )
-from unitrack_env.evaluation.scorecard_plan import TASKS
+from unitrack_env.evaluation.scorecard.plan import TASKS
 
 
 def _counted(arch: str, layer: str, stride: str | None = None) -> float:

@@ -14,7 +14,7 @@ import pytest
 
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.datasets.synthetic.cache import SpecsOnly, specs_only
-from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, data_source, plan
+from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, data_source, plan
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = [ModelSpec.parse("imagenet-lite0"), ModelSpec.parse("random")]

@@ -17,9 +17,9 @@ import pytest
 from unitrack_env.datasets.lasot import LASOT_SYNTHETIC
 from unitrack_env.datasets.sot_attributes import LASOT_CODES
 from unitrack_env.datasets.synthetic.cache import ensure_synthetic
-from unitrack_env.evaluation.attributes_plot import markdown_table, run_attributes
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.plots.attributes import markdown_table, run_attributes
+from unitrack_env.evaluation.run.runner import run
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "envs" / "sot-protocols.md"
 #: The synthetic LaSOT test split's attributes written here (LaSOT toolkit's file format).

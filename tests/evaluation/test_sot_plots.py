@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.curves_plot import run_curves
-from unitrack_env.evaluation.runner import run
+from unitrack_env.evaluation.plots.curves import run_curves
+from unitrack_env.evaluation.run.runner import run
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ from pathlib import Path
 from unitrack_env.benchmarks.views import Head, ScorecardColumn
 from unitrack_env.datasets.lasot import GOT10K_SYNTHETIC
 from unitrack_env.datasets.synthetic.cache import ensure_synthetic
-from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
-from unitrack_env.evaluation.scorecard_report import markdown_table
+from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, plan
+from unitrack_env.evaluation.scorecard.table import markdown_table
 
 MODELS = [ModelSpec.parse("imagenet-lite0")]
 

@@ -18,8 +18,8 @@ from unitrack_env.evaluation.analysis.intervals import (
     run_intervals,
 )
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.scorecard import _checked_request
-from unitrack_env.evaluation.scorecard_plan import TASKS, ModelSpec, plan
+from unitrack_env.evaluation.scorecard.card import _checked_request
+from unitrack_env.evaluation.scorecard.plan import TASKS, ModelSpec, plan
 from unitrack_env.metrics.points import COLUMNS, THRESHOLDS
 
 ENV = "UniTrack/TAPVid-DAVIS-v0"

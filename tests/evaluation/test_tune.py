@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from unitrack_env.evaluation.cli import main
-from unitrack_env.evaluation.tune import (
+from unitrack_env.evaluation.tune.search import (
     Dimension,
     apply,
     check_space,
@@ -94,7 +94,7 @@ def test_an_interrupted_trial_is_queued_again_with_its_setting(tmp_path):
     """A trial stopped by Ctrl-C (Optuna marks it failed) resumes: its setting is drawn
     first, so its run folder (same digest) keeps its finished sequences."""
     optuna = pytest.importorskip("optuna")
-    from unitrack_env.evaluation.tune import _study
+    from unitrack_env.evaluation.tune.search import _study
 
     study = _study(optuna, tmp_path, "maximize", 0)
     done = study.ask({"x": optuna.distributions.FloatDistribution(0, 1)})
@@ -152,7 +152,7 @@ def test_tune_resumes_after_ctrl_c_and_validates(tmp_path):
 def test_ray_domains_keep_the_bounds_of_the_space():
     """Ray's integer upper bound is exclusive: the space's is inclusive."""
     pytest.importorskip("ray.tune")
-    from unitrack_env.evaluation.tune_ray import _domain
+    from unitrack_env.evaluation.tune.ray_trials import _domain
 
     ints = _domain(parse_dimension("max_age=10..60"))
     assert (ints.lower, ints.upper) == (10, 61)

@@ -8,7 +8,7 @@ of the result files a sequence wrote.
 
 None of them depends on where things live: the data folder (``root``) is left out of the
 identity and input files are named relative to it; files named by options (a checkpoint) and
-the agent's code (:func:`~unitrack_env.evaluation.agent_code.agent_code`: its file and the
+the agent's code (:func:`~unitrack_env.evaluation.run.agent_code.agent_code`: its file and the
 modules of ``unitrack_env.agents`` it imports) count by base name and content. A run folder
 copied to another machine, or resumed with the data or the checkpoint moved elsewhere, reuses
 its sequences; different data, weights or code replay them.
@@ -112,7 +112,7 @@ class RunIdentity:
 
     @classmethod
     def of(cls, spec: Any, code: dict[str, str] | None = None) -> RunIdentity:
-        """The identity of a :class:`~unitrack_env.evaluation.run_spec.RunSpec`.
+        """The identity of a :class:`~unitrack_env.evaluation.run.run_spec.RunSpec`.
 
         ``code``: the agent's code manifest to assume (default: the files as they are now).
         """

@@ -22,7 +22,7 @@ from typing import Any
 
 from unitrack_env.io import atomic_write_text
 
-from .analysis.events import run_benchmark, run_sequences
+from ..analysis.events import run_benchmark, run_sequences
 
 #: The row of every scored sequence.
 OVERALL = "Overall"

@@ -70,7 +70,7 @@ def figure_stem(name: str) -> str:
 
 def report_section(folder: Path, out: Path) -> str:
     """The HTML of a scorecard folder's correlation study ("" when it has none)."""
-    from .report.html import esc, table
+    from ..report.html import esc, table
 
     path = folder / "correlation.json"
     if not path.is_file():

@@ -3,7 +3,7 @@
 ``unitrack scorecard`` plays every task's UniTrack head with one shared appearance model per
 row (one per ``--model``) and each task's appearance-free baseline, over every sequence of the
 data it finds, and reports the metrics of the paper's Table 2 and a radar chart
-(:mod:`unitrack_env.evaluation.radar`). More in docs/module-notes.md.
+(:mod:`unitrack_env.evaluation.scorecard.radar`). More in docs/module-notes.md.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from typing import Any
 import unitrack_env
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
-from .scorecard_plan import BASELINE, TASKS, Cell, ModelSpec, Source, plan
-from .scorecard_report import ran_on
+from .plan import BASELINE, TASKS, Cell, ModelSpec, Source, plan
+from .table import ran_on
 
 
 def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
@@ -32,7 +32,7 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     Runs where the backend puts it (another process or machine); nothing is written to the
     driver's output folder from here.
     """
-    from .runner import run
+    from ..run.runner import run
 
     started = time.monotonic()
     if threads:
@@ -79,7 +79,7 @@ def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     A stored cell is stale when its data or code changed since it was played; the runner
     would replay it while the card is scored, so it goes to the workers instead.
     """
-    from .resume import RunMismatch, stale_sequences
+    from ..run.resume import RunMismatch, stale_sequences
 
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
@@ -103,7 +103,7 @@ def restamp_cells(out: Path, cells: Sequence[Cell]) -> dict[str, list[str] | str
     Returns, for each stale stored cell, the changed code files (kept) or why it cannot be
     kept (:mod:`.restamp`); nothing is played.
     """
-    from .resume import RunMismatch, restamp_sequences
+    from ..run.resume import RunMismatch, restamp_sequences
 
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
@@ -128,8 +128,8 @@ def _finite(value: Any) -> float | None:
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from .resume import RunMismatch
-    from .runner import run
+    from ..run.resume import RunMismatch
+    from ..run.runner import run
 
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
@@ -169,7 +169,7 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
 
 def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank") -> list[Path]:
     """``scorecard.json``, ``.csv``, ``.md`` and (with matplotlib) the radar chart PNG/SVG."""
-    from .scorecard_report import markdown_table, rows_csv
+    from .table import markdown_table, rows_csv
 
     atomic_write_text(out / "scorecard.json", json.dumps(card, indent=2, allow_nan=False))
     atomic_write_text(out / "scorecard.csv", rows_csv(card))
@@ -206,7 +206,7 @@ def _gflops(models: Sequence[ModelSpec], names: list[str]) -> dict[str, dict[str
     """
     from unitrack_env.agents.appearance.weights import load_weights
 
-    from .scorecard_eta import megapixel_gflops
+    from .eta import megapixel_gflops
     gflops: dict[str, dict[str, float]] = {}
     for m in models:
         loaded = load_weights(m.weights, arch=m.arch, layer=m.layer, stride=m.stride)
@@ -232,11 +232,11 @@ def _first_estimate(out: Path, models: Sequence[ModelSpec], names: list[str],
     """The ETA before torch is imported or synthetic data are written.
 
     Frame counts from the benchmarks (or the synthetic specs), GFLOP from
-    :mod:`.scorecard_flops` and the time to set up (:func:`~.scorecard_eta.setup_seconds`);
+    :mod:`.flops` and the time to set up (:func:`~.eta.setup_seconds`);
     the exact ETA follows when the cells start.
     """
-    from .scorecard_eta import schedule, setup_seconds
-    from .scorecard_flops import estimated_megapixel_gflops
+    from .eta import schedule, setup_seconds
+    from .flops import estimated_megapixel_gflops
 
     cells, _, pending = plan(models, names, data, motion=motion, runtime=runtime,
                              generate=False)
@@ -262,13 +262,13 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
               torch_runtime: bool = False, gflop_per_mp: dict | None = None) -> None:
     """Play and store every cell not done yet, longest first; each warning is shown once.
 
-    ``on_estimate`` gets the seconds left (:class:`~.scorecard_eta.CellClock`) at the start
-    and after every cell; ``gflop_per_mp`` is :func:`~.scorecard_eta.schedule`'s.
+    ``on_estimate`` gets the seconds left (:class:`~.eta.CellClock`) at the start
+    and after every cell; ``gflop_per_mp`` is :func:`~.eta.schedule`'s.
     """
-    from .backends import make_backend
-    from .runner import RunFailed
-    from .scorecard_eta import schedule
-    from .workers import SequenceFailure
+    from ..run.backends import make_backend
+    from ..run.runner import RunFailed
+    from ..run.workers import SequenceFailure
+    from .eta import schedule
 
     todo, clock = schedule(cells_to_play(out, cells), BASELINE,
                            _slots(backend, workers), torch_runtime, gflop_per_mp)
@@ -337,16 +337,16 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     if on_estimate is not None:
         _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
                         motion=motion, runtime=runtime, on_estimate=on_estimate)
-    from .runner import check_out_folder
+    from ..run.runner import check_out_folder
 
     gflops = _gflops(models, names)
     if backend == "pool" and workers > 1:
-        from .workers import refuse_unguarded_script
+        from ..run.workers import refuse_unguarded_script
 
         refuse_unguarded_script()
     from unitrack_env.agents.appearance.runtime import resolve_runtime
 
-    from .ownership import hold_folder
+    from ..run.ownership import hold_folder
 
     chosen = resolve_runtime(runtime)  # not installed: one error now, not one per cell
     check_out_folder(out)

@@ -26,6 +26,9 @@ from unitrack_env.io import atomic_write_text
 
 from .correlation import correlate
 from .correlation_plot import draw_scatter, figure_stem
+from .plan import TASKS
+from .radar import axes
+from .table import value as card_value
 
 #: Direction suffixes of a metric name.
 DIRECTIONS = ("lower", "higher")
@@ -126,9 +129,6 @@ def merge_externals(*sources: dict[str, dict[str, float]]) -> dict[str, dict[str
 
 def _tracking_axes(card: dict[str, Any]) -> list[tuple[str, str, str, str, bool]]:
     """(task, head, metric, title, lower is better) of each task's radar axis."""
-    from .radar import axes
-    from .scorecard_plan import TASKS
-
     return [(task, head, metric, f"{TASKS[task].title} {metric} ({head})",
              metric in TASKS[task].lower_is_better)
             for task, head, metric, _ in axes(card)]
@@ -137,8 +137,6 @@ def _tracking_axes(card: dict[str, Any]) -> list[tuple[str, str, str, str, bool]
 def study(card: dict[str, Any], externals: dict[str, dict[str, float]], *,
           resamples: int = 2000) -> dict[str, Any]:
     """The correlation of every external metric with every task's axis, over the models."""
-    from .scorecard_report import value
-
     models = list(card["models"])
     names = sorted({name for metrics in externals.values() for name in metrics})
     results = []
@@ -148,7 +146,7 @@ def study(card: dict[str, Any], externals: dict[str, dict[str, float]], *,
             points = []
             for model in models:
                 x = externals.get(model, {}).get(name)
-                y = value(card, model, task, head, metric)
+                y = card_value(card, model, task, head, metric)
                 if x is not None and y is not None:
                     points.append({"model": model, "x": x, "y": y})
             xs = [-p["x"] if lower else p["x"] for p in points]

@@ -12,7 +12,7 @@ scaled by the ratio of measured to estimated seconds of its finished cells (befo
 cells finished, by that of its model's finished cells, else of all). The ETA is the end of a
 list schedule of the remaining cells over the workers, counting the time the running cells
 have already spent. The scorecard's first estimate, made before the models load
-(:mod:`.scorecard_flops`), adds the seconds still to come before the cells start
+(:mod:`.flops`), adds the seconds still to come before the cells start
 (:func:`setup_seconds`).
 """
 
@@ -24,7 +24,7 @@ from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .scorecard_plan import TASKS
+from .plan import TASKS
 
 #: Network input per frame of a task whose benchmark declares no scorecard column (each
 #: column states its own ``input_size``: SOT feeds three 520 x 520 scale crops; VOS the
@@ -70,7 +70,7 @@ def cell_cost(task: str, frames: int, *, appearance: bool, torch_runtime: bool =
     """Estimated seconds of one cell: ``frames`` frames of ``task``'s head.
 
     Args:
-        task: The task name (a key of :data:`~.scorecard_plan.TASKS`).
+        task: The task name (a key of :data:`~.plan.TASKS`).
         frames: Frames of the sequence.
         appearance: Whether the head runs the appearance model (baselines do not).
         torch_runtime: The backbone runs in eager torch (slower).
@@ -191,7 +191,7 @@ def schedule(cells: Sequence[Any], baseline: str, workers: int, torch_runtime: b
     """Scorecard cells longest first, and the clock of their ETA.
 
     Args:
-        cells: :class:`~unitrack_env.evaluation.scorecard.Cell` objects (task, head, model,
+        cells: :class:`~unitrack_env.evaluation.scorecard.plan.Cell` objects (task, head, model,
             frames).
         baseline: The row label of the appearance-free baselines.
         workers: Cells running at once.

@@ -1,6 +1,6 @@
 """``unitrack tune --backend ray``: the search's trials as Ray Tune trials.
 
-The same trial as on Optuna (:func:`.tune.play_trial`: a run folder ``<out>/trials/<digest>``
+The same trial as on Optuna (:func:`.search.play_trial`: a run folder ``<out>/trials/<digest>``
 on the tuning split, the shared feature cache), drawn by Ray Tune's ``OptunaSearch`` (TPE,
 seeded) and scheduled by a ``tune.Tuner`` on a local Ray or a cluster (``address``). Each
 trial asks for one CPU. On a cluster ``<out>`` must be a folder every node sees (a shared
@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .tune import Dimension, TuneSpec, play_trial
+from .search import Dimension, TuneSpec, play_trial
 
 #: The experiment's name inside ``<out>/ray``.
 EXPERIMENT = "unitrack-tune"
@@ -75,7 +75,7 @@ def _history(grid: Any, names: list[str]) -> list[dict[str, Any]]:
 
 
 def ray_search(address: str | None = None) -> Callable[..., Any]:
-    """A search for :func:`.tune.tune` on Ray Tune (local Ray when ``address`` is None)."""
+    """A search for :func:`.search.tune` on Ray Tune (local Ray when ``address`` is None)."""
 
     def search(spec: TuneSpec, space: list[Dimension], base: dict[str, Any], out: Path,
                trials: int, seed: int, on_trial: Callable[[dict[str, Any]], None] | None

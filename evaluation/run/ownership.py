@@ -20,6 +20,9 @@ from typing import Any
 
 from unitrack_env.io import LinkRefused, atomic_write_text, path_inside, refuse_link
 
+from .episode import OutputError, SequenceRecord
+from .identity import result_digest
+
 try:  # POSIX; elsewhere the lock relies on the recorded pid alone
     import fcntl
 except ImportError:  # pragma: no cover - Windows
@@ -206,8 +209,6 @@ def hold_folder(folder: str | os.PathLike, what: str) -> Iterator[FolderLock]:
     try:
         previous = lock.acquire()
     except OSError as exc:
-        from .episode import OutputError
-
         raise OutputError(exc.errno, f"cannot write to {folder}: {exc.strerror or exc}") from exc
     try:
         if previous is not None:
@@ -400,9 +401,6 @@ def _record(out: Path, name: str) -> Path:
 
 def results_match(out: Path, names: list[str], name: str) -> bool:
     """Whether sequence ``name`` has a record whose digest matches its result files."""
-    from .episode import SequenceRecord
-    from .identity import result_digest
-
     try:
         record = SequenceRecord.from_json(json.loads(_record(out, name).read_text()))
     except (OSError, ValueError, TypeError):
@@ -416,8 +414,6 @@ def own_folder(out: Path, every: Iterable[str], names: list[str], overwrite: boo
     Unlisted runs of ours are adopted when their records verify. Files no run of ours wrote
     are never deleted (a warning names them) nor overwritten (OutputError).
     """
-    from .episode import OutputError
-
     every = list(every)
     try:
         for name in (MANIFEST, "run.json", "metrics.json", "data", "sequences", "events"):

@@ -1,8 +1,8 @@
 """Sequences played one after the other (``workers=1``), here or in one supervised child.
 
-The counterpart of :mod:`unitrack_env.evaluation.workers`: a failed sequence keeps its
+The counterpart of :mod:`unitrack_env.evaluation.run.workers`: a failed sequence keeps its
 exception (with the agent's traceback) and the next one plays in a fresh environment; a step
-longer than the limit fails its sequence (:mod:`unitrack_env.evaluation.watchdog`).
+longer than the limit fails its sequence (:mod:`unitrack_env.evaluation.run.watchdog`).
 :func:`play_isolated` plays the same way in one child process that the parent watches (the
 CLI's default), so that a step stuck in native code, a crash or a ``close()`` that never
 returns ends only what it was doing.
@@ -22,7 +22,7 @@ from unitrack_env.benchmarks.base import Benchmark
 
 from .episode import SequenceRecord, play_repetitions, save_episode
 from .identity import Stamp
-from .pool import SupervisedPool
+from .pool import SupervisedPool, WorkerDied, WorkerTimedOut
 from .watchdog import StepTimeout, StepWatchdog, limit
 from .workers import RemoteTraceback, SequenceFailure, init_worker
 
@@ -171,8 +171,6 @@ def _closed(spec: Any, outcome: Any, step_timeout: float | None) -> None:
 
     Every sequence is already saved; an exception close() raised is raised, as in this process.
     """
-    from .pool import WorkerDied, WorkerTimedOut
-
     if isinstance(outcome, WorkerTimedOut):
         warnings.warn(f"agent '{spec.agent}': close() did not return within "
                       f"{limit(step_timeout):g} s; its process was stopped (the results are "

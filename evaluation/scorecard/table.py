@@ -18,7 +18,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .analysis.tables import COUNT_METRICS
+from ..analysis.tables import COUNT_METRICS
+from .plan import BASELINE, TASKS
 
 #: Header marks of the data sources.
 MARKS = {"benchmark": "", "fixture": "*", "synthetic": "†"}
@@ -26,8 +27,6 @@ MARKS = {"benchmark": "", "fixture": "*", "synthetic": "†"}
 
 def columns(card: dict[str, Any]) -> list[tuple[str, str, str]]:
     """(task, head, metric) of every column, in the scorecard's task order."""
-    from .scorecard_plan import TASKS
-
     out = []
     for task in card["tasks"]:
         spec = TASKS[task]
@@ -39,8 +38,6 @@ def columns(card: dict[str, Any]) -> list[tuple[str, str, str]]:
 
 def value(card: dict[str, Any], model: str, task: str, head: str, metric: str) -> float | None:
     """The combined metric of one row, or None."""
-    from .scorecard_plan import BASELINE, TASKS
-
     if model == BASELINE:
         head = TASKS[task].baseline.label
     for row in card["rows"]:
@@ -56,15 +53,11 @@ def _cell(metric: str, number: float | None) -> str:
 
 
 def _lower_is_better(task: str, metric: str) -> bool:
-    from .scorecard_plan import TASKS
-
     return metric in TASKS[task].lower_is_better
 
 
 def markdown_table(card: dict[str, Any]) -> str:
     """The scorecard as a Markdown table (one row per model, then the baselines)."""
-    from .scorecard_plan import BASELINE, TASKS
-
     cols = columns(card)
     rows = [*card["models"], BASELINE]
     head = ["Representation"]
@@ -144,8 +137,6 @@ def rows_csv(card: dict[str, Any]) -> str:
 def polygon_values(card: dict[str, Any],
                    spokes: list[tuple[str, str, str, str]]) -> dict[str, list[float | None]]:
     """Each model's (and the baselines') value on each radar axis ``(task, head, metric, _)``."""
-    from .scorecard_plan import BASELINE
-
     return {model: [value(card, model, task, head, metric) for task, head, metric, _ in spokes]
             for model in [*card["models"], BASELINE]}
 
@@ -157,8 +148,6 @@ def merge_cards(paths: Sequence[Path]) -> dict[str, Any]:
     label; the baselines and the data sources are the first file's. A task whose data source
     differs between the files is refused: its numbers would not be comparable.
     """
-    from .scorecard_plan import BASELINE
-
     cards = []
     for path in paths:
         try:

@@ -236,7 +236,7 @@ def play_trial(spec: TuneSpec, base: dict[str, Any], params: dict[str, Any],
     Returns its value, seconds, CPU seconds, sequences played, cache summary and folder. A
     folder finished before is read back, not played again (``played`` is then 0).
     """
-    from .runner import run
+    from ..run.runner import run
 
     folder = out / "trials" / setting_digest(params)
     started, cpu = time.monotonic(), time.process_time()
@@ -308,9 +308,9 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     """
     from unitrack_env.benchmarks import benchmark_for
 
-    from .analysis.compare import COMBINED
-    from .analysis.intervals import compare_runs
-    from .runner import run
+    from ..analysis.compare import COMBINED
+    from ..analysis.intervals import compare_runs
+    from ..run.runner import run
 
     folders = {"defaults": out / "validation" / "defaults",
                "best": out / "validation" / f"best-{setting_digest(best)}"}
@@ -368,8 +368,8 @@ def tune(spec: TuneSpec, *, out: str | os.PathLike, trials: int, seed: int = 0,
     ``search`` is Optuna's by default (``backend`` names it in the result; ``check``
     refuses a missing library before anything runs).
     """
-    from .ownership import hold_folder
-    from .runner import check_out_folder
+    from ..run.ownership import hold_folder
+    from ..run.runner import check_out_folder
 
     space = [Dimension(**d) for d in spec.space]
     _check_sequences(spec.env_id, spec.env_kwargs, spec.metric, spec.tune_sequences,

@@ -10,14 +10,15 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from .plan import BASELINE, TASKS
+from .table import polygon_values
+
 #: Label suffix per data source.
 SOURCE_NOTES = {"benchmark": "", "fixture": "\n(fixture)", "synthetic": "\n[synthetic data]"}
 
 
 def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     """(task, head, metric, label) of every radar axis."""
-    from .scorecard_plan import TASKS
-
     out = []
     for task in card["tasks"]:
         spec = TASKS[task]
@@ -31,8 +32,6 @@ def axes(card: dict[str, Any]) -> list[tuple[str, str, str, str]]:
 
 def radii(card: dict[str, Any], scale: str = "rank") -> dict[str, list[float | None]]:
     """Each polygon's radius on each axis (None: no value)."""
-    from .scorecard_report import polygon_values
-
     values = polygon_values(card, axes(card))
     if scale == "value":
         return values
@@ -83,8 +82,6 @@ def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list
 
 def _style(plt: Any, name: str, index: int) -> dict[str, Any]:
     """Line style of one polygon: the baselines grey and dashed, the models in tab10."""
-    from .scorecard_plan import BASELINE
-
     if name == BASELINE:
         return {"color": "0.5", "linestyle": "--", "linewidth": 1.2}
     return {"color": plt.get_cmap("tab10")(index % 10), "linewidth": 2}
@@ -98,8 +95,6 @@ def _title(scale: str, better: str = "outer") -> str:
 def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
               data: dict[str, list[float | None]], scale: str) -> Any:
     """The radar proper (three axes or more)."""
-    from .scorecard_plan import BASELINE
-
     angles = [2 * math.pi * i / len(spokes) for i in range(len(spokes))]
     figure, ax = plt.subplots(figsize=(6.4, 6.4), subplot_kw={"projection": "polar"})
     ax.set_theta_offset(math.pi / 2)  # first task at the top, the others clockwise
@@ -140,8 +135,6 @@ def _bars(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]
           data: dict[str, list[float | None]], scale: str) -> Any:
     """One or two tasks: grouped bars (no radar polygon has fewer than three vertices)."""
     from matplotlib.patches import Patch
-
-    from .scorecard_plan import BASELINE
 
     figure, ax = plt.subplots(figsize=(3.2 + 1.6 * len(spokes), 4.8))
     width = 0.8 / len(data)

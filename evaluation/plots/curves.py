@@ -13,7 +13,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from .analysis.events import run_benchmark, run_sequences
+from ..analysis.events import run_benchmark, run_sequences
 
 
 def run_curves(run: Path) -> tuple[str, list[Any]]:

@@ -18,6 +18,8 @@ from multiprocessing import current_process
 from pathlib import Path
 from typing import Any
 
+from .episode import OutputError, SequenceRecord, play_repetitions, save_episode
+from .pool import CLOSING, SupervisedPool
 from .progress import format_warning
 
 #: Seconds between a worker's checks that its parent is alive.
@@ -88,9 +90,6 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
     """
     from unitrack_env.agents.base import close_agent
 
-    from .episode import OutputError, play_repetitions, save_episode
-    from .pool import CLOSING
-
     env = agent = None
     try:
         env = spec.make_env()
@@ -156,11 +155,8 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], stamps: dict[str, Any
     """Play ``todo`` in ``workers`` supervised processes; return (records, failures).
 
     A worker that dies or overruns ``step_timeout`` fails only the sequence it was playing
-    (:mod:`unitrack_env.evaluation.pool`).
+    (:mod:`unitrack_env.evaluation.run.pool`).
     """
-    from .episode import SequenceRecord
-    from .pool import SupervisedPool
-
     records: dict[str, SequenceRecord] = {}
     failures: dict[str, str] = {}
     threads = max(1, (os.cpu_count() or 1) // workers)

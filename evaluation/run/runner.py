@@ -24,10 +24,14 @@ from unitrack_env.benchmarks.base import Benchmark, select_sequences
 from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
+from ..analysis.events import events_path, write_run_events
 from .episode import OutputError, SequenceRecord
 from .identity import RunIdentity, Stamp
 from .integrity import data_fingerprint
 from .ownership import Manifest, hold_folder, outside, own_folder, settle
+from .progress import RunProgress
+from .ray_sequences import play_on_ray
+from .repetitions import repetition_scores
 from .restamp import restamp_record
 from .resume import check_run_json, record_path, stale_reason
 from .run_spec import RunSpec
@@ -175,8 +179,6 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
         payload |= {"benchmark": scores.benchmark, "per_sequence": scores.per_sequence,
                     "combined": scores.combined, "combined_covers": scores.coverage_json()}
         if spec.repeats > 1:
-            from .repetitions import repetition_scores
-
             repeated = repetition_scores(bench, out / "data", list(scores.per_sequence),
                                          spec.repeats)
             payload["repetitions"] = repeated
@@ -192,8 +194,6 @@ def _score_and_write(out: Path, spec: RunSpec, bench: Benchmark, names: list[str
                                      f"{out / 'data'}: free space and run the same command "
                                      "again to score them") from exc
     if scores is not None:  # per-frame error events beside the results (never fails the run)
-        from .analysis.events import write_run_events
-
         write_run_events(out, bench, with_gt)
     return scores, repeated
 
@@ -316,15 +316,11 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
     lengths, failures = _sequence_lengths(bench, [n for n in names if n not in skipped])
     todo = list(lengths)
 
-    from .progress import RunProgress
-
     causes: dict[str, BaseException] = {}
     manifest.claim(todo)
     try:
         with RunProgress(sum(lengths.values()) * spec.repeats, enabled=options.progress) as bar:
             if options.backend == "ray" and todo:
-                from .ray_sequences import play_on_ray
-
                 records, played = play_on_ray(spec, out, todo, stamps, lengths, bar=bar,
                                               workers=options.workers, address=options.address)
             elif options.isolate and (options.workers <= 1 or len(todo) <= 1):
@@ -345,8 +341,6 @@ def _run_prepared(spec: RunSpec, env: gym.Env, bench: Benchmark, agent_obj: Any,
         raise RunFailed(failures, out, causes) from next(iter(causes.values()), None)
     for name in skipped:
         records[name] = SequenceRecord.from_json(json.loads(record_path(out, name).read_text()))
-    from .analysis.events import events_path
-
     manifest.add(out / "metrics.json", *(events_path(out, name) for name in names))
     scores, repeated = _score_and_write(out, spec, bench, names, records)
     return RunReport(out, {n: records[n] for n in names}, scores, skipped, replayed,

@@ -112,7 +112,7 @@ class SupervisedPool:
     """``workers`` spawned processes; :meth:`run` yields ``(item, result or exception)``.
 
     Each process first calls ``init(parent pid, threads)``
-    (:func:`~unitrack_env.evaluation.workers.init_worker`; passed in, so that this module does
+    (:func:`~unitrack_env.evaluation.run.workers.init_worker`; passed in, so that this module does
     not import the one that uses it).
     """
 

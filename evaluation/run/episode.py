@@ -37,7 +37,7 @@ class SequenceRecord:
     appearance-free agent, None in records written before it was kept."""
     code: dict[str, str] | None = None
     """The agent's code when it was played: ``{file: content digest}``
-    (:func:`~unitrack_env.evaluation.agent_code.code_manifest`); None until the run's stamp
+    (:func:`~unitrack_env.evaluation.run.agent_code.code_manifest`); None until the run's stamp
     is applied."""
     data: str = ""
     """Fingerprint of the sequence's data files when it was played (ground truth and

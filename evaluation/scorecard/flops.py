@@ -18,7 +18,7 @@ import math
 import re
 from collections.abc import Sequence
 
-from .scorecard_eta import LITE0_GFLOP_PER_MP, input_size
+from .eta import LITE0_GFLOP_PER_MP, input_size
 
 REFERENCE_SIZE: int = 224
 """Input side at which the counts are taken (``network_gflops``'s)."""

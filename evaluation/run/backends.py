@@ -3,7 +3,7 @@
 A backend is a context manager yielding ``run(fn, items)``, which calls ``fn(item,
 threads)`` somewhere and yields ``(item, result or exception)`` as they finish; results
 travel through the backend, so remote workers need no shared file system. ``pool``:
-``workers`` spawned local processes (:mod:`unitrack_env.evaluation.pool`); ``ray``: one
+``workers`` spawned local processes (:mod:`unitrack_env.evaluation.run.pool`); ``ray``: one
 ``num_cpus=1`` task per item, on a local Ray or a cluster (``address``; the ``ray`` extra).
 """
 
@@ -14,15 +14,15 @@ import os
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
+from .pool import SupervisedPool
+from .workers import init_worker
+
 Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]]
 
 
 @contextlib.contextmanager
 def pool_backend(workers: int = 1) -> Iterator[Runner]:
     """Local worker processes (``workers`` <= 1: in this process)."""
-    from .pool import SupervisedPool
-    from .workers import init_worker
-
     workers = max(1, int(workers))
     threads = max(1, (os.cpu_count() or 1) // workers)
 

@@ -1,7 +1,7 @@
 """``unitrack evaluate --backend ray``: a run's sequences as Ray tasks.
 
 Each sequence is one ``num_cpus=1`` task on the scorecard's Ray backend
-(:func:`~unitrack_env.evaluation.backends.ray_backend`: a local Ray, or a cluster at
+(:func:`~unitrack_env.evaluation.run.backends.ray_backend`: a local Ray, or a cluster at
 ``address``). The task plays the sequence in a scratch folder on whichever machine runs it
 and sends back its result files and record as bytes; this process writes them into the run
 folder (results first, the record last: the record marks the sequence done), so workers need
