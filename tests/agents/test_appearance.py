@@ -151,10 +151,19 @@ def test_input_forms_agree(lite0: AppearanceModel) -> None:
 def test_bad_inputs_are_explained(lite0: AppearanceModel) -> None:
     with pytest.raises(ValueError, match="same size"):
         lite0.features([np.zeros((8, 8, 3), np.uint8), np.zeros((16, 8, 3), np.uint8)])
-    with pytest.raises(ValueError, match="uint8"):
-        lite0.features(np.zeros((8, 8, 3), np.float32))
+    with pytest.raises(ValueError, match="uint8 or float32"):
+        lite0.features(np.zeros((8, 8, 3), np.float64))
     with pytest.raises(ValueError, match="uint8"):
         lite0.features(np.zeros((8, 8), np.uint8))
+
+
+def test_float32_pixel_values_are_the_uint8_image(lite0: AppearanceModel) -> None:
+    """The SOT heads' exact crops are float32 pixel values: integral ones give the uint8
+    image's features, and the caller's array is left as it was (not normalised in place)."""
+    image = np.random.default_rng(5).integers(0, 256, (2, 24, 40, 3), dtype=np.uint8)
+    pixels = image.astype(np.float32)
+    assert torch.equal(lite0.features(pixels), lite0.features(image))
+    np.testing.assert_array_equal(pixels, image)
 
 
 def test_num_threads_is_applied_only_during_the_pass() -> None:
