@@ -84,27 +84,28 @@ def instrumented(head: type, seed: int | None, pixels: int) -> type:
                 {"reset": reset, "act": act, "trace": []})
 
 
-def uint8_crops() -> None:
-    """Patch the heads' crop sampling back to cv2's uint8 one (``--uint8-crops``)."""
+def cv2_crop_windows(image: np.ndarray, centre: tuple[float, float], windows: np.ndarray,
+                     out_size: int, *, fill: Any = None) -> np.ndarray:
+    """The heads' crops before the stability fix: ``cv2.warpAffine``, rounded to uint8."""
     import cv2
 
+    colour = tuple(float(v) for v in (image.reshape(-1, 3).mean(0) if fill is None else fill))
+    out = []
+    for win_w, win_h in np.asarray(windows, np.float64).reshape(-1, 2):
+        ax, ay = win_w / out_size, win_h / out_size
+        matrix = np.array([[ax, 0.0, centre[0] + (0.5 - out_size / 2) * ax - 0.5],
+                           [0.0, ay, centre[1] + (0.5 - out_size / 2) * ay - 0.5]])
+        out.append(cv2.warpAffine(image, matrix, (out_size, out_size),
+                                  flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                  borderMode=cv2.BORDER_CONSTANT, borderValue=colour))
+    return np.stack(out)
+
+
+def uint8_crops() -> None:
+    """Patch the heads' crop sampling back to :func:`cv2_crop_windows` (``--uint8-crops``)."""
     from unitrack_env.agents.primitives import box_propagation
 
-    def crop(image: np.ndarray, centre: tuple[float, float], windows: np.ndarray,
-             out_size: int, *, fill: Any = None) -> np.ndarray:
-        colour = tuple(float(v) for v in (image.reshape(-1, 3).mean(0) if fill is None
-                                          else fill))
-        out = []
-        for win_w, win_h in np.asarray(windows, np.float64).reshape(-1, 2):
-            ax, ay = win_w / out_size, win_h / out_size
-            matrix = np.array([[ax, 0.0, centre[0] + (0.5 - out_size / 2) * ax - 0.5],
-                               [0.0, ay, centre[1] + (0.5 - out_size / 2) * ay - 0.5]])
-            out.append(cv2.warpAffine(image, matrix, (out_size, out_size),
-                                      flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                      borderMode=cv2.BORDER_CONSTANT, borderValue=colour))
-        return np.stack(out)
-
-    box_propagation.crop_windows = crop
+    box_propagation.crop_windows = cv2_crop_windows
 
 
 def _boxes(out: Path, clip: str) -> np.ndarray:

@@ -47,7 +47,7 @@ def _axis_taps(
     Sample ``k`` at pixel-centre coordinate ``first + k * step`` (pixel ``j``'s centre at
     ``j``) blends pixels ``lo`` and ``lo + 1`` with weights ``1 - frac`` and ``frac``.
     Returns the pixels read (sorted, possibly outside ``[0, length)``), whether each is in
-    the image, each sample's two taps as indices into those pixels, and their weights.
+    the image, each sample's two taps as indices into those pixels, and ``frac``.
     """
     pos = first + step * np.arange(count, dtype=np.float64)
     lo = np.floor(pos)
@@ -55,7 +55,7 @@ def _axis_taps(
     taps = lo.astype(np.int64)[:, None] + np.array([0, 1])
     read = np.unique(taps)
     inside = (read >= 0) & (read < length)
-    return read, inside, np.searchsorted(read, taps), np.stack([1.0 - frac, frac], axis=1)
+    return read, inside, np.searchsorted(read, taps), frac
 
 
 def crop_windows(
@@ -68,11 +68,11 @@ def crop_windows(
 ) -> np.ndarray:
     """Crop axis-aligned windows around one centre and resize each to ``out_size`` squared.
 
-    Exact bilinear sampling, computed in float64 and returned unrounded: a crop is a
-    continuous function of the box. (Integer resamplers such as ``cv2.warpAffine`` put sample
-    positions on a 1/32-pixel grid and round the output to uint8, so a box moved by 1e-6 px,
-    float noise of the previous step, changes whole grey levels of the next crop; a tracker
-    then carries that input-sized change on. ``benchmarks/sot_stability.py`` measures it.)
+    Exact bilinear sampling (positions in float64, values in float32), returned unrounded: a
+    crop is a continuous function of the box. (Integer resamplers such as ``cv2.warpAffine``
+    put sample positions on a 1/32-pixel grid and round the output to uint8, so a box moved by
+    1e-6 px, float noise of the previous step, changes whole grey levels of the next crop; a
+    tracker then carries that input-sized change on. ``benchmarks/sot_stability.py`` measures it.)
 
     Args:
         image: uint8 RGB ``(H, W, 3)``.
@@ -89,7 +89,7 @@ def crop_windows(
     height, width = image.shape[:2]
     if fill is None:  # an exact integer sum: the same colour on every machine
         fill = image.reshape(-1, 3).sum(0, dtype=np.int64) / (height * width)
-    colour = np.asarray(fill, dtype=np.float64).reshape(3)
+    colour = np.asarray(fill, dtype=np.float64).reshape(3).astype(np.float32)
     cx, cy = centre
     crops = np.empty((len(np.reshape(windows, (-1, 2))), out_size, out_size, 3), np.float32)
     for i, (win_w, win_h) in enumerate(np.asarray(windows, dtype=np.float64).reshape(-1, 2)):
@@ -100,13 +100,16 @@ def crop_windows(
         cols, in_x, tx, wx = _axis_taps(cx + (0.5 - out_size / 2) * ax - 0.5, ax,
                                         out_size, width)
         # The pixels the crop reads; those outside the image read the fill colour.
-        block = np.empty((len(rows), len(cols), 3))
+        block = np.empty((len(rows), len(cols), 3), np.float32)
         block[...] = colour
         block[np.ix_(in_y, in_x)] = image[np.ix_(rows[in_y], cols[in_x])]
-        # Explicit products and sums: IEEE-exact on every machine (no BLAS, no FMA).
-        blended = wy[:, 0, None, None] * block[ty[:, 0]] + wy[:, 1, None, None] * block[ty[:, 1]]
-        crops[i] = (wx[None, :, 0, None] * blended[:, tx[:, 0]]
-                    + wx[None, :, 1, None] * blended[:, tx[:, 1]])
+        # Rows then columns, each ``a + frac * (b - a)`` in float32 elementwise (positions and
+        # fractions in float64): IEEE-exact on every machine (no BLAS, no FMA), and exactly
+        # the image's pixels at integer positions.
+        top = block[ty[:, 0]]
+        blended = top + wy[:, None, None].astype(np.float32) * (block[ty[:, 1]] - top)
+        left = blended[:, tx[:, 0]]
+        crops[i] = left + wx[None, :, None].astype(np.float32) * (blended[:, tx[:, 1]] - left)
     return crops
 
 
