@@ -97,6 +97,8 @@ def markdown_table(card: dict[str, Any]) -> str:
                  "the scorecard was made with --motion.")
     if card.get("runtime"):
         lines.append(f"Appearance models ran on {card['runtime']}.")
+    notes = dict.fromkeys(TASKS[task].note for task in card["tasks"] if task in TASKS)
+    lines.extend(note for note in notes if note)
     return "\n".join(lines) + "\n"
 
 

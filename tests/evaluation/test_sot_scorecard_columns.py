@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from unitrack_env.benchmarks.sot_columns import SPREAD
 from unitrack_env.benchmarks.views import Head, ScorecardColumn
 from unitrack_env.datasets.lasot import GOT10K_SYNTHETIC
 from unitrack_env.datasets.synthetic.cache import ensure_synthetic
@@ -20,7 +21,8 @@ def test_the_default_task_set_and_its_sot_column_are_unchanged() -> None:
         "SOT", ("UniTrack/OTB-v0",),
         (Head("unitrack-xcorr", "XCorr", metrics), Head("unitrack-dcf", "DCF", metrics)),
         Head("repeat-box", "repeat-box", metrics, appearance=False),
-        ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02)
+        ("XCorr", "AUC"), order=1, input_size=(3, 520, 520), head_seconds=0.02,
+        note=SPREAD)  # (the footer line of how far SOT cells move, added with exact crops)
     task = TASKS["sot"]
     assert ScorecardColumn(**{k: getattr(task, k) for k in before.__dataclass_fields__}) \
         == before
@@ -69,3 +71,7 @@ def test_got10k_column_reads_val_under_data_and_is_marked_in_the_table(tmp_path:
     assert "SOT (GOT-10k val) AO (XCorr) ↑ | SOT (GOT-10k val) SR0.5 (XCorr) ↑" in table
     assert "| m | - | - | - | - | 50.0 | 25.0 | - | - |" in table
     assert "- SOT (GOT-10k val): UniTrack/GOT10k-v0, benchmark: /d/GOT-10k" in table
+    # how far SOT cells move, once under the table however many SOT columns it has
+    assert table.count(SPREAD) == 1 and "at most 0.2 points" in SPREAD
+    card["tasks"] = ["sot-got10k"]
+    assert SPREAD in markdown_table(card)

@@ -11,8 +11,13 @@ from __future__ import annotations
 
 from unitrack_env.benchmarks.views import Head, ScorecardColumn
 
+#: How far a SOT cell moves: the ranges measured by ``benchmarks/sot_stability.py`` on the
+#: fixture clips (docs/envs/sot-protocols.md, "How reproducible a SOT number is").
+SPREAD = ("SOT heads: across runtimes and thread counts a clip's AUC moved by at most 0.2 "
+          "points; with one grey level changed on 64 pixels a frame, by up to 4.0 "
+          "(benchmarks/sot_stability.py, docs/envs/sot-protocols.md).")
 #: The box heads on an OTB-sized search area, as the default SOT column measures them.
-_SOT = {"input_size": (3, 520, 520), "head_seconds": 0.02}
+_SOT = {"input_size": (3, 520, 520), "head_seconds": 0.02, "note": SPREAD}
 
 
 def _sot_column(title: str, env_id: str, metrics: tuple[str, ...], order: float,

@@ -53,7 +53,8 @@ class ScorecardColumn:
     the head's own seconds per frame besides the backbone (None: the association heads');
     ``opt_in``: left out of the default task set, played only when asked for by name;
     ``task``: the column's name in the scorecard (``--tasks``), default the benchmark's task
-    (a second column of a task, on another benchmark, needs its own).
+    (a second column of a task, on another benchmark, needs its own); ``note``: a line the
+    card prints under its table for this column (e.g. how far its numbers move).
     """
 
     title: str
@@ -67,6 +68,7 @@ class ScorecardColumn:
     head_seconds: float | None = None
     opt_in: bool = False
     task: str = ""
+    note: str = ""
 
 
 def association_head(metrics: tuple[str, ...]) -> Head:
