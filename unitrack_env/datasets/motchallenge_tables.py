@@ -20,6 +20,7 @@ from unitrack_env.datasets.limits import (
     read_limited,
 )
 from unitrack_env.errors import DataFormatError
+from unitrack_env.spaces.limits import COORD_MAX, FLOAT_MAX
 
 #: Columns of a detection row, for messages.
 DET_FIELDS = ("frame", "id", "x", "y", "w", "h", "score")
@@ -210,8 +211,6 @@ def _check_frames_and_sizes(
 
 def _check_detection_values(path: Path, table: np.ndarray, lines: np.ndarray) -> None:
     """Detection boxes and scores fit the observation space."""
-    from unitrack_env.spaces.limits import COORD_MAX, FLOAT_MAX
-
     outside = np.abs(table[:, 2:6]) > COORD_MAX
     if outside.any():
         i, col = (int(v) for v in np.argwhere(outside)[0])

@@ -20,6 +20,7 @@ from unitrack_env.datasets.mots_format import (
     parse_instances_txt,
     read_instances_png,
 )
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError
 
@@ -175,8 +176,6 @@ def check_ground_truth(gt: MaskAnnotations, info: MOTSSequenceInfo) -> None:
     Frames in range, masks of the frame's size, no id twice in a frame (except the ignore id
     10000, which TrackEval merges), no overlapping masks; checked on the RLEs, undecoded.
     """
-    from unitrack_env.datasets.rle import mask_api as mask_utils
-
     last = info.first_frame + info.length - 1
     _check_ids(gt)
     for i in range(len(gt)):

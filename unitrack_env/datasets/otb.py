@@ -22,6 +22,7 @@ from unitrack_env.datasets.sot import (
     select_frames,
 )
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
+from unitrack_env.spaces.limits import COORD_MAX
 
 __all__ = ["OTB_GT_PATTERN", "OTBDataset", "OTBSequenceSpec", "canonical_otb_name"]
 
@@ -101,8 +102,6 @@ def _check_boxes(path: Path, boxes: np.ndarray, first: int) -> None:
     The first row must be finite with a positive size, every value within the observation
     bounds; later rows may be NaN or empty (the toolkit leaves those frames out).
     """
-    from unitrack_env.spaces.limits import COORD_MAX
-
     init = boxes[first]
     if not (np.isfinite(init).all() and init[2] > 0 and init[3] > 0):
         raise DataFormatError(

@@ -19,6 +19,7 @@ from unitrack_env.datasets.posetrack_records import (
     PoseTrackImage,
     PoseTrackVideo,
 )
+from unitrack_env.datasets.sot import read_image_size
 from unitrack_env.errors import DataFormatError, UnknownSequenceError
 from unitrack_env.io import path_inside
 
@@ -146,8 +147,6 @@ class PoseTrackDataset:
         if "width" in first.extra and "height" in first.extra:
             size = (int(first.extra["width"]), int(first.extra["height"]))
         else:
-            from unitrack_env.datasets.sot import read_image_size
-
             size = read_image_size(paths[0])
         return PoseTrackSequence(name, self.split, images, paths, video, size, annotation)
 

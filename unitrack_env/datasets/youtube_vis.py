@@ -24,6 +24,7 @@ from unitrack_env.datasets.limits import (
     load_json_limited,
 )
 from unitrack_env.datasets.rle import check_rle
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import path_inside
 
@@ -37,8 +38,6 @@ FRAME_RATE = 6.0
 
 def to_rle(segmentation: Any, height: int, width: int, path: Path, where: str) -> dict | None:
     """Convert a polygon list or (un)compressed RLE to a compressed RLE dict (``bytes`` counts)."""
-    from unitrack_env.datasets.rle import mask_api as mask_utils
-
     if segmentation is None:
         return None
     try:
@@ -83,8 +82,6 @@ def rle_to_json(rle: dict | None, *, uncompressed: bool = False) -> dict | None:
     if rle is None:
         return None
     if uncompressed:
-        from unitrack_env.datasets.rle import mask_api as mask_utils
-
         flat = mask_utils.decode(rle).ravel(order="F").astype(np.int8)
         edges = np.flatnonzero(np.diff(flat)) + 1
         bounds = np.concatenate([[0], edges, [flat.size]])
@@ -290,8 +287,6 @@ def format_annotations(data: VisData, videos: list[VisVideo] | None = None) -> s
     Annotations carry ``height``/``width``/``length`` and uncompressed RLE as the 2019 train
     file does (TrackEval reads both).
     """
-    from unitrack_env.datasets.rle import mask_api as mask_utils
-
     videos = list(data.videos) if videos is None else videos
     keep = {v.id for v in videos}
     by_id = {v.id: v for v in videos}

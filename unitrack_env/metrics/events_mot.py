@@ -19,6 +19,7 @@ from unitrack_env.metrics.mot_preprocess import (
     preprocess,
     tracker_frames_from_rows,
 )
+from unitrack_env.metrics.mots import mask_frame
 
 #: Columns of an event table, in order (every task uses the same columns; unused are NaN).
 EVENT_COLUMNS: tuple[str, ...] = (
@@ -125,8 +126,6 @@ def mots_sequence_events(sequence: str, gt: MaskAnnotations, results: MaskAnnota
     :class:`~unitrack_env.metrics.mots.MaskClearStream` (the environment's reward) uses
     before the same CLEAR matching; boxes are the masks' bounding boxes.
     """
-    from unitrack_env.metrics.mots import mask_frame
-
     frames = []
     for t in range(first_frame, first_frame + num_frames):
         g, r = gt.rows(t), results.rows(t)

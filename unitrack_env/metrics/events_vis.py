@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.youtube_vis import VisData, VisTrack, VisVideo
 from unitrack_env.metrics.events_mot import EventRows
 from unitrack_env.metrics.vis import track_matches
@@ -17,8 +18,6 @@ from unitrack_env.metrics.vis import track_matches
 
 def _overlap(a: tuple, b: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per frame: intersection, union, and whether either track has a mask there."""
-    from unitrack_env.datasets.rle import mask_api as mask_utils
-
     n = len(a)
     inter, union, present = np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool)
     for t in range(n):

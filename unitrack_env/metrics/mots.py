@@ -23,6 +23,7 @@ from unitrack_env.datasets.mots_format import (
     format_instances_txt,
     parse_instances_txt,
 )
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.datasets.rle import quiet_pycocotools
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.clear_stream import FrameClear, StreamingClear
@@ -101,6 +102,7 @@ def score_sequence(
 
 def _run_trackeval(gt: MaskAnnotations, res: MaskAnnotations, benchmark: str, cls: str,
                    seq_length: int, source: Path) -> dict[str, dict[str, Any]]:
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     import trackeval.datasets as te_datasets
     from trackeval.utils import TrackEvalException
 
@@ -188,8 +190,6 @@ def score_folder(
 # ------------------------------------------------------------------ per-frame counts
 def mask_iou(rles_a: list[dict], rles_b: list[dict], *, ioa: bool = False) -> np.ndarray:
     """``(len(a), len(b))`` mask IoU of pycocotools RLEs (``ioa``: intersection / area of a)."""
-    from unitrack_env.datasets.rle import mask_api as mask_utils
-
     if not rles_a or not rles_b:
         return np.zeros((len(rles_a), len(rles_b)))
     # pycocotools' "crowd" flag on the second argument divides by the first one's area.
@@ -245,8 +245,6 @@ def mask_frame(gt_ids: np.ndarray, gt_rles: list[dict], ignore_rles: list[dict],
         unmatched[cols[score[rows, cols] > EPS]] = False
     keep = np.ones(len(tracker_ids), dtype=bool)
     if ignore_rles and unmatched.any():
-        from unitrack_env.datasets.rle import mask_api as mask_utils
-
         region = mask_utils.merge(ignore_rles, intersect=False)
         idx = np.flatnonzero(unmatched)
         inside = mask_iou([tracker_rles[i] for i in idx], [region], ioa=True)[:, 0]
@@ -260,6 +258,5 @@ def mask_frame(gt_ids: np.ndarray, gt_rles: list[dict], ignore_rles: list[dict],
 def _rle_boxes(rles: list[dict], boxes: bool) -> np.ndarray:
     if not boxes or not rles:
         return np.zeros((len(rles), 4))
-    from unitrack_env.datasets.rle import mask_api as mask_utils
 
     return np.asarray(mask_utils.toBbox(rles), dtype=np.float64).reshape(len(rles), 4)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +42,7 @@ AREA_RANGES = ([0**2, 128**2], [128**2, 256**2], [256**2, 1e5**2])
 
 
 def _metric() -> Any:
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     from trackeval.metrics import TrackMAP
 
     return TrackMAP({"PRINT_CONFIG": False, "USE_TIME_RANGES": False,
@@ -72,6 +74,7 @@ def _per_class(ground_truth: VisData, results: list[VisTrack], videos: list[VisV
         raise ValueError(f"{ground_truth.path} has no annotations to score against")
     if not videos:
         raise ValueError("no videos to score")
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     import trackeval.datasets as te_datasets
     from trackeval.utils import TrackEvalException
 
@@ -169,8 +172,6 @@ def merge_result_files(folder: str | Path, sequences: list[str] | None = None) -
 
     The list is what the challenge's ``results.json`` holds (dump it with ``json.dump``).
     """
-    import json
-
     folder = Path(folder)
     names = sequences if sequences is not None else sorted(p.stem for p in folder.glob("*.json"))
     out: list[dict] = []
