@@ -51,6 +51,7 @@ DAVIS_PALETTE.setflags(write=False)
 
 def _pil_image() -> Any:
     try:
+        # lazy: start-up cost (PIL)
         from PIL import Image
     except ImportError as err:  # pragma: no cover - depends on the environment
         raise ImportError(

@@ -63,7 +63,7 @@ def read_joint_positions(path: str | Path, *, zero_based: bool = True) -> np.nda
 
     ``zero_based`` subtracts MATLAB's 1; a bad file or shape raises DataFormatError.
     """
-    # scipy is a core dependency; imported here to keep ``import unitrack_env`` fast.
+    # lazy: start-up cost (scipy.io; keeps ``import unitrack_env`` fast)
     from scipy.io import loadmat
     from scipy.io.matlab import MatReadError
 

@@ -39,6 +39,7 @@ class _MaskAPI:
     """``pycocotools.mask`` with every function called inside :func:`quiet_pycocotools`."""
 
     def __getattr__(self, name: str) -> Callable[..., Any]:
+        # lazy: start-up cost (pycocotools)
         from pycocotools import mask
 
         function = getattr(mask, name)

@@ -182,6 +182,7 @@ class PoseTrackEnv(SequenceEnv[PoseTrackSequence]):
                           ) -> tuple[str, Path | None]:
         if detections is None:
             if self.synthetic:
+                # lazy: start-up cost (unitrack_env.datasets.synthetic, every generator)
                 from unitrack_env.datasets.synthetic.posetrack import DETECTIONS_FOLDER
 
                 return "synthetic", Path(data_root) / DETECTIONS_FOLDER / self.dataset.split

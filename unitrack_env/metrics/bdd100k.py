@@ -49,6 +49,7 @@ def bdd_raw_scores(ground_truth: Mapping[str, Path], results: Path,
     ``ground_truth`` maps each sequence to its JSON file, ``results`` is the folder of the
     ``<sequence>.json`` result files.
     """
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     from trackeval.datasets import BDD100K
     from trackeval.utils import TrackEvalException
 

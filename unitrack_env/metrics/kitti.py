@@ -56,6 +56,7 @@ def kitti_raw_scores(label_dir: Path, results: Path,
     ``label_dir`` holds ``<seq>.txt`` ground truth, ``results`` the ``<seq>.txt`` result
     files, ``lengths`` each sequence's number of frames.
     """
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     from trackeval.datasets import Kitti2DBox
     from trackeval.utils import TrackEvalException
 

@@ -74,6 +74,7 @@ class SequenceScore(Mapping[str, float]):
 
 def trackeval_metrics() -> list[Any]:
     """Fresh, quiet TrackEval HOTA, CLEAR, Identity and Count metric objects."""
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     from trackeval.metrics import CLEAR, HOTA, Count, Identity
 
     quiet = {"PRINT_CONFIG": False}
@@ -203,6 +204,7 @@ def _run_trackeval(
     seq_dir: Path, rows: np.ndarray, benchmark: str, seq_length: int, gt_file: Path,
     source: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
+    # lazy: optional dependency (trackeval, installed on its own with --no-deps)
     from trackeval.datasets import MotChallenge2DBox
     from trackeval.utils import TrackEvalException
 

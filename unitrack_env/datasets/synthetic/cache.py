@@ -134,7 +134,8 @@ def cache_root() -> Path:
     override = os.environ.get(CACHE_ENV_VAR)
     if override:
         return Path(override).expanduser()
-    import platformdirs  # lazily: only needed without the override
+    # lazy: start-up cost (platformdirs; only needed without the override)
+    import platformdirs
 
     return Path(platformdirs.user_cache_dir(APP_NAME))
 

@@ -103,6 +103,7 @@ MAT_HEADER: bytes = b"MATLAB 5.0 MAT-file, written by unitrack-env".ljust(116)
 
 def joint_positions_mat(joints: np.ndarray) -> bytes:
     """The bytes of a ``joint_positions.mat`` (``pos_img``, 1-based) for ``(T, 15, 2)`` joints."""
+    # lazy: start-up cost (scipy.io)
     from scipy.io import savemat
 
     pos = (np.asarray(joints, dtype=np.float64) + MATLAB_ORIGIN).transpose(2, 1, 0)
