@@ -21,6 +21,7 @@ from PIL import Image
 
 from unitrack_env.benchmarks.views import Attributes, Curve, ReportView, ScorecardColumn
 from unitrack_env.errors import DataFormatError
+from unitrack_env.fingerprint import sequence_files
 from unitrack_env.metrics.report import ScoreReport
 from unitrack_env.roots import resolve_root
 
@@ -40,6 +41,7 @@ def data_root(root: str | os.PathLike | None, folder: str, *synthetic_args: Any,
     path = resolve_root(root, folder)
     if path is not None:
         return path, False
+    # lazy: start-up cost (unitrack_env.datasets.synthetic, every generator)
     from unitrack_env.datasets.synthetic.cache import ensure_synthetic
 
     return Path(ensure_synthetic(*synthetic_args, **synthetic_kwargs)), True
@@ -171,8 +173,6 @@ class Benchmark(ABC):
 
     def has_results(self, folder: str | os.PathLike, name: str) -> bool:
         """Whether ``folder`` holds a result file of sequence ``name`` (any file of its)."""
-        from unitrack_env.fingerprint import sequence_files
-
         folder = Path(folder)
         return folder.is_dir() and bool(sequence_files(folder, name, self.sequence_names,
                                                        shared=False))

@@ -96,6 +96,7 @@ class BDD100KBenchmark(Benchmark):
 
     def _combined(self, folder: Path, sequences: list[str]) -> tuple[dict, dict]:
         """TrackEval's raw scores per sequence and their combination."""
+        # lazy: start-up cost (scipy, via unitrack_env.metrics.bdd100k and .kitti)
         from unitrack_env.metrics.bdd100k import bdd_raw_scores
         from unitrack_env.metrics.kitti import combine
 
@@ -113,6 +114,7 @@ class BDD100KBenchmark(Benchmark):
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.json`` files: per sequence and over all of them."""
+        # lazy: start-up cost (scipy, via unitrack_env.metrics.kitti)
         from unitrack_env.metrics.kitti import combine
 
         raw, combined = self._combined(Path(folder), sequences)

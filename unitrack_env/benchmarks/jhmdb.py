@@ -29,6 +29,7 @@ RESULT_FILE = "joint_positions.mat"
 
 def pose_mat_bytes(keypoints: np.ndarray) -> bytes:
     """Return a ``joint_positions.mat`` (``pos_img`` ``(2, 15, T)``, 1-based) for 0-based joints."""
+    # lazy: start-up cost (unitrack_env.datasets.synthetic, every generator)
     from unitrack_env.datasets.synthetic.jhmdb import joint_positions_mat
 
     return joint_positions_mat(keypoints)

@@ -38,6 +38,7 @@ def flat_metrics(scores: dict[str, dict[str, float]]) -> dict[str, float]:
     Every metric of the detection-averaged combination unprefixed (TrackEval's
     ``cls_comb_det_av``), and :data:`PER_CLASS_METRICS` per class and per combination.
     """
+    # lazy: start-up cost (scipy, via unitrack_env.metrics.kitti)
     from unitrack_env.metrics.kitti import DETECTION_AVERAGE
 
     row = dict(scores[DETECTION_AVERAGE])
@@ -97,6 +98,7 @@ class KITTIBenchmark(Benchmark):
         return rounded_digest(results)
 
     def _scores(self, folder: Path, sequences: list[str]) -> dict:
+        # lazy: start-up cost (scipy, via unitrack_env.metrics.kitti)
         from unitrack_env.metrics.kitti import kitti_raw_scores
 
         return kitti_raw_scores(self.dataset.split_dir / "label_02", folder,
@@ -106,6 +108,7 @@ class KITTIBenchmark(Benchmark):
         """TrackEval's metrics of one sequence's rows."""
         import tempfile
 
+        # lazy: start-up cost (scipy, via unitrack_env.metrics.kitti)
         from unitrack_env.metrics.kitti import combine
 
         with tempfile.TemporaryDirectory(prefix="unitrack-kitti-seq-") as tmp:
@@ -114,6 +117,7 @@ class KITTIBenchmark(Benchmark):
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` files: per sequence and over all of them."""
+        # lazy: start-up cost (scipy, via unitrack_env.metrics.kitti)
         from unitrack_env.metrics.kitti import combine
 
         for seq in sequences:  # a bad file is named with its line and field, not TrackEval's

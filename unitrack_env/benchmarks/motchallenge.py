@@ -43,6 +43,17 @@ from unitrack_env.metrics.events_mot import (
     read_gt_rows,
 )
 from unitrack_env.metrics.kitti import combine
+from unitrack_env.metrics.mot_classes import (
+    check_class_rows,
+    class_events,
+    class_frames,
+    class_raw_scores,
+    merged_frames,
+    read_class_results,
+)
+from unitrack_env.metrics.mot_results import read_result_file
+from unitrack_env.metrics.mot_stats import mot_stats
+from unitrack_env.metrics.motchallenge import score_folder, score_sequence
 from unitrack_env.metrics.report import ScoreReport
 
 if TYPE_CHECKING:
@@ -144,12 +155,8 @@ class MOTChallengeBenchmark(Benchmark):
 
     def read(self, folder: str | os.PathLike, sequence: str) -> np.ndarray:
         """Read ``<folder>/<sequence>.txt`` as ``(k, c)`` float64 rows (checked classes)."""
-        from unitrack_env.metrics.mot_results import read_result_file
-
         path = self._results(folder) / f"{sequence}.txt"
         if self.class_map is not None:
-            from unitrack_env.metrics.mot_classes import read_class_results
-
             return read_class_results(path, self.class_map, self.sequence_length(sequence))
         return read_result_file(path)
 
@@ -159,11 +166,7 @@ class MOTChallengeBenchmark(Benchmark):
 
     def score_sequence(self, sequence: str, results: np.ndarray) -> dict[str, float]:
         """TrackEval's metrics of one sequence's rows (it must have ground truth)."""
-        from unitrack_env.metrics.motchallenge import score_sequence
-
         if self.class_map is not None:
-            from unitrack_env.metrics.mot_classes import check_class_rows
-
             path = Path(f"<results of {sequence}>")
             check_class_rows(results, self.class_map, self.sequence_length(sequence), path)
             return flat_metrics(combine({sequence: self._class_raw(sequence, results)},
@@ -179,8 +182,6 @@ class MOTChallengeBenchmark(Benchmark):
         With a class map: per class, per sequence and combined, and the class combinations
         (``<class>/HOTA``, ``cls_comb_cls_av/HOTA``; unprefixed: ``cls_comb_det_av``).
         """
-        from unitrack_env.metrics.motchallenge import score_folder
-
         if self.class_map is not None:
             names = self.class_map.names
             raw = {seq: self._class_raw(seq, self.read(folder, seq)) for seq in sequences}
@@ -200,13 +201,10 @@ class MOTChallengeBenchmark(Benchmark):
 
     def _class_raw(self, sequence: str, results: np.ndarray) -> dict:
         """TrackEval's raw per-class results of one sequence's checked rows."""
-        from unitrack_env.metrics.mot_classes import class_raw_scores
-
         return class_raw_scores(self._class_gt(sequence), results, self.class_map, sequence,
                                 self.sequence_length(sequence))
 
     def _class_frames(self, folder: str | os.PathLike, sequence: str) -> dict:
-        from unitrack_env.metrics.mot_classes import class_frames
 
         return class_frames(self._class_gt(sequence), self.read(folder, sequence),
                             self.class_map, self.sequence_length(sequence))
@@ -217,8 +215,6 @@ class MOTChallengeBenchmark(Benchmark):
         With a class map, each class's (its ``class`` column names it).
         """
         if self.class_map is not None:
-            from unitrack_env.metrics.mot_classes import class_events
-
             return class_events(sequence, self._class_frames(folder, sequence))
         return mot_sequence_events(sequence, read_gt_rows(self.dataset.split_dir / sequence),
                                    self.read(folder, sequence), self.sequence_length(sequence),
@@ -231,11 +227,7 @@ class MOTChallengeBenchmark(Benchmark):
         With a class map, of class ``cls``, or (None) of the classes together (their
         detection average).
         """
-        from unitrack_env.metrics.mot_stats import mot_stats
-
         if self.class_map is not None:
-            from unitrack_env.metrics.mot_classes import merged_frames
-
             frames = self._class_frames(folder, sequence)
             return mot_stats(merged_frames(frames) if cls is None else frames[cls])
         if cls is not None:
@@ -287,8 +279,6 @@ def score_split_folder(gt: str | os.PathLike, results: str | os.PathLike, benchm
     Raises:
         MissingResults: result files are missing (and ``allow_missing`` is False).
     """
-    from unitrack_env.metrics.motchallenge import score_folder
-
     gt, results = Path(gt), Path(results)
     refuse_run_folder(results)
     split = (sorted(d.name for d in gt.iterdir() if (d / "gt" / "gt.txt").is_file())

@@ -23,6 +23,7 @@ from unitrack_env.datasets.mots_format import (
 )
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import EventRows, mots_sequence_events
+from unitrack_env.metrics.mots import score_folder, score_sequence
 from unitrack_env.metrics.report import ScoreReport
 
 #: Default split of each benchmark.
@@ -95,8 +96,6 @@ class MOTSBenchmark(Benchmark):
 
     def score_sequence(self, sequence: str, results: MaskAnnotations) -> dict[str, float]:
         """TrackEval's MOTS metrics of one sequence's masks (it must have ground truth)."""
-        from unitrack_env.metrics.mots import score_sequence
-
         gt = self.dataset.ground_truth(sequence)
         if gt is None:
             raise ValueError("this sequence has no ground truth to score against")
@@ -107,8 +106,6 @@ class MOTSBenchmark(Benchmark):
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Score ``<folder>/<sequence>.txt`` files with TrackEval (HOTA, CLEAR, Identity)."""
-        from unitrack_env.metrics.mots import score_folder
-
         return score_folder(self.dataset, folder, sequences, object_class=self.object_class)
 
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:

@@ -21,6 +21,8 @@ from unitrack_env.datasets.posetrack_json import read_posetrack_json, write_pose
 from unitrack_env.datasets.posetrack_records import PoseTrackVideo
 from unitrack_env.errors import DataFormatError
 from unitrack_env.metrics.events_mot import EventRows
+from unitrack_env.metrics.events_pose import posetrack_sequence_events
+from unitrack_env.metrics.posetrack import evaluate_video, summarise
 from unitrack_env.metrics.posetrack_frames import POSEVAL_DROPS_LAST_FRAME
 from unitrack_env.metrics.report import COMBINED, ScoreReport
 
@@ -90,8 +92,6 @@ class PoseTrackBenchmark(Benchmark):
 
     def score_sequence(self, sequence: str, results: PoseTrackVideo) -> dict[str, float]:
         """Poseval's metrics of one sequence's tracked poses."""
-        from unitrack_env.metrics.posetrack import evaluate_video, summarise
-
         gt = read_posetrack_json(self.dataset.annotation_dir / f"{sequence}.json")
         return summarise([evaluate_video(gt, results, drop_last_frame=self.drop_last_frame)])
 
@@ -99,7 +99,6 @@ class PoseTrackBenchmark(Benchmark):
         """Score ``<folder>/<sequence>.json`` result files with poseval's tracking metrics."""
         # Imported here: the metrics pull in scipy.optimize (0.5 s), which planning a run
         # (sequence names and lengths) does not need.
-        from unitrack_env.metrics.posetrack import evaluate_video, summarise
 
         per_sequence: dict[str, dict[str, float]] = {}
         counts = []
@@ -118,8 +117,6 @@ class PoseTrackBenchmark(Benchmark):
 
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """Per-frame fn/fp/idsw events of the joints, as poseval matches them."""
-        from unitrack_env.metrics.events_pose import posetrack_sequence_events
-
         gt = read_posetrack_json(self.dataset.annotation_dir / f"{sequence}.json")
         return posetrack_sequence_events(sequence, gt, self.read(folder, sequence),
                                          drop_last_frame=self.drop_last_frame)

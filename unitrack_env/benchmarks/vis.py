@@ -22,7 +22,9 @@ from unitrack_env.datasets.youtube_vis import (
 from unitrack_env.errors import DataFormatError
 from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.events_mot import EventRows
+from unitrack_env.metrics.events_vis import vis_sequence_events
 from unitrack_env.metrics.report import ScoreReport
+from unitrack_env.metrics.vis import score_videos
 
 #: Name of the rule set in score reports (and the data folder under ``$UNITRACK_DATA``).
 BENCHMARK = "YouTube-VIS-2019"
@@ -85,15 +87,11 @@ class VISBenchmark(Benchmark):
 
     def score_sequence(self, sequence: str, results: list[VisTrack]) -> dict[str, float]:
         """Track mAP of one video's tracks (the split must have annotations)."""
-        from unitrack_env.metrics.vis import score_videos
-
         video = self.dataset.video(sequence)
         return score_videos(self.dataset.data, results, [video]).per_sequence[video.name]
 
     def score_files(self, folder: str | os.PathLike, sequences: list[str]) -> ScoreReport:
         """Track mAP of ``<folder>/<video>.json`` files, per video and combined."""
-        from unitrack_env.metrics.vis import score_videos
-
         videos = [self.dataset.video(name) for name in dict.fromkeys(sequences)]
         results: list[VisTrack] = []
         for video in videos:
@@ -102,7 +100,5 @@ class VISBenchmark(Benchmark):
 
     def sequence_events(self, folder: str | os.PathLike, sequence: str) -> EventRows:
         """Per-frame events of the tracks matched to the video's instances (IoU of tp)."""
-        from unitrack_env.metrics.events_vis import vis_sequence_events
-
         return vis_sequence_events(sequence, self.dataset.data, self.read(folder, sequence),
                                    self.dataset.video(sequence))
