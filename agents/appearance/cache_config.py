@@ -86,7 +86,8 @@ def default_cache_dir() -> Path | None:
     data = os.environ.get(DATA_ENV, "").strip()
     if data:
         return Path(data).expanduser() / "features"
-    import platformdirs  # lazily: only needed without an override
+    # lazy: start-up cost (platformdirs; only needed without an override)
+    import platformdirs
 
     return Path(platformdirs.user_cache_dir(APP_NAME)) / "features"
 

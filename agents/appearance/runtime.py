@@ -310,6 +310,7 @@ def _compile(runtime: str, path: Path, shape: tuple[int, int, int, int], threads
     (a pool worker) loads them instead of compiling again.
     """
     if runtime == OPENVINO:
+        # lazy: optional dependency (openvino)
         import openvino as ov
 
         core = ov.Core()
@@ -326,6 +327,7 @@ def _compile(runtime: str, path: Path, shape: tuple[int, int, int, int], threads
             # cores). A library must not pin its user's threads.
             "ENABLE_CPU_PINNING": False,
         })
+    # lazy: optional dependency (onnxruntime)
     import onnxruntime as ort
 
     options = ort.SessionOptions()

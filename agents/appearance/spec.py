@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
+    # lazy: start-up cost (torch, via .model)
     from .model import AppearanceModel
 
 SpecT = TypeVar("SpecT", bound="AppearanceSpec")
@@ -56,6 +57,7 @@ class AppearanceSpec:
 
     def build(self, **extra: Any) -> AppearanceModel:
         """The :class:`AppearanceModel` this spec names (``extra``: further model options)."""
+        # lazy: start-up cost (torch, via .model)
         from .model import AppearanceModel
 
         spec = self.appearance()

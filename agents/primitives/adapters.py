@@ -160,9 +160,11 @@ def adapter_for(task: str, capacities: Mapping[str, int] | None = None) -> Obser
 def default_max_tracks(task: str) -> int:
     """The environments' default ``max_tracks`` of ``task``, read from the env modules."""
     if task == "posetrack":
+        # lazy: start-up cost (unitrack_env.envs.posetrack)
         from unitrack_env.envs.posetrack import DEFAULT_MAX_TRACKS as POSE_TRACKS
 
         return int(POSE_TRACKS)
+    # lazy: start-up cost (unitrack_env.envs.motchallenge)
     from unitrack_env.envs.motchallenge import DEFAULT_MAX_TRACKS as BOX_TRACKS
 
     return int(BOX_TRACKS)

@@ -30,6 +30,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from unitrack_env.datasets.rle import mask_api as mask_utils
 from unitrack_env.geometry import box_iou
 
 S = TypeVar("S")
@@ -134,8 +135,6 @@ class MaskOverlap(OverlapMeasure[dict]):
 
     def states(self, detections: Any) -> list[dict]:
         """The RLE of each mask of an ``(m, H, W)`` bool stack."""
-        from unitrack_env.datasets.rle import mask_api as mask_utils
-
         masks = np.asarray(detections, dtype=bool)
         if not len(masks):
             return []
@@ -143,8 +142,6 @@ class MaskOverlap(OverlapMeasure[dict]):
 
     def similarity(self, a: Sequence[dict], b: Sequence[dict]) -> np.ndarray:
         """Mask IoU (no crowd regions)."""
-        from unitrack_env.datasets.rle import mask_api as mask_utils
-
         return np.asarray(mask_utils.iou(list(a), list(b), [False] * len(b))
                           ).reshape(len(a), len(b))
 
