@@ -173,10 +173,10 @@ def draw_attribute_radar(tables: list[RunAttributes], stem: Path) -> list[Path]:
     if len(spokes) < 3:
         return []
     try:
-        import matplotlib
+        import matplotlib  # lazy: optional dependency (matplotlib)
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # lazy: optional dependency (matplotlib)
     except ImportError:
         warnings.warn("no radar chart: matplotlib is missing (pip install "
                       "'unitrack-env[plots]')", stacklevel=2)

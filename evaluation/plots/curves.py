@@ -48,10 +48,10 @@ def draw_labelled(labelled: list[tuple[str, list[Any]]], out: Path, *,
     for _, curves in labelled:
         titles += [c.title for c in curves if c.title not in titles]
     try:
-        import matplotlib
+        import matplotlib  # lazy: optional dependency (matplotlib)
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # lazy: optional dependency (matplotlib)
     except ImportError:
         warnings.warn("no plots: matplotlib is missing (pip install 'unitrack-env[plots]')",
                       stacklevel=2)

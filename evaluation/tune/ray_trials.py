@@ -28,6 +28,7 @@ EXPERIMENT = "unitrack-tune"
 def check_ray_tune() -> None:
     """Refuse a missing Ray Tune (or its ``pyarrow``) before anything runs."""
     try:
+        # lazy: optional dependency (ray[tune])
         import ray.tune  # noqa: F401
         from ray.tune.search.optuna import OptunaSearch  # noqa: F401
     except ImportError:
@@ -36,7 +37,7 @@ def check_ray_tune() -> None:
 
 
 def _domain(d: Dimension) -> Any:
-    from ray import tune
+    from ray import tune  # lazy: optional dependency (ray[tune])
 
     if d.choices:
         return tune.choice(list(d.choices))
@@ -50,7 +51,7 @@ def _trainable(spec: TuneSpec, base: dict[str, Any], names: list[str],
     def trial(config: dict[str, Any]) -> None:
         import time
 
-        from ray import tune
+        from ray import tune  # lazy: optional dependency (ray[tune])
 
         started = time.time()
         row = play_trial(spec, base, {n: config[n] for n in names}, out)
@@ -80,10 +81,10 @@ def ray_search(address: str | None = None) -> Callable[..., Any]:
     def search(spec: TuneSpec, space: list[Dimension], base: dict[str, Any], out: Path,
                trials: int, seed: int, on_trial: Callable[[dict[str, Any]], None] | None
                ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-        import optuna
-        import ray
-        from ray import tune
-        from ray.tune.search.optuna import OptunaSearch
+        import optuna  # lazy: optional dependency (optuna)
+        import ray  # lazy: optional dependency (ray[tune])
+        from ray import tune  # lazy: optional dependency (ray[tune])
+        from ray.tune.search.optuna import OptunaSearch  # lazy: optional dependency (ray[tune])
 
         # Trials keep the command's working directory (relative data paths stay valid).
         os.environ.setdefault("RAY_CHDIR_TO_TRIAL_DIR", "0")
@@ -145,7 +146,7 @@ class _Printer:
     """
 
     def __new__(cls, on_trial: Callable[[dict[str, Any]], None], names: list[str]) -> Any:
-        from ray.tune import Callback
+        from ray.tune import Callback  # lazy: optional dependency (ray[tune])
 
         class Printer(Callback):
             def on_trial_result(self, iteration: int, trials: list, trial: Any,
@@ -165,6 +166,6 @@ class _Printer:
 
 def _stored() -> Any:
     """What a stored :class:`_Printer` comes back as: a callback that does nothing."""
-    from ray.tune import Callback
+    from ray.tune import Callback  # lazy: optional dependency (ray[tune])
 
     return Callback()
