@@ -15,7 +15,6 @@ import csv
 import io
 import json
 import math
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ from typing import Any
 from unitrack_env.io import atomic_write_text
 
 from ..analysis.events import run_benchmark, run_sequences
+from .figures import pyplot, save_figure
 
 #: The row of every scored sequence.
 OVERALL = "Overall"
@@ -172,25 +172,10 @@ def draw_attribute_radar(tables: list[RunAttributes], stem: Path) -> list[Path]:
     spokes = [(code, rows) for code, _, rows in _layout(tables) if code != OVERALL]
     if len(spokes) < 3:
         return []
-    try:
-        import matplotlib  # lazy: optional dependency (matplotlib)
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt  # lazy: optional dependency (matplotlib)
-    except ImportError:
-        warnings.warn("no radar chart: matplotlib is missing (pip install "
-                      "'unitrack-env[plots]')", stacklevel=2)
+    plt = pyplot("radar chart")
+    if plt is None:
         return []
-    figure = _radar(plt, tables, spokes)
-    written = []
-    with matplotlib.rc_context({"svg.hashsalt": "unitrack-attributes"}):
-        for suffix in (".png", ".svg"):
-            path = stem.with_suffix(suffix)
-            figure.savefig(path, dpi=120, bbox_inches="tight",
-                           metadata={"Date": None} if suffix == ".svg" else None)
-            written.append(path)
-    plt.close(figure)
-    return written
+    return save_figure(_radar(plt, tables, spokes), stem, "unitrack-attributes")
 
 
 def _radar(plt: Any, tables: list[RunAttributes],

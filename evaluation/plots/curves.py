@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import json
 import re
-import warnings
 from pathlib import Path
 from typing import Any
 
 from ..analysis.events import run_benchmark, run_sequences
+from .figures import pyplot, save_figure
 
 
 def run_curves(run: Path) -> tuple[str, list[Any]]:
@@ -47,27 +47,15 @@ def draw_labelled(labelled: list[tuple[str, list[Any]]], out: Path, *,
     titles: list[str] = []
     for _, curves in labelled:
         titles += [c.title for c in curves if c.title not in titles]
-    try:
-        import matplotlib  # lazy: optional dependency (matplotlib)
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt  # lazy: optional dependency (matplotlib)
-    except ImportError:
-        warnings.warn("no plots: matplotlib is missing (pip install 'unitrack-env[plots]')",
-                      stacklevel=2)
+    plt = pyplot("plots")
+    if plt is None:
         return []
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for title in titles:
         lines = [(label, c) for label, curves in labelled for c in curves if c.title == title]
-        figure = _figure(plt, title, lines)
-        with matplotlib.rc_context({"svg.hashsalt": "unitrack-curves"}):
-            for suffix in (".png", ".svg"):
-                path = out / f"{prefix}{plot_stem(title)}{suffix}"
-                figure.savefig(path, dpi=120, bbox_inches="tight",
-                               metadata={"Date": None} if suffix == ".svg" else None)
-                written.append(path)
-        plt.close(figure)
+        written += save_figure(_figure(plt, title, lines), out / f"{prefix}{plot_stem(title)}",
+                               "unitrack-curves")
     return written
 
 

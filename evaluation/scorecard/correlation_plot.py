@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import json
 import shutil
-import warnings
 from pathlib import Path
 from typing import Any
+
+from ..plots.figures import pyplot, save_figure
 
 
 def _coefficients(row: dict[str, Any]) -> str:
@@ -24,14 +25,8 @@ def _coefficients(row: dict[str, Any]) -> str:
 
 def draw_scatter(rows: list[dict[str, Any]], stem: Path) -> list[Path]:
     """Write ``<stem>.png`` and ``<stem>.svg`` for one metric's rows; [] without matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        warnings.warn("no correlation figure: matplotlib is missing (pip install "
-                      "'unitrack-env[plots]')", stacklevel=2)
+    plt = pyplot("correlation figure")
+    if plt is None:
         return []
     figure, panels = plt.subplots(1, len(rows), figsize=(3.0 * len(rows), 3.2), squeeze=False)
     for ax, row in zip(panels[0], rows, strict=True):
@@ -53,14 +48,7 @@ def draw_scatter(rows: list[dict[str, Any]], stem: Path) -> list[Path]:
     panels[0][0].set_ylabel("tracking (%)", fontsize=8)
     figure.tight_layout()
     stem.parent.mkdir(parents=True, exist_ok=True)
-    written = []
-    with matplotlib.rc_context({"svg.hashsalt": "unitrack-correlation"}):
-        for suffix in (".png", ".svg"):
-            path = stem.with_suffix(suffix)
-            figure.savefig(path, dpi=150, metadata={"Date": None} if suffix == ".svg" else None)
-            written.append(path)
-    plt.close(figure)
-    return written
+    return save_figure(figure, stem, "unitrack-correlation", dpi=150, tight=False)
 
 
 def figure_stem(name: str) -> str:

@@ -6,10 +6,10 @@ More in docs/module-notes.md.
 from __future__ import annotations
 
 import math
-import warnings
 from pathlib import Path
 from typing import Any
 
+from ..plots.figures import pyplot, save_figure
 from .plan import BASELINE, TASKS
 from .table import polygon_values
 
@@ -53,31 +53,17 @@ def radii(card: dict[str, Any], scale: str = "rank") -> dict[str, list[float | N
 
 def draw_radar(card: dict[str, Any], stem: Path, *, scale: str = "rank") -> list[Path]:
     """Write ``<stem>.png`` and ``<stem>.svg``; return the files written ([] without matplotlib)."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        warnings.warn("no radar chart: matplotlib is missing (pip install "
-                      "'unitrack-env[plots]')", stacklevel=2)
+    plt = pyplot("radar chart")
+    if plt is None:
         return []
     spokes = axes(card)
     data = radii(card, scale)
     draw = _polygons if len(spokes) >= 3 else _bars
     figure = draw(plt, card, spokes, data, scale)
     stem.parent.mkdir(parents=True, exist_ok=True)
-    written = []
     # No date and a fixed salt for the SVG's element ids: the same card draws the same bytes,
     # so scoring a committed scorecard again leaves its charts untouched
-    with matplotlib.rc_context({"svg.hashsalt": "unitrack-radar"}):
-        for suffix in (".png", ".svg"):
-            path = stem.with_suffix(suffix)
-            figure.savefig(path, dpi=150, bbox_inches="tight",
-                           metadata={"Date": None} if suffix == ".svg" else None)
-            written.append(path)
-    plt.close(figure)
-    return written
+    return save_figure(figure, stem, "unitrack-radar", dpi=150)
 
 
 def _style(plt: Any, name: str, index: int) -> dict[str, Any]:

@@ -41,7 +41,7 @@ def test_check_env_passes(env_id):
 def test_both_make_forms_and_registration_table():
     assert set(MOT_IDS) == {f"UniTrack/{n}-v0" for n in
                             ("MOT15", "MOT16", "MOT17", "MOT20", "DanceTrack", "SportsMOT",
-                             "MOTChallenge", "KITTI")}
+                             "MOTChallenge", "KITTI", "BDD100K")}
     env = gym.make("unitrack_env:UniTrack/MOT16-v0")
     assert env.unwrapped.synthetic and env.unwrapped.benchmark == "MOT16"
     env.close()
