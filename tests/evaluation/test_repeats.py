@@ -123,7 +123,12 @@ def test_got10k_toolkit_report_reads_the_run_folder_and_agrees(tmp_path, monkeyp
     shutil.copytree(tmp_path / "g" / "data", results)
     experiment = ExperimentGOT10k(str(root), subset="val", result_dir=str(tmp_path / "results"),
                                   report_dir=str(tmp_path / "reports"))
+    import matplotlib.pyplot as plt
+
+    before = set(plt.get_fignums())
     overall = experiment.report(["mine"])["mine"]["overall"]
+    for number in set(plt.get_fignums()) - before:  # got10k's report leaves its plot open
+        plt.close(number)
     assert overall["ao"] == pytest.approx(report.combined["AO"], abs=1e-6)
     assert overall["sr"] == pytest.approx(report.combined["SR0.5"], abs=1e-6)
     assert np.isfinite(overall["speed_fps"]) and overall["speed_fps"] > 0
