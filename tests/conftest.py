@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib
 import os
+import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -59,3 +62,27 @@ def mot17_root(shared_data: Path) -> Path:
 def mot15_root(shared_data: Path) -> Path:
     """Real MOT15 PETS09-S2L1 (400 frames)."""
     return shared_data / "MOT15"
+
+
+@pytest.fixture(scope="module")
+def got10k_experiments():
+    """The ``got10k`` package's ``experiments`` module (the parity reference of the SOT
+    protocols). Modules it imports at load time only for downloads and polygons (six, wget,
+    shapely), which none of the functions the tests call use, are replaced by empty ones when
+    they are not installed (a ``--no-deps`` install) and removed again afterwards."""
+    pytest.importorskip("got10k")
+    added = []
+    for name in ("six", "wget", "shapely", "shapely.geometry"):
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            module = types.ModuleType(name)
+            module.box = module.Polygon = None
+            module.string_types = str
+            sys.modules[name] = module
+            added.append(name)
+    try:
+        yield importlib.import_module("got10k.experiments")
+    finally:
+        for name in added:
+            sys.modules.pop(name, None)

@@ -99,20 +99,9 @@ def test_a_run_with_other_repeats_is_refused_and_one_repeat_keeps_the_old_run_js
         run("UniTrack/OTB-v0", "repeat-box", out=tmp_path / "zero", repeats=0, progress=False)
 
 
-def test_got10k_toolkit_report_reads_the_run_folder_and_agrees(tmp_path, monkeypatch):
+def test_got10k_toolkit_report_reads_the_run_folder_and_agrees(tmp_path, got10k_experiments):
     """got10k's own ExperimentGOT10k.report on the written folder: same AO and SR, a speed."""
     import shutil
-    import sys
-    import types
-
-    pytest.importorskip("got10k")
-    if "six" not in sys.modules:  # imported by got10k's modules at load time only
-        try:
-            import six  # noqa: F401
-        except ImportError:
-            monkeypatch.setitem(sys.modules, "six", types.ModuleType("six"))
-            sys.modules["six"].string_types = str
-    from got10k.experiments import ExperimentGOT10k
 
     from unitrack_env.benchmarks import benchmark_for
 
@@ -121,8 +110,9 @@ def test_got10k_toolkit_report_reads_the_run_folder_and_agrees(tmp_path, monkeyp
     root = benchmark_for("UniTrack/GOT10k-v0").dataset.split_dir.parent
     results = tmp_path / "results" / "GOT-10k" / "mine"
     shutil.copytree(tmp_path / "g" / "data", results)
-    experiment = ExperimentGOT10k(str(root), subset="val", result_dir=str(tmp_path / "results"),
-                                  report_dir=str(tmp_path / "reports"))
+    experiment = got10k_experiments.ExperimentGOT10k(
+        str(root), subset="val", result_dir=str(tmp_path / "results"),
+        report_dir=str(tmp_path / "reports"))
     import matplotlib.pyplot as plt
 
     before = set(plt.get_fignums())

@@ -6,10 +6,7 @@ The ``got10k`` package (the test extra's parity reference) reads NfS and UAV123 
 
 from __future__ import annotations
 
-import importlib
 import json
-import sys
-import types
 from pathlib import Path
 
 import cv2
@@ -23,27 +20,6 @@ from unitrack_env.benchmarks import benchmark_class, benchmark_for
 from unitrack_env.datasets.nfs import NfSDataset, write_synthetic_nfs
 from unitrack_env.datasets.uav123 import UAV123_SUBSEQUENCES, UAV123Dataset, subsequence_range
 from unitrack_env.errors import DataFormatError
-
-
-@pytest.fixture(scope="module")
-def got10k():
-    """The got10k package; six / wget / shapely stubbed when absent (a --no-deps install)."""
-    pytest.importorskip("got10k")
-    added = []
-    for name in ("six", "wget", "shapely", "shapely.geometry"):
-        try:
-            importlib.import_module(name)
-        except ImportError:
-            module = types.ModuleType(name)
-            module.box = module.Polygon = None
-            module.string_types = str
-            sys.modules[name] = module
-            added.append(name)
-    try:
-        yield importlib.import_module("got10k")
-    finally:
-        for name in added:
-            sys.modules.pop(name, None)
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +45,7 @@ def test_nfs_id_passes_check_env_and_plays_its_synthetic_default(variant):
 
 
 @pytest.mark.parametrize("fps", [30, 240])
-def test_nfs_frames_and_boxes_match_got10k_reader(got10k, nfs_root, fps, monkeypatch):
+def test_nfs_frames_and_boxes_match_got10k_reader(got10k_experiments, nfs_root, fps, monkeypatch):
     from got10k.datasets import NfS, nfs
 
     monkeypatch.setattr(nfs.six, "string_types", str, raising=False)  # a stub six may lack it
@@ -92,7 +68,7 @@ def test_nfs_30fps_keeps_every_eighth_240fps_row_and_drops_a_leftover_image(nfs_
     assert np.array_equal(thirty.boxes, full.boxes[::8])
 
 
-def test_nfs_scores_match_got10k_experiment(got10k, nfs_root, tmp_path):
+def test_nfs_scores_match_got10k_experiment(got10k_experiments, nfs_root, tmp_path):
     from got10k.experiments import ExperimentNfS
 
     bench = benchmark_for("UniTrack/NfS-v0", root=str(nfs_root))
@@ -162,8 +138,9 @@ def test_uav123_sub_sequences_play_their_configseqs_frame_ranges(tmp_path):
         UAV123Dataset(tmp_path)
 
 
-def test_uav123_sub_sequence_table_is_got10ks_and_10fps_ranges_are_the_toolkits(got10k):
-    meta = json.loads((Path(got10k.__file__).parent / "datasets" / "uav123.json").read_text())
+def test_uav123_sub_sequence_table_is_got10ks_and_10fps_ranges_are_the_toolkits(got10k_experiments):
+    meta = json.loads((Path(got10k_experiments.__file__).parents[1] / "datasets" / "uav123.json")
+                      .read_text())
     parts = {name: (m["start_frame"], m["end_frame"]) for name, m in meta["UAV123"].items()
              if m["folder_name"] != name}
     ours = {f"{folder}_{k}": r for folder, ranges in UAV123_SUBSEQUENCES.items()

@@ -8,9 +8,6 @@ toolkit's ``calc_seq_err_robust.m`` / ``eval_tracker.m`` give by hand.
 
 from __future__ import annotations
 
-import importlib
-import sys
-import types
 from pathlib import Path
 
 import gymnasium as gym
@@ -31,29 +28,7 @@ from unitrack_env.metrics.sot import (
 )
 
 
-@pytest.fixture(scope="module")
-def got10k():
-    """got10k's experiments; modules it imports at load time only for downloads and
-    polygons (six, wget, shapely), which none of the functions called here use, are
-    replaced by empty ones when they are not installed (a ``--no-deps`` install)."""
-    pytest.importorskip("got10k")
-    added = []
-    for name in ("six", "wget", "shapely", "shapely.geometry"):
-        try:
-            importlib.import_module(name)
-        except ImportError:
-            module = types.ModuleType(name)
-            module.box = module.Polygon = module.string_types = None
-            sys.modules[name] = module
-            added.append(name)
-    try:
-        yield importlib.import_module("got10k.experiments")
-    finally:
-        for name in added:
-            sys.modules.pop(name, None)
-
-
-def _reference_curves(got10k, experiment, pred, gt):
+def _reference_curves(experiment, pred, gt):
     """Success and precision curves as got10k's ``report`` computes them for one sequence."""
     runner = experiment.__new__(experiment)
     runner.nbins_iou, runner.nbins_ce = 21, 51
@@ -81,26 +56,27 @@ def _synthetic_gt(rng, n=80):
     return np.hstack([xy, wh])
 
 
-def test_otb_curves_match_got10k_on_fixtures_and_synthetic(got10k, shared_data):
+def test_otb_curves_match_got10k_on_fixtures_and_synthetic(got10k_experiments, shared_data):
     rng = np.random.default_rng(0)
     cases = dict(_fixture_boxes(shared_data))
     cases["synthetic"] = _synthetic_gt(rng)
     for name, gt in cases.items():
         for pred in (_random_run(rng, gt), np.repeat(gt[:1], len(gt), axis=0)):
             ours = evaluate_sot_sequence(pred, gt)
-            succ, prec = _reference_curves(got10k, got10k.ExperimentOTB, pred, gt)
+            succ, prec = _reference_curves(got10k_experiments.ExperimentOTB, pred, gt)
             assert np.allclose(ours.success_curve, succ, atol=1e-6, rtol=0), name
             assert np.allclose(ours.precision_curve, prec, atol=1e-6, rtol=0), name
             assert abs(ours.auc - np.mean(succ)) < 1e-6
             assert abs(ours.precision_20px - prec[20]) < 1e-6
 
 
-def test_uav123_absent_rows_match_got10k_when_excluded_and_the_toolkit_default_differs(got10k):
+def test_uav123_absent_rows_match_got10k_when_excluded_and_the_toolkit_default_differs(
+        got10k_experiments):
     rng = np.random.default_rng(1)
     gt = _synthetic_gt(rng)
     gt[[10, 11, 12, 40]] = np.nan  # UAV123's absent target
     pred = _random_run(rng, np.nan_to_num(gt, nan=40.0))
-    succ, prec = _reference_curves(got10k, got10k.ExperimentUAV123, pred, gt)
+    succ, prec = _reference_curves(got10k_experiments.ExperimentUAV123, pred, gt)
     excluded = evaluate_sot_sequence(pred, gt, invalid_gt=INVALID_GT_EXCLUDE)
     assert np.allclose(excluded.success_curve, succ, atol=1e-6, rtol=0)
     assert np.allclose(excluded.precision_curve, prec, atol=1e-6, rtol=0)
@@ -112,11 +88,11 @@ def test_uav123_absent_rows_match_got10k_when_excluded_and_the_toolkit_default_d
     assert np.allclose(default.precision_curve, (prec * valid + 4) / n, atol=1e-12)
 
 
-def test_got10k_ao_and_success_rates_match_got10k(got10k, shared_data):
+def test_got10k_ao_and_success_rates_match_got10k(got10k_experiments, shared_data):
     from got10k.utils.metrics import rect_iou
 
     rng = np.random.default_rng(2)
-    runner = got10k.ExperimentGOT10k.__new__(got10k.ExperimentGOT10k)
+    runner = got10k_experiments.ExperimentGOT10k.__new__(got10k_experiments.ExperimentGOT10k)
     cases = dict(_fixture_boxes(shared_data))
     cases["synthetic"] = _synthetic_gt(rng)
     pooled_ours, pooled_ref = [], []
@@ -250,7 +226,7 @@ def test_rule_differences_measure_the_absent_frame_rules(tmp_path):
     assert diff["difference"]["AUC"] < 0
 
 
-def test_got10k_id_plays_val_and_writes_the_servers_layout_for_test(tmp_path, got10k):
+def test_got10k_id_plays_val_and_writes_the_servers_layout_for_test(tmp_path, got10k_experiments):
     from got10k.utils.metrics import rect_iou
 
     env = gym.make("UniTrack/GOT10k-v0")
