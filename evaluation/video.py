@@ -13,9 +13,15 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import cv2
+import gymnasium as gym
 import numpy as np
 
+import unitrack_env
+from unitrack_env.agents.base import close_agent, make_agent
 from unitrack_env.io import file_in_the_way
+
+from .run.episode import play_episode
 
 #: Video extensions and how they are written.
 FORMATS = {".mp4": "H.264 (imageio-ffmpeg)", ".avi": "Motion-JPEG (OpenCV)"}
@@ -32,7 +38,7 @@ def _even(image: np.ndarray) -> np.ndarray:
 
 class _H264Writer:
     def __init__(self, path: Path, size: tuple[int, int], fps: float) -> None:
-        import imageio_ffmpeg
+        import imageio_ffmpeg  # lazy: optional dependency (imageio-ffmpeg, [video])
 
         self._gen = imageio_ffmpeg.write_frames(
             str(path), size, fps=fps, codec="libx264", pix_fmt_out="yuv420p", quality=None,
@@ -49,15 +55,12 @@ class _H264Writer:
 
 class _MJPGWriter:
     def __init__(self, path: Path, size: tuple[int, int], fps: float) -> None:
-        import cv2
-
-        self._cv2 = cv2
         self._writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
         if not self._writer.isOpened():
             raise OSError(f"{path}: OpenCV could not open a video writer")
 
     def write(self, rgb: np.ndarray) -> None:
-        self._writer.write(self._cv2.cvtColor(rgb, self._cv2.COLOR_RGB2BGR))
+        self._writer.write(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
 
     def close(self) -> None:
         self._writer.release()
@@ -95,7 +98,7 @@ def check_video_path(out: str | os.PathLike) -> Path:
     _check_writable(out)
     if suffix == ".mp4":
         try:
-            import imageio_ffmpeg  # noqa: F401
+            import imageio_ffmpeg  # noqa: F401  # lazy: optional dependency (imageio-ffmpeg, [video])
         except ImportError:
             raise ImportError(
                 "writing .mp4 (H.264) needs imageio-ffmpeg: pip install 'unitrack-env[video]' "
@@ -106,7 +109,7 @@ def check_video_path(out: str | os.PathLike) -> Path:
 
 def video_codec(path: str | os.PathLike) -> str:
     """The codec of a video file's first video stream, as FFmpeg names it (e.g. ``h264``)."""
-    import imageio_ffmpeg
+    import imageio_ffmpeg  # lazy: optional dependency (imageio-ffmpeg, [video])
 
     reader = imageio_ffmpeg.read_frames(str(path))
     try:
@@ -127,13 +130,6 @@ def render_episode(
     fps: float | None = None,
 ) -> int:
     """Play one sequence and write every rendered frame to ``out``; return the frame count."""
-    import gymnasium as gym
-
-    import unitrack_env
-    from unitrack_env.agents.base import close_agent, make_agent
-
-    from .run.episode import play_episode
-
     out = check_video_path(out)
     unitrack_env.register_all()
     env = gym.make(env_id, render_mode="rgb_array", **(env_kwargs or {}))

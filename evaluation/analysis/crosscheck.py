@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import motmetrics
 import numpy as np
 
 from unitrack_env.metrics.clear_stream import StreamingClear
@@ -27,6 +28,7 @@ from unitrack_env.metrics.mot_preprocess import (
     preprocess,
     tracker_frames_from_rows,
 )
+from unitrack_env.metrics.motchallenge import score_sequence
 
 #: motmetrics metric names we compute, and the TrackEval-style keys we return them under.
 MOTMETRICS_FIELDS: dict[str, str] = {
@@ -57,16 +59,6 @@ DISPLACED = "displaced"
 OTHER = "assignment"
 """Any other difference: the assignment objective, or a knock-on of an earlier difference."""
 RULES: tuple[str, ...] = (CONTINUATION, DISPLACED, OTHER)
-
-
-def _import_motmetrics() -> Any:
-    try:
-        import motmetrics
-    except ImportError as exc:  # pragma: no cover - motmetrics is a core dependency
-        raise ImportError(
-            "the py-motmetrics cross-check needs `motmetrics` (pip install 'motmetrics>=1.4')"
-        ) from exc
-    return motmetrics
 
 
 def iou_distance(iou: np.ndarray, threshold: float = MATCH_IOU_THRESHOLD) -> np.ndarray:
@@ -164,8 +156,7 @@ def _accumulate(gt_frames: Sequence[GtFrame], tracker_frames: Sequence[TrackerFr
         raise ValueError(
             f"{len(gt_frames)} ground-truth frames but {len(tracker_frames)} tracker frames"
         )
-    mm = _import_motmetrics()
-    acc = mm.MOTAccumulator(auto_id=False)
+    acc = motmetrics.MOTAccumulator(auto_id=False)
     clear = StreamingClear()
     trackeval: list[dict[int, int] | None] = []
     for t, (gt, trk) in enumerate(zip(gt_frames, tracker_frames, strict=True), start=1):
@@ -180,7 +171,7 @@ def _accumulate(gt_frames: Sequence[GtFrame], tracker_frames: Sequence[TrackerFr
 
 
 def _summary(acc: Any) -> dict[str, float]:
-    host = _import_motmetrics().metrics.create()
+    host = motmetrics.metrics.create()
     summary = host.compute(acc, metrics=list(MOTMETRICS_FIELDS), return_dataframe=False)
     return {key: float(summary[name]) for name, key in MOTMETRICS_FIELDS.items()}
 
@@ -241,8 +232,6 @@ def crosscheck_sequence(seq_dir: Path, results: Path | np.ndarray, *, benchmark:
     ``results`` is a MOTChallenge result file or its rows; ``seq_dir`` the sequence folder
     (``gt/gt.txt``, ``seqinfo.ini``).
     """
-    from unitrack_env.metrics.motchallenge import score_sequence
-
     seq_dir = Path(seq_dir)
     rows = results if isinstance(results, np.ndarray) else \
         np.loadtxt(results, delimiter=",", ndmin=2)

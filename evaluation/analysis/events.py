@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
+import unitrack_env
 from unitrack_env.benchmarks import benchmark_for
 from unitrack_env.benchmarks.base import Benchmark
 from unitrack_env.errors import DataFormatError
@@ -41,8 +42,6 @@ def run_benchmark(run: str | os.PathLike) -> Benchmark:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: not a run folder of `unitrack evaluate` (no run.json)")
     spec = json.loads(path.read_text(encoding="utf-8"))
-    import unitrack_env
-
     unitrack_env.register_all()
     return benchmark_for(spec["env_id"], **spec.get("env_kwargs", {}))
 

@@ -12,16 +12,13 @@ tasks (MOTS, PoseTrack, VIS) get none.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from unitrack_env.benchmarks.base import Benchmark
-from unitrack_env.io import atomic_write_text
 from unitrack_env.metrics.mot_stats import add_sums, metrics_from_sums, weighted_sums
 
 from ..run.integrity import check_pair
@@ -322,48 +319,3 @@ def run_intervals(run: str | os.PathLike, *, resamples: int = 1000,
     if bench.intervals == "counts":
         return _count_intervals(run, bench)
     return {}
-
-
-def card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
-                   resamples: int = 1000) -> dict[tuple[str, str, str], dict]:
-    """Intervals of every (model, task, head) row of a scorecard made in ``out``."""
-    from ..scorecard.plan import Cell
-
-    result = {}
-    for row in card["rows"]:
-        folder = Path(out) / "cells" / Cell(row["model"], row["task"], row["head"], "", "",
-                                            "").folder
-        if (folder / "metrics.json").is_file():
-            result[row["model"], row["task"], row["head"]] = run_intervals(
-                folder, resamples=resamples)
-    return result
-
-
-def write_card_intervals(out: str | os.PathLike, card: dict[str, Any], *,
-                         resamples: int = 1000) -> list[Path]:
-    """``scorecard_ci.md`` and ``scorecard_ci.json``: each cell's value with its interval."""
-    from ..scorecard.plan import BASELINE, TASKS
-    from ..scorecard.table import columns, value
-
-    found = card_intervals(out, card, resamples=resamples)
-    lines = ["| model | task | head | metric | value | 95% interval |", "|---|---|---|---|---|---|"]
-    payload = []
-    for model in [*card["models"], BASELINE]:
-        for task, head, metric in columns(card):
-            number = value(card, model, task, head, metric)
-            if number is None:
-                continue
-            row_head = TASKS[task].baseline.label if model == BASELINE else head
-            ci = found.get((model, task, row_head), {}).get(metric)
-            text = f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]" if ci else "-"
-            lines.append(f"| {model} | {task} | {row_head} | {metric} | {100 * number:.1f} | "
-                         f"{text} |")
-            payload.append({"model": model, "task": task, "head": row_head, "metric": metric,
-                            "value": number, "low": ci[0] if ci else None,
-                            "high": ci[1] if ci else None})
-    lines += ["", "Delete-a-block jackknife over frames (blocks of a fifth of each sequence, "
-              "t 95% intervals); see docs/report.md."]
-    paths = [Path(out) / "scorecard_ci.md", Path(out) / "scorecard_ci.json"]
-    atomic_write_text(paths[0], "\n".join(lines) + "\n")  # never through a link
-    atomic_write_text(paths[1], json.dumps(payload, indent=2))
-    return paths

@@ -10,7 +10,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 from rich.table import Table
 
@@ -105,10 +107,19 @@ def metrics_table(
     return table, dropped
 
 
+def json_safe(value: Any) -> Any:
+    """Replace NaN/inf floats (metrics of sequences with nothing to score) by None (null)."""
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def metrics_json(per_sequence: Rows, combined: Mapping[str, float] | None) -> str:
     """The metrics as JSON (NaN as null): ``{"per_sequence": ..., "combined": ...}``."""
-    from ..run.runner import json_safe
-
     return json.dumps(json_safe({"per_sequence": dict(per_sequence),
                                  "combined": dict(combined or {})}), indent=2)
 

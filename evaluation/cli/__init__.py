@@ -22,6 +22,8 @@ import traceback
 from collections.abc import Iterable, Sequence
 from types import ModuleType
 
+import unitrack_env
+
 from ..run.progress import one_line_warnings
 from ..run.watchdog import Terminated, sigterm_stops
 from .common import console, error_text
@@ -62,8 +64,6 @@ def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentPars
     Every command is listed; only those in ``commands`` have their module imported and
     their options added.
     """
-    import unitrack_env
-
     parser = argparse.ArgumentParser(
         prog="unitrack", description=__doc__.split("\n")[0],
         epilog="`unitrack COMMAND --help` shows each command's options and examples.",
@@ -120,6 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         errors = console(stderr=True)
         if args.debug:
             errors.print("".join(traceback.format_exception(exc)), markup=False)
+        # lazy: start-up cost (run.runner loads scipy and TrackEval: +0.8 s on every `unitrack`)
         from ..run.runner import RunFailed
 
         errors.print(f"error: {error_text(exc)}", markup=False)

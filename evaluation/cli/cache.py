@@ -16,17 +16,22 @@ The folder is ``--dir``, else ``$UNITRACK_FEATURE_CACHE``, else the user cache f
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime
 import json
 import math
 import os
-from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 from rich.table import Table
+
+from unitrack_env.agents.appearance.cache_config import (
+    CACHE_DIR_ENV,
+    default_cache_dir,
+    format_size,
+)
+from unitrack_env.agents.appearance.feature_cache import FeatureCache
 
 #: ``unitrack cache --help`` opens with this (``unitrack --help`` shows the command's summary).
 DESCRIPTION = "The on-disk feature cache of the UniTrack heads (on by default)."
@@ -51,33 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub.add_parser("clear", parents=[common], help="remove every entry and statistic")
 
 
-@contextlib.contextmanager
-def feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
-        Callable[[], str | None]]:
-    """Count the feature-cache hits of a run, for agents that have a feature cache option.
-
-    Yields a function that returns the summary once the run is over (None without a cache:
-    other agents do not pay for importing the appearance stack). A run that stored features
-    adds a line with the cache's folder, its size and how to trim it.
-    """
-    from unitrack_env.agents.base import agent_class
-    from unitrack_env.agents.options import agent_options
-
-    if "feature_cache" not in agent_options(agent_class(agent)):
-        yield lambda: None
-        return
-    from unitrack_env.agents.appearance.cache_runs import track_cache_run
-
-    folder = agent_kwargs.get("feature_cache")
-    root = Path(folder).expanduser() if isinstance(folder, (str, os.PathLike)) else None
-    with track_cache_run(root) as cache_run:
-        yield lambda: _run_summary(cache_run, root)
-
-
-def _run_summary(cache_run: Any, root: Path | None) -> str | None:
-    from unitrack_env.agents.appearance.cache_config import default_cache_dir, format_size
-    from unitrack_env.agents.appearance.feature_cache import FeatureCache
-
+def run_summary(cache_run: Any, root: Path | None) -> str | None:
+    """The feature cache's lines after a run (its hits; where stored features went)."""
     stats = cache_run.stats()
     folder = root or default_cache_dir()
     if stats is None or folder is None:
@@ -94,9 +74,6 @@ def _run_summary(cache_run: Any, root: Path | None) -> str | None:
 
 
 def _cache(args: argparse.Namespace) -> Any:
-    from unitrack_env.agents.appearance.cache_config import CACHE_DIR_ENV, default_cache_dir
-    from unitrack_env.agents.appearance.feature_cache import FeatureCache
-
     root = Path(args.dir).expanduser() if args.dir else default_cache_dir()
     if root is None:
         raise ValueError(f"the feature cache is turned off (${CACHE_DIR_ENV}="
@@ -149,8 +126,6 @@ def cache_info(cache: Any, runs: int = 10) -> dict[str, Any]:
 
 
 def _print_info(cache: Any, console: Console, runs: int) -> None:
-    from unitrack_env.agents.appearance.cache_config import format_size
-
     info = cache_info(cache, runs)
     share = info["bytes"] / info["max_size"] if info["max_size"] else float("inf")
     console.print(f"feature cache: {info['location']}", highlight=False)
@@ -188,8 +163,6 @@ def _print_info(cache: Any, console: Console, runs: int) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack cache <info|prune|clear>``."""
-    from unitrack_env.agents.appearance.cache_config import format_size
-
     cache = _cache(args)
     if args.cache_command == "info":
         if args.json:

@@ -13,7 +13,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 from rich.console import Console
+
+import unitrack_env
+from unitrack_env.agents.base import agent_class
+from unitrack_env.agents.options import parse_options
+
+from ..analysis.tables import metrics_csv, metrics_json, metrics_table
 
 #: gym.make's own keyword arguments, accepted by every environment.
 GYM_MAKE_OPTIONS: dict[str, Any] = {
@@ -76,8 +83,6 @@ def names(text: str) -> list[str]:
 
 def check_env_id(env_id: str) -> str:
     """The env id, or a ValueError with the closest registered ids."""
-    import unitrack_env
-
     ids = unitrack_env.env_ids()
     if env_id in ids:
         return env_id
@@ -88,13 +93,7 @@ def check_env_id(env_id: str) -> str:
 
 def env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """The environment arguments from the command line, checked against the env's options."""
-    import gymnasium as gym
-
-    from unitrack_env.agents.options import parse_options
-
     env_id = check_env_id(args.env)
-    import unitrack_env
-
     unitrack_env.register_all()
     cls = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point)
     given = list(args.env_arg or [])
@@ -110,17 +109,12 @@ def env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 def agent_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """The agent arguments from the command line, checked against the agent's options."""
-    from unitrack_env.agents.base import agent_class
-    from unitrack_env.agents.options import parse_options
-
     return parse_options(agent_class(args.agent), args.agent_arg or [], agent=args.agent)
 
 
 def print_metrics(console: Console, per_sequence: dict, combined: dict | None, title: str,
                    columns: tuple, fmt: str, fps: dict | None = None, coverage: str = "") -> None:
     """Print metrics as a table fitted to the console, JSON or CSV (``fmt``)."""
-    from ..analysis.tables import metrics_csv, metrics_json, metrics_table
-
     if fmt == "json":
         console.print(metrics_json(per_sequence, combined), markup=False, soft_wrap=True)
     elif fmt == "csv":

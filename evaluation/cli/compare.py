@@ -8,6 +8,7 @@ from typing import Any
 
 from rich.console import Console
 
+from ..analysis.intervals import compare_runs
 from .common import positive_int
 
 EXAMPLES = """examples:
@@ -58,8 +59,6 @@ def comparison_lines(comp: Any) -> list[str]:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack compare``."""
-    from ..analysis.intervals import compare_runs
-
     comp = compare_runs(args.runs[0], args.runs[1], resamples=args.resamples, seed=args.seed,
                         level=args.level, block=args.block, method=args.interval)
     if args.format == "json":

@@ -18,6 +18,10 @@ from pathlib import Path
 
 from rich.console import Console
 
+from unitrack_env.datasets.synthetic.cache import cache_root
+from unitrack_env.dependencies import FIXES
+from unitrack_env.roots import DATA_ENV_VAR
+
 #: Free space below which the data cache folder is reported (synthetic data and features).
 MIN_FREE_BYTES = 2 * 1024**3
 #: Optional extras: import name -> (extra, what it enables).
@@ -54,7 +58,7 @@ def check_opencv() -> Finding:
     fix = (f"pip uninstall -y {' '.join(gui)} && pip install --force-reinstall "
            "--no-deps opencv-python-headless")
     try:
-        import cv2
+        import cv2  # lazy: optional dependency (doctor reports a cv2 that does not import)
     except ImportError as exc:
         return Finding("opencv", "problem", f"cv2 does not import: {exc}", fix)
     if gui:
@@ -65,8 +69,6 @@ def check_opencv() -> Finding:
 
 def check_trackeval() -> Finding:
     """TrackEval, the official MOT/MOTS/VIS scorer."""
-    from unitrack_env.dependencies import FIXES
-
     version = _version("trackeval")
     if version is None or importlib.util.find_spec("trackeval") is None:
         return Finding("trackeval", "problem", "not installed: MOT, MOTS and VIS cannot be "
@@ -77,7 +79,7 @@ def check_trackeval() -> Finding:
 def check_torch() -> Finding:
     """torch: version, CPU/CUDA, threads."""
     try:
-        import torch
+        import torch  # lazy: optional dependency (doctor reports a torch that does not import)
     except ImportError as exc:
         return Finding("torch", "problem", f"torch does not import: {exc}",
                        "pip install torch==2.13.0 (CPU build; see README)")
@@ -108,8 +110,6 @@ def check_weights() -> Finding:
 
 def check_cache_folder() -> Finding:
     """The cache folder (synthetic data, features) exists or can be made, with free space."""
-    from unitrack_env.datasets.synthetic.cache import cache_root
-
     folder = cache_root()
     probe = folder
     while not probe.exists() and probe != probe.parent:
@@ -126,8 +126,6 @@ def check_cache_folder() -> Finding:
 
 def check_data_roots() -> Finding:
     """Benchmark folders found under ``$UNITRACK_DATA``."""
-    from unitrack_env.roots import DATA_ENV_VAR
-
     base = os.environ.get(DATA_ENV_VAR)
     if not base:
         return Finding("data", "ok", f"{DATA_ENV_VAR} is not set: every env uses its embedded "

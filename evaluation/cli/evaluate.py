@@ -3,10 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
 
+from unitrack_env.agents.base import agent_class
+from unitrack_env.agents.options import agent_options
+from unitrack_env.benchmarks import benchmark_for
+
+from ..analysis.tables import format_cell, table_columns
+from ..run.runner import run as play
 from ..run.watchdog import DEFAULT_STEP_TIMEOUT
 from .common import (
     agent_kwargs,
@@ -67,14 +79,33 @@ def _defined(value: Any) -> bool:
     return value is not None and not (isinstance(value, float) and value != value)
 
 
+@contextlib.contextmanager
+def feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
+        Callable[[], str | None]]:
+    """Count the feature-cache hits of a run, for agents that have a feature cache option.
+
+    Yields a function that returns the summary once the run is over (None without a cache:
+    other agents do not pay for importing the appearance stack). A run that stored features
+    adds a line with the cache's folder, its size and how to trim it.
+    """
+    if "feature_cache" not in agent_options(agent_class(agent)):
+        yield lambda: None
+        return
+    # lazy: start-up cost (cli.cache and cache_runs load the appearance stack, torch: +1.6 s)
+    from unitrack_env.agents.appearance.cache_runs import track_cache_run
+
+    from .cache import run_summary  # lazy: start-up cost (as above)
+
+    folder = agent_kwargs.get("feature_cache")
+    root = Path(folder).expanduser() if isinstance(folder, (str, os.PathLike)) else None
+    with track_cache_run(root) as cache_run:
+        yield lambda: run_summary(cache_run, root)
+
+
 def run(args: argparse.Namespace, out: Console) -> int:
     """Run ``unitrack evaluate``."""
-    from ..run.runner import run as play
-
     env_given = env_kwargs(args)
     agent_given = agent_kwargs(args)
-    from .cache import feature_cache_report
-
     with feature_cache_report(args.agent, agent_given) as cache_summary:
         report = play(args.env, args.agent, out=args.out, env_kwargs=env_given,
                       agent_kwargs=agent_given, sequences=args.sequences,
@@ -122,8 +153,6 @@ def run(args: argparse.Namespace, out: Console) -> int:
 
 def _columns(env_id: str, env_given: dict[str, Any]) -> tuple[str, ...]:
     """The table columns of the run's benchmark instance (a MOT class map adds its classes)."""
-    from unitrack_env.benchmarks import benchmark_for
-
     return benchmark_for(env_id, **env_given).columns
 
 
@@ -132,11 +161,6 @@ def spread_table(repeated: dict[str, Any], columns: tuple[str, ...], width: int)
 
     The leading columns that fit in ``width``; the title counts those left to metrics.json.
     """
-    from rich.markup import escape
-    from rich.table import Table
-
-    from ..analysis.tables import format_cell, table_columns
-
     spread = repeated["spread"]
     rows = {**spread["per_sequence"], "COMBINED": spread["combined"]}
     cells = {label: {m: f"{format_cell(m, v['mean'])} [{format_cell(m, v['min'])}, "

@@ -7,6 +7,9 @@ import json
 from typing import Any
 
 from rich.console import Console
+from rich.table import Table
+
+from ..analysis.events import event_counts, load_events
 
 EXAMPLES = """examples:
   unitrack events runs/pets --type idsw
@@ -33,8 +36,6 @@ TABLE_COLUMNS = ("sequence", "frame", "type", "class", "object", "gt_id", "track
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack events``."""
-    from ..analysis.events import event_counts, load_events
-
     df = load_events(args.run, sequence=args.sequence, type=args.type)
     if args.format == "csv":
         print(df.to_csv(index=False, float_format="%.4f"), end="")
@@ -42,8 +43,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if args.format == "count":
         console.print(json.dumps(event_counts(df), indent=2), markup=False)
         return 0
-    from rich.table import Table
-
     if args.type is None:  # thousands of lines help nobody: the counts, and how to list
         _events_summary(console, event_counts(df), len(df))
         return 0
@@ -58,8 +57,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 
 def _events_summary(console: Console, counts: dict[str, dict[str, int]], total: int) -> None:
-    from rich.table import Table
-
     kinds = list(dict.fromkeys(kind for row in counts.values() for kind in row))
     table = Table("sequence", title=f"{total} events", title_justify="left")
     for kind in kinds:

@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 
 from rich.console import Console
+from rich.table import Table
+
+from unitrack_env.agents.base import agent_class, available_agents
+from unitrack_env.agents.loading import entry_point_agents
+from unitrack_env.registration import variants
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -13,12 +18,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack list``."""
-    from rich.table import Table
-
-    from unitrack_env.agents.base import agent_class, available_agents
-    from unitrack_env.agents.loading import entry_point_agents
-    from unitrack_env.registration import variants
-
     envs = Table(title="environments", title_justify="left")
     envs.add_column("id", no_wrap=True)
     envs.add_column("task")

@@ -7,6 +7,9 @@ from pathlib import Path
 
 from rich.console import Console
 
+from ..plots.attributes import load_attributes, write_attributes
+from ..plots.curves import draw_curves
+
 EXAMPLES = """examples:
   unitrack plot runs/otb-xcorr --out plots/
   unitrack plot runs/lasot-xcorr runs/lasot-repeat --out plots/   # both runs on each figure
@@ -28,12 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack plot``."""
-    from ..plots.curves import draw_curves
-
     runs = [Path(r) for r in args.runs]
     if args.attributes:  # read (and refused if bad) before any figure is written
-        from ..plots.attributes import load_attributes, write_attributes
-
         tables, without = load_attributes(runs)
     written = draw_curves(runs, Path(args.out))
     if args.attributes:

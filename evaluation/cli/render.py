@@ -6,6 +6,7 @@ import argparse
 
 from rich.console import Console
 
+from ..video import check_video_path, render_episode
 from .common import agent_kwargs, env_kwargs, env_options, positive_float
 
 EXAMPLES = """examples:
@@ -26,8 +27,6 @@ def add_arguments(rd: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack render``."""
-    from ..video import check_video_path, render_episode
-
     check_video_path(args.out)
     frames = render_episode(args.env, args.agent, args.sequence, args.out,
                             env_kwargs=env_kwargs(args), agent_kwargs=agent_kwargs(args),

@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from rich.console import Console
 
+from unitrack_env.benchmarks import benchmark_for
+from unitrack_env.benchmarks.motchallenge import MOTChallengeBenchmark, score_split_folder
+from unitrack_env.io import atomic_write_text
+
+from ..analysis.tables import json_safe
 from .common import check_env_id, console, env_kwargs, format_option, names, print_metrics
 
 EXAMPLES = """examples:
@@ -38,11 +44,7 @@ def add_arguments(sc: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, out: Console) -> int:
     """Run ``unitrack score``."""
-    import json
-
     if args.env:
-        from unitrack_env.benchmarks import benchmark_for
-
         given = env_kwargs(args)
         bench = benchmark_for(check_env_id(args.env), **given)
         chosen = given.get("sequences")  # --env-arg sequences=...: those with gt
@@ -50,8 +52,6 @@ def run(args: argparse.Namespace, out: Console) -> int:
             bench.scorable(chosen) if chosen else None), allow_missing=args.allow_missing)
         columns = bench.columns
     elif args.benchmark and args.gt:
-        from unitrack_env.benchmarks.motchallenge import MOTChallengeBenchmark, score_split_folder
-
         report = score_split_folder(args.gt, args.results, args.benchmark, args.sequences,
                                     allow_missing=args.allow_missing)
         columns = MOTChallengeBenchmark.columns
@@ -65,10 +65,6 @@ def run(args: argparse.Namespace, out: Console) -> int:
                                     f"no result file for {', '.join(report.missing)})",
                                     markup=False)
     if args.out:
-        from unitrack_env.io import atomic_write_text
-
-        from ..run.runner import json_safe
-
         atomic_write_text(args.out, json.dumps(json_safe(json.loads(report.to_json())),
                                                indent=2))
         console(stderr=True).print(f"metrics: {args.out}", markup=False)

@@ -11,7 +11,27 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    ProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+)
+from rich.table import Column
+from rich.text import Text
 
+from ..scorecard import card as sc
+from ..scorecard.correlation_study import (
+    merge_externals,
+    read_external_csv,
+    split_model_text,
+    write_correlation,
+)
+from ..scorecard.intervals import write_card_intervals
+from ..scorecard.plan import ModelSpec
+from ..scorecard.table import merge_cards
 from .common import positive_int
 
 
@@ -68,11 +88,6 @@ def _print_restamp(console: Console, label: str, result: list[str] | str) -> Non
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack scorecard`` (or redraw earlier cards with ``--compare``)."""
-    from ..scorecard import card as sc
-    from ..scorecard.correlation_study import merge_externals, read_external_csv, split_model_text
-    from ..scorecard.plan import ModelSpec
-    from ..scorecard.table import merge_cards
-
     out = Path(args.out)
     split = [split_model_text(text) for text in args.model or ()]
     externals = read_external_csv(args.external) if args.external else {}
@@ -99,12 +114,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
                                     console, label, result))
         files = sorted(out.glob("scorecard.*"))
     if args.ci:
-        from ..analysis.intervals import write_card_intervals
-
         files += write_card_intervals(out, card)
     if any(externals.values()):
-        from ..scorecard.correlation_study import write_correlation
-
         files += write_correlation(out, card, externals)
     console.print((out / "scorecard.md").read_text(), markup=False, soft_wrap=True)
     if any(externals.values()):
@@ -133,30 +144,24 @@ class _Update:
             self.progress.update(self.task, eta=(time.monotonic(), seconds))
 
 
-def _eta_column() -> Any:
-    from rich.progress import ProgressColumn
-    from rich.text import Text
+class _EtaColumn(ProgressColumn):
+    """The scorecard's own ETA, counting down between cells.
 
-    class EtaColumn(ProgressColumn):
-        """The scorecard's own ETA, counting down between cells.
+    From the cells' frames and input sizes, corrected as they finish; rich's own column
+    would wait for two finished cells. Drawn at every refresh (a countdown in whole
+    seconds does not flicker), so a new estimate shows at once.
+    """
 
-        From the cells' frames and input sizes, corrected as they finish; rich's own column
-        would wait for two finished cells. Drawn at every refresh (a countdown in whole
-        seconds does not flicker), so a new estimate shows at once.
-        """
+    max_refresh = None
 
-        max_refresh = None
-
-        def render(self, task: Any) -> Text:
-            stamp, seconds = task.fields.get("eta", (None, None))
-            if stamp is None or task.finished:  # before the plan: models and data load
-                return Text("-:--:--" if task.finished else "planning",
-                            style="progress.remaining")
-            left = max(0, round(seconds - (time.monotonic() - stamp)))
-            return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d}",
+    def render(self, task: Any) -> Text:
+        stamp, seconds = task.fields.get("eta", (None, None))
+        if stamp is None or task.finished:  # before the plan: models and data load
+            return Text("-:--:--" if task.finished else "planning",
                         style="progress.remaining")
-
-    return EtaColumn()
+        left = max(0, round(seconds - (time.monotonic() - stamp)))
+        return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d}",
+                    style="progress.remaining")
 
 
 @contextlib.contextmanager
@@ -165,17 +170,8 @@ def cell_progress(enabled: bool) -> Iterator[_Update]:
     if not enabled:
         yield _Update()
         return
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-    )
-    from rich.table import Column
-
     with Progress(TextColumn("cells"), BarColumn(bar_width=20), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("ETA"), _eta_column(),
+                  TimeElapsedColumn(), TextColumn("ETA"), _EtaColumn(),
                   TextColumn("{task.description}",
                              table_column=Column(no_wrap=True, overflow="ellipsis")),
                   console=Console(stderr=True, highlight=False, soft_wrap=True)) as progress:

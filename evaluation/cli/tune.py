@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict
 from typing import Any
 
 from rich.console import Console
+from rich.table import Table
 
+from ..tune.ray_trials import check_ray_tune, ray_search
+from ..tune.search import TuneSpec, parse_dimension, tune
 from .common import agent_kwargs, env_kwargs, env_options, names, positive_int
 
 EXAMPLES = """examples:
@@ -48,10 +52,6 @@ def add_arguments(tp: argparse.ArgumentParser) -> None:
 
 
 def _spec(args: argparse.Namespace) -> Any:
-    from dataclasses import asdict
-
-    from ..tune.search import TuneSpec, parse_dimension
-
     space = [asdict(parse_dimension(text)) for text in args.space]
     for d in space:
         d["choices"] = list(d["choices"])
@@ -67,8 +67,6 @@ def _setting(params: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack tune``."""
-    from ..tune.search import tune
-
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address goes with --backend ray")
     spec = _spec(args)
@@ -82,8 +80,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
             log.print(f"  {row['feature_cache']}", markup=False)
 
     if args.backend == "ray":
-        from ..tune.ray_trials import check_ray_tune, ray_search
-
         search = {"search": ray_search(args.address), "backend": "ray",
                   "check": check_ray_tune}
     else:
@@ -96,8 +92,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
 
 def _print_result(console: Console, spec: Any, result: dict[str, Any]) -> None:
-    from rich.table import Table
-
     table = Table(title=f"search history ({spec.metric} on {', '.join(spec.tune_sequences)})",
                   title_justify="left")
     for column in ("trial", "state", spec.metric, "seconds", "setting"):

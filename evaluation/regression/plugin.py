@@ -12,6 +12,8 @@ from typing import Any
 
 import pytest
 
+from unitrack_env.roots import DataRootNotFound
+
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     """Add ``--update-goldens``."""
@@ -42,8 +44,7 @@ class EpisodeRegression:
         root is missing, so a clone without the benchmark data passes.
         """
         __tracebackhide__ = True
-        from unitrack_env.roots import DataRootNotFound
-
+        # lazy: start-up cost (this plugin loads in every pytest session: +40 ms for golden)
         from .golden import GoldenMismatch, check_episode
 
         try:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,12 @@ from unitrack_env.io import atomic_write_bytes, atomic_write_text, refuse_link
 
 from ..analysis.events import load_events, run_benchmark, run_sequences
 from ..analysis.intervals import comparable, compare_runs
+from ..plots.attributes import NoAttributes, draw_attribute_radar, load_attributes
+from ..plots.curves import draw_labelled
 from ..run.integrity import DifferentData, check_current
+from ..scorecard.correlation_plot import figure_stem
+from ..scorecard.plan import BASELINE
+from ..scorecard.table import columns, value
 from .html import esc, forest, mot_timeline, number_cell, page, table, value_timeline
 from .pages import event_pages, figure, legend, sequence_page
 from .pictures import choose, event_pictures
@@ -54,8 +60,6 @@ def metrics_section(runs: list[tuple[str, Path, Any, dict]]) -> str:
 
 def curves_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
     """The runs' success and precision plots, when their benchmarks draw any ("" if none)."""
-    from ..plots.curves import draw_labelled
-
     labelled = [(label, bench.curves(run / "data", list(metrics.get("per_sequence", {}))))
                 for label, run, bench, metrics in runs]
     if not any(curves for _, curves in labelled):
@@ -68,8 +72,6 @@ def curves_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
 
 def attributes_section(runs: list[tuple[str, Path, Any, dict]], out: Path) -> str:
     """Each run's scores per challenge attribute and their radar ("" if no run has any)."""
-    from ..plots.attributes import NoAttributes, draw_attribute_radar, load_attributes
-
     if not any(bench.sequence_attributes(list(metrics.get("per_sequence", {})))
                for _, _, bench, metrics in runs):
         return ""  # most tasks
@@ -161,15 +163,38 @@ def sequence_section(index: int, label: str, run: Path, bench: Any, seq: str,
             + '<div class="thumbs">' + "".join(figures) + "</div></section>")
 
 
+def correlation_section(folder: Path, out: Path) -> str:
+    """The HTML of a scorecard folder's correlation study ("" when it has none)."""
+    path = folder / "correlation.json"
+    if not path.is_file():
+        return ""
+    result = json.loads(path.read_text(encoding="utf-8"))
+    html = ["<h2 id=\"correlation\">Correlation study</h2>"]
+    for name in result["metrics"]:
+        rows = []
+        for c in (c for c in result["correlations"] if c["metric"] == name):
+            cells = [c["title"], str(c["n"])]
+            for key in ("pearson", "spearman"):
+                ci = c[f"{key}_ci"]
+                cells.append("-" if c[key] is None else f"{c[key]:+.2f}" + (
+                    f" [{ci[0]:+.2f}, {ci[1]:+.2f}]" if ci else ""))
+            rows.append("<tr>" + "".join(f'<td class="text">{esc(v)}</td>'
+                                         for v in [*cells, c["verdict"]]) + "</tr>")
+        html.append(f"<h3>{esc(name)}</h3>" + table(
+            ["task", "models", "Pearson r [95%]", "Spearman rho [95%]", "verdict"], rows,
+            table_id=f"correlation-{figure_stem(name)}"))
+        src = folder / f"correlation-{figure_stem(name)}.svg"
+        if src.is_file():
+            shutil.copyfile(src, out / src.name)
+            html.append(f'<p><img src="{esc(src.name)}" alt="correlation with {esc(name)}" '
+                        'style="max-width:100%"></p>')
+    return "".join(html)
+
+
 def scorecard_section(folder: Path, out: Path) -> str:
     """A scorecard folder's table (its Markdown as HTML) and radar chart."""
-    from ..scorecard.correlation_plot import report_section as correlation_section
-    from ..scorecard.table import columns, value
-
     card = json.loads((folder / "scorecard.json").read_text(encoding="utf-8"))
     cols = columns(card)
-    from ..scorecard.plan import BASELINE
-
     rows = []
     for model in [*card["models"], BASELINE]:
         cells = "".join(number_cell(value(card, model, t, h, m), percent=m not in COUNTS)

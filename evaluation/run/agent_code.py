@@ -22,11 +22,11 @@ from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
 
+import unitrack_env.agents
+
 
 def _roots() -> tuple[Path, Path]:
     """The folders of ``unitrack_env`` and of ``unitrack_env.agents`` (links resolved)."""
-    import unitrack_env.agents
-
     return (Path(unitrack_env.__file__).resolve().parent,
             Path(unitrack_env.agents.__file__).resolve().parent)
 

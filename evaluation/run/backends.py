@@ -54,7 +54,7 @@ def ray_backend(workers: int = 1, address: str | None = None,
                 gpus: float = 0.0) -> Iterator[Runner]:
     """Ray tasks on a local Ray (``address`` None) or a running cluster."""
     try:
-        import ray
+        import ray  # lazy: optional dependency (ray)
     except ImportError:
         raise ImportError("--backend ray needs Ray: pip install 'unitrack-env[ray]'") from None
     started = not ray.is_initialized()

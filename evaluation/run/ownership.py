@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from unitrack_env.fingerprint import sequence_files
 from unitrack_env.io import LinkRefused, atomic_write_text, path_inside, refuse_link
 
 from .episode import OutputError, SequenceRecord
@@ -300,8 +301,6 @@ class Manifest:
 # ------------------------------------------------------------------ a run's sequences
 def sequence_outputs(out: Path, sequence: str, names: Iterable[str]) -> list[Path]:
     """The files a run writes for ``sequence``: its result files and its record."""
-    from unitrack_env.fingerprint import sequence_files
-
     data, record = out / "data", out / "sequences" / f"{sequence}.json"
     files = sequence_files(data, sequence, names, shared=False) if data.is_dir() else []
     return files + ([record] if record.is_file() else [])

@@ -28,7 +28,7 @@ def play_remote(item: tuple[Any, str, Any], threads: int) -> dict[str, Any]:
     """A Ray task: play one sequence in a scratch folder; its outcome and files as bytes."""
     spec, sequence, stamp = item
     if threads:
-        import torch
+        import torch  # lazy: start-up cost (+1.4 s; agents without a network never load torch)
 
         torch.set_num_threads(threads)
     with tempfile.TemporaryDirectory(prefix="unitrack-ray-") as scratch:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -17,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 
 import unitrack_env
-from unitrack_env.agents.base import agent_class, close_agent
+from unitrack_env.agents.base import agent_class, agents_for_task, close_agent
 from unitrack_env.agents.loading import portable_reference
 from unitrack_env.agents.options import check_options
 from unitrack_env.benchmarks.base import Benchmark, select_sequences
@@ -25,6 +24,7 @@ from unitrack_env.io import atomic_write_text, file_in_the_way
 from unitrack_env.metrics.report import ScoreReport
 
 from ..analysis.events import events_path, write_run_events
+from ..analysis.tables import json_safe
 from .episode import OutputError, SequenceRecord
 from .identity import RunIdentity, Stamp
 from .integrity import data_fingerprint
@@ -87,17 +87,6 @@ class RunReport:
         return self.scores.combined if self.scores is not None else {}
 
 
-def json_safe(value: Any) -> Any:
-    """Replace NaN/inf floats (metrics of sequences with nothing to score) by None (null)."""
-    if isinstance(value, dict):
-        return {key: json_safe(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(item) for item in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], elsewhere: bool,
                    env_id: str) -> tuple[type, str, str | None]:
     """The agent class, its name for the record and its importable reference (checked).
@@ -112,8 +101,6 @@ def _resolve_agent(agent: str | type, agent_kwargs: dict[str, Any], elsewhere: b
     task = unitrack_env.task_of(env_id)
     tasks = getattr(cls, "tasks", ())
     if tasks and task not in tasks:
-        from unitrack_env.agents.base import agents_for_task
-
         raise ValueError(f"agent '{name}' plays {', '.join(tasks)}, not {task} ({env_id}); "
                          f"agents for {task}: {', '.join(agents_for_task(task)) or 'none'}")
     reference = portable_reference(cls)

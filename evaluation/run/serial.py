@@ -18,6 +18,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from unitrack_env.agents.base import close_agent
 from unitrack_env.benchmarks.base import Benchmark
 
 from .episode import SequenceRecord, play_repetitions, save_episode
@@ -85,8 +86,6 @@ def _play_kept(spec: Any, out: str, sequence: str | None, stamp: Stamp | None, e
     the parent at run time: its package registers it). Returns ``("ok", record)``,
     ``("error", message, traceback)``, ``("unmade", message, traceback)`` or ``("closed",)``.
     """
-    from unitrack_env.agents.base import close_agent
-
     if sequence is None:
         beat(0)  # close() is timed like a step
         agent, env = _KEPT.pop("agent", None), _KEPT.pop("env", None)

@@ -18,6 +18,9 @@ from multiprocessing import current_process
 from pathlib import Path
 from typing import Any
 
+from unitrack_env.agents.base import close_agent
+from unitrack_env.errors import CheckpointError, DataFormatError, InvalidActionError
+
 from .episode import OutputError, SequenceRecord, play_repetitions, save_episode
 from .pool import CLOSING, SupervisedPool
 from .progress import format_warning
@@ -32,8 +35,6 @@ class SequenceFailure:
     @staticmethod
     def describe(exc: BaseException) -> str:
         """``message`` for the project's own errors, ``Type: message`` otherwise."""
-        from unitrack_env.errors import CheckpointError, DataFormatError, InvalidActionError
-
         if isinstance(exc, (DataFormatError, CheckpointError, InvalidActionError)):
             return str(exc)
         if isinstance(exc, RuntimeError) and str(exc).startswith("agent '"):
@@ -77,7 +78,7 @@ def init_worker(parent: int, threads: int) -> None:
     _watch_parent(parent)
     warnings.formatwarning = format_warning  # the worker's own warnings, as one line
     if threads:
-        import torch
+        import torch  # lazy: start-up cost (+1.4 s; agents without a network never load torch)
 
         torch.set_num_threads(threads)
 
@@ -88,8 +89,6 @@ def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
 
     ``beat`` is called after every step (the parent's progress bar and step watchdog).
     """
-    from unitrack_env.agents.base import close_agent
-
     env = agent = None
     try:
         env = spec.make_env()

@@ -5,10 +5,11 @@ Every task's UniTrack head played with each appearance model, and each task's ba
 * :mod:`.card` - :func:`~.card.scorecard`: play, store and score every cell, write the outputs;
 * :mod:`.plan` - its tasks, heads, models (:class:`~.plan.ModelSpec`), data and cells;
 * :mod:`.eta` and :mod:`.flops` - what a cell costs, the order cells run in, the ETA;
-* :mod:`.table` and :mod:`.radar` - the Markdown / CSV table and the radar chart.
+* :mod:`.table` and :mod:`.radar` - the Markdown / CSV table and the radar chart;
+* :mod:`.intervals` - each cell's value with its 95% interval (``--ci``);
 * :mod:`.correlation_study` - the paper's correlation study of a card's rows against other
-  evaluations of the same models (statistics in :mod:`.correlation`, figure and report
-  section in :mod:`.correlation_plot`).
+  evaluations of the same models (statistics in :mod:`.correlation`, figure in
+  :mod:`.correlation_plot`).
 
 Exported here: :func:`scorecard` and :class:`ModelSpec` (its rows).
 """

@@ -19,11 +19,21 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+
 import unitrack_env
 from unitrack_env.io import atomic_write_bytes, atomic_write_text
 
+from ..run.backends import make_backend
+from ..run.ownership import hold_folder
+from ..run.resume import RunMismatch, restamp_sequences, stale_sequences
+from ..run.runner import RunFailed, check_out_folder, run
+from ..run.workers import SequenceFailure, refuse_unguarded_script
+from .eta import megapixel_gflops, schedule, setup_seconds
+from .flops import estimated_megapixel_gflops
 from .plan import BASELINE, TASKS, Cell, ModelSpec, Source, plan
-from .table import ran_on
+from .radar import draw_radar
+from .table import markdown_table, ran_on, rows_csv
 
 
 def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
@@ -32,11 +42,9 @@ def play_cell(cell: Cell, threads: int | None = None) -> dict[str, Any]:
     Runs where the backend puts it (another process or machine); nothing is written to the
     driver's output folder from here.
     """
-    from ..run.runner import run
-
     started = time.monotonic()
     if threads:
-        import torch
+        import torch  # lazy: start-up cost (+1.4 s; the baselines' cells never load torch)
 
         torch.set_num_threads(threads)
     with (tempfile.TemporaryDirectory(prefix="unitrack-cell-") as scratch,
@@ -79,8 +87,6 @@ def cells_to_play(out: Path, cells: Sequence[Cell]) -> list[Cell]:
     A stored cell is stale when its data or code changed since it was played; the runner
     would replay it while the card is scored, so it goes to the workers instead.
     """
-    from ..run.resume import RunMismatch, stale_sequences
-
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
         if cell_done(out, cell):
@@ -103,8 +109,6 @@ def restamp_cells(out: Path, cells: Sequence[Cell]) -> dict[str, list[str] | str
     Returns, for each stale stored cell, the changed code files (kept) or why it cannot be
     kept (:mod:`.restamp`); nothing is played.
     """
-    from ..run.resume import RunMismatch, restamp_sequences
-
     stored: dict[str, list[Cell]] = {}
     for cell in cells:
         if cell_done(out, cell):
@@ -128,9 +132,6 @@ def _finite(value: Any) -> float | None:
 
 def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[str, Any]:
     """Score every (model, task, head) folder with the runner; the scorecard's content."""
-    from ..run.resume import RunMismatch
-    from ..run.runner import run
-
     groups: dict[tuple[str, str, str], list[Cell]] = {}
     for cell in cells:
         groups.setdefault((cell.model, cell.task, cell.head), []).append(cell)
@@ -169,14 +170,10 @@ def combine(out: Path, cells: list[Cell], sources: dict[str, Source]) -> dict[st
 
 def write_outputs(out: Path, card: dict[str, Any], *, radar_scale: str = "rank") -> list[Path]:
     """``scorecard.json``, ``.csv``, ``.md`` and (with matplotlib) the radar chart PNG/SVG."""
-    from .table import markdown_table, rows_csv
-
     atomic_write_text(out / "scorecard.json", json.dumps(card, indent=2, allow_nan=False))
     atomic_write_text(out / "scorecard.csv", rows_csv(card))
     atomic_write_text(out / "scorecard.md", markdown_table(card))
     written = [out / "scorecard.json", out / "scorecard.csv", out / "scorecard.md"]
-    from .radar import draw_radar
-
     written += draw_radar(card, out / "scorecard", scale=radar_scale)
     return written
 
@@ -204,9 +201,9 @@ def _gflops(models: Sequence[ModelSpec], names: list[str]) -> dict[str, dict[str
 
     Loads every model: a bad checkpoint or layer is one error now, not one per cell later.
     """
+    # lazy: start-up cost (the appearance package loads torch, +1.4 s: the first ETA comes first)
     from unitrack_env.agents.appearance.weights import load_weights
 
-    from .eta import megapixel_gflops
     gflops: dict[str, dict[str, float]] = {}
     for m in models:
         loaded = load_weights(m.weights, arch=m.arch, layer=m.layer, stride=m.stride)
@@ -220,8 +217,6 @@ def _check_environments(sources: dict[str, Source]) -> None:
     What an environment refuses (a missing scoring library, a bad option) is then one error
     at the door, not one per cell.
     """
-    import gymnasium as gym
-
     for source in sources.values():
         gym.make(source.env_id, **({"root": source.root} if source.root else {})).close()
 
@@ -235,9 +230,6 @@ def _first_estimate(out: Path, models: Sequence[ModelSpec], names: list[str],
     :mod:`.flops` and the time to set up (:func:`~.eta.setup_seconds`);
     the exact ETA follows when the cells start.
     """
-    from .eta import schedule, setup_seconds
-    from .flops import estimated_megapixel_gflops
-
     cells, _, pending = plan(models, names, data, motion=motion, runtime=runtime,
                              generate=False)
     todo = [c for c in cells if not cell_done(out, c)]
@@ -265,11 +257,6 @@ def _play_all(out: Path, cells: list[Cell], *, backend: str, workers: int, addre
     ``on_estimate`` gets the seconds left (:class:`~.eta.CellClock`) at the start
     and after every cell; ``gflop_per_mp`` is :func:`~.eta.schedule`'s.
     """
-    from ..run.backends import make_backend
-    from ..run.runner import RunFailed
-    from ..run.workers import SequenceFailure
-    from .eta import schedule
-
     todo, clock = schedule(cells_to_play(out, cells), BASELINE,
                            _slots(backend, workers), torch_runtime, gflop_per_mp)
     position = {id(cell): i for i, cell in enumerate(todo)}
@@ -337,16 +324,11 @@ def scorecard(models: Sequence[ModelSpec], *, out: str | os.PathLike,
     if on_estimate is not None:
         _first_estimate(out, models, names, data_path, slots=_slots(backend, workers),
                         motion=motion, runtime=runtime, on_estimate=on_estimate)
-    from ..run.runner import check_out_folder
-
     gflops = _gflops(models, names)
     if backend == "pool" and workers > 1:
-        from ..run.workers import refuse_unguarded_script
-
         refuse_unguarded_script()
+    # lazy: start-up cost (the appearance package loads torch, +1.4 s: the first ETA comes first)
     from unitrack_env.agents.appearance.runtime import resolve_runtime
-
-    from ..run.ownership import hold_folder
 
     chosen = resolve_runtime(runtime)  # not installed: one error now, not one per cell
     check_out_folder(out)

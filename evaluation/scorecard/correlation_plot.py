@@ -1,4 +1,7 @@
-"""The correlation study's figure (the UniTrack paper's Figure 4), and its report section.
+"""The correlation study's figure (the UniTrack paper's Figure 4).
+
+The report draws its section from the same files
+(:func:`unitrack_env.evaluation.report.build.correlation_section`).
 
 One figure per external metric: a scatter panel per task, the other evaluation on the x-axis,
 tracking on the y-axis, each model's label beside its point, and both coefficients in the
@@ -8,8 +11,6 @@ study (no date, a fixed SVG id salt).
 
 from __future__ import annotations
 
-import json
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -54,33 +55,3 @@ def draw_scatter(rows: list[dict[str, Any]], stem: Path) -> list[Path]:
 def figure_stem(name: str) -> str:
     """A file-name-safe form of a metric name (``probe:imagenet`` -> ``probe-imagenet``)."""
     return "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in name)
-
-
-def report_section(folder: Path, out: Path) -> str:
-    """The HTML of a scorecard folder's correlation study ("" when it has none)."""
-    from ..report.html import esc, table
-
-    path = folder / "correlation.json"
-    if not path.is_file():
-        return ""
-    result = json.loads(path.read_text(encoding="utf-8"))
-    html = ["<h2 id=\"correlation\">Correlation study</h2>"]
-    for name in result["metrics"]:
-        rows = []
-        for c in (c for c in result["correlations"] if c["metric"] == name):
-            cells = [c["title"], str(c["n"])]
-            for key in ("pearson", "spearman"):
-                ci = c[f"{key}_ci"]
-                cells.append("-" if c[key] is None else f"{c[key]:+.2f}" + (
-                    f" [{ci[0]:+.2f}, {ci[1]:+.2f}]" if ci else ""))
-            rows.append("<tr>" + "".join(f'<td class="text">{esc(v)}</td>'
-                                         for v in [*cells, c["verdict"]]) + "</tr>")
-        html.append(f"<h3>{esc(name)}</h3>" + table(
-            ["task", "models", "Pearson r [95%]", "Spearman rho [95%]", "verdict"], rows,
-            table_id=f"correlation-{figure_stem(name)}"))
-        src = folder / f"correlation-{figure_stem(name)}.svg"
-        if src.is_file():
-            shutil.copyfile(src, out / src.name)
-            html.append(f'<p><img src="{esc(src.name)}" alt="correlation with {esc(name)}" '
-                        'style="max-width:100%"></p>')
-    return "".join(html)

@@ -100,6 +100,7 @@ def setup_seconds(synthetic_frames: int = 0) -> float:
 def megapixel_gflops(module: Any, layers: tuple[str, ...], tasks: Sequence[str],
                      ) -> dict[str, float]:
     """A network's GFLOP per megapixel of each task's input (:func:`input_size`)."""
+    # lazy: start-up cost (the appearance package loads torch, +1.4 s: the first ETA comes first)
     from unitrack_env.agents.appearance.architectures import network_gflops
 
     sizes = [input_size(task)[1:] for task in tasks]

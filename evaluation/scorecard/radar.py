@@ -120,7 +120,7 @@ def _polygons(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, 
 def _bars(plt: Any, card: dict[str, Any], spokes: list[tuple[str, str, str, str]],
           data: dict[str, list[float | None]], scale: str) -> Any:
     """One or two tasks: grouped bars (no radar polygon has fewer than three vertices)."""
-    from matplotlib.patches import Patch
+    from matplotlib.patches import Patch  # lazy: optional dependency (matplotlib, [plots])
 
     figure, ax = plt.subplots(figsize=(3.2 + 1.6 * len(spokes), 4.8))
     width = 0.8 / len(data)

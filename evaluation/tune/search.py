@@ -29,7 +29,16 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from unitrack_env.agents.base import agent_class, close_agent
+from unitrack_env.agents.options import agent_options, check_options
+from unitrack_env.benchmarks import benchmark_for
+from unitrack_env.benchmarks.base import select_sequences
 from unitrack_env.io import atomic_write_text
+
+from ..analysis.compare import COMBINED
+from ..analysis.intervals import compare_runs
+from ..run.ownership import hold_folder
+from ..run.runner import check_out_folder, run
 
 #: Name of the Optuna study inside its storage.
 STUDY = "unitrack-tune"
@@ -99,9 +108,6 @@ def apply(base: dict[str, Any], params: dict[str, Any]) -> dict[str, Any]:
 
 def check_space(agent: str, space: list[Dimension], base: dict[str, Any]) -> None:
     """Refuse an unknown option, a value of the wrong type, or a setting the agent rejects."""
-    from unitrack_env.agents.base import agent_class, close_agent
-    from unitrack_env.agents.options import check_options
-
     cls = agent_class(agent)
     names = [d.name for d in space]
     if len(set(names)) != len(names):
@@ -157,9 +163,6 @@ class TuneSpec:
 
 def _check_sequences(env_id: str, env_kwargs: dict[str, Any], metric: str,
                      tune: list[str], validation: list[str]) -> None:
-    from unitrack_env.benchmarks import benchmark_for
-    from unitrack_env.benchmarks.base import select_sequences
-
     bench = benchmark_for(env_id, **env_kwargs)
     if metric not in bench.columns:
         raise ValueError(f"--metric {metric}: {env_id} scores {', '.join(bench.columns)}")
@@ -173,9 +176,6 @@ def _check_sequences(env_id: str, env_kwargs: dict[str, Any], metric: str,
 
 def _cache_option(agent: str, base: dict[str, Any], out: Path) -> dict[str, Any]:
     """``base`` with the search's own feature cache, when the agent has one and none is set."""
-    from unitrack_env.agents.base import agent_class
-    from unitrack_env.agents.options import agent_options
-
     if "feature_cache" in agent_options(agent_class(agent)) and "feature_cache" not in base:
         return {**base, "feature_cache": str((out / "feature-cache").resolve())}
     return base
@@ -188,6 +188,7 @@ def _cache_tracking(base: dict[str, Any]) -> Iterator[Callable[[], str | None]]:
     if not isinstance(folder, str):
         yield lambda: None
         return
+    # lazy: start-up cost (the appearance package loads torch, +1.4 s; only cached agents need it)
     from unitrack_env.agents.appearance.cache_runs import track_cache_run
 
     with track_cache_run(folder) as cache_run:
@@ -196,7 +197,7 @@ def _cache_tracking(base: dict[str, Any]) -> Iterator[Callable[[], str | None]]:
 
 def _optuna() -> Any:
     try:
-        import optuna
+        import optuna  # lazy: optional dependency (optuna, [tune])
     except ImportError:
         raise ImportError("unitrack tune needs Optuna: pip install 'unitrack-env[tune]'") \
             from None
@@ -236,8 +237,6 @@ def play_trial(spec: TuneSpec, base: dict[str, Any], params: dict[str, Any],
     Returns its value, seconds, CPU seconds, sequences played, cache summary and folder. A
     folder finished before is read back, not played again (``played`` is then 0).
     """
-    from ..run.runner import run
-
     folder = out / "trials" / setting_digest(params)
     started, cpu = time.monotonic(), time.process_time()
     with _cache_tracking(base) as cache_summary:
@@ -306,12 +305,6 @@ def validate(spec: TuneSpec, base: dict[str, Any], best: dict[str, Any],
     The interval is ``unitrack compare``'s (paired jackknife, best minus defaults) where
     the task and metric have one; otherwise only both values are given.
     """
-    from unitrack_env.benchmarks import benchmark_for
-
-    from ..analysis.compare import COMBINED
-    from ..analysis.intervals import compare_runs
-    from ..run.runner import run
-
     folders = {"defaults": out / "validation" / "defaults",
                "best": out / "validation" / f"best-{setting_digest(best)}"}
     values = {}
@@ -368,9 +361,6 @@ def tune(spec: TuneSpec, *, out: str | os.PathLike, trials: int, seed: int = 0,
     ``search`` is Optuna's by default (``backend`` names it in the result; ``check``
     refuses a missing library before anything runs).
     """
-    from ..run.ownership import hold_folder
-    from ..run.runner import check_out_folder
-
     space = [Dimension(**d) for d in spec.space]
     _check_sequences(spec.env_id, spec.env_kwargs, spec.metric, spec.tune_sequences,
                      spec.validation_sequences)

@@ -69,7 +69,7 @@ def test_dir_option_and_a_cache_turned_off(tmp_path: Path, monkeypatch, capsys) 
 
 def test_a_run_that_stored_features_says_where_they_are_and_how_much(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from unitrack_env.evaluation.cli.cache import feature_cache_report
+    from unitrack_env.evaluation.cli.evaluate import feature_cache_report
 
     root = tmp_path / "features"  # issue 42: the cache grew by 883 MiB without a word
     monkeypatch.setenv("UNITRACK_FEATURE_CACHE", str(root))

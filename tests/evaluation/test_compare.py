@@ -186,7 +186,8 @@ def test_compare_command(two_runs, capsys, tmp_path) -> None:
 
 
 def test_run_and_scorecard_intervals(two_runs, tmp_path) -> None:
-    from unitrack_env.evaluation.analysis.intervals import run_intervals, write_card_intervals
+    from unitrack_env.evaluation.analysis.intervals import run_intervals
+    from unitrack_env.evaluation.scorecard.intervals import write_card_intervals
 
     a, _ = two_runs
     combined = json.loads((a / "metrics.json").read_text())["combined"]
