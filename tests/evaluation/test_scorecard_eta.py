@@ -81,9 +81,9 @@ def test_a_heavier_backbone_costs_more_and_schedules_first():
 def test_the_bar_says_planning_until_the_first_estimate_then_counts_down():
     import time
 
-    from unitrack_env.evaluation.cli.scorecard import _eta_column
+    from unitrack_env.evaluation.cli.scorecard import _EtaColumn
 
-    column = _eta_column()
+    column = _EtaColumn()
     task = SimpleNamespace(fields={}, finished=False)
     assert column.render(task).plain == "planning"
     task.fields["eta"] = (time.monotonic(), 3725.0)
