@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from .pool import SupervisedPool
-from .workers import init_worker
+from .workers import worker_init
 
 Runner = Callable[[Callable[..., Any], Iterable[Any]], Iterator[tuple[Any, Any]]]
 
@@ -37,7 +37,7 @@ def pool_backend(workers: int = 1) -> Iterator[Runner]:
         yield run_here
         return
 
-    with SupervisedPool(workers, threads, init=init_worker) as pool:
+    with SupervisedPool(workers, threads, init=worker_init()) as pool:
         def run_pool(fn: Callable[..., Any], items: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
             yield from pool.run(_call, items, lambda item: (fn, item, threads))
 

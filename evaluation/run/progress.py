@@ -53,6 +53,33 @@ def format_warning(message: Warning | str, category: type[Warning], filename: st
     return _default_format(message, category, filename, lineno, line)
 
 
+#: The messages shown by each open :func:`one_line_warnings` block, innermost last.
+_SHOWN: list[set[str]] = []
+
+
+def show_warnings_once(shown: set[str]) -> None:
+    """From now on, show warnings as by :func:`format_warning`, each message once.
+
+    ``shown``: the messages not to show (grows with each one shown). A worker process calls
+    this with its parent's :func:`shown_warnings`, so that a data warning the parent gave at
+    the door is not given again by the worker that reads the same file.
+    """
+    previous_show = warnings.showwarning
+
+    def show_once(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        if str(message) not in shown:
+            shown.add(str(message))
+            previous_show(message, category, filename, lineno, file, line)
+
+    warnings.formatwarning = format_warning
+    warnings.showwarning = show_once
+
+
+def shown_warnings() -> frozenset[str]:
+    """The messages the innermost open :func:`one_line_warnings` block has shown."""
+    return frozenset(_SHOWN[-1]) if _SHOWN else frozenset()
+
+
 @contextlib.contextmanager
 def one_line_warnings() -> Iterator[None]:
     """Within the block, warnings are formatted by :func:`format_warning`, each message once.
@@ -60,22 +87,15 @@ def one_line_warnings() -> Iterator[None]:
     Python's own once-per-location memory is reset whenever a ``catch_warnings`` block ends
     (every scorecard cell has one), so a data warning would be repeated for each cell.
     """
-    shown: set[tuple[type[Warning], str]] = set()
-    previous_show = warnings.showwarning
-
-    def show_once(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
-        key = (category, str(message))
-        if key not in shown:
-            shown.add(key)
-            previous_show(message, category, filename, lineno, file, line)
-
-    previous, warnings.formatwarning = warnings.formatwarning, format_warning
-    warnings.showwarning = show_once
+    previous = warnings.formatwarning, warnings.showwarning
+    shown: set[str] = set()
+    show_warnings_once(shown)
+    _SHOWN.append(shown)
     try:
         yield
     finally:
-        warnings.formatwarning = previous
-        warnings.showwarning = previous_show
+        _SHOWN.pop()
+        warnings.formatwarning, warnings.showwarning = previous
 
 
 class _FpsColumn(ProgressColumn):

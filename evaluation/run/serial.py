@@ -25,7 +25,7 @@ from .episode import SequenceRecord, play_repetitions, save_episode
 from .identity import Stamp
 from .pool import SupervisedPool, WorkerDied, WorkerTimedOut
 from .watchdog import StepTimeout, StepWatchdog, limit
-from .workers import RemoteTraceback, SequenceFailure, init_worker
+from .workers import RemoteTraceback, SequenceFailure, worker_init
 
 #: The child's environment and agent, kept from one sequence to the next (as in this process).
 _KEPT: dict[str, Any] = {}
@@ -145,7 +145,7 @@ def play_isolated(spec: Any, out: Path, todo: list[str], stamps: dict[str, Stamp
 
     entry = gym.spec(spec.env_id).entry_point
     entry = entry.partition(":")[0] if isinstance(entry, str) else ""
-    with SupervisedPool(1, 0, step_timeout, init=init_worker) as pool:  # 0: torch defaults
+    with SupervisedPool(1, 0, step_timeout, init=worker_init()) as pool:  # 0: torch defaults
         played = pool.run(_play_kept, [*todo, None],
                           lambda name: (spec, str(out), name, stamps.get(name or ""), entry),
                           on_beat=on_beat)

@@ -7,13 +7,14 @@ sequence; workers exit when their parent dies; each gets ``cpu_count // workers`
 from __future__ import annotations
 
 import ast
+import functools
 import inspect
 import os
 import signal
 import sys
 import threading
 import time
-import warnings
+from collections.abc import Callable, Iterable
 from multiprocessing import current_process
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,7 @@ from unitrack_env.errors import CheckpointError, DataFormatError, InvalidActionE
 
 from .episode import OutputError, SequenceRecord, play_repetitions, save_episode
 from .pool import CLOSING, SupervisedPool
-from .progress import format_warning
+from .progress import show_warnings_once, shown_warnings
 
 #: Seconds between a worker's checks that its parent is alive.
 WATCHDOG_PERIOD = 0.5
@@ -70,17 +71,25 @@ def _watch_parent(parent: int) -> None:
     threading.Thread(target=watch, name="unitrack-parent-watchdog", daemon=True).start()
 
 
-def init_worker(parent: int, threads: int) -> None:
-    """Set up a worker process: ignore Ctrl-C, die with the parent, one-line warnings."""
+def init_worker(parent: int, threads: int, shown: Iterable[str] = ()) -> None:
+    """Set up a worker process: ignore Ctrl-C, die with the parent, one-line warnings.
+
+    ``shown``: warnings the parent gave already (:func:`worker_init` passes them).
+    """
     # Ctrl-C reaches the whole process group; the parent handles it (keeps finished
     # sequences, stops the pool), so the workers must not die mid-write on their own.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _watch_parent(parent)
-    warnings.formatwarning = format_warning  # the worker's own warnings, as one line
+    show_warnings_once(set(shown))  # the worker's own warnings, as one line, each once
     if threads:
         import torch  # lazy: start-up cost (+1.4 s; agents without a network never load torch)
 
         torch.set_num_threads(threads)
+
+
+def worker_init() -> Callable[[int, int], None]:
+    """The ``init`` of a pool started now: :func:`init_worker`, with the warnings shown so far."""
+    return functools.partial(init_worker, shown=shown_warnings())
 
 
 def _play_one(spec: Any, out: str, sequence: str, stamp: Any,
@@ -160,7 +169,7 @@ def play_in_workers(spec: Any, out: Path, todo: list[str], stamps: dict[str, Any
     failures: dict[str, str] = {}
     threads = max(1, (os.cpu_count() or 1) // workers)
     with SupervisedPool(min(workers, len(todo)), threads, step_timeout,
-                        init=init_worker) as pool:
+                        init=worker_init()) as pool:
         played = pool.run(_play_one, todo, lambda s: (spec, str(out), s, stamps[s]),
                           on_beat=lambda s, frames: bar.advance(frames))
         for name, outcome in played:

@@ -196,6 +196,27 @@ def test_the_commands_show_each_warning_once():
     assert [str(w.message) for w in shown] == ["trimmed copy", "another"]
 
 
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_a_data_warning_is_shown_once_with_worker_processes(tmp_path, workers):
+    """The runner reads the sequences at the door (warning about a trimmed OTB copy) and its
+    worker processes read them again: the workers skip what the command has shown (the
+    command in a process of its own, as a user runs it: pytest records warnings itself)."""
+    import shutil
+
+    from unitrack_env.datasets.synthetic import ensure_synthetic
+
+    root = tmp_path / "OTB"
+    shutil.copytree(ensure_synthetic("OTB", "otb"), root)
+    (root / "SynWalker").rename(root / "Crossing")  # an OTB-2015 name: 120 rows are due
+    done = subprocess.run(
+        [sys.executable, "-m", "unitrack_env.evaluation.cli", "evaluate", "--env",
+         "UniTrack/OTB-v0", "--root", str(root), "--agent", "repeat-box", "--out",
+         str(tmp_path / "run"), "--quiet", "--workers", workers],
+        capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count("reading a trimmed copy") == 1, done.stderr
+
+
 def np_file() -> str:
     import numpy
 
