@@ -16,8 +16,8 @@ Parts (run all, or pick with --parts):
                (no hidden argument): its thresholds are on 0..1 of the score range the env
                declares (MOT15: 0..100), and the peers get the env's 0..1 scores
                (detection_scores='unit').
-               Each sequence's detections and box features are recorded once per weights and
-               replayed through the association engine (benchmarks/_mot_replay.py).
+               Each row is a run of the agent through the evaluation runner; the runs of one
+               appearance model share the agent's feature cache (the backbone runs once).
   peers        time per frame of roboflow SORT / ByteTrack and iou at 30 detections
 
 Usage: python benchmarks/mot_agent.py [--parts stages,association,...] [--threads 2]
@@ -35,24 +35,28 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
-from _mot_replay import diagnose, record, replay, score  # a sibling file (the script's folder)
+from scipy.optimize import linear_sum_assignment
 
 import unitrack_env  # noqa: F401  (registers the ids)
 from unitrack_env.agents import make_agent
 from unitrack_env.agents.appearance import AppearanceModel, letterbox
-from unitrack_env.agents.heads.unitrack_config import UniTrackConfig
+from unitrack_env.agents.heads.association import UniTrackAgent
 from unitrack_env.agents.primitives.association import Associator
-from unitrack_env.agents.primitives.association_config import AssociationConfig
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
+from unitrack_env.agents.primitives.tracks import StepRecord
 from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motchallenge
 from unitrack_env.evaluation.run.runner import run
 from unitrack_env.frames import read_rgb
+from unitrack_env.geometry import box_iou
+from unitrack_env.metrics.motchallenge import combine_sequence_scores, score_sequence
 from unitrack_env.score_range import ScoreRange
 
 REPO = Path(__file__).resolve().parents[1]
@@ -246,44 +250,204 @@ TABLE_METRICS = ("HOTA", "IDF1", "MOTA", "IDSW", "DetA", "AssA")
 
 def _combined(scores: dict) -> dict[str, float]:
     """TrackEval's combination of per-sequence scores (``SequenceScore`` values)."""
-    from unitrack_env.metrics.motchallenge import combine_sequence_scores
-
     return dict(combine_sequence_scores(scores))
 
 
-def _peer_scores(data: DataSet, recordings: list, tmp: Path) -> dict[str, dict[str, float]]:
+def _peer_scores(data: DataSet, tmp: Path) -> dict[str, dict[str, float]]:
     """roboflow SORT and ByteTrack on the same public detections, scores on 0..1 (what
     ``detection_scores="unit"`` hands out)."""
-    from unitrack_env.metrics.motchallenge import score_sequence
-
     python = _peer_python()
     script = REPO / "benchmarks" / "_peer_roboflow.py"
     out: dict[str, dict[str, float]] = {}
     scores = data.score_range()
+    env = gym.make(data.env_id, **data.env_kwargs, decode_frames=False)
+    dataset = env.unwrapped.dataset
+    infos = [dataset.load(name, check_frames=False).info for name in dataset.sequence_names]
+    env.close()
     for name in ("sort", "bytetrack"):
         per_seq = {}
-        for rec in recordings:
-            det = np.loadtxt(rec.seq_dir / "det" / "det.txt", delimiter=",", ndmin=2)
+        for info in infos:
+            det = np.loadtxt(dataset.detection_path(info.name), delimiter=",", ndmin=2)
             det[:, 6] = scores.to_unit(det[:, 6])
-            scaled = tmp / f"{rec.name}-det.txt"
+            scaled = tmp / f"{info.name}-det.txt"
             np.savetxt(scaled, det, delimiter=",", fmt="%.4f")
-            result = tmp / f"{rec.name}-{name}.txt"
-            subprocess.run([str(python), str(script), name, str(scaled), str(len(rec)),
-                            str(rec.frame_rate), str(result)], check=True, capture_output=True)
-            per_seq[rec.name] = score_sequence(rec.seq_dir, result, benchmark=rec.benchmark,
-                                               seq_length=len(rec))
+            result = tmp / f"{info.name}-{name}.txt"
+            subprocess.run([str(python), str(script), name, str(scaled), str(info.length),
+                            str(info.frame_rate), str(result)], check=True, capture_output=True)
+            per_seq[info.name] = score_sequence(info.path, result, benchmark=dataset.benchmark,
+                                                seq_length=info.length)
         out[f"roboflow {name}"] = _combined(per_seq)
     return out
 
 
-def _replay_scores(recordings: list, config: AssociationConfig,
-                   similarity) -> tuple[dict, dict]:
-    per_seq, diags = {}, {}
-    for rec in recordings:
-        result = replay(rec, config, similarity)
-        per_seq[rec.name] = score(rec, result)
-        diags[rec.name] = diagnose(rec, result)
-    return _combined(per_seq), diags
+# ------------------------------------------------------------------- played sequences
+class TracedUniTrack(UniTrackAgent):
+    """The ``unitrack`` agent, keeping what each association step saw and did.
+
+    Nothing changes in how it tracks: after the agent's own step, the detections the engine
+    was given, its :class:`StepRecord` and the reported tracks are appended to ``trace``.
+    """
+
+    def reset(self, observation: Any, info: dict[str, Any]) -> None:
+        super().reset(observation, info)
+        self.trace: list[tuple[np.ndarray, StepRecord, list[tuple[int, np.ndarray, int]]]] = []
+
+    def _step(self, parsed: Any, features: Any) -> Any:
+        outputs = super()._step(parsed, features)
+        self.trace.append((parsed.boxes, self.associator.last_step,
+                           [(o.track_id, o.box, o.detection_index) for o in outputs]))
+        return outputs
+
+
+@dataclass
+class Played:
+    """One sequence played by :class:`TracedUniTrack`: the engine's view of every frame."""
+
+    name: str
+    seq_dir: Path
+    benchmark: str
+    boxes: list[np.ndarray]
+    records: list[StepRecord]
+    outputs: list[list[tuple[int, np.ndarray, int]]]
+
+    def __len__(self) -> int:
+        return len(self.boxes)
+
+
+def play_traced(data: DataSet, agent_kwargs: dict[str, Any]) -> list[Played]:
+    """Play every sequence of ``data`` with the traced agent (its feature cache serves the
+    features the scored run computed)."""
+    env = gym.make(data.env_id, **data.env_kwargs)
+    agent = TracedUniTrack(**agent_kwargs)
+    played = []
+    try:
+        for name in env.unwrapped.sequence_names:
+            obs, info = env.reset(options={"sequence": name})
+            agent.reset(obs, info)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, _ = env.step(agent.act(obs))
+                done = terminated or truncated
+            played.append(Played(name, Path(env.unwrapped.dataset.split_dir) / name,
+                                 str(info["benchmark"]), *map(list, zip(*agent.trace,
+                                                                        strict=True))))
+    finally:
+        agent.close()
+        env.close()
+    return played
+
+
+def ground_truth(rec: Played) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per frame ``(ids, boxes)`` of the evaluated ground truth (pedestrians, flag 1)."""
+    gt = np.loadtxt(rec.seq_dir / "gt" / "gt.txt", delimiter=",", ndmin=2)
+    if rec.benchmark != "MOT15" and gt.shape[1] >= 8:
+        gt = gt[(gt[:, 6] != 0) & (gt[:, 7] == 1)]
+    frames = []
+    for t in range(1, len(rec) + 1):
+        g = gt[gt[:, 0] == t]
+        frames.append((g[:, 1].astype(int), g[:, 2:6]))
+    return frames
+
+
+def detection_identities(rec: Played, threshold: float = 0.5) -> list[np.ndarray]:
+    """Per frame, the ground-truth id each detection covers (IoU >= threshold), else -1."""
+    out = []
+    for (ids, gboxes), boxes in zip(ground_truth(rec), rec.boxes, strict=True):
+        owner = np.full(len(boxes), -1)
+        if len(ids) and len(boxes):
+            iou = box_iou(boxes, gboxes)
+            r, c = linear_sum_assignment(-iou)
+            ok = iou[r, c] >= threshold
+            owner[r[ok]] = ids[c[ok]]
+        out.append(owner)
+    return out
+
+
+def diagnose(rec: Played) -> dict[str, float]:
+    """Per-stage diagnostics of one played sequence against the ground truth.
+
+    * ``true_dets``: detections covering a ground-truth person (IoU >= 0.5).
+    * ``reported_true``: of those, the fraction the tracker reported (detection -> confirmed
+      output); ``reported_false``: the fraction of false-positive detections reported.
+    * ``box_shift``: mean ``1 - IoU`` between each reported box and its detection.
+    * ``stage1``/``stage2``/``births``: matches per stage.
+    * ``reid``: lost tracks re-found (on a detection of a person, after following one);
+      ``reid_wrong``: of those, re-found on another person.
+    * ``switch_matches``: matches of a track to a detection of another person than its
+      previous match (any stage).
+    * ``sim_true``/``sim_false``: mean stage-1 similarity of pairs the Hungarian step was
+      offered whose track last followed the same / another person; ``sim_overlap``: the
+      fraction of (true, false) pairs of one frame and track ordered wrongly.
+    """
+    owners = detection_identities(rec)
+    true_dets = sum(int((o >= 0).sum()) for o in owners)
+    false_dets = sum(int((o < 0).sum()) for o in owners)
+    reported_true = reported_false = 0
+    shifts = []
+    for t, frame_out in enumerate(rec.outputs):
+        for _, box, det in frame_out:
+            if owners[t][det] >= 0:
+                reported_true += 1
+            else:
+                reported_false += 1
+            shifts.append(1.0 - float(box_iou(box[None], rec.boxes[t][det][None])[0, 0]))
+    follows: dict[int, int] = {}  # engine track key -> gt id of its last match
+    stages: Counter[str] = Counter()
+    reid = reid_wrong = switches = 0
+    sim_true: list[float] = []
+    sim_false: list[float] = []
+    wrong_order = pairs = 0
+    for t, step in enumerate(rec.records):
+        own = owners[t]
+        for key, det, stage, was_lost in step.matches:
+            stages[stage] += 1
+            gid = int(own[det])
+            prev = follows.get(key)
+            if prev is not None and gid >= 0 and prev >= 0 and gid != prev:
+                switches += 1
+            if was_lost and prev is not None and prev >= 0 and gid >= 0:
+                reid += 1
+                if gid != prev:
+                    reid_wrong += 1
+            if gid >= 0:
+                follows[key] = gid
+            elif key not in follows:
+                follows[key] = -1
+        for key, sims in step.similarities.items():
+            prev = follows.get(key)
+            if prev is None or prev < 0:
+                continue
+            true = [s for s, g in zip(sims, own, strict=True) if g == prev]
+            false = [s for s, g in zip(sims, own, strict=True) if g >= 0 and g != prev]
+            sim_true += true
+            sim_false += false
+            for a in true:
+                for b in false:
+                    pairs += 1
+                    wrong_order += b >= a
+        # births are matches of new tracks: record them
+        for key, det in step.births:
+            stages["birth"] += 1
+            follows[key] = int(own[det]) if own[det] >= 0 else -1
+    return {
+        "true_dets": true_dets,
+        "false_dets": false_dets,
+        "reported_true": reported_true / max(true_dets, 1),
+        "reported_false": reported_false / max(false_dets, 1),
+        "box_shift": float(np.mean(shifts)) if shifts else 0.0,
+        "stage1": stages["appearance"],
+        "stage2": stages["iou"],
+        "tentative": stages["tentative"],
+        "births": stages["birth"],
+        "reid": reid,
+        "reid_wrong": reid_wrong,
+        "switch_matches": switches,
+        "sim_true": float(np.mean(sim_true)) if sim_true else float("nan"),
+        "sim_false": float(np.mean(sim_false)) if sim_false else float("nan"),
+        "sim_true_p10": float(np.percentile(sim_true, 10)) if sim_true else float("nan"),
+        "sim_false_p90": float(np.percentile(sim_false, 90)) if sim_false else float("nan"),
+        "sim_overlap": wrong_order / max(pairs, 1),
+    }
 
 
 def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int] | None = None,
@@ -292,11 +456,11 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
              runtime: str | None = None, grid: bool = False) -> None:
     """The issue-11 accuracy table and per-stage diagnostics on every long sequence.
 
-    Every sequence is recorded once per appearance model (detections + box features, see
-    ``benchmarks/_mot_replay.py``); each unitrack variant replays the recording through the
-    association engine, which is what the agent does after its feature step. One run of the
-    agent at its defaults through the evaluation runner (on the MOT17 clips, the cheapest)
-    checks that the replay gives the agent's numbers.
+    Every row is a run of the agent through the evaluation runner (what `unitrack evaluate`
+    plays and scores). The runs of one appearance model share the agent's feature cache
+    (``<work>/features``): the backbone runs once per frame, every other variant reads its
+    features back, bit for bit. The diagnostics play the defaults and the paper setting again
+    with :class:`TracedUniTrack` (the same agent, keeping what each association step did).
     """
     torch.set_num_threads(threads)
     work = Path(work or Path(tempfile.gettempdir()) / "unitrack-mot-accuracy")
@@ -322,11 +486,9 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
                 kwargs["layer"] = layer
             if runtime is not None:
                 kwargs["runtime"] = runtime
-            recordings = record(data.env_id, data.env_kwargs, kwargs, work / "recordings")
-            declared = data.score_range()  # what the agent reads from the reset info
             if weights == "imagenet-lite0" and peers_too:
                 with tempfile.TemporaryDirectory() as tmp:
-                    for name, m in _peer_scores(data, recordings, Path(tmp)).items():
+                    for name, m in _peer_scores(data, Path(tmp)).items():
                         rows.append((label, name, m))
             variants = [("defaults", {}), ("preset=paper", {"preset": "paper"})]
             variants += [(f"{sim}{'' if motion else ' w/o motion'}",
@@ -341,28 +503,19 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
                     for m, d in GRID]
             if weights == "random":
                 variants = [(n, o) for n, o in variants if "w/o motion" in n]
+            tag = "" if weights == "imagenet-lite0" else f" [{weights}]"
             for name, options in variants:
-                config = UniTrackConfig(**{**kwargs, **options})
-                m, diags = _replay_scores(recordings,
-                                          config.resolve("mot").association(declared),
-                                          config.similarity)
-                tag = "" if weights == "imagenet-lite0" else f" [{weights}]"
+                slug = "".join(c if c.isalnum() else "-" for c in f"{name}{tag}")
+                report = run(data.env_id, "unitrack", out=work / "runs" / f"{label}-{slug}",
+                             progress=False, overwrite=True, env_kwargs=data.env_kwargs,
+                             agent_kwargs={**kwargs, **options})
+                m = report.combined
                 rows.append((label, f"unitrack {name}{tag}", m))
                 if name in ("defaults", "preset=paper") and weights == "imagenet-lite0":
-                    for seq, d in diags.items():
-                        diag_rows.append((label, seq, name, d))
+                    for played in play_traced(data, {**kwargs, **options}):
+                        diag_rows.append((label, played.name, name, diagnose(played)))
                 print(f"  {label:16s} unitrack {name}{tag:10s} HOTA {100 * m['HOTA']:5.1f} "
                       f"IDF1 {100 * m['IDF1']:5.1f}", flush=True)
-            if weights == "imagenet-lite0" and label == "MOT17 clips":
-                agent_kwargs = {**kwargs, "feature_cache": str(work / "features")}
-                report = run(data.env_id, "unitrack", out=work / "runs" / f"unitrack-{label}",
-                             progress=False, overwrite=True, env_kwargs=data.env_kwargs,
-                             agent_kwargs=agent_kwargs)
-                replayed = next(m for lab, n, m in rows
-                                if lab == label and n == "unitrack defaults")
-                print(f"  {label:16s} agent through the runner: HOTA "
-                      f"{100 * report.combined['HOTA']:.2f} (replay "
-                      f"{100 * replayed['HOTA']:.2f})", flush=True)
     print("\n[accuracy] combined metrics per data set (percent; IDSW count)")
     print("| data | agent | " + " | ".join(TABLE_METRICS) + " |")
     print("|---|---|" + "---|" * len(TABLE_METRICS))
@@ -370,7 +523,7 @@ def accuracy(threads: int, work: Path | None = None, input_size: tuple[int, int]
         cells = " | ".join(f"{m[k]:.0f}" if k == "IDSW" else f"{100 * m[k]:.1f}"
                            for k in TABLE_METRICS)
         print(f"| {label} | {agent} | {cells} |")
-    print("\n[diagnostics] per sequence (see benchmarks/_mot_replay.py:diagnose)")
+    print("\n[diagnostics] per sequence (see diagnose)")
     keys = ("true_dets", "false_dets", "reported_true", "reported_false", "box_shift",
             "stage1", "stage2", "tentative", "births", "reid", "reid_wrong", "switch_matches",
             "sim_true", "sim_false", "sim_true_p10", "sim_false_p90", "sim_overlap")
@@ -451,7 +604,7 @@ def main() -> None:
     parser.add_argument("--parts", default=",".join(PARTS))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--work", type=Path, default=None,
-                        help="accuracy: folder for recordings, features and the hard scenes "
+                        help="accuracy: folder for runs, features and the hard scenes "
                              "(default: a folder in the temp dir, reused across runs)")
     parser.add_argument("--input-size", type=int, nargs=2, default=None,
                         metavar=("W", "H"), help="accuracy: network input (default 1088 608)")
@@ -470,8 +623,8 @@ def main() -> None:
     parser.add_argument("--grid", action="store_true",
                         help="accuracy: also the appearance-momentum x ambiguity-margin grid")
     parser.add_argument("--runtime", default=None,
-                        help="accuracy: inference runtime of the recordings (torch, openvino, "
-                             "onnxruntime, auto; default torch)")
+                        help="accuracy: inference runtime of the appearance model (torch, "
+                             "openvino, onnxruntime, auto; default torch)")
     args = parser.parse_args()
     for part in args.parts.split(","):
         if part in {"stages", "cache", "peers"} and not SHARED.is_dir():
