@@ -9,7 +9,9 @@ Commands are registered in one place, :data:`COMMANDS`: a name, the module under
 defines ``add_arguments(parser)`` and ``run(args, console) -> exit status``, and may define
 ``EXAMPLES`` (the epilog of its ``--help``) and ``DESCRIPTION`` (else its summary opens its
 ``--help``). It is imported only when that command runs, so ``unitrack --help`` and a mistyped
-command ("did you mean ...?") import none of them.
+command ("did you mean ...?") import none of them. A command's module imports its
+implementation (TrackEval, scipy, pandas, torch) inside ``run``, with the measured cost in a
+``# lazy:`` comment, so that ``unitrack COMMAND --help`` answers in about 0.25 s, not 1-2 s.
 """
 
 from __future__ import annotations

@@ -26,13 +26,6 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from unitrack_env.agents.appearance.cache_config import (
-    CACHE_DIR_ENV,
-    default_cache_dir,
-    format_size,
-)
-from unitrack_env.agents.appearance.feature_cache import FeatureCache
-
 #: ``unitrack cache --help`` opens with this (``unitrack --help`` shows the command's summary).
 DESCRIPTION = "The on-disk feature cache of the UniTrack heads (on by default)."
 
@@ -58,6 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_summary(cache_run: Any, root: Path | None) -> str | None:
     """The feature cache's lines after a run (its hits; where stored features went)."""
+    # lazy: start-up cost (torch via the appearance package: `cache --help` 0.22 s, else 2 s)
+    from unitrack_env.agents.appearance.cache_config import default_cache_dir, format_size
+    from unitrack_env.agents.appearance.feature_cache import FeatureCache
+
     stats = cache_run.stats()
     folder = root or default_cache_dir()
     if stats is None or folder is None:
@@ -74,6 +71,10 @@ def run_summary(cache_run: Any, root: Path | None) -> str | None:
 
 
 def _cache(args: argparse.Namespace) -> Any:
+    # lazy: start-up cost (torch, as in run_summary)
+    from unitrack_env.agents.appearance.cache_config import CACHE_DIR_ENV, default_cache_dir
+    from unitrack_env.agents.appearance.feature_cache import FeatureCache
+
     root = Path(args.dir).expanduser() if args.dir else default_cache_dir()
     if root is None:
         raise ValueError(f"the feature cache is turned off (${CACHE_DIR_ENV}="
@@ -126,6 +127,9 @@ def cache_info(cache: Any, runs: int = 10) -> dict[str, Any]:
 
 
 def _print_info(cache: Any, console: Console, runs: int) -> None:
+    # lazy: start-up cost (torch, as in run_summary)
+    from unitrack_env.agents.appearance.cache_config import format_size
+
     info = cache_info(cache, runs)
     share = info["bytes"] / info["max_size"] if info["max_size"] else float("inf")
     console.print(f"feature cache: {info['location']}", highlight=False)
@@ -163,6 +167,9 @@ def _print_info(cache: Any, console: Console, runs: int) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack cache <info|prune|clear>``."""
+    # lazy: start-up cost (torch, as in run_summary)
+    from unitrack_env.agents.appearance.cache_config import format_size
+
     cache = _cache(args)
     if args.cache_command == "info":
         if args.json:

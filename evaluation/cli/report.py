@@ -7,7 +7,6 @@ from pathlib import Path
 
 from rich.console import Console
 
-from ..report.build import build_report
 from .common import positive_int
 
 EXAMPLES = """examples:
@@ -30,6 +29,9 @@ def add_arguments(rp: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack report``."""
+    # lazy: start-up cost (pandas, scipy, TrackEval: `unitrack report --help` 0.24 s, else 1.63 s)
+    from ..report.build import build_report
+
     index = build_report([Path(r) for r in args.runs], Path(args.out),
                          thumbnails=args.thumbnails, resamples=args.resamples)
     console.print(f"report: {index}", markup=False)

@@ -9,8 +9,6 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from ..tune.ray_trials import check_ray_tune, ray_search
-from ..tune.search import TuneSpec, parse_dimension, tune
 from .common import agent_kwargs, env_kwargs, env_options, names, positive_int
 
 EXAMPLES = """examples:
@@ -52,6 +50,9 @@ def add_arguments(tp: argparse.ArgumentParser) -> None:
 
 
 def _spec(args: argparse.Namespace) -> Any:
+    # lazy: start-up cost (scipy, TrackEval: `unitrack tune --help` 0.25 s, else 1.50 s)
+    from ..tune.search import TuneSpec, parse_dimension
+
     space = [asdict(parse_dimension(text)) for text in args.space]
     for d in space:
         d["choices"] = list(d["choices"])
@@ -67,6 +68,10 @@ def _setting(params: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Run ``unitrack tune``."""
+    # lazy: start-up cost (scipy, TrackEval: `unitrack tune --help` 0.25 s, else 1.50 s)
+    from ..tune.ray_trials import check_ray_tune, ray_search
+    from ..tune.search import tune
+
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address goes with --backend ray")
     spec = _spec(args)
