@@ -19,6 +19,7 @@ from unitrack_env.benchmarks import benchmark_for
 
 from ..analysis.tables import format_cell, table_columns
 from ..run.watchdog import DEFAULT_STEP_TIMEOUT
+from .cache import run_summary
 from .common import (
     agent_kwargs,
     console,
@@ -90,10 +91,8 @@ def feature_cache_report(agent: str, agent_kwargs: dict[str, Any]) -> Iterator[
     if "feature_cache" not in agent_options(agent_class(agent)):
         yield lambda: None
         return
-    # lazy: start-up cost (cli.cache and cache_runs load the appearance stack, torch: +1.6 s)
+    # lazy: start-up cost (the appearance package loads torch: +1.6 s for agents without it)
     from unitrack_env.agents.appearance.cache_runs import track_cache_run
-
-    from .cache import run_summary  # lazy: start-up cost (as above)
 
     folder = agent_kwargs.get("feature_cache")
     root = Path(folder).expanduser() if isinstance(folder, (str, os.PathLike)) else None
