@@ -1,7 +1,11 @@
 """Reader and result writer for DAVIS-2017 semi-supervised video object segmentation.
 
 Reads ``JPEGImages/480p/<seq>/*.jpg``, ``Annotations/480p/<seq>/*.png`` (palette PNGs;
-test-dev: first frame only) and ``ImageSets/2017/<split>.txt``. More in docs/module-notes.md.
+test-dev: first frame only) and ``ImageSets/2017/<split>.txt``. A palette PNG's *indices* are
+the labels, which OpenCV cannot return (``cv2.IMREAD_UNCHANGED`` expands the palette to BGR,
+checked on the fixture), so PNGs are read and written with Pillow. A sequence's objects are
+the labels of its first annotation other than 0 and 255: DAVIS-2017 labels are ``1..n``, so
+this equals the official evaluation's ``1..max``.
 """
 
 from __future__ import annotations

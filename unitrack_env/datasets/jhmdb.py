@@ -3,7 +3,11 @@
 Reads ``Rename_Images/<action>/<video>/*.png``,
 ``joint_positions/<action>/<video>/joint_positions.mat`` and optional
 ``splits/<action>_test_split<k>.txt`` (HMDB51 format: 1 = train, 2 = test).
-More in docs/module-notes.md.
+``pos_img`` ``(2, 15, T)`` holds sub-pixel joints in MATLAB's 1-based convention (the
+top-left pixel's centre is ``(1, 1)``). They are returned 0-based (``pos_img - 1``), as the
+UniTrack/CRW/TimeCycle loaders and evaluation script use them (``lbls_coord = pos_img - 1``)
+and as an agent samples feature maps; PCK depends only on differences, so scores do not
+change. JHMDB annotates occluded joints too, so every joint counts as visible.
 """
 
 from __future__ import annotations

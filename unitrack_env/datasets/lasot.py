@@ -1,4 +1,4 @@
-"""LaSOT and GOT-10k readers (layouts in :mod:`unitrack_env.datasets.otb`), LaSOT synthetic data."""
+"""LaSOT and GOT-10k readers (layouts in docs/envs/sot-protocols.md), LaSOT synthetic data."""
 
 from __future__ import annotations
 

@@ -1,6 +1,16 @@
 """Limits checked at the door: image dimensions, id ranges and id counts.
 
-More in docs/module-notes.md.
+Readers check their files against these limits when a sequence is opened, before the first
+frame, so that a hostile or corrupt file is refused by name rather than exhausting memory
+mid-episode or at scoring; each limit is far above the real benchmarks and far below what
+memory holds. Images are measured from their header, undecoded: a 70-byte PNG can claim
+100000x100000 pixels (Pillow refuses such a "decompression bomb", OpenCV allocates up to 1 Gpx
+of it). Ids are int32, what the action space and the official result files carry exactly
+(Python reads a JSON ``2**70`` as an int numpy cannot store). Track counts bound TrackEval's
+HOTA, which keeps about 22 ``gt ids x tracker ids`` matrices of doubles per sequence
+(``trackeval/metrics/hota.py``, 176 bytes per pair); the tracker's side is only known at
+scoring, which checks the product against the machine's memory
+(:func:`unitrack_env.metrics.motchallenge.check_matrix_memory`).
 """
 
 from __future__ import annotations
@@ -16,11 +26,14 @@ import numpy as np
 
 from unitrack_env.errors import DataFormatError
 
-#: Largest image (width x height) read as a frame or an annotation map: 8192 x 8192.
+#: Largest image (width x height) read as a frame or an annotation map: 8192 x 8192, about
+#: eight times a 3840x2160 DAVIS Full-Resolution frame (the largest of any supported benchmark).
 MAX_IMAGE_PIXELS = 8192 * 8192
 #: Largest id read from an annotation file (int32).
 MAX_ID = 2**31 - 1
-#: Most distinct ground-truth ids (tracks, instances) in one sequence.
+#: Most distinct ground-truth ids (tracks, instances) in one sequence. The busiest
+#: MOTChallenge sequence (MOT20-05) has about 1,200; 10,000 against 5,000 tracker ids
+#: is 9 GB at scoring.
 MAX_TRACKS = 10_000
 #: Most frames in one sequence: 9 hours at 30 fps. The longest benchmark sequences have a
 #: few thousand (MOT20-05 3,315; LaSOT's longest about 11,000); per-frame index arrays stay

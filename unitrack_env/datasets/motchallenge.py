@@ -2,7 +2,11 @@
 
 Reads ``<root>/<split>/<sequence>/`` with ``seqinfo.ini``, ``img1/``, ``det/det.txt`` and
 ``gt/gt.txt`` (train splits); where each benchmark keeps them is its
-:class:`~unitrack_env.datasets.mot_layouts.MOTLayout`. More in docs/module-notes.md.
+:class:`~unitrack_env.datasets.mot_layouts.MOTLayout`. Columns are read by position, with the
+quirks seen in real releases: ``det.txt`` of 10 columns (``frame,-1,x,y,w,h,score,-1,-1,-1``)
+or 7, rows in any order, unbounded scores (MOT15's run past 100); ``gt.txt`` of 9 columns
+(``frame,id,x,y,w,h,flag,class,visibility``, MOT16/17/20) or MOT15's 10 without a class
+(``frame,id,x,y,w,h,flag,wx,wy,wz``), sorted by id or by frame.
 """
 
 from __future__ import annotations

@@ -1,6 +1,17 @@
 """Readers and writers of the MOTS formats: MOTS Challenge (MOTS20) and KITTI MOTS.
 
-More in docs/module-notes.md.
+Format (Voigtlaender et al., "MOTS", CVPR 2019; restated in TrackEval's
+``docs/MOTS-format.txt``): a **txt** file has one line per object and frame,
+``time_frame id class_id img_height img_width rle``, space-separated, ``rle`` being a COCO
+compressed run-length encoding (``pycocotools.mask``) of the mask; a **png** instance map
+(``instances/<seq>/<frame>.png``) is one 16-bit image per frame whose pixels are the ids.
+Ids are ``class_id * 1000 + instance`` (class 1 car, 2 pedestrian); id 10000 (class 10) is an
+ignore region, 0 the background. Masks of one frame never overlap (TrackEval rejects
+overlapping ground truth and results). Frames are numbered as TrackEval reads them: MOTS20
+from 1 (``MOTSChallenge``, ``{gt_folder}/{seq}/gt/gt.txt``), KITTI MOTS from 0
+(``KittiMOTS``). The on-disk layouts and detection files are in docs/envs/mots.md; neither
+benchmark ships mask detections, so ``"public"`` is where the embedded synthetic data put
+theirs.
 """
 
 from __future__ import annotations
@@ -60,7 +71,7 @@ class MOTSSequenceInfo:
 
 
 class MOTSDataset:
-    """A MOTS data set on disk in the MOTS20 or the KITTI MOTS layout (module docstring).
+    """A MOTS data set on disk in the MOTS20 or the KITTI MOTS layout (docs/envs/mots.md).
 
     ``split``: MOTS20 ``"train"``/``"test"``, KITTI ``"training"``/``"testing"``;
     ``detections``: ``"public"``, ``"gt"`` or a folder of ``<seq>.txt`` files.

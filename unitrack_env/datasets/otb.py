@@ -1,6 +1,14 @@
-"""Readers for single object tracking layouts: OTB-2015 (main), LaSOT and GOT-10k.
+"""Reader for the OTB-2015 layout (OTB-100, OTB-50 or any folder in that layout).
 
-More in docs/module-notes.md.
+Reads ``<root>/<Seq>/img/0001.jpg ...`` with ``groundtruth_rect[.k].txt`` (docs/envs/otb.md);
+LaSOT and GOT-10k are read by :mod:`unitrack_env.datasets.lasot`. :data:`OTB100_SEQUENCES` is
+our own encoding of the OTB toolkit's sequence configuration (jwlim/tracker_benchmark
+``matlab/util/MakeSequenceConfigVer10.m``/``Ver11.m``) and of the OTB-2015 table in
+pytracking's ``pytracking/evaluation/otbdataset.py``: ``Jogging`` and ``Skating2`` hold two
+targets (``.1``/``.2`` files), ``Human4`` only ``.2`` (its ``.1`` file is empty in the
+release); David and BlurCar1/3/4 start later (their images are numbered from the start
+frame), Football1, Freeman3 and Freeman4 have more images than annotated frames, and Tiger1's
+first 5 frames are omitted (the toolkit's ``initOmit``).
 """
 
 from __future__ import annotations

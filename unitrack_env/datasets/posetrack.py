@@ -1,7 +1,13 @@
 """Reader and writer of PoseTrack 2018 JSON (ground truth, results and pose detections).
 
 Reads the release layout: ``posetrack_data/annotations/{train,val}/<sequence>.json`` and
-``posetrack_data/images/{train,val,test}/<sequence>/*.jpg``. More in docs/module-notes.md.
+``posetrack_data/images/{train,val,test}/<sequence>/*.jpg``. A sequence file is COCO-like
+(field meanings from poseval's ``convert.py``, leonid-pishchulin/poseval): ``images`` has one
+entry per frame, ``annotations`` one per person and labelled frame (``track_id`` 0-based per
+video, 17 ``(x, y, v)`` keypoints in COCO order), ``categories`` one ``person`` whose
+``head_bottom``/``head_top`` sit in COCO's eye slots (the ear slots are never annotated).
+Results and pose detections use the same schema (docs/envs/posetrack.md). Keypoints are
+floating-point pixels, kept exactly as written.
 """
 
 from __future__ import annotations

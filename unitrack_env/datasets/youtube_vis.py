@@ -1,6 +1,13 @@
 """Reader and writer of YouTube-VIS 2019 (video instance segmentation) JSON files.
 
-More in docs/module-notes.md.
+Format (Yang et al., "Video Instance Segmentation", ICCV 2019; the CodaLab page's definition,
+restated in TrackEval's ``docs/YouTube-VIS-format.txt``), MS-COCO style: ``videos`` (``id``,
+``width``, ``height``, ``length``, ``file_names``), ``categories``, and ``annotations`` with
+``video_id``, ``category_id``, ``iscrowd`` and, per frame of the video, a segmentation (RLE or
+polygons), area and box, None where the object is absent. Results are a list of ``{video_id,
+category_id, segmentations, score}``; detections use that format (docs/envs/vis.md). The 2019
+release's ``valid`` and ``test`` files have no annotations. A video is named by the folder of
+its frames (the first component of its ``file_names``), as TrackEval names sequences.
 """
 
 from __future__ import annotations

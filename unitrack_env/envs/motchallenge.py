@@ -119,7 +119,8 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
       also ``"val"``, their ids' default). The test split has no ground truth: its results
       are written for the test server (DanceTrack: in a ``tracker/`` folder to zip).
     - ``sequences``: restrict to these sequence names (default: all of the split).
-    - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format.
+    - ``detections``: ``"public"`` or a folder of ``<sequence>.txt`` files in det format
+      (``frame,-1,x,y,w,h,score``, optionally ``,-1,-1,-1``; rows in any order).
       DanceTrack and SportsMOT ship no public detections: give your detector's folder, or
       put it at ``<root>/detections/<split>/``; otherwise the env refuses at ``make``,
       naming that path. Their embedded defaults ship simulated detections there.

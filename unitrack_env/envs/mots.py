@@ -95,12 +95,17 @@ class MOTSEnv(SequenceEnv[MOTSSequenceInfo]):
     ## Arguments
     - ``benchmark``: ``"MOTS20"`` (MOTS Challenge layout) or ``"KITTI-MOTS"``.
     - ``root``: the benchmark folder (default: ``$UNITRACK_DATA/<benchmark>`` if that
-      variable is set, else the synthetic default).
+      variable is set, else the synthetic default). MOTS20: ``<split>/<seq>/seqinfo.ini``,
+      ``img1/000001.jpg`` ..., ``gt/gt.txt``. KITTI MOTS: ``<split>/image_02/<seq>/000000.png``
+      ... (KITTI tracking's ``training``/``testing`` folders) and ground truth
+      ``instances_txt/<seq>.txt`` or ``instances/<seq>/000000.png`` ... (16-bit maps of
+      object ids).
     - ``split``: MOTS20 ``"train"``/``"test"``; KITTI ``"training"``/``"testing"``.
     - ``sequences``: restrict to these sequences.
     - ``detections``: ``"public"`` (``<seq>/det/det.txt``; KITTI ``<split>/det_02/<seq>.txt``),
-      ``"gt"`` (ground-truth masks as detections) or a folder of ``<seq>.txt`` files, in the
-      MOTS txt format with an optional 7th score field.
+      ``"gt"`` (ground-truth masks of the tracked class, score 1) or a folder of
+      ``<seq>.txt`` files, in the MOTS txt format with an optional 7th score field (1 when
+      absent; the ``id`` field is ignored). Neither benchmark ships mask detections.
     - ``object_class``: ``"pedestrian"`` or (KITTI) ``"car"``: the class tracked and scored.
     - ``min_score``: drop detections scored below this (the one place that filters
       detections by score).

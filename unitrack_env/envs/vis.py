@@ -82,13 +82,17 @@ class VISEnv(SequenceEnv[VisVideo]):
     TrackEval's ``AP_all``, ``AR_all`` and area ranges (-1 where undefined).
 
     ## Arguments
-    - ``root``: the benchmark folder (default ``$UNITRACK_DATA/YouTube-VIS-2019`` if set, else
-      the synthetic default).
+    - ``root``: the benchmark folder, holding ``<split>.json`` and the frames
+      ``<split>/JPEGImages/<file_name>`` (default ``$UNITRACK_DATA/YouTube-VIS-2019`` if set,
+      else the synthetic default).
     - ``split``: ``"train"``, ``"valid"`` or ``"test"``; ``annotation_file`` overrides
       ``<root>/<split>.json``.
     - ``sequences``: restrict to these videos (names).
-    - ``detections``: ``"public"`` (``<root>/detections/<split>.json``), ``"gt"`` or a
-      results-format JSON file.
+    - ``detections``: ``"public"`` (``<root>/detections/<split>.json``; the benchmark ships
+      none), ``"gt"`` (the ground truth, score 1) or a results-format JSON file: every
+      non-null segmentation of an entry is one detection of that frame with the entry's
+      ``category_id`` and ``score`` (a per-frame detector writes one entry per detection,
+      non-null on one frame).
     - ``min_score``: drop detections scored below this (the one place that filters
       detections by score).
     - ``max_detections``, ``max_frame_size``, ``decode_frames``, ``prefetch``, ``shuffle``,
