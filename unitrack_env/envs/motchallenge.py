@@ -45,7 +45,13 @@ class MOTChallengeEnv(SequenceEnv[MOTSequence]):
 
     With no ``root`` (and no ``UNITRACK_DATA``), the environment reads a small
     deterministic synthetic data set in the exact MOTChallenge layout, generated once into
-    the user cache, so it works offline.
+    the user cache, so it works offline. For MOT15/16/17/20 it holds ``train`` sequences
+    ``SYN-01`` (72 frames, 640x360) and ``SYN-02`` (64 frames, 576x324, 25 fps) and ``test``
+    sequence ``SYN-03`` (80 frames) of textured people who walk and cross (two forced
+    crossings each), one standing person and one occluder (classes 7 and 9 in MOT16/17/20;
+    MOT15's ground truth lists the persons only), with simulated public detections (MOT15:
+    scored 0-100). The names carry no detector suffix, even under MOT17: there is one
+    detection set, not MOT17's three.
 
     ## Observation space
     A ``Dict``:

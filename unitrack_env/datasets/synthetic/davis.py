@@ -1,8 +1,12 @@
 """Synthetic DAVIS-2017 data set: several people per sequence, segmented, crossing and occluded.
 
 :func:`write_davis` writes the DAVIS-2017 semi-supervised layout: ``JPEGImages/480p``,
-``Annotations/480p`` (palette PNGs) and ``ImageSets/2017/{train,val,test-dev}.txt``.
-More in docs/module-notes.md.
+``Annotations/480p`` (palette PNGs) and ``ImageSets/2017/{train,val,test-dev}.txt``; the
+folders keep DAVIS's ``480p`` name although the frames are smaller (any size is read).
+The labelled objects are the first walking people visible in frame 0 by scene id, so the
+pair forced to cross (which occlude each other) comes first; labels come from the instance
+map after occlusion. As in DAVIS, a void band (255) may mark label borders and a test-dev
+sequence ships only its first annotation.
 """
 
 from __future__ import annotations

@@ -2,7 +2,11 @@
 
 :func:`write_jhmdb` writes ``Rename_Images/<action>/<video>/*.png`` frames,
 ``joint_positions/<action>/<video>/joint_positions.mat`` (``pos_img`` ``(2, 15, T)``,
-1-based) and ``splits/<action>_test_split1.txt``. More in docs/module-notes.md.
+1-based) and ``splits/<action>_test_split1.txt``. Each video follows one walking person
+(scene object 1) whose 15 joints come from the shared stick figure of
+:mod:`~unitrack_env.datasets.synthetic.poses`; a second person crosses it, in front or
+behind, so the joints are briefly occluded as in a real clip. Like JHMDB, every joint is
+annotated in every frame, occluded or not.
 """
 
 from __future__ import annotations

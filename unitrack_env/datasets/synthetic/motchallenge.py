@@ -1,6 +1,13 @@
 """Synthetic MOTChallenge data sets (MOT15, MOT16, MOT17, MOT20 layouts).
 
-More in docs/module-notes.md.
+:func:`write_motchallenge` writes ``<split>/<SEQ>/{img1/, seqinfo.ini, gt/gt.txt,
+det/det.txt}`` (no ``gt`` in test) with the benchmark's ground-truth columns and row order.
+In MOT16/17/20 a standing person (class 7, a distractor) and the occluder (class 9) are
+written with flag 0 as in the official MOT17 files, so that the official preprocessing
+(distractor removal, zero-marked filtering) has work to do; visibility is measured on the
+rendered instance map. The public detections (:func:`simulate_detections`) miss a person
+more often the less visible it is and score in [0, 1] by box quality; MOT15's are scaled to
+0-100 like the PETS detector's unbounded scores.
 """
 
 from __future__ import annotations

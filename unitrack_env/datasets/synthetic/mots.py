@@ -1,6 +1,10 @@
 """Synthetic MOTS data sets in the MOTS20 and KITTI MOTS layouts (:func:`write_mots`).
 
-More in docs/module-notes.md.
+Ground truth comes from the rendered instance map, so masks never overlap: every person
+(walking or standing) is a pedestrian (class 2, id ``2000 + object id``) and the occluder is
+an ignore region (class 10, id 10000). Detections are the visible masks made imperfect
+(:class:`MaskNoise`) plus false-positive blobs, some on the occluder, that is inside the
+ignore region; overlaps between detections go to the higher score, as MOTS requires.
 """
 
 from __future__ import annotations

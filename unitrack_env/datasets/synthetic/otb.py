@@ -1,7 +1,13 @@
 """Synthetic OTB-2015 data set: single targets that walk, cross and get occluded.
 
 :func:`write_otb` writes the exact OTB-2015 layout (``<Seq>/img/0001.jpg ...``,
-``<Seq>/groundtruth_rect.txt`` in 1-based pixels). More in docs/module-notes.md.
+``<Seq>/groundtruth_rect.txt`` in 1-based pixels). The target is the walker that stays in
+view throughout and is the most occluded at some frame, hidden partly or wholly as it
+crosses another person or passes behind the occluder; its ground truth is the amodal box,
+also while hidden, as OTB annotates occluded targets. The default set exercises the OTB
+quirks the reader handles: tab-separated ground truth (like Crossing), no final newline
+(like Human3), grayscale frames (like Car4) and images numbered from a later frame (like
+BlurCar1). Its names are not OTB-100 names, so no toolkit frame range applies.
 """
 
 from __future__ import annotations

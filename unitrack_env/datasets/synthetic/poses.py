@@ -1,6 +1,13 @@
 """Keypoints of the synthetic people: one walking stick figure, two benchmark joint sets.
 
-More in docs/module-notes.md.
+A person of the scene engine is drawn as a silhouette inside its placement box;
+:data:`SKELETON_JOINTS` sit inside it in the box's normalised ``(u, v)`` coordinates, so the
+joints move exactly with the textured sprite. The person faces the camera (its right side on
+the image left, as JHMDB and PoseTrack annotate frontal people); walking swings the legs and,
+in anti-phase, the arms with a phase that advances with the distance walked. Both
+benchmarks' joint sets are read off this one skeleton, and :func:`joint_visibility` judges
+each joint on the rendered instance map (a wrist beside the body lands on background and
+stays visible). Coordinates are 0-based pixel centres, like the scene engine's boxes.
 """
 
 from __future__ import annotations

@@ -2,7 +2,11 @@
 
 :func:`write_posetrack` writes ``posetrack_data/annotations/{train,val}/<seq>.json``,
 ``posetrack_data/images/{train,val,test}/<seq>/*.jpg`` and simulated pose detections in
-``detections/{train,val,test}/<seq>.json``. More in docs/module-notes.md.
+``detections/{train,val,test}/<seq>.json``. As in the release, a walking person is
+annotated with its visible joints only (others ``(0, 0, 0)``), its head box (the PCKh
+reference) and a 0-based ``track_id``, and a standing person only by an ignore region, as
+PoseTrack treats unannotated crowds. :func:`simulate_pose_detections` stands in for the pose
+estimator; its output order is shuffled, since a detector's order says nothing of ids.
 """
 
 from __future__ import annotations

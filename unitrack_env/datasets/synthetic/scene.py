@@ -1,6 +1,18 @@
 """Deterministic synthetic scenes: textured people that walk, cross and occlude each other.
 
-More in docs/module-notes.md.
+The engine every synthetic writer builds on. A scene is a static, mildly textured background
+and its objects: pedestrians that walk at constant velocity with a small wobble (and may
+enter or leave), standing persons (a distractor class) and occluders nearer than everything
+(one on a walker's path). ``num_crossings`` pairs of pedestrians are forced to cross: they
+walk opposite ways through the same point at the same frame, so their boxes overlap heavily
+and the farther one is hidden. Their sizes are similar and their textures differ, which is
+what separates an appearance tracker from an IoU tracker. Frames are painted far to near;
+the instance map gives each object's visible fraction. Boxes are amodal and may extend past
+the image border.
+
+All randomness is drawn once, in :func:`render_scene`, from streams seeded by
+``SceneConfig.seed``; a frame is a pure function of the scene and its index, so frames
+render lazily, in any order, with identical output.
 """
 
 from __future__ import annotations

@@ -2,7 +2,11 @@
 
 :func:`write_youtube_vis` writes ``train.json``/``valid.json``, frames under
 ``{train,valid}/JPEGImages/<video>/`` (every-5th numbering, as the 2019 release) and noisy
-detections in ``detections/{train,valid}.json``. More in docs/module-notes.md.
+detections in ``detections/{train,valid}.json``. Person masks are the visible pixels of the
+rendered instance map as compressed RLE; the occluder's are polygons (its visible
+rectangle), so the reader's polygon path is exercised. Detections come from
+:func:`~unitrack_env.datasets.synthetic.mots.simulate_frame` without overlap resolution
+(VIS detections may overlap) and with class confusion, one entry per detection.
 """
 
 from __future__ import annotations
