@@ -1,6 +1,14 @@
 """CLEAR MOT counts frame by frame, with TrackEval 1.3.0's matching (our own implementation).
 
-More in docs/module-notes.md.
+Restates ``trackeval/metrics/clear.py`` (``CLEAR.eval_sequence``; the metrics are Bernardin &
+Stiefelhagen's, EURASIP JIVP 2008). In a frame with both ground truth and tracker boxes the
+score is ``1000 * [track id == the one this gt matched at the previous timestep] + IoU``,
+zeroed below ``0.5 - eps``; the Hungarian assignment maximises it and pairs scoring ``<= eps``
+are no match, so continuing a track beats any IoU gain. An ID switch is a match whose track
+differs from the one its gt was *last* matched to, however many frames ago. A frame without
+ground truth or without tracker boxes leaves the previous-timestep record untouched, as
+TrackEval's early ``continue`` does. Summed over a sequence, ``tp``/``fp``/``fn``/``idsw``
+equal TrackEval's ``CLR_TP``/``CLR_FP``/``CLR_FN``/``IDSW`` on the same preprocessed frames.
 """
 
 from __future__ import annotations

@@ -1,6 +1,12 @@
 """Per-frame error events of box and mask MOT, from the CLEAR matching the official score uses.
 
-More in docs/module-notes.md.
+Each frame is preprocessed (:func:`~unitrack_env.metrics.mot_preprocess.preprocess`, or for
+MOTS :func:`~unitrack_env.metrics.mots.mask_frame`) and matched by
+:class:`~unitrack_env.metrics.clear_stream.StreamingClear`, whose pairs become the events
+(types and columns: docs/report.md). Per sequence the ``tp``/``fp``/``fn``/``idsw``/``frag``
+row counts equal TrackEval's ``CLR_TP``/``CLR_FP``/``CLR_FN``/``IDSW``/``Frag`` (tested on the
+real fixtures): like ``Frag``, a gt id's first match is no fragmentation, and "not matched
+before" looks only at frames with both ground truth and tracker boxes.
 """
 
 from __future__ import annotations

@@ -1,6 +1,10 @@
 """MOTChallenge per-frame preprocessing, exactly as the official evaluation does it.
 
-More in docs/module-notes.md.
+Our numpy restatement, per frame so that an environment can score every step, of TrackEval
+1.3.0's ``MotChallenge2DBox.get_preprocessed_seq_data`` (J. Luiten et al.,
+``trackeval/datasets/mot_challenge_2d_box.py``); the rules are listed in docs/evaluation.md
+("Which rules are applied"). Surviving rows keep their input order: it matters only for
+Hungarian tie-breaking, and keeping it makes our sums equal TrackEval's to the last count.
 """
 
 from __future__ import annotations

@@ -1,8 +1,12 @@
 """Per-frame sufficient statistics of MOTA, IDF1 and HOTA, and the metrics on reweighted frames.
 
-:mod:`unitrack_env.evaluation.analysis.compare` recomputes the metrics on many resamples
-(frame weights); the tables are built once and a ``(B, frames)`` weight matrix is evaluated
-with a few matrix products. More in docs/module-notes.md.
+:mod:`unitrack_env.evaluation.analysis.compare` recomputes the metrics on many resamples (frame
+weights: how often each frame is drawn); the tables are built once and a ``(B, frames)`` weight
+matrix is evaluated with a few matrix products. At unit weights every metric is TrackEval's;
+what is exact on a resample is in docs/report.md. IDF1's optimal id assignment is solved again
+per resample (minimising IDFN + IDFP is maximising the matched pair count). HOTA's per-frame
+matching is made once, with the whole sequence's alignment scores, and not redone with a
+resample's (it would change only where two assignments score nearly equal).
 """
 
 from __future__ import annotations

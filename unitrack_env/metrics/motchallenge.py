@@ -1,7 +1,13 @@
 """Official MOTChallenge scores through TrackEval 1.3.0 (HOTA, CLEAR, Identity, Count).
 
-Uses TrackEval's ``MotChallenge2DBox`` loading and preprocessing and its metric classes, not its
-``Evaluator``, so nothing is printed, plotted or written. More in docs/module-notes.md.
+TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
+licence) is the MOTChallenge leaderboards' scorer. We call its ``MotChallenge2DBox``
+(``get_raw_seq_data``, ``get_preprocessed_seq_data``) and each metric's ``eval_sequence`` /
+``combine_sequences``, not its ``Evaluator``, so nothing is printed, plotted or written (its
+defaults write into its own ``site-packages`` folder). Result rows go to a private temporary
+folder with track ids relabelled to ``1..K``: TrackEval relabels too, but indexes an array by
+the raw id, so huge or negative ids would exhaust memory or alias. The HOTA family (HOTA, DetA,
+AssA, LocA, ...) is the mean over the 19 alpha thresholds, as TrackEval's summary reports it.
 """
 
 from __future__ import annotations

@@ -1,8 +1,14 @@
 """Official MOTS scores through TrackEval 1.3.0, and per-frame mask CLEAR counts.
 
-TrackEval's ``MOTSChallenge`` / ``KittiMOTS`` data set classes with HOTA, CLEAR (on masks
-``MOTA``/``MOTP``/``sMOTA`` are MOTSA, MOTSP, sMOTSA), Identity and Count, never its
-``Evaluator``. More in docs/module-notes.md.
+TrackEval's ``MOTSChallenge`` (MOTS20) / ``KittiMOTS`` data set classes with HOTA, CLEAR (on
+masks its ``MOTA``/``MOTP``/``sMOTA`` are MOTSA, MOTSP, sMOTSA, Voigtlaender et al. CVPR 2019;
+both names are returned), Identity and Count, called as
+:mod:`unitrack_env.metrics.motchallenge` calls them (never the ``Evaluator``), track ids
+relabelled to ``1..K`` for the same reason. ``time_frame`` uses the benchmark's numbering
+(MOTS20 1-based, KITTI 0-based); masks of one frame must not overlap. :class:`MaskClearStream`
+(the environment's reward) is TrackEval's MOTS preprocessing of one frame followed by
+:class:`~unitrack_env.metrics.clear_stream.StreamingClear`; summed over a sequence,
+``(tp - fp - idsw) / (tp + fn)`` is TrackEval's MOTSA.
 """
 
 from __future__ import annotations

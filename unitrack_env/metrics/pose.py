@@ -1,9 +1,15 @@
 """PCK (percentage of correct keypoints) for pose propagation on JHMDB.
 
 Keypoints are ``(..., J, 2)`` ``(x, y)`` pixels, prediction and ground truth in the same frame.
-A joint is correct when ``||pred - gt|| <= alpha * s``, ``s`` the frame's normaliser.
-
-More in docs/module-notes.md.
+A joint is correct when ``||pred - gt|| <= alpha * s``, ``s`` the frame's normaliser, computed
+from the *ground-truth* joints. The default ``"box_diagonal"`` is the UniTrack JHMDB script's
+(a copy of the CRW / TimeCycle ``eval_pck``: ``now_boxes[k] = 0.6 * norm([maxx, maxy] - [minx,
+miny])``), which made the paper's JHMDB table (TimeCycle 57.3/78.1, UVC 58.6/79.6, CRW
+59.0/83.2, I18 58.3/80.5 at PCK@0.1/0.2). ``"box_max_side"`` is the alternative commented out
+there, the usual "person size" convention (Jhuang et al. 2013 use the person box; with joints
+only, the joint box). As that script, :class:`PCKCounts` skips the given first frame, pools
+each joint over all frames of all videos and reports the mean over the 15 joints; unlike it,
+it keeps joints predicted at a negative x (docs/evaluation.md).
 """
 
 from __future__ import annotations

@@ -1,8 +1,32 @@
 """PoseTrack multi-person pose tracking metrics: poseval's per-keypoint CLEAR MOT (our code).
 
-Definitions restated from poseval (``assignGTmulti``, ``computeMetrics``; UniTrack's copy adds
-IDF1 and the ID-switch sum) and py-motmetrics; nothing is imported from them. More in
-docs/module-notes.md.
+Restated from poseval (leonid-pishchulin/poseval, ``py/eval_helpers.py`` ``assignGTmulti``,
+``py/evaluateTracking.py`` ``computeMetrics``; UniTrack's copy, ``eval/poseval`` of
+Zhongdao/UniTrack @ 5efab37, adds IDF1 and the ID-switch sum) and py-motmetrics'
+``MOTAccumulator.update``, which poseval calls. Nothing is imported from them;
+``tests/unitrack_env/test_posetrack.py`` cross-checks the counts with motmetrics 1.4.0.
+
+* Joints: poseval's 15, read by name from the 17 PoseTrack 2018 keypoints (``convert.py``; the
+  ears are ignored). A keypoint exists unless it is ``(0, 0, 0)``, on both sides.
+* Frames: ground-truth frames with a person (``cleanupData``), predictions paired by position,
+  the last frame dropped. Keypoints strictly inside an ignore polygon are removed on both
+  sides, then persons left without keypoints (``removeIgnoredPoints``).
+* Matching, per joint and frame, by py-motmetrics' rule among candidates (both joints exist,
+  head-normalised distance <= 0.5): a ground truth keeps the hypothesis it last matched if
+  still a candidate; the rest go by minimum-distance assignment, a match whose ground truth
+  last matched another hypothesis being a switch; the rest are misses and false positives. A
+  frame with nobody on one side scores one dummy miss and false positive per joint (poseval's
+  ``trackidxGT = trackidxPr = [0]``, distance NaN); our dummy ids cannot collide with real
+  ones, while poseval's 0 can equal a real track 0 in the first sequence it globs (moving
+  only IDF1 there).
+* Scores: counts summed over sequences per joint. ``MOTP = 1 - sum(matched d) / detections``
+  is 0 for a joint without detections and averaged as such, as poseval does (so a sequence
+  may score below the pooled set); poseval with py-motmetrics >= 1.2 also sums unmatched
+  candidate pairs (``events['D']`` then holds RAW rows), we keep the matched distances.
+  Per-joint IDF1 (py-motmetrics' global identity assignment, ``2 IDTP / (objects +
+  predictions)``) is averaged over sequences (UniTrack's ``idf1 / nSeq``). Totals are means
+  over the joints with a defined value, ``IDSW`` their sum (the UniTrack paper: "averaged for
+  IDF-1 and MOTA, and summed for ID-switch, over 15 key points").
 """
 from __future__ import annotations
 

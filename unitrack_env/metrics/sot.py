@@ -1,7 +1,24 @@
 """Single object tracking (SOT) metrics in the OTB toolkit's way: success AUC and precision.
 
-``pred`` and ``gt`` are ``(n, 4)`` ``(x, y, w, h)`` boxes in the same pixel frame, row ``i``
-= frame ``i``, row 0 = the initialisation frame. More in docs/module-notes.md.
+``pred`` and ``gt`` are ``(n, 4)`` ``(x, y, w, h)`` boxes in the same pixel frame (OTB's is
+1-based; a shared origin cancels out), row ``i`` = frame ``i``, row 0 = the initialisation
+frame. The rules are the OTB-2015 toolkit's (``tracker_benchmark_v1.0``:
+``util/calcSeqErrRobust.m``, ``perfPlot.m``/``OPE_perfmat.m``); visionml/pytracking's port
+(``pytracking/analysis/extract_results.py``) agrees on frame 1, the thresholds and the
+comparisons, and differs where said:
+
+* Frame 1's prediction is the ground truth (``rectMat(1,:) = rect_anno(1,:)``); a later
+  prediction that is NaN or has ``w <= 0`` or ``h <= 0`` is the previous one unless that
+  frame's ground truth is NaN (pytracking repairs zero sizes only, rejects NaN or negative).
+* The toolkit's overlap (``calcRectInt.m``: ``x2 = x + w - 1``, ``+1`` on the intersection
+  side) is the continuous IoU of :func:`unitrack_env.geometry.box_iou` and TrackEval; its
+  centre ``x + (w - 1) / 2`` gives the same centre errors as ``x + w / 2``.
+* Ground truth is valid only when all four numbers are ``> 0`` (``rect_anno > 0``,
+  ``sum(index, 2) == 4``; NaN compares false). Invalid frames get overlap and centre error
+  ``-1`` and stay in the denominator (:data:`INVALID_GT_TOOLKIT`); pytracking drops them
+  (valid = ``w > 0 and h > 0``: :data:`INVALID_GT_EXCLUDE`).
+* Success counts overlaps ``> t``, precision centre errors ``<= d``; the toolkit divides by
+  ``len + eps``, we by ``len``.
 """
 
 from __future__ import annotations

@@ -1,8 +1,13 @@
 """Official YouTube-VIS track mAP through TrackEval 1.3.0 (``YouTubeVIS`` + ``TrackMAP``).
 
-Tracks match by spatio-temporal mask IoU; AP is averaged over IoU 0.50:0.05:0.95 and 101
-recall points per category, then over categories. TrackEval's classes are called directly
-(no ``Evaluator``, nothing written). More in docs/module-notes.md.
+TrackEval (J. Luiten, A. Hoffhues et al., https://github.com/JonathonLuiten/TrackEval, MIT
+licence) restates the YouTube-VIS evaluation (Yang et al., ICCV 2019): tracks match by
+spatio-temporal mask IoU (intersections and unions summed over the video's frames); AP is
+averaged over IoU 0.50:0.05:0.95 and 101 recall points per category, then over categories.
+Its classes are called directly in a private temporary folder (no ``Evaluator``: nothing is
+printed, plotted or written). The combined row accumulates all videos before averaging, as
+the leaderboard does (docs/evaluation.md). ``AP`` is ``AP_all``, the challenge's mAP;
+undefined values are -1, TrackEval's convention.
 """
 
 from __future__ import annotations

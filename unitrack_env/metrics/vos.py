@@ -2,7 +2,14 @@
 
 Label maps are ``(H, W)`` integer arrays: 0 = background, ``k`` = object ``k``, 255 = void.
 Object ``k`` of the prediction is scored against object ``k`` of the ground truth (no
-matching). More in docs/module-notes.md.
+matching). The definitions (for users: docs/evaluation.md) are those of
+davisvideochallenge/davis2017-evaluation, ``davis2017/metrics.py`` and ``evaluation.py``:
+decay bins are cut at ``round(linspace(1, n, 5))``, the semi-supervised evaluation drops the
+first and last frames (``all_gt_masks[:, 1:-1]``), and J&F-Mean averages J-mean and F-mean
+over all objects of all sequences, not per sequence first. TrackEval 1.3.0's ``JAndF``
+(``trackeval/metrics/j_and_f.py``) has the same J and F (the tests compare its
+``_compute_j``/``_compute_f``) but matches ids with the Hungarian algorithm, keeps the first
+and last frames and has no void label, hence this implementation.
 """
 
 from __future__ import annotations
