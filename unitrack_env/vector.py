@@ -1,13 +1,11 @@
 """Gymnasium vector environments with shared memory for the variable-size spaces.
 
-``AsyncVectorEnv`` passes observations through shared memory by default; this module registers
-its three hooks (``create_shared_memory``, ``write_to_shared_memory``,
-``read_from_shared_memory``) for ``Image``, ``MaskStack`` and ``LabelMap``, whose arrays vary in
-size: each environment gets one slot sized for the space's bounds, in an anonymous mapping
-whose pages exist only once written (a 4K bound costs nothing while frames are 1080p).
-Gymnasium reads the buffer once and keeps the result, so the reader returns :class:`LiveSlots`,
-which reads each slot when indexed (always the latest step) and becomes a tuple of copies
-under ``copy.deepcopy`` (what the vector env's default ``copy=True`` returns).
+``AsyncVectorEnv`` passes observations through shared memory by default; Gymnasium's three
+shared-memory hooks are registered here for ``Image``, ``MaskStack`` and ``LabelMap``, whose
+arrays vary in size: each environment gets one slot sized for the space's bounds, in an
+anonymous mapping whose pages exist only once written (a 4K bound costs nothing at 1080p).
+Gymnasium reads the buffer once, so the reader returns :class:`LiveSlots`, which reads each
+slot when indexed (the latest step) and deep-copies to a tuple of copies (``copy=True``).
 """
 
 from __future__ import annotations
