@@ -1,6 +1,11 @@
 """Gymnasium vector environments with shared memory for the variable-size spaces.
 
-More in docs/module-notes.md.
+``AsyncVectorEnv`` passes observations through shared memory by default; Gymnasium's three
+shared-memory hooks are registered here for ``Image``, ``MaskStack`` and ``LabelMap``, whose
+arrays vary in size: each environment gets one slot sized for the space's bounds, in an
+anonymous mapping whose pages exist only once written (a 4K bound costs nothing at 1080p).
+Gymnasium reads the buffer once, so the reader returns :class:`LiveSlots`, which reads each
+slot when indexed (the latest step) and deep-copies to a tuple of copies (``copy=True``).
 """
 
 from __future__ import annotations

@@ -1,8 +1,15 @@
 """Cross-check of MOTChallenge scores with py-motmetrics, and where and why the two differ.
 
-py-motmetrics (MIT licence) independently implements CLEAR MOT and the ID measures; it is
-fed exactly the frames TrackEval scores, with distances ``1 - IoU`` (NaN below 0.5).
-More in docs/module-notes.md.
+py-motmetrics (C. Heindl, J. Valmadre et al., https://github.com/cheind/py-motmetrics, MIT
+licence) independently implements CLEAR MOT and the ID measures; it is fed exactly the frames
+TrackEval scores, with distances ``1 - IoU`` (NaN below 0.5). The two count alike but match
+differently: motmetrics keeps each object's *last-ever* match where TrackEval favours only the
+previous frame's (:data:`CONTINUATION`, the usual cause: fewer ID switches after a gap), and
+it maximises the number of matches, then minimises their summed ``1 - IoU``, where TrackEval
+maximises the summed IoU. TrackEval stays the official scorer; measurements in
+docs/design-decisions.md, "Cross-check with py-motmetrics". motmetrics 1.4.0's ``iou_matrix``
+(``np.asfarray``, gone in NumPy 2) and ``merge_event_dataframes`` (broken on pandas 2) are not
+called, so no NumPy patch is needed.
 """
 
 from __future__ import annotations

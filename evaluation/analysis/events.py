@@ -1,6 +1,9 @@
 """Error events of a run, per frame: computed from its result files, stored beside them.
 
-More in docs/module-notes.md.
+``<run>/events/<sequence>.csv.gz`` holds one table per scored sequence (the rows of each task:
+docs/report.md). The run's benchmark computes them (``Benchmark.sequence_events``), so this
+module names no task. The runner writes them while scoring and only warns when it cannot (the
+scores stand); :func:`load_events` computes missing ones, replaying no agent.
 """
 
 from __future__ import annotations

@@ -1,6 +1,11 @@
 """Who owns an output folder: one run at a time, and a manifest of what runs of ours wrote.
 
-More in docs/module-notes.md.
+The lock is an exclusive ``flock`` on ``.unitrack.lock`` (the kernel drops it when its process
+dies, however it dies), whose text names the holder; where ``flock`` is missing or not honoured
+(some network file systems), a holder on this host whose pid runs with the recorded start time
+(not a recycled pid) still refuses. ``manifest.json`` lists each file before it is written and
+claims a sequence before its first file, so a killed run's half-written sequence is still ours;
+``overwrite`` deletes only what it lists. For users: docs/evaluation.md.
 """
 
 from __future__ import annotations

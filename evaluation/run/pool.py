@@ -1,6 +1,12 @@
 """Worker processes supervised one by one: the parent knows who plays what, and for how long.
 
-More in docs/module-notes.md.
+``concurrent.futures``' process pool cannot say which process ran which task: when one dies,
+every task in flight fails with ``BrokenProcessPool``, and a task that never returns blocks it
+for ever. Here each spawned worker has its own pipe, runs one task at a time and sends a
+heartbeat after each step. So the parent blames a death only on that worker's task (naming the
+signal: :func:`describe_exit`) and starts a fresh worker for the rest, and kills a worker whose
+task sent no heartbeat for ``step_timeout`` seconds (a hang even inside a C call). The clock
+starts at the task's first heartbeat: imports and building the env and agent are not steps.
 """
 
 from __future__ import annotations

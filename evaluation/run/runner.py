@@ -1,6 +1,13 @@
 """Play an agent over every sequence of an environment, write official results, score them.
 
-More in docs/module-notes.md.
+The run folder has TrackEval's tracker layout, so ``unitrack score`` or TrackEval can score it
+again (its files: docs/evaluation.md); one run at a time owns it (:mod:`.ownership`), and a
+step over ``step_timeout`` fails its sequence (:mod:`.watchdog`). The runner knows no task:
+the id's benchmark writes the results, says which sequences can be scored and scores them. A
+sequence is finished once its record exists, written after its results, every file to a
+temporary name then renamed: a crash or Ctrl-C never leaves half a file nor loses a finished
+sequence. Running again resumes, keeping a finished sequence only while its inputs have the
+recorded fingerprint and its result files the recorded digest (:mod:`.resume`).
 """
 
 from __future__ import annotations

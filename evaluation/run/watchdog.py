@@ -1,6 +1,21 @@
 """Per-step time limits: a hung agent becomes a failed sequence, not a run that never ends.
 
-More in docs/module-notes.md.
+A step lies between two heartbeats of an episode: the reset (with the agent's ``reset``), then
+each ``act()`` with ``env.step``. Where the episode plays decides how an overdue step ends:
+
+* in worker processes (``--workers N``), or in one child playing the sequences in order (the
+  CLI's default, ``run(isolate=True)``): the parent (:mod:`.pool`) kills the silent process
+  and only its sequence fails. Only a separate process can be stopped anywhere (a deadlock or
+  a loop in native code that holds the GIL) or survive a segfault; the child costs one
+  interpreter start per run, not per sequence (benchmarks/isolation.py);
+* in this process (``--in-process``, ``run()``'s default): :class:`StepWatchdog` has the kernel
+  send SIGALRM and the handler raises :class:`StepTimeout` in the agent's code. Handlers run
+  only between bytecodes or where C code checks for signals, so for a C call that does neither
+  the watchdog thread, once it gets the GIL, prints why and exits with status 3 after
+  :data:`GRACE` seconds (finished sequences are on disk; the same command resumes).
+
+:class:`StepTimeout` derives from ``BaseException`` so that an agent's ``except Exception``
+cannot swallow it.
 """
 
 from __future__ import annotations

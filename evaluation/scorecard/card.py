@@ -3,7 +3,15 @@
 ``unitrack scorecard`` plays every task's UniTrack head with one shared appearance model per
 row (one per ``--model``) and each task's appearance-free baseline, over every sequence of the
 data it finds, and reports the metrics of the paper's Table 2 and a radar chart
-(:mod:`unitrack_env.evaluation.scorecard.radar`). More in docs/module-notes.md.
+(:mod:`unitrack_env.evaluation.scorecard.radar`).
+
+:func:`play_cell` plays each cell (model, task, head, sequence) wherever the backend runs it
+and returns its files as bytes; the driver writes them into
+``<out>/cells/<model>/<task>/<head>/`` (the runner's layout), so finished cells survive an
+interruption and no shared file system is needed. The runner then scores each folder, reusing
+every unchanged cell: the numbers are exactly those of ``unitrack evaluate``. As in Table 2,
+association heads run without motion ("motion cues are discarded to better highlight
+distinctions between different representations"; ``motion=True`` keeps them).
 """
 
 from __future__ import annotations

@@ -1,6 +1,10 @@
 """The radar chart of a scorecard (the UniTrack paper's Figure 1), as PNG and SVG.
 
-More in docs/module-notes.md.
+The ``rank`` scale is the paper's ("A higher rank (better performance) corresponds to a vertex
+nearer to the outer circle"): on each axis the best polygon lies at radius 1, the worst at 1/n,
+ties share a rank; ``value`` draws the metric (a fraction). The baselines are a grey dashed
+polygon, as the paper draws its reference model; axes on synthetic data say so and get hollow
+vertices, so that nobody reads them as benchmark numbers. Under three tasks: grouped bars.
 """
 
 from __future__ import annotations
