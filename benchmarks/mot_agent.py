@@ -53,6 +53,7 @@ from unitrack_env.agents.primitives.association import Associator
 from unitrack_env.agents.primitives.similarity import SIMILARITIES
 from unitrack_env.agents.primitives.tracks import StepRecord
 from unitrack_env.datasets.synthetic.hard_mot import HARD_SPEC, write_hard_motchallenge
+from unitrack_env.evaluation.run.episode import play_episode
 from unitrack_env.evaluation.run.runner import run
 from unitrack_env.frames import read_rgb
 from unitrack_env.geometry import box_iou
@@ -322,15 +323,11 @@ def play_traced(data: DataSet, agent_kwargs: dict[str, Any]) -> list[Played]:
     played = []
     try:
         for name in env.unwrapped.sequence_names:
-            obs, info = env.reset(options={"sequence": name})
-            agent.reset(obs, info)
-            done = False
-            while not done:
-                obs, _, terminated, truncated, _ = env.step(agent.act(obs))
-                done = terminated or truncated
+            infos: list[dict[str, Any]] = []
+            play_episode(env, agent, name, on_reset=infos.append)
             played.append(Played(name, Path(env.unwrapped.dataset.split_dir) / name,
-                                 str(info["benchmark"]), *map(list, zip(*agent.trace,
-                                                                        strict=True))))
+                                 str(infos[0]["benchmark"]), *map(list, zip(*agent.trace,
+                                                                            strict=True))))
     finally:
         agent.close()
         env.close()
